@@ -1,0 +1,36 @@
+# Two entry points for a fresh machine with Python 3.11 and make:
+#   make run   - install into .venv if needed, then run the main job
+#   make test  - install into .venv if needed, then run the test suite
+PYTHON ?= python3.11
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: run test venv lock bench clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.lock pyproject.toml
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (Python 3.11 is required)"; exit 1; }
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -r requirements.lock
+	$(BIN)/python -m pip install -q --no-deps -e .
+	@touch $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/ellipsled run nominal --out runs/latest
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/ellipsled bench --out runs/bench.json
+
+# Refresh the full lock from the pinned direct dependencies.
+lock:
+	$(PYTHON) -m venv /tmp/ellipsled-lock && /tmp/ellipsled-lock/bin/pip install -q -r requirements.in \
+	  && /tmp/ellipsled-lock/bin/pip freeze --exclude-editable > requirements.lock && rm -rf /tmp/ellipsled-lock
+
+clean:
+	rm -rf $(VENV) runs

@@ -1,0 +1,319 @@
+"""Typed, validated views of the data files: planet, vehicle, scenario.
+
+Loaded once, at start-up; everything downstream takes these objects, never raw dicts.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .config import ConfigError, Table, load_toml, resolve
+
+N_JETS = 18
+INERTIA_KEYS = ("I11", "I22", "I33", "I12", "I13", "I23")
+FAULT_KINDS = ("off", "stuck", "degraded", "clear")
+
+
+def inertia_matrix(h: np.ndarray) -> np.ndarray:
+    """Inertia tensor from h = [I11 I22 I33 I12 I13 I23] (spec 20-fsw.md ordering)."""
+    return np.array([[h[0], h[3], h[4]], [h[3], h[1], h[5]], [h[4], h[5], h[2]]])
+
+
+def inertia_vector(I: np.ndarray) -> np.ndarray:
+    return np.array([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+
+
+@dataclass(frozen=True)
+class Planet:
+    name: str
+    mu_m3ps2: float
+    radius_m: float
+    omega_radps: float
+    j2: float
+    use_j2: bool
+    g0_mps2: float
+    density_model: str
+    rho0_kgpm3: float
+    scale_height_m: float
+
+
+@dataclass(frozen=True)
+class Aero:
+    alpha_trim_rad: float
+    C_L: float
+    C_D: float
+    C_Lalpha: float
+    C_Ybeta: float
+    C_malpha: float
+    C_nbeta: float
+    C_lbeta: float
+    C_lp: float
+    C_mq: float
+    C_nr: float
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    name: str
+    mass_kg: float
+    inertia_kgm2: np.ndarray      # 3x3, body axes
+    S_ref_m2: float
+    l_ref_m: float
+    aero: Aero
+    thrust_N: np.ndarray          # (18,)
+    torque_matrix_Nm: np.ndarray  # (3, 18): column k = torque of jet k+1 at full thrust
+    isp_s: float
+    jet_force_B_N: np.ndarray | None = None  # (3, 18) when jets are given by geometry
+
+
+@dataclass(frozen=True)
+class FaultEvent:
+    t_s: float
+    jets: tuple[int, ...]   # 1-based jet numbers
+    kind: str               # off | stuck | degraded | clear
+    eta: float = 1.0
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Dispersion of the truth relative to the nominal (FSW) models."""
+    inertia_scale: np.ndarray       # (6,) on h ordering
+    density_scale: float
+    C_lbeta_scale: float
+    C_malpha_scale: float
+    C_nbeta_scale: float
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    gyro_noise_radps: float
+    gyro_bias_radps: np.ndarray
+    attitude_noise_rad: float
+    nav_noise: bool
+    nav_pos_noise_m: float
+    nav_vel_noise_mps: float
+    chamber_noise: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    file: str
+    planet: Planet
+    vehicle: Vehicle
+    seed: int
+    max_duration_s: float
+    dt_control_s: float
+    dt_integrator_s: float
+    # initial state
+    altitude_m: float
+    speed_rel_mps: float
+    flight_path_rad: float
+    heading_rad: float
+    latitude_rad: float
+    longitude_rad: float
+    bank0_rad: float
+    # end conditions
+    end_mach: float
+    end_altitude_m: float
+    # guidance
+    bank_schedule: tuple[tuple[float, float], ...]   # (t_s, bank_rad)
+    bank_rate_limit_radps: float
+    bank_accel_limit_radps2: float
+    truth: Truth
+    sensors: SensorNoise
+    faults: tuple[FaultEvent, ...]
+    fsw: dict = field(default_factory=dict)  # overrides of data/fsw/default.toml, validated by fsw
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.dt_control_s / self.dt_integrator_s))
+
+    def with_(self, **kw) -> "Scenario":
+        return replace(self, **kw)
+
+
+def load_planet(name_or_path: str | Path) -> Planet:
+    path = resolve("planets", name_or_path)
+    root = Table(load_toml(path), path)
+    p = root.table("planet")
+    a = root.table("atmosphere")
+    out = Planet(
+        name=p.str("name"),
+        mu_m3ps2=p.num("mu_m3ps2", lo=0, lo_open=True),
+        radius_m=p.num("radius_m", lo=0, lo_open=True),
+        omega_radps=p.num("omega_radps", lo=-1e-2, hi=1e-2),
+        j2=p.num("j2", default=0.0, lo=-0.1, hi=0.1),
+        use_j2=p.bool("use_j2", default=False),
+        g0_mps2=p.num("g0_mps2", default=9.80665, lo=0, lo_open=True),
+        density_model=a.str("model", choices=("exponential", "polynomial")),
+        rho0_kgpm3=a.num("rho0_kgpm3", lo=0, lo_open=True),
+        scale_height_m=a.num("scale_height_m", lo=0, lo_open=True),
+    )
+    p.reject_unknown(); a.reject_unknown(); root.reject_unknown()
+    return out
+
+
+def _jets_from_geometry(jt: Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """T = r x F for jets given by position (about the centre of mass), direction, thrust."""
+    entries = jt.tables("jet")
+    if len(entries) != N_JETS:
+        raise jt.error("jet", f"must list {N_JETS} jets, got {len(entries)}")
+    thrust = np.empty(N_JETS)
+    T = np.empty((3, N_JETS))
+    F = np.empty((3, N_JETS))
+    for k, e in enumerate(entries):
+        r = e.vec("position_m", 3)
+        d = e.vec("direction", 3)
+        n = float(np.linalg.norm(d))
+        if n < 1e-9:
+            raise e.error("direction", "must be a non-zero vector")
+        thrust[k] = e.num("thrust_N", lo=0, lo_open=True)
+        F[:, k] = thrust[k] * d / n
+        T[:, k] = np.cross(r, F[:, k])
+        e.reject_unknown()
+    return thrust, T, F
+
+
+def load_vehicle(name_or_path: str | Path) -> Vehicle:
+    path = resolve("vehicles", name_or_path)
+    root = Table(load_toml(path), path)
+    v = root.table("vehicle")
+    it = v.table("inertia_kgm2")
+    h = np.array([it.num(k, lo=0, lo_open=True) if i < 3 else it.num(k) for i, k in enumerate(INERTIA_KEYS)])
+    it.reject_unknown()
+    I = inertia_matrix(h)
+    if np.min(np.linalg.eigvalsh(I)) <= 0:
+        raise v.error("inertia_kgm2", "inertia tensor is not positive definite")
+    ev = np.linalg.eigvalsh(I)
+    if ev[0] + ev[1] < ev[2] * (1 - 1e-12):
+        raise v.error("inertia_kgm2", "principal moments violate the triangle inequality (not a physical body)")
+    a = root.table("aero")
+    aero = Aero(
+        alpha_trim_rad=math.radians(a.num("alpha_trim_deg", lo=-90, hi=90)),
+        C_L=a.num("C_L"), C_D=a.num("C_D", lo=0, lo_open=True), C_Lalpha=a.num("C_Lalpha"),
+        C_Ybeta=a.num("C_Ybeta"), C_malpha=a.num("C_malpha"), C_nbeta=a.num("C_nbeta"),
+        C_lbeta=a.num("C_lbeta"), C_lp=a.num("C_lp"), C_mq=a.num("C_mq"), C_nr=a.num("C_nr"),
+    )
+    jt = root.table("jets")
+    model = jt.str("model", choices=("matrix", "geometry"))
+    isp = jt.num("isp_s", lo=0, lo_open=True)
+    force = None
+    if model == "matrix":
+        thrust = jt.vec("thrust_N", N_JETS, lo=0, lo_open=True)
+        T = jt.matrix("torque_matrix_Nm", 3, N_JETS)
+    else:
+        thrust, T, force = _jets_from_geometry(jt)
+    jt.reject_unknown()
+    out = Vehicle(
+        name=v.str("name"),
+        mass_kg=v.num("mass_kg", lo=0, lo_open=True),
+        inertia_kgm2=I,
+        S_ref_m2=v.num("S_ref_m2", lo=0, lo_open=True),
+        l_ref_m=v.num("l_ref_m", lo=0, lo_open=True),
+        aero=aero, thrust_N=thrust, torque_matrix_Nm=T, isp_s=isp, jet_force_B_N=force,
+    )
+    v.num("diameter_m", default=None, lo=0, lo_open=True)
+    v.num("length_m", default=None, lo=0, lo_open=True)
+    for t in (v, a, root):
+        t.reject_unknown()
+    return out
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    path = resolve("scenarios", name_or_path)
+    root = Table(load_toml(path), path)
+    s = root.table("scenario")
+    planet = load_planet(s.str("planet", default="mars"))
+    vehicle = load_vehicle(s.str("vehicle", default="ellipsled"))
+    dt_c = s.num("dt_control_s", default=0.02, lo=1e-4, hi=1.0)
+    dt_i = s.num("dt_integrator_s", default=0.005, lo=1e-5, hi=1.0)
+    n_sub = dt_c / dt_i
+    if abs(n_sub - round(n_sub)) > 1e-9 or round(n_sub) < 1:
+        raise s.error("dt_integrator_s", f"must divide dt_control_s ({dt_c}) into a whole number of substeps")
+
+    ini = root.table("initial")
+    end = root.table("end", default={})
+    g = root.table("guidance")
+    sched_raw = g.raw("bank_schedule")
+    if not isinstance(sched_raw, list) or not sched_raw:
+        raise g.error("bank_schedule", "must be a non-empty list of [t_s, bank_deg] pairs")
+    sched = []
+    for i, pair in enumerate(sched_raw):
+        if (not isinstance(pair, list) or len(pair) != 2
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in pair)):
+            raise g.error("bank_schedule", f"entry {i + 1} must be [t_s, bank_deg] with finite numbers")
+        if abs(pair[1]) > 180:
+            raise g.error("bank_schedule", f"entry {i + 1}: bank must be within [-180, 180] deg, got {pair[1]}")
+        if sched and pair[0] <= sched[-1][0]:
+            raise g.error("bank_schedule", f"entry {i + 1}: times must increase")
+        sched.append((float(pair[0]), math.radians(pair[1])))
+
+    tr = root.table("truth", default={})
+    isc = tr.table("inertia_scale", default={})
+    inertia_scale = np.array([isc.num(k, default=1.0, lo=0, lo_open=True) for k in INERTIA_KEYS])
+    isc.reject_unknown()
+    truth = Truth(
+        inertia_scale=inertia_scale,
+        density_scale=tr.num("density_scale", default=1.0, lo=0, lo_open=True),
+        C_lbeta_scale=tr.num("C_lbeta_scale", default=1.0),
+        C_malpha_scale=tr.num("C_malpha_scale", default=1.0),
+        C_nbeta_scale=tr.num("C_nbeta_scale", default=1.0),
+    )
+    I_truth = inertia_matrix(inertia_vector(vehicle.inertia_kgm2) * inertia_scale)
+    if np.min(np.linalg.eigvalsh(I_truth)) <= 0:
+        raise isc.error("I11", "scaled truth inertia is not positive definite")
+
+    sn = root.table("sensors", default={})
+    sensors = SensorNoise(
+        gyro_noise_radps=sn.num("gyro_noise_radps", default=2e-5, lo=0),
+        gyro_bias_radps=sn.vec("gyro_bias_radps", 3, default=[0.0, 0.0, 0.0]),
+        attitude_noise_rad=math.radians(sn.num("attitude_noise_arcsec", default=20.0, lo=0) / 3600.0),
+        nav_noise=sn.bool("nav_noise", default=False),
+        nav_pos_noise_m=sn.num("nav_pos_noise_m", default=10.0, lo=0),
+        nav_vel_noise_mps=sn.num("nav_vel_noise_mps", default=0.1, lo=0),
+        chamber_noise=sn.num("chamber_noise", default=0.02, lo=0, hi=1),
+    )
+    faults = []
+    for f in root.tables("faults"):
+        kind = f.str("kind", choices=FAULT_KINDS)
+        jets = f.raw("jets")
+        if (not isinstance(jets, list) or not jets
+                or not all(isinstance(j, int) and not isinstance(j, bool) and 1 <= j <= N_JETS for j in jets)):
+            raise f.error("jets", f"must be a non-empty list of jet numbers 1..{N_JETS}, got {jets!r}")
+        eta = f.num("eta", default=1.0 if kind != "degraded" else None, lo=0, hi=1, lo_open=True, hi_open=kind == "degraded")
+        if kind == "degraded" and eta is None:
+            raise f.error("eta", "required for kind = \"degraded\" (0 < eta < 1)")
+        faults.append(FaultEvent(t_s=f.num("t_s", lo=0), jets=tuple(jets), kind=kind, eta=eta))
+        f.reject_unknown()
+    fsw = root.raw("fsw", default={})
+    if not isinstance(fsw, dict):
+        raise root.error("fsw", "must be a table")
+
+    out = Scenario(
+        name=s.str("name"), description=s.str("description", default=""), file=str(path),
+        planet=planet, vehicle=vehicle,
+        seed=s.num("seed", default=1, lo=0, integer=True),
+        max_duration_s=s.num("max_duration_s", default=700.0, lo=0, lo_open=True),
+        dt_control_s=dt_c, dt_integrator_s=dt_i,
+        altitude_m=ini.num("altitude_m", lo=0, lo_open=True),
+        speed_rel_mps=ini.num("speed_rel_mps", lo=0, lo_open=True),
+        flight_path_rad=math.radians(ini.num("flight_path_deg", lo=-90, hi=90, lo_open=True, hi_open=True)),
+        heading_rad=math.radians(ini.num("heading_deg", lo=-360, hi=360)),
+        latitude_rad=math.radians(ini.num("latitude_deg", lo=-89, hi=89)),
+        longitude_rad=math.radians(ini.num("longitude_deg", lo=-360, hi=360)),
+        bank0_rad=math.radians(ini.num("bank_deg", lo=-180, hi=180)),
+        end_mach=end.num("mach", default=2.0, lo=0),
+        end_altitude_m=end.num("altitude_m", default=6000.0, lo=0),
+        bank_schedule=tuple(sched),
+        bank_rate_limit_radps=math.radians(g.num("rate_limit_dps", lo=0, lo_open=True)),
+        bank_accel_limit_radps2=math.radians(g.num("accel_limit_dps2", lo=0, lo_open=True)),
+        truth=truth, sensors=sensors, faults=tuple(sorted(faults, key=lambda f: f.t_s)), fsw=dict(fsw),
+    )
+    for t in (s, ini, end, g, tr, sn, root):
+        t.reject_unknown()
+    return out

@@ -19,10 +19,26 @@ def _add_plant(sub):
     p.set_defaults(func=run)
 
 
+def _add_batch(sub):
+    p = sub.add_parser("batch", help="fly a scenario: plant and FSW in one process, lockstep")
+    p.add_argument("scenario", help="scenario name (data/scenarios) or .toml path")
+    p.add_argument("--out", required=True, help="output folder (summary.json, history.npz, PNG plots)")
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--ft-off", action="store_true", help="fault tolerance off (paper figure 5)")
+    p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--no-plots", action="store_true")
+
+    def run(a):
+        from ellipsled.batch import main as batch_main
+        return batch_main(a)
+    p.set_defaults(func=run)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="ellipsled", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     _add_plant(sub)
+    _add_batch(sub)
     a = ap.parse_args(argv)
     try:
         return int(a.func(a) or 0)

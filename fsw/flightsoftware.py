@@ -1,0 +1,177 @@
+"""The flight software assembled: what the rate groups call.
+
+RG1 (control, every tick): sensor frame -> monitors -> FDIR -> navigation -> guidance ->
+SAMI -> allocator -> jet driver. RG2 (slow): analytic-redundancy check. RG3: housekeeping.
+This object is the same in the one-process batch runner and in the SIL FSW process; the
+process shell only moves records in and out. No transport, threads or clocks here.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from common.model import Scenario
+from .allocation import Allocator
+from .control import SamiController
+from .events import EventLog, Severity
+from .fdir import Fdir
+from .guidance import BankProfile, Guidance
+from .health import JetHealth
+from .jetdriver import JetDriver
+from .modes import Mode, ModeManager
+from .monitors import SensorMonitor
+from .navigation import Navigation
+from .params import Param, load_params
+
+EXECUTIVE_PARAMS = [
+    Param("executive.rg2_divisor", 1, 50, "", "RG2 runs every N control ticks", integer=True, ground_settable=False),
+    Param("executive.rg3_divisor", 1, 500, "", "RG3 runs every N control ticks", integer=True, ground_settable=False),
+]
+
+
+def all_params() -> list[Param]:
+    return (SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + EXECUTIVE_PARAMS)
+
+
+class FlightSoftware:
+    """All FSW functions wired together. ``scenario`` supplies only what the FSW may know:
+    the nominal vehicle and planet models, the guidance schedule, and parameter overrides."""
+
+    def __init__(self, scenario: Scenario, events: EventLog | None = None, start_mode: Mode = Mode.ENTRY,
+                 armed: bool = True, param_overrides: dict | None = None):
+        self.scenario = scenario
+        veh, planet = scenario.vehicle, scenario.planet
+        self.dt_s = scenario.dt_control_s
+        self.events = events or EventLog()
+        overrides = dict(scenario.fsw)
+        if param_overrides:
+            overrides.update(param_overrides)
+        self.param_table = {p.name: p for p in all_params()}
+        self.params = load_params(all_params(), overrides)
+
+        self.nav = Navigation(planet, veh)
+        self.guidance = Guidance(BankProfile(scenario.bank_schedule, scenario.bank_rate_limit_radps,
+                                             scenario.bank_accel_limit_radps2),
+                                 veh.aero.alpha_trim_rad, planet.omega_radps)
+        self.control = SamiController(self.params, veh, self.dt_s)
+        self.allocator = Allocator(veh.torque_matrix_Nm, veh.thrust_N, self.params)
+        self.fdir = Fdir(self.params, self.dt_s, self.events)
+        self.driver = JetDriver(veh.thrust_N, veh.isp_s, planet.g0_mps2, self.dt_s, self.events)
+        self.modes = ModeManager(self.events)
+        self.monitor = SensorMonitor(self.events, self.dt_s)
+
+        if start_mode != Mode.STANDBY:
+            self.modes.request(0.0, start_mode, "start")
+        self.driver.arm(0.0, armed)
+        self.allocator.set_health(self.fdir.health_active)
+
+        self.k = -1
+        self.t_s = 0.0
+        self.u_cal_B = np.zeros(3)
+        self.tau_alloc_B = np.zeros(3)
+        self._omega_prev = np.zeros(3)
+        self._tau_cmd_prev = np.zeros(3)
+        self._have_prev = False
+        self.alloc_ns = 0
+        self.reconfig_times: list[float] = []
+        self.cycles = 0
+
+    # ---------------------------------------------------------------- RG1
+    def control_step(self, frame) -> np.ndarray:
+        """One control cycle on a SENSORS record; returns the jet command (uint8, 18)."""
+        self.cycles += 1
+        t_s = frame["t_ns"] * 1e-9
+        ok = self.monitor.check(t_s, frame)
+        if not ok or self.monitor.stale:
+            self._have_prev = False
+            return self.driver.command(self._zero_u(), False)
+        self.k = int(frame["k"])
+        self.t_s = t_s
+        if self.fdir.update(t_s, self.driver.last_command, frame["chamber"]):
+            self.allocator.set_health(self.fdir.health_active)
+            self.reconfig_times.append(t_s)
+            self.events.emit(t_s, Severity.NOTICE, "allocator", "reconfigured",
+                             f"ALLOCATOR RECONFIGURED ({self.allocator.rebuild_time_s * 1e3:.1f} ms)")
+        nav = self.nav.update(t_s, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
+                              frame["accel_B"])
+        self.guidance.update(nav)
+        mode = self.modes.mode
+        if mode == Mode.ENTRY:
+            self.control.freeze = not self.modes.adaptation_enabled
+            u_cal = self.control.update(nav, self.guidance, self.tau_alloc_B if self._have_prev else None)
+        elif mode == Mode.SAFE:
+            self.control.freeze = True
+            u_cal = self.control.safe_torque(nav)
+        else:
+            u_cal = self._zero3()
+        self.u_cal_B[:] = u_cal
+        t0 = time.perf_counter_ns()
+        u_alloc = self.allocator.solve(self.u_cal_B)
+        self.alloc_ns = time.perf_counter_ns() - t0
+        self.tau_alloc_B[:] = self.allocator.tau_B
+        if self.allocator.degraded:
+            self.events.emit(t_s, Severity.WARNING, "allocator", "alloc_degraded",
+                             "ALLOCATION DEGRADED (infeasible)", rate_limited=True)
+        self._have_prev = True
+        return self.driver.command(u_alloc, self.modes.jets_enabled)
+
+    def _zero_u(self) -> np.ndarray:
+        if not hasattr(self, "_zu"):
+            self._zu = np.zeros(18, dtype=np.uint8)
+        return self._zu
+
+    def _zero3(self) -> np.ndarray:
+        if not hasattr(self, "_z3"):
+            self._z3 = np.zeros(3)
+        return self._z3
+
+    # ---------------------------------------------------------------- RG2 / RG3
+    def slow_step(self) -> None:
+        """RG2: analytic-redundancy residual (needs two consecutive good cycles)."""
+        nav = self.nav.state
+        if self._have_prev and self._residual_ready:
+            self.fdir.residual_check(self.t_s, nav.omega_BN_B, self._omega_prev, self._residual_dt,
+                                     self._tau_cmd_prev, self.control.aero_torque_est(nav),
+                                     self.control.inertia_hat())
+        self._omega_prev[:] = nav.omega_BN_B
+        self._tau_cmd_prev[:] = self.tau_alloc_B
+        self._residual_dt = self.dt_s * self.params["executive.rg2_divisor"]
+        self._residual_ready = True
+
+    _residual_ready = False
+    _residual_dt = 0.0
+
+    def housekeeping(self) -> None:
+        """RG3: nothing periodic beyond telemetry yet (the ground link adds its heartbeat here)."""
+
+    # ---------------------------------------------------------------- commands
+    def set_fault_tolerance(self, on: bool) -> None:
+        self.allocator.set_fault_tolerance(on)
+        self.allocator.set_health(self.fdir.health_active)
+
+    def set_param(self, name: str, value: float) -> float:
+        """Validated ground parameter set; raises ValueError (value unchanged) when refused."""
+        p = self.param_table.get(name)
+        if p is None:
+            raise ValueError(f"{name}: unknown parameter")
+        if not p.ground_settable:
+            raise ValueError(f"{name}: not settable in flight")
+        v = p.check(value)
+        section = name.split(".", 1)[0]
+        if section == "control":
+            self.control.set_param(name, v)
+        elif section == "allocator":
+            if name == "allocator.fault_tolerance":
+                self.set_fault_tolerance(bool(v))
+            else:
+                self.allocator.set_param(name, v)
+                self.allocator.set_health(self.fdir.health_active)
+        elif section == "fdir":
+            self.fdir.set_param(name, v)
+        self.params[name] = v
+        return v
+
+    @property
+    def health(self) -> JetHealth:
+        return self.fdir.health_active

@@ -34,11 +34,24 @@ def _add_batch(sub):
     p.set_defaults(func=run)
 
 
+def _add_report(sub):
+    p = sub.add_parser("report", help="fly every paper case and write report.md (paper claims vs measured)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--duration", type=float, default=None)
+
+    def run(a):
+        from ellipsled.report import main as report_main
+        return report_main(a)
+    p.set_defaults(func=run)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="ellipsled", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     _add_plant(sub)
     _add_batch(sub)
+    _add_report(sub)
     a = ap.parse_args(argv)
     try:
         return int(a.func(a) or 0)

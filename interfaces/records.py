@@ -35,3 +35,32 @@ JETS = np.dtype([
 def new(dtype: np.dtype) -> np.ndarray:
     """A zeroed 0-d record; fields are views (``rec['omega_BN_B'][:] = ...``)."""
     return np.zeros((), dtype=dtype)
+
+
+# fsw or test harness -> sim: inject or clear a jet fault (spec 40-interfaces.md, MAVLink
+# MAV_CMD_INJECT_FAILURE mapping). Jet numbering follows the command: 1..18, 0 = all jets.
+FAULT_CLEAR = 0        # MAVLink FAILURE_TYPE_OK
+FAULT_OFF = 1          # FAILURE_TYPE_OFF: failed off
+FAULT_STUCK = 2        # FAILURE_TYPE_STUCK: stuck on
+FAULT_DEGRADED = 4     # FAILURE_TYPE_WRONG: degraded, eta in (0, 1)
+FAULT_KINDS = (FAULT_CLEAR, FAULT_OFF, FAULT_STUCK, FAULT_DEGRADED)
+
+FAULT = np.dtype([
+    ("t_apply_ns", "<i8"),         # simulated time at which to apply [ns]; < 0 = at the next step
+    ("eta", "<f8"),                # thrust efficiency for FAULT_DEGRADED, in (0, 1) [-]
+    ("request_id", "<u4"),         # echoed in the acknowledgement
+    ("jet", "u1"),                 # 1..18, 0 = all jets
+    ("kind", "u1"),                # one of FAULT_KINDS
+    ("_pad", "u1", (2,)),          # keeps the record a multiple of 8 bytes
+])
+
+# fsw -> viewers, ground: one event (fsw/events.py Event), fixed width. Strings are
+# UTF-8, NUL-padded; text <= 50 bytes fits one MAVLink STATUSTEXT.
+EVENT = np.dtype([
+    ("t_ns", "<i8"),               # event time [ns] (FSW time)
+    ("severity", "u1"),            # MAVLink MAV_SEVERITY 0..7
+    ("source", "S15"),             # module, e.g. b"fdir"
+    ("code", "S32"),               # stable machine-readable id, e.g. b"jet_failed_off"
+    ("text", "S50"),               # human-readable
+    ("_pad", "u1", (6,)),          # keeps the record a multiple of 8 bytes
+])

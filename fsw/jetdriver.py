@@ -1,0 +1,94 @@
+"""Jet driver (spec 20-fsw.md "Jet driver"): arming, the ground inhibit mask and the mode
+gate; the command holds for exactly one control period; pulse, on-time and propellant
+bookkeeping; remembers what it sent for FDIR.
+
+Bookkeeping counts what was *commanded*: a jet stuck on in the plant burns propellant the
+driver does not see (FDIR's health says so instead).
+
+Events (source "driver", NOTICE): "JETS ARMED" / "JETS DISARMED" on a change of arming,
+"JET 5 INHIBITED" / "JET 5 INHIBIT CLEARED" (jet 0 = "ALL JETS") on a change of the mask.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .events import EventLog, Severity
+from .params import Param
+
+
+class JetDriver:
+    PARAMS = [
+        Param("driver.arm_on_entry", 0, 1, "-", "1 = the executive arms the jets when ENTRY starts", integer=True),
+    ]
+
+    def __init__(self, thrust_N: np.ndarray, isp_s: float, g0_mps2: float, dt_s: float, events: EventLog) -> None:
+        thrust_N = np.asarray(thrust_N, dtype=float)
+        if thrust_N.ndim != 1 or thrust_N.size == 0 or not np.all(np.isfinite(thrust_N)) or np.any(thrust_N < 0):
+            raise ValueError("thrust_N: must be a 1-D array of finite values >= 0")
+        for name, v in (("isp_s", isp_s), ("g0_mps2", g0_mps2), ("dt_s", dt_s)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name}: must be finite and > 0, got {v!r}")
+        n = thrust_N.size
+        self.n = n
+        self.dt_s = float(dt_s)
+        self.events = events
+        self.thrust_N = thrust_N.copy()
+        self._mdot_kgps = thrust_N / (isp_s * g0_mps2)       # per jet, while on
+        self.armed = False
+        self.inhibit = np.zeros(n, dtype=bool)
+        self.pulses = np.zeros(n, dtype=np.int64)
+        self.on_time_s = np.zeros(n)
+        self.propellant_kg = 0.0
+        self.seq = 0                                          # commands issued
+        self.last_command = np.zeros(n, dtype=np.uint8)       # the command in force (sent last)
+        self._on = np.zeros(n, dtype=bool)
+        self._prev_on = np.zeros(n, dtype=bool)
+        self._rise = np.zeros(n, dtype=bool)
+
+    def _check_jet(self, jet) -> int:
+        if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= int(jet) <= self.n:
+            raise ValueError(f"jet: must be an integer in 0..{self.n} (0 = all), got {jet!r}")
+        return int(jet)
+
+    def arm(self, t_s: float, on: bool) -> None:
+        on = bool(on)
+        if on != self.armed:
+            self.armed = on
+            self.events.emit(t_s, Severity.NOTICE, "driver", "jets_armed" if on else "jets_disarmed",
+                             "JETS ARMED" if on else "JETS DISARMED")
+
+    def set_inhibit(self, t_s: float, jet: int, on: bool) -> None:
+        """Ground inhibit mask; jet is 1-based, 0 = all jets."""
+        jet = self._check_jet(jet)
+        on = bool(on)
+        sel = slice(None) if jet == 0 else slice(jet - 1, jet)
+        if np.all(self.inhibit[sel] == on):
+            return
+        self.inhibit[sel] = on
+        who = "ALL JETS" if jet == 0 else f"JET {jet}"
+        self.events.emit(t_s, Severity.NOTICE, "driver", "jet_inhibit",
+                         f"{who} INHIBITED" if on else f"{who} INHIBIT CLEARED")
+
+    def command(self, u_alloc: np.ndarray, jets_enabled: bool) -> np.ndarray:
+        """The command actually sent for the next period: u_alloc (> 0.5 = on; NaN = off)
+        unless disarmed or not enabled by the mode, inhibited jets off. Returns
+        ``last_command`` (uint8, preallocated and overwritten by the next call)."""
+        u = np.asarray(u_alloc)
+        if u.shape != (self.n,):
+            raise ValueError(f"u_alloc: must have shape ({self.n},), got {u.shape}")
+        on = self._on
+        if self.armed and jets_enabled:
+            np.greater(u, 0.5, out=on)
+            on &= ~self.inhibit
+        else:
+            on[:] = False
+        np.greater(on, self._prev_on, out=self._rise)       # 0 -> 1 transitions
+        self.pulses += self._rise
+        np.add(self.on_time_s, self.dt_s, out=self.on_time_s, where=on)
+        self.propellant_kg += float(self._mdot_kgps @ on) * self.dt_s
+        self._prev_on[:] = on
+        self.last_command[:] = on
+        self.seq += 1
+        return self.last_command

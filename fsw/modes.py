@@ -1,0 +1,131 @@
+"""Modes (spec 20-fsw.md "Modes") and the ordered failsafe list.
+
+STANDBY: the loop runs, jets inhibited.  ENTRY: closed loop, adaptation on.
+SAFE: rate damping only, adaptation frozen, jets enabled.
+
+Allowed transitions: STANDBY -> ENTRY, ENTRY <-> SAFE, any -> STANDBY. A request for the
+current mode is accepted as a no-op (no event). A refused request returns False and
+raises a WARNING event; an accepted one a NOTICE event (source "modes").
+
+Failsafes (PX4 style: one explicit ordered list, first match wins), evaluated once per
+control period by the executive:
+
+| # | condition                                           | action                                 |
+|---|-----------------------------------------------------|----------------------------------------|
+| 1 | sensor frames stale (SensorMonitor.stale)           | HOLD_JETS_OFF, mode unchanged          |
+| 2 | in ENTRY: tracking error > fdir.safe_track_deg for fdir.safe_track_s | request SAFE       |
+
+Leaving SAFE is a ground decision (request ENTRY); nothing returns to ENTRY by itself.
+"""
+from __future__ import annotations
+
+import math
+from enum import IntEnum
+
+from .events import EventLog, Severity
+from .params import Param
+
+
+class Mode(IntEnum):
+    STANDBY = 0
+    ENTRY = 1
+    SAFE = 2
+
+
+_ALLOWED = {
+    (Mode.STANDBY, Mode.ENTRY),
+    (Mode.ENTRY, Mode.SAFE),
+    (Mode.SAFE, Mode.ENTRY),
+    (Mode.ENTRY, Mode.STANDBY),
+    (Mode.SAFE, Mode.STANDBY),
+}
+
+
+class ModeManager:
+    """The current mode and what it implies for the rest of the FSW."""
+
+    def __init__(self, events: EventLog, initial: Mode = Mode.STANDBY) -> None:
+        self.events = events
+        self.mode = Mode(initial)
+        self.transitions: list[tuple[float, Mode, Mode, str]] = []   # (t_s, from, to, reason)
+
+    def request(self, t_s: float, mode, reason: str) -> bool:
+        """Ask for ``mode`` (a Mode or its int/name). True if now in that mode."""
+        try:
+            target = Mode[mode.upper()] if isinstance(mode, str) else Mode(mode)
+        except (KeyError, ValueError):
+            self.events.emit(t_s, Severity.WARNING, "modes", "mode_refused", f"MODE {mode!s:.12} UNKNOWN: REFUSED")
+            return False
+        reason = str(reason)
+        if target == self.mode:
+            return True
+        if (self.mode, target) not in _ALLOWED:
+            self.events.emit(t_s, Severity.WARNING, "modes", "mode_refused",
+                             f"MODE {self.mode.name}->{target.name} REFUSED")
+            return False
+        self.transitions.append((t_s, self.mode, target, reason))
+        text = f"MODE {self.mode.name}->{target.name} ({reason})"
+        self.mode = target
+        self.events.emit(t_s, Severity.NOTICE, "modes", "mode_change", text[:50])
+        return True
+
+    @property
+    def jets_enabled(self) -> bool:
+        return self.mode != Mode.STANDBY
+
+    @property
+    def adaptation_enabled(self) -> bool:
+        return self.mode == Mode.ENTRY
+
+    @property
+    def closed_loop(self) -> bool:
+        return self.mode == Mode.ENTRY
+
+    @property
+    def rate_damping(self) -> bool:
+        return self.mode == Mode.SAFE
+
+
+class FailsafeAction(IntEnum):
+    NONE = 0
+    HOLD_JETS_OFF = 1   # command zero this period; mode unchanged
+    SAFE = 2            # switch to SAFE (rate damping, adaptation frozen)
+
+
+class Failsafes:
+    """The ordered failsafe list above. ``evaluate`` returns the action of the first rule
+    that holds and applies a SAFE transition through the ModeManager itself."""
+
+    PARAMS = [
+        Param("fdir.safe_track_deg", 0.1, 180.0, "deg", "tracking error (rotation angle) beyond which SAFE is entered"),
+        Param("fdir.safe_track_s", 0.0, 600.0, "s", "... for this long"),
+    ]
+
+    def __init__(self, params: dict[str, float], modes: ModeManager) -> None:
+        for p in self.PARAMS:
+            if p.name not in params:
+                raise ValueError(f"{p.name}: missing")
+        self.limit_rad = math.radians(self.PARAMS[0].check(params["fdir.safe_track_deg"]))
+        self.persist_s = self.PARAMS[1].check(params["fdir.safe_track_s"])
+        self.modes = modes
+        self._above_s = 0.0
+        self.last_rule = ""
+
+    def evaluate(self, t_s: float, dt_s: float, *, sensors_stale: bool, tracking_error_rad: float) -> FailsafeAction:
+        """Once per control period. A non-finite tracking error counts as beyond the limit."""
+        if sensors_stale:                                                   # rule 1
+            self._above_s = 0.0
+            self.last_rule = "sensors_stale"
+            return FailsafeAction.HOLD_JETS_OFF
+        beyond = not (math.isfinite(tracking_error_rad) and abs(tracking_error_rad) <= self.limit_rad)
+        if self.modes.mode == Mode.ENTRY and beyond:                        # rule 2
+            self._above_s += dt_s
+            if self._above_s >= self.persist_s - 1e-9:
+                self._above_s = 0.0
+                self.last_rule = "tracking_error"
+                self.modes.request(t_s, Mode.SAFE, "track err")
+                return FailsafeAction.SAFE
+        else:
+            self._above_s = 0.0
+        self.last_rule = ""
+        return FailsafeAction.NONE

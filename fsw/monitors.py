@@ -1,0 +1,151 @@
+"""Sensor-frame monitor (spec 20-fsw.md FDIR "Other monitors", 40-interfaces.md).
+
+How to call it, per control period of the executive:
+- ``check(t_s, frame)`` for each SENSORS record received; True = use it.
+- ``tick(t_s, got_frame=False)`` for a period in which no frame arrived at all (the real-
+  time executive; in lockstep every tick is a frame and ``tick`` is not needed).
+Each rejected frame and each frameless ``tick`` is a period without fresh data; after
+``fdir.stale_n`` of them in a row the monitor is STALE (``stale`` and
+``jets_must_hold_off`` True, ERROR event); the next accepted frame recovers it (NOTICE).
+
+Rejections (the whole frame; counted in ``counts`` under the reason):
+- ``format``: not a SENSORS record;
+- ``nonfinite``: a non-finite value in omega, sigma, r, v or accel;
+- ``range``: |sigma| > 1 + sigma_tol, |omega| > omega_max, |r| below the surface by more than
+  r_below_m or above it by more than alt_max_m, |v| > v_max, |accel| > accel_max, k < 0;
+- ``duplicate`` (k equal to the last accepted) and ``out_of_order`` (k smaller).
+Chamber pressures are per-jet sensors: a non-finite value or one outside
+[chamber_lo, chamber_hi] is replaced by NaN in the frame, in place (FDIR then ignores
+that jet's sample), counted under ``chamber_nonfinite`` / ``chamber_range`` per jet, and
+does not reject the frame: one failed transducer must not cost the vehicle its attitude
+control. Events are WARNING and rate-limited per reason (source "monitor").
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from interfaces.records import SENSORS
+
+from .events import EventLog, Severity
+from .params import Param, load_params
+
+MARS_RADIUS_M = 3396.2e3   # default only; pass the planet's radius from data/planets
+
+REASONS = ("format", "nonfinite", "range", "duplicate", "out_of_order", "chamber_nonfinite", "chamber_range")
+_VEC_FIELDS = ("omega_BN_B", "sigma_BN", "r_N", "v_N", "accel_B")
+
+
+class SensorMonitor:
+    PARAMS = [
+        Param("fdir.stale_n", 1, 1000, "periods", "periods without a fresh frame before STALE", integer=True),
+        Param("fdir.omega_max_radps", 0.01, 100.0, "rad/s", "largest credible |omega|"),
+        Param("fdir.sigma_tol", 0.0, 1.0, "-", "|sigma| may exceed 1 by this much"),
+        Param("fdir.r_below_m", 0.0, 1e6, "m", "reject |r| this far below the surface"),
+        Param("fdir.alt_max_m", 1e3, 1e9, "m", "reject |r| this far above the surface"),
+        Param("fdir.v_max_mps", 1.0, 1e6, "m/s", "largest credible |v|"),
+        Param("fdir.accel_max_mps2", 1.0, 1e6, "m/s^2", "largest credible sensed |accel|"),
+        Param("fdir.chamber_lo", -10.0, 0.0, "-", "lowest credible normalised chamber pressure"),
+        Param("fdir.chamber_hi", 1.0, 10.0, "-", "highest credible normalised chamber pressure"),
+    ]
+
+    def __init__(self, events: EventLog, dt_s: float, params: dict[str, float] | None = None,
+                 radius_m: float = MARS_RADIUS_M) -> None:
+        if params is None:
+            params = load_params(self.PARAMS)
+        p = {}
+        for q in self.PARAMS:
+            if q.name not in params:
+                raise ValueError(f"{q.name}: missing")
+            p[q.name] = q.check(params[q.name])
+        if not (math.isfinite(dt_s) and dt_s > 0):
+            raise ValueError(f"dt_s: must be finite and > 0, got {dt_s!r}")
+        if not (math.isfinite(radius_m) and radius_m > 0):
+            raise ValueError(f"radius_m: must be finite and > 0, got {radius_m!r}")
+        self.events = events
+        self.dt_s = float(dt_s)
+        self.stale_n = int(p["fdir.stale_n"])
+        self._omega_max = p["fdir.omega_max_radps"]
+        self._sigma_max = 1.0 + p["fdir.sigma_tol"]
+        self._r_min = max(0.0, radius_m - p["fdir.r_below_m"])
+        self._r_max = radius_m + p["fdir.alt_max_m"]
+        self._v_max = p["fdir.v_max_mps"]
+        self._a_max = p["fdir.accel_max_mps2"]
+        self._ch_lo, self._ch_hi = p["fdir.chamber_lo"], p["fdir.chamber_hi"]
+        self.counts: dict[str, int] = {r: 0 for r in REASONS}
+        self.accepted = 0
+        self.last_k: int | None = None
+        self.missed = 0            # consecutive periods without fresh data
+        self.stale = False
+
+    @property
+    def jets_must_hold_off(self) -> bool:
+        return self.stale
+
+    def _reject(self, t_s: float, reason: str, text: str) -> bool:
+        self.counts[reason] += 1
+        self.events.emit(t_s, Severity.WARNING, "monitor", f"frame_{reason}", text[:50], rate_limited=True)
+        self._no_fresh(t_s)
+        return False
+
+    def _no_fresh(self, t_s: float) -> None:
+        self.missed += 1
+        if not self.stale and self.missed >= self.stale_n:
+            self.stale = True
+            self.events.emit(t_s, Severity.ERROR, "monitor", "sensors_stale",
+                             f"SENSORS STALE ({self.missed} PERIODS): JETS HELD OFF")
+
+    def tick(self, t_s: float, got_frame: bool = False) -> None:
+        """End of a control period; ``got_frame`` False = no frame arrived at all."""
+        if not got_frame:
+            self._no_fresh(t_s)
+
+    def check(self, t_s: float, frame) -> bool:
+        """Validate one SENSORS record; True = accepted (fresh and credible)."""
+        if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != ():
+            return self._reject(t_s, "format", "SENSOR FRAME BAD FORMAT: REJECTED")
+        for name in _VEC_FIELDS:
+            if not np.isfinite(frame[name]).all():
+                return self._reject(t_s, "nonfinite", f"SENSOR FRAME NON-FINITE {name.split('_')[0].upper()}")
+        k = int(frame["k"])
+        if k < 0:
+            return self._reject(t_s, "range", f"SENSOR FRAME BAD K {k}")
+        checks = (("omega", frame["omega_BN_B"], 0.0, self._omega_max),
+                  ("sigma", frame["sigma_BN"], 0.0, self._sigma_max),
+                  ("r", frame["r_N"], self._r_min, self._r_max),
+                  ("v", frame["v_N"], 0.0, self._v_max),
+                  ("accel", frame["accel_B"], 0.0, self._a_max))
+        for name, vec, lo, hi in checks:
+            mag = math.sqrt(float(vec @ vec))
+            if not lo <= mag <= hi:
+                return self._reject(t_s, "range", f"SENSOR {name.upper()} OUT OF RANGE {mag:.4g}")
+        if self.last_k is not None and k <= self.last_k:
+            if k == self.last_k:
+                return self._reject(t_s, "duplicate", f"SENSOR FRAME K {k} DUPLICATE")
+            return self._reject(t_s, "out_of_order", f"SENSOR FRAME K {k} OUT OF ORDER")
+        self._mask_chamber(t_s, frame["chamber"])
+        self.last_k = k
+        self.accepted += 1
+        self.missed = 0
+        if self.stale:
+            self.stale = False
+            self.events.emit(t_s, Severity.NOTICE, "monitor", "sensors_recovered", "SENSORS RECOVERED")
+        return True
+
+    def _mask_chamber(self, t_s: float, ch: np.ndarray) -> None:
+        # one comparison pass in the common (all good) case
+        if ch.min() >= self._ch_lo and ch.max() <= self._ch_hi:
+            return
+        nonfinite = ~np.isfinite(ch)
+        out = ~nonfinite & ((ch < self._ch_lo) | (ch > self._ch_hi))
+        n_nf, n_out = int(nonfinite.sum()), int(out.sum())
+        self.counts["chamber_nonfinite"] += n_nf
+        self.counts["chamber_range"] += n_out
+        ch[nonfinite | out] = np.nan
+        if n_nf:
+            self.events.emit(t_s, Severity.WARNING, "monitor", "chamber_nonfinite",
+                             f"CHAMBER NON-FINITE JET {int(np.flatnonzero(nonfinite)[0]) + 1}", rate_limited=True)
+        if n_out:
+            self.events.emit(t_s, Severity.WARNING, "monitor", "chamber_range",
+                             f"CHAMBER OUT OF RANGE JET {int(np.flatnonzero(out)[0]) + 1}", rate_limited=True)

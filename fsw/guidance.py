@@ -1,0 +1,311 @@
+"""Guidance: the smoothed bank-angle reference and the reference attitude (spec 20-fsw.md,
+"Guidance: the reference bank-angle trajectory").
+
+BankProfile turns the scenario's bank steps into a twice-differentiable reference that
+respects the rate and acceleration limits. Guidance turns phi_r into the reference
+attitude C_RN = R2(alpha_trim) R1(phi_r) C_WN (beta_r = 0) with its MRP sigma_RN and the
+derivatives SAMI needs, including the wind frame's own angular velocity omega_WN.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from typing import Sequence
+
+import numpy as np
+from numba import njit
+
+from common.model import load_planet
+
+# Minimum-jerk (quintic) blend s(x) = 10x^3 - 15x^4 + 6x^5 on x in [0, 1]:
+# max s' = 15/8 at x = 1/2; max |s''| = 10/sqrt(3) at x = 1/2 -+ sqrt(3)/6.
+_S1_MAX = 15.0 / 8.0
+_S2_MAX = 10.0 / math.sqrt(3.0)
+
+
+class BankProfile:
+    """Bank-angle reference from a schedule of (t_s, bank_rad) steps.
+
+    The reference starts at schedule[0]'s bank. Each later step becomes a minimum-jerk
+    quintic transition from the previous target to the new one, with duration
+    T = max(15/8 |d| / rate_limit, sqrt(10/sqrt(3) |d| / accel_limit)), so the peak rate
+    and the peak acceleration are both within their limits; each transition starts and
+    ends at rest (zero rate and acceleration), so the reference is C2 everywhere.
+
+    Steps are taken literally (no wrapping): 85 deg -> -85 deg reverses through 0 (lift up),
+    as entry guidance intends.
+
+    A step that arrives while a transition is still running is queued: its transition
+    starts when the running one ends (so the limits hold exactly and the reference stays
+    C2; the price is a lag, reported by ``lag_s``).
+    """
+
+    def __init__(self, schedule: Sequence[tuple[float, float]], rate_limit_radps: float,
+                 accel_limit_radps2: float):
+        for name, v in (("rate_limit_radps", rate_limit_radps), ("accel_limit_radps2", accel_limit_radps2)):
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"BankProfile.{name}: must be a finite number > 0, got {v!r}")
+        if schedule is None or len(schedule) == 0:
+            raise ValueError("BankProfile.schedule: must be a non-empty list of (t_s, bank_rad)")
+        steps = []
+        for i, pair in enumerate(schedule):
+            try:
+                t, b = float(pair[0]), float(pair[1])
+            except (TypeError, ValueError, IndexError):
+                raise ValueError(f"BankProfile.schedule: entry {i + 1} must be (t_s, bank_rad), got {pair!r}") from None
+            if not (math.isfinite(t) and math.isfinite(b)):
+                raise ValueError(f"BankProfile.schedule: entry {i + 1} must be finite, got {pair!r}")
+            if abs(b) > math.pi + 1e-12:
+                raise ValueError(f"BankProfile.schedule: entry {i + 1}: bank {b:g} rad outside [-pi, pi]")
+            if steps and t <= steps[-1][0]:
+                raise ValueError(f"BankProfile.schedule: entry {i + 1}: times must increase")
+            steps.append((t, b))
+        if steps[0][0] != 0.0:
+            raise ValueError(f"BankProfile.schedule: the first step must be at t = 0, got {steps[0][0]:g}")
+        self.schedule = tuple(steps)
+        self.rate_limit_radps = float(rate_limit_radps)
+        self.accel_limit_radps2 = float(accel_limit_radps2)
+        self.phi0_rad = steps[0][1]
+        # segments: (t_start, duration, phi_from, delta)
+        starts, segs = [], []
+        lag = 0.0
+        t_free, phi = 0.0, steps[0][1]
+        for t, b in steps[1:]:
+            d = b - phi
+            if d == 0.0:
+                continue
+            T = max(_S1_MAX * abs(d) / self.rate_limit_radps, math.sqrt(_S2_MAX * abs(d) / self.accel_limit_radps2))
+            t0 = max(t, t_free)
+            lag = max(lag, t0 - t)
+            starts.append(t0)
+            segs.append((t0, T, phi, d))
+            t_free, phi = t0 + T, b
+        self._starts = starts
+        self._segs = segs
+        self.lag_s = lag   # largest delay of a transition start behind its step time
+
+    def transitions(self) -> list[tuple[float, float, float, float]]:
+        """(t_start, duration, phi_from, phi_to) of each transition."""
+        return [(t0, T, p, p + d) for t0, T, p, d in self._segs]
+
+    def evaluate(self, t_s: float) -> tuple[float, float, float]:
+        """(phi_r [rad], phidot_r [rad/s], phiddot_r [rad/s^2]) at time t_s."""
+        i = bisect.bisect_right(self._starts, t_s) - 1
+        if i < 0:
+            return self.phi0_rad, 0.0, 0.0
+        t0, T, p, d = self._segs[i]
+        x = (t_s - t0) / T
+        if x >= 1.0:
+            return p + d, 0.0, 0.0
+        x2 = x * x
+        s = x2 * x * (10.0 + x * (-15.0 + 6.0 * x))
+        s1 = x2 * (30.0 + x * (-60.0 + 30.0 * x)) / T
+        s2 = x * (60.0 + x * (-180.0 + 120.0 * x)) / (T * T)
+        return p + d * s, d * s1, d * s2
+
+
+@njit(cache=True)
+def _mrp_from_dcm(C, out):
+    """sigma (|sigma| <= 1) of a DCM via Shepperd's quaternion (same as common.mrp.from_dcm)."""
+    tr = C[0, 0] + C[1, 1] + C[2, 2]
+    b0 = (1.0 + tr) / 4.0
+    b1 = (1.0 + 2.0 * C[0, 0] - tr) / 4.0
+    b2 = (1.0 + 2.0 * C[1, 1] - tr) / 4.0
+    b3 = (1.0 + 2.0 * C[2, 2] - tr) / 4.0
+    if b0 >= b1 and b0 >= b2 and b0 >= b3:
+        q0 = math.sqrt(b0)
+        q1 = (C[1, 2] - C[2, 1]) / (4 * q0)
+        q2 = (C[2, 0] - C[0, 2]) / (4 * q0)
+        q3 = (C[0, 1] - C[1, 0]) / (4 * q0)
+    elif b1 >= b2 and b1 >= b3:
+        q1 = math.sqrt(b1)
+        q0 = (C[1, 2] - C[2, 1]) / (4 * q1)
+        q2 = (C[0, 1] + C[1, 0]) / (4 * q1)
+        q3 = (C[2, 0] + C[0, 2]) / (4 * q1)
+    elif b2 >= b3:
+        q2 = math.sqrt(b2)
+        q0 = (C[2, 0] - C[0, 2]) / (4 * q2)
+        q1 = (C[0, 1] + C[1, 0]) / (4 * q2)
+        q3 = (C[1, 2] + C[2, 1]) / (4 * q2)
+    else:
+        q3 = math.sqrt(b3)
+        q0 = (C[0, 1] - C[1, 0]) / (4 * q3)
+        q1 = (C[2, 0] + C[0, 2]) / (4 * q3)
+        q2 = (C[1, 2] + C[2, 1]) / (4 * q3)
+    if q0 < 0.0:
+        q0, q1, q2, q3 = -q0, -q1, -q2, -q3
+    out[0] = q1 / (1.0 + q0)
+    out[1] = q2 / (1.0 + q0)
+    out[2] = q3 / (1.0 + q0)
+
+
+@njit(cache=True)
+def _B_mul(s, x, out):
+    """out = B(s) x, B = (1 - s.s) I + 2[s x] + 2 s s^T (spec 10-plant.md)."""
+    s2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
+    sx = s[0] * x[0] + s[1] * x[1] + s[2] * x[2]
+    c0 = s[1] * x[2] - s[2] * x[1]
+    c1 = s[2] * x[0] - s[0] * x[2]
+    c2 = s[0] * x[1] - s[1] * x[0]
+    out[0] = (1.0 - s2) * x[0] + 2.0 * c0 + 2.0 * s[0] * sx
+    out[1] = (1.0 - s2) * x[1] + 2.0 * c1 + 2.0 * s[1] * sx
+    out[2] = (1.0 - s2) * x[2] + 2.0 * c2 + 2.0 * s[2] * sx
+
+
+@njit(cache=True)
+def _Bdot_mul(s, sd, x, out):
+    """out = Bdot(s, sd) x, Bdot = -2 (s.sd) I + 2[sd x] + 2 (sd s^T + s sd^T) (spec 20-fsw.md)."""
+    ssd = s[0] * sd[0] + s[1] * sd[1] + s[2] * sd[2]
+    sx = s[0] * x[0] + s[1] * x[1] + s[2] * x[2]
+    sdx = sd[0] * x[0] + sd[1] * x[1] + sd[2] * x[2]
+    c0 = sd[1] * x[2] - sd[2] * x[1]
+    c1 = sd[2] * x[0] - sd[0] * x[2]
+    c2 = sd[0] * x[1] - sd[1] * x[0]
+    out[0] = -2.0 * ssd * x[0] + 2.0 * c0 + 2.0 * (sd[0] * sx + s[0] * sdx)
+    out[1] = -2.0 * ssd * x[1] + 2.0 * c1 + 2.0 * (sd[1] * sx + s[1] * sdx)
+    out[2] = -2.0 * ssd * x[2] + 2.0 * c2 + 2.0 * (sd[2] * sx + s[2] * sdx)
+
+
+@njit(cache=True)
+def reference_derivatives(sigma_r, omega_R, domega_R, sdot, sddot):
+    """sigma_r_dot = 1/4 B omega_R; sigma_r_ddot = 1/4 (Bdot omega_R + B domega_R) (spec 20-fsw.md)."""
+    tmp = np.empty(3)
+    _B_mul(sigma_r, omega_R, sdot)
+    for i in range(3):
+        sdot[i] *= 0.25
+    _Bdot_mul(sigma_r, sdot, omega_R, sddot)
+    _B_mul(sigma_r, domega_R, tmp)
+    for i in range(3):
+        sddot[i] = 0.25 * (sddot[i] + tmp[i])
+
+
+@njit(cache=True)
+def wind_rate(r_N, v_N, vrel_N, C_WN, a_N, omega_planet, out_W):
+    """Angular velocity of W relative to N, in W components [rad/s].
+
+    W: w1 = v_rel/|v_rel|, w2 = (v_rel x r)/|.|, w3 = w1 x w2 (spec 10-plant.md). With
+    d(v_rel)/dt = a - Omega x v (a = inertial acceleration, v = dr/dt) and h = v_rel x r:
+    omega1 = hdot.w3/|h|, omega2 = -vrel_dot.w3/V, omega3 = vrel_dot.w2/V
+    (from dw1/dt = omega x w1 and dw2/dt = omega x w2).
+    """
+    vd0 = a_N[0] + omega_planet * v_N[1]
+    vd1 = a_N[1] - omega_planet * v_N[0]
+    vd2 = a_N[2]
+    V = math.sqrt(vrel_N[0] ** 2 + vrel_N[1] ** 2 + vrel_N[2] ** 2)
+    h0 = vrel_N[1] * r_N[2] - vrel_N[2] * r_N[1]
+    h1 = vrel_N[2] * r_N[0] - vrel_N[0] * r_N[2]
+    h2 = vrel_N[0] * r_N[1] - vrel_N[1] * r_N[0]
+    hn = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+    if V < 1e-6 or hn < 1e-6:
+        out_W[0] = 0.0
+        out_W[1] = 0.0
+        out_W[2] = 0.0
+        return
+    # hdot = vrel_dot x r + vrel x v
+    hd0 = vd1 * r_N[2] - vd2 * r_N[1] + vrel_N[1] * v_N[2] - vrel_N[2] * v_N[1]
+    hd1 = vd2 * r_N[0] - vd0 * r_N[2] + vrel_N[2] * v_N[0] - vrel_N[0] * v_N[2]
+    hd2 = vd0 * r_N[1] - vd1 * r_N[0] + vrel_N[0] * v_N[1] - vrel_N[1] * v_N[0]
+    out_W[0] = (hd0 * C_WN[2, 0] + hd1 * C_WN[2, 1] + hd2 * C_WN[2, 2]) / hn
+    out_W[1] = -(vd0 * C_WN[2, 0] + vd1 * C_WN[2, 1] + vd2 * C_WN[2, 2]) / V
+    out_W[2] = (vd0 * C_WN[1, 0] + vd1 * C_WN[1, 1] + vd2 * C_WN[1, 2]) / V
+
+
+@njit(cache=True)
+def _guidance_kernel(phi, phid, phidd, alpha, omega_planet, mu, r_N, v_N, vrel_N, C_WN, C_BN,
+                     accel_B, sigma_BN, out):
+    """out[0:3] sigma_RN, [3:6] sigma_r_dot, [6:9] sigma_r_ddot, [9:12] omega_RN_R,
+    [12:15] domega_RN_R, [15:18] omega_WN_W."""
+    # inertial acceleration = sensed (body -> N) + FSW gravity (point mass)
+    rn = math.sqrt(r_N[0] ** 2 + r_N[1] ** 2 + r_N[2] ** 2)
+    g = -mu / (rn * rn * rn) if rn > 0.0 else 0.0
+    a_N = np.empty(3)
+    for i in range(3):
+        a_N[i] = C_BN[0, i] * accel_B[0] + C_BN[1, i] * accel_B[1] + C_BN[2, i] * accel_B[2] + g * r_N[i]
+    wW = out[15:18]
+    wind_rate(r_N, v_N, vrel_N, C_WN, a_N, omega_planet, wW)
+    # C_RW = R2(alpha) R1(phi)
+    ca, sa = math.cos(alpha), math.sin(alpha)
+    cp, sp = math.cos(phi), math.sin(phi)
+    C_RW = np.empty((3, 3))
+    C_RW[0, 0] = ca
+    C_RW[0, 1] = -sa * sp
+    C_RW[0, 2] = -sa * cp
+    C_RW[1, 0] = 0.0
+    C_RW[1, 1] = cp
+    C_RW[1, 2] = sp
+    C_RW[2, 0] = sa
+    C_RW[2, 1] = ca * sp
+    C_RW[2, 2] = ca * cp
+    C_RN = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C_RN[i, j] = C_RW[i, 0] * C_WN[0, j] + C_RW[i, 1] * C_WN[1, j] + C_RW[i, 2] * C_WN[2, j]
+    sr = out[0:3]
+    _mrp_from_dcm(C_RN, sr)
+    # nearest shadow set to sigma_BN so that eps = sigma - sigma_r never jumps
+    s2 = sr[0] ** 2 + sr[1] ** 2 + sr[2] ** 2
+    if s2 > 1e-300:
+        d0 = 0.0
+        d1 = 0.0
+        for i in range(3):
+            d0 += (sigma_BN[i] - sr[i]) ** 2
+            d1 += (sigma_BN[i] + sr[i] / s2) ** 2
+        if d1 < d0:
+            for i in range(3):
+                sr[i] = -sr[i] / s2
+    # omega_RN = omega_WN + phidot w1; its N-derivative (omegadot_WN neglected) in W comps:
+    # phiddot w1 + phidot (omega_WN x w1) = [phiddot, phidot wW3, -phidot wW2]
+    w_W = np.array([wW[0] + phid, wW[1], wW[2]])
+    dw_W = np.array([phidd, phid * wW[2], -phid * wW[1]])
+    oR = out[9:12]
+    doR = out[12:15]
+    for i in range(3):
+        oR[i] = C_RW[i, 0] * w_W[0] + C_RW[i, 1] * w_W[1] + C_RW[i, 2] * w_W[2]
+        doR[i] = C_RW[i, 0] * dw_W[0] + C_RW[i, 1] * dw_W[1] + C_RW[i, 2] * dw_W[2]
+    reference_derivatives(sr, oR, doR, out[3:6], out[6:9])
+
+
+class Guidance:
+    """Reference attitude from the bank profile and the navigation state.
+
+    After ``update(nav)``: phi_r, phidot_r, phiddot_r [rad, rad/s, rad/s^2]; sigma_RN,
+    sigma_r_dot, sigma_r_ddot (3) [-, 1/s, 1/s^2]; omega_RN_R, domega_RN_R (3)
+    [rad/s, rad/s^2] in R components; omega_WN_W (3) [rad/s] the wind frame's own rate.
+
+    The wind frame's rate comes from r, v_rel and the inertial acceleration (sensed
+    nav.accel_B rotated to N plus the FSW's point-mass gravity -mu r/|r|^3; J2 is
+    neglected, ~1e-3 of g). Its derivative (~1e-5 rad/s^2) is neglected in domega_RN_R.
+    ``mu_m3ps2`` defaults to the planet file's value (data/planets/mars.toml).
+    """
+
+    def __init__(self, profile: BankProfile, alpha_trim_rad: float, omega_planet_radps: float,
+                 mu_m3ps2: float | None = None):
+        if mu_m3ps2 is None:
+            mu_m3ps2 = load_planet("mars").mu_m3ps2
+        for name, v in (("alpha_trim_rad", alpha_trim_rad), ("omega_planet_radps", omega_planet_radps),
+                        ("mu_m3ps2", mu_m3ps2)):
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+                raise ValueError(f"Guidance.{name}: must be a finite number, got {v!r}")
+        if mu_m3ps2 < 0:
+            raise ValueError(f"Guidance.mu_m3ps2: must be >= 0, got {mu_m3ps2!r}")
+        if not isinstance(profile, BankProfile):
+            raise ValueError("Guidance.profile: must be a BankProfile")
+        self.profile = profile
+        self.alpha_trim_rad = float(alpha_trim_rad)
+        self.omega_planet_radps = float(omega_planet_radps)
+        self.mu_m3ps2 = float(mu_m3ps2)
+        self._out = np.zeros(18)
+        self.sigma_RN = self._out[0:3]
+        self.sigma_r_dot = self._out[3:6]
+        self.sigma_r_ddot = self._out[6:9]
+        self.omega_RN_R = self._out[9:12]
+        self.domega_RN_R = self._out[12:15]
+        self.omega_WN_W = self._out[15:18]
+        self.phi_r, self.phidot_r, self.phiddot_r = profile.evaluate(0.0)
+
+    def update(self, nav) -> None:
+        """Fill the reference for nav.t_s (nav: fsw.navigation.NavState)."""
+        self.phi_r, self.phidot_r, self.phiddot_r = self.profile.evaluate(nav.t_s)
+        _guidance_kernel(self.phi_r, self.phidot_r, self.phiddot_r, self.alpha_trim_rad,
+                         self.omega_planet_radps, self.mu_m3ps2, nav.r_N, nav.v_N, nav.vrel_N, nav.C_WN,
+                         nav.C_BN, nav.accel_B, nav.sigma_BN, self._out)

@@ -140,7 +140,14 @@ class FrameSplitter:
             hdr = parse_header(buf, i)
             if hdr is None or n - i < hdr.frame_len:
                 if not final:
-                    break                   # wait for the rest of the frame
+                    # A false magic byte claiming a long frame must not hold back good
+                    # frames already received after it: if one is complete, resync there.
+                    j = self._next_good_frame(buf, i + 1)
+                    if j is None:
+                        break               # wait for the rest of the frame
+                    st.garbage_bytes += j - i
+                    i = j
+                    continue
                 truncated = True
                 st.garbage_bytes += 1
                 i += 1
@@ -161,3 +168,27 @@ class FrameSplitter:
         if truncated:
             st.truncated += 1
         return frames, i
+
+    def _good_at(self, buf: bytes, i: int) -> FrameHeader | None:
+        hdr = parse_header(buf, i)
+        if hdr is None or len(buf) - i < hdr.frame_len:
+            return None
+        extra = self.crc_extra.get(hdr.msgid)
+        if extra is None or not crc_ok(buf[i:i + hdr.frame_len], hdr, extra):
+            return None
+        return hdr
+
+    def _next_good_frame(self, buf: bytes, start: int) -> int | None:
+        """Index of the first complete frame with a good CRC at or after ``start``."""
+        n = len(buf)
+        i = start
+        while i < n:
+            j2, j1 = buf.find(b"\xfd", i), buf.find(b"\xfe", i)
+            cands = [x for x in (j2, j1) if x >= 0]
+            if not cands:
+                return None
+            j = min(cands)
+            if self._good_at(buf, j) is not None:
+                return j
+            i = j + 1
+        return None

@@ -216,6 +216,12 @@ class Rejection(NamedTuple):
     link_id: int = -1
     detail: str = ""
 
+    def text(self) -> str:
+        """One line of at most 50 characters (fits a STATUSTEXT); never contains key data."""
+        who = f" {self.sysid}/{self.compid}" if self.sysid >= 0 else ""
+        what = f" msg {self.msgid}" if self.msgid >= 0 else ""
+        return f"link rejected {self.reason.value}{who}{what}"[:50]
+
 
 class Verdict(NamedTuple):
     accepted: bool

@@ -1,0 +1,635 @@
+"""The plant: 6-DOF entry vehicle over a rotating Mars, 18 on/off jets with faults, and
+the sensors it publishes to the FSW (spec 10-plant.md).
+
+State x (12,) = [r_N (3) m, v_N (3) m/s, sigma_BN (3), omega_BN_B (3) rad/s], integrated
+with fixed-step RK4 in a numba kernel (flat float64 arrays, no Python objects). Bank,
+alpha and beta are always derived from the attitude and v_rel, never integrated.
+
+Time is the integer step index k: t = k * dt_control, t_ns = k * dt_control_ns.
+Jet commands are held over [t_k, t_k+1) (zero-order hold); scheduled faults apply at the
+first step boundary with t >= t_s; the sensor frame for k+1 is sampled after the step.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from common import atmosphere, mrp
+from common.model import FAULT_KINDS, N_JETS, Scenario, inertia_matrix, inertia_vector
+from interfaces import records
+
+# ---- jet fault states (same numbering as fsw/health.py, which sim must not import) ----
+NOMINAL, FAILED_OFF, STUCK_ON, DEGRADED = 0, 1, 2, 3
+FAULT_STATE_NAMES = {NOMINAL: "nominal", FAILED_OFF: "failed_off", STUCK_ON: "stuck_on", DEGRADED: "degraded"}
+
+# ---- flat parameter vector p (indices are compile-time constants in the kernels) ----
+P_MU, P_RE, P_OMEGA, P_J2, P_USE_J2 = 0, 1, 2, 3, 4
+P_RHO_MODEL, P_RHO0, P_HSCALE, P_RHO_SCALE = 5, 6, 7, 8
+P_MASS, P_S, P_LREF = 9, 10, 11
+P_ALPHA_TRIM, P_CL, P_CD, P_CLA, P_CYB = 12, 13, 14, 15, 16
+P_CMA, P_CNB, P_CLB, P_CLP, P_CMQ, P_CNR = 17, 18, 19, 20, 21, 22
+P_I = 23        # 9 entries, row-major truth inertia [kg m^2]
+P_IINV = 32     # 9 entries, its inverse
+N_P = 41
+
+# ---- derived outputs at the end of a step (aux) ----
+A_H, A_V, A_ALPHA, A_BETA, A_BANK, A_RHO, A_QBAR, A_MACH = 0, 1, 2, 3, 4, 5, 6, 7
+A_TAU_AERO_B = 8     # 3
+A_ACC_B = 11         # 3: sensed (non-gravitational) acceleration, body [m/s^2]
+A_F_AERO_N = 14      # 3: aerodynamic force, N [N]
+A_E1, A_E2, A_E3 = 17, 20, 23   # wind-frame unit vectors w1, w2, w3 in N (rows of C_WN)
+A_OMEGA_W_N = 26     # 3: angular velocity of W relative to N, in N [rad/s]
+A_R = 29             # |r| [m]
+A_SIN_GAMMA = 30     # sin(flight-path angle)
+N_AUX = 31
+
+STEP_OK, STEP_BAD_U, STEP_NON_FINITE = 0, 1, 2
+
+_rho_exp = njit(cache=True)(atmosphere.density_exponential)
+_rho_poly = njit(cache=True)(atmosphere.density_polynomial)
+_speed_of_sound = njit(cache=True)(atmosphere.speed_of_sound)
+
+
+@njit(cache=True)
+def mrp_to_dcm(s1, s2, s3, C):
+    """C_BN (3x3, written into C) from sigma_BN (common/mrp.py to_dcm, scalar form)."""
+    ss = s1 * s1 + s2 * s2 + s3 * s3
+    d = 1.0 / ((1.0 + ss) * (1.0 + ss))
+    f = 4.0 * (1.0 - ss)
+    C[0, 0] = 1.0 + d * (8.0 * s1 * s1 - 8.0 * ss)
+    C[0, 1] = d * (8.0 * s1 * s2 + f * s3)
+    C[0, 2] = d * (8.0 * s1 * s3 - f * s2)
+    C[1, 0] = d * (8.0 * s2 * s1 - f * s3)
+    C[1, 1] = 1.0 + d * (8.0 * s2 * s2 - 8.0 * ss)
+    C[1, 2] = d * (8.0 * s2 * s3 + f * s1)
+    C[2, 0] = d * (8.0 * s3 * s1 + f * s2)
+    C[2, 1] = d * (8.0 * s3 * s2 - f * s1)
+    C[2, 2] = 1.0 + d * (8.0 * s3 * s3 - 8.0 * ss)
+
+
+@njit(cache=True)
+def _deriv(x, p, tau_B, F_B, dx, C, aux, want_aux):
+    """dx = f(x) for the coupled 6-DOF state (spec 10-plant.md, translational and
+    rotational dynamics). tau_B: jet + external torque [N m]; F_B: jet force [N].
+    C is scratch for C_BN. When want_aux, the derived outputs are written to aux."""
+    rx, ry, rz = x[0], x[1], x[2]
+    vx, vy, vz = x[3], x[4], x[5]
+    s1, s2, s3 = x[6], x[7], x[8]
+    w1, w2, w3 = x[9], x[10], x[11]
+
+    # gravity: point mass (+ J2, optional)
+    r2 = rx * rx + ry * ry + rz * rz
+    r = math.sqrt(r2)
+    mu = p[P_MU]
+    kg = -mu / (r2 * r)
+    gx, gy, gz = kg * rx, kg * ry, kg * rz
+    if p[P_USE_J2] != 0.0:
+        re = p[P_RE]
+        zr2 = rz * rz / r2
+        cj = -1.5 * p[P_J2] * mu * re * re / (r2 * r2 * r)
+        gx += cj * rx * (1.0 - 5.0 * zr2)
+        gy += cj * ry * (1.0 - 5.0 * zr2)
+        gz += cj * rz * (3.0 - 5.0 * zr2)
+
+    # planet-relative velocity u = v - Omega x r (Omega along N3)
+    om = p[P_OMEGA]
+    ux, uy, uz = vx + om * ry, vy - om * rx, vz
+    V = math.sqrt(ux * ux + uy * uy + uz * uz)
+    h = r - p[P_RE]
+    if p[P_RHO_MODEL] == 0.0:
+        rho = _rho_exp(h, p[P_RHO0], p[P_HSCALE])
+    else:
+        rho = _rho_poly(h)
+    rho *= p[P_RHO_SCALE]
+    qbar = 0.5 * rho * V * V
+
+    # wind frame W: w1 along u, w2 = (u x r)/|u x r| (right), w3 = w1 x w2 (down)
+    e1x, e1y, e1z = ux / V, uy / V, uz / V
+    hx, hy, hz = uy * rz - uz * ry, uz * rx - ux * rz, ux * ry - uy * rx
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    e2x, e2y, e2z = hx / hn, hy / hn, hz / hn
+    e3x, e3y, e3z = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+
+    # aerodynamic angles from C_BN = R2(alpha) R3(-beta) R1(bank) C_WN (common/frames.py)
+    mrp_to_dcm(s1, s2, s3, C)
+    b1x = C[0, 0] * e1x + C[0, 1] * e1y + C[0, 2] * e1z
+    b1y = C[1, 0] * e1x + C[1, 1] * e1y + C[1, 2] * e1z
+    b1z = C[2, 0] * e1x + C[2, 1] * e1y + C[2, 2] * e1z
+    beta = math.asin(min(1.0, max(-1.0, b1y)))
+    alpha = math.atan2(b1z, b1x)
+    ca, sa, cb, sb = math.cos(alpha), math.sin(alpha), math.cos(beta), math.sin(beta)
+    # a2 (A-frame y axis) is [-ca sb, cb, -sa sb] in B; in N it is C^T of that
+    ya0, ya1, ya2 = -ca * sb, cb, -sa * sb
+    a2x = C[0, 0] * ya0 + C[1, 0] * ya1 + C[2, 0] * ya2
+    a2y = C[0, 1] * ya0 + C[1, 1] * ya1 + C[2, 1] * ya2
+    a2z = C[0, 2] * ya0 + C[1, 2] * ya1 + C[2, 2] * ya2
+    bank = math.atan2(a2x * e3x + a2y * e3y + a2z * e3z, a2x * e2x + a2y * e2y + a2z * e2z)
+    cp, sp = math.cos(bank), math.sin(bank)
+    # lift l = sin(bank) w2 - cos(bank) w3; side y = cos(bank) w2 + sin(bank) w3
+    lx, ly, lz = sp * e2x - cp * e3x, sp * e2y - cp * e3y, sp * e2z - cp * e3z
+    yx, yy, yz = cp * e2x + sp * e3x, cp * e2y + sp * e3y, cp * e2z + sp * e3z
+
+    # F_aero = qbar S (-C_D w1 + C_L l + C_Y beta y), C_L = C_L + C_Lalpha (alpha - alpha_trim)
+    da = alpha - p[P_ALPHA_TRIM]
+    cl = p[P_CL] + p[P_CLA] * da
+    cd = p[P_CD]
+    cy = p[P_CYB] * beta
+    qs = qbar * p[P_S]
+    fax = qs * (-cd * e1x + cl * lx + cy * yx)
+    fay = qs * (-cd * e1y + cl * ly + cy * yy)
+    faz = qs * (-cd * e1z + cl * lz + cy * yz)
+    # jet force (geometry model) from B to N: C^T F_B
+    fjx = C[0, 0] * F_B[0] + C[1, 0] * F_B[1] + C[2, 0] * F_B[2]
+    fjy = C[0, 1] * F_B[0] + C[1, 1] * F_B[1] + C[2, 1] * F_B[2]
+    fjz = C[0, 2] * F_B[0] + C[1, 2] * F_B[1] + C[2, 2] * F_B[2]
+    m = p[P_MASS]
+    ax = gx + (fax + fjx) / m
+    ay = gy + (fay + fjy) / m
+    az = gz + (faz + fjz) / m
+
+    # aerodynamic moments: static derivatives about trim + damping, p_hat = p l/(2V)
+    lref = p[P_LREF]
+    lh = lref / (2.0 * V)
+    qsl = qs * lref
+    ml = qsl * (p[P_CLB] * beta + p[P_CLP] * w1 * lh)
+    mm = qsl * (p[P_CMA] * da + p[P_CMQ] * w2 * lh)
+    mn = qsl * (p[P_CNB] * beta + p[P_CNR] * w3 * lh)
+
+    # Euler: I w_dot = -w x (I w) + tau
+    I0 = P_I
+    iw1 = p[I0] * w1 + p[I0 + 1] * w2 + p[I0 + 2] * w3
+    iw2 = p[I0 + 3] * w1 + p[I0 + 4] * w2 + p[I0 + 5] * w3
+    iw3 = p[I0 + 6] * w1 + p[I0 + 7] * w2 + p[I0 + 8] * w3
+    t1 = -(w2 * iw3 - w3 * iw2) + tau_B[0] + ml
+    t2 = -(w3 * iw1 - w1 * iw3) + tau_B[1] + mm
+    t3 = -(w1 * iw2 - w2 * iw1) + tau_B[2] + mn
+    J0 = P_IINV
+    # sigma_dot = 1/4 [(1 - s.s) w + 2 s x w + 2 s (s.w)]
+    ss = s1 * s1 + s2 * s2 + s3 * s3
+    sw = s1 * w1 + s2 * w2 + s3 * w3
+    a = 1.0 - ss
+    dx[0], dx[1], dx[2] = vx, vy, vz
+    dx[3], dx[4], dx[5] = ax, ay, az
+    dx[6] = 0.25 * (a * w1 + 2.0 * (s2 * w3 - s3 * w2) + 2.0 * s1 * sw)
+    dx[7] = 0.25 * (a * w2 + 2.0 * (s3 * w1 - s1 * w3) + 2.0 * s2 * sw)
+    dx[8] = 0.25 * (a * w3 + 2.0 * (s1 * w2 - s2 * w1) + 2.0 * s3 * sw)
+    dx[9] = p[J0] * t1 + p[J0 + 1] * t2 + p[J0 + 2] * t3
+    dx[10] = p[J0 + 3] * t1 + p[J0 + 4] * t2 + p[J0 + 5] * t3
+    dx[11] = p[J0 + 6] * t1 + p[J0 + 7] * t2 + p[J0 + 8] * t3
+
+    if want_aux:
+        aux[A_H] = h
+        aux[A_V] = V
+        aux[A_ALPHA] = alpha
+        aux[A_BETA] = beta
+        aux[A_BANK] = bank
+        aux[A_RHO] = rho
+        aux[A_QBAR] = qbar
+        aux[A_MACH] = V / _speed_of_sound(h)
+        aux[A_TAU_AERO_B], aux[A_TAU_AERO_B + 1], aux[A_TAU_AERO_B + 2] = ml, mm, mn
+        nx, ny, nz = (fax + fjx) / m, (fay + fjy) / m, (faz + fjz) / m
+        aux[A_ACC_B] = C[0, 0] * nx + C[0, 1] * ny + C[0, 2] * nz
+        aux[A_ACC_B + 1] = C[1, 0] * nx + C[1, 1] * ny + C[1, 2] * nz
+        aux[A_ACC_B + 2] = C[2, 0] * nx + C[2, 1] * ny + C[2, 2] * nz
+        aux[A_F_AERO_N], aux[A_F_AERO_N + 1], aux[A_F_AERO_N + 2] = fax, fay, faz
+        aux[A_E1], aux[A_E1 + 1], aux[A_E1 + 2] = e1x, e1y, e1z
+        aux[A_E2], aux[A_E2 + 1], aux[A_E2 + 2] = e2x, e2y, e2z
+        aux[A_E3], aux[A_E3 + 1], aux[A_E3 + 2] = e3x, e3y, e3z
+        # omega_WN: derivatives of the wind axes. u_dot = a - Omega x v; (u x r)' = u_dot x r + u x v
+        udx, udy, udz = ax + om * vy, ay - om * vx, az
+        k1 = e1x * udx + e1y * udy + e1z * udz
+        d1x, d1y, d1z = (udx - k1 * e1x) / V, (udy - k1 * e1y) / V, (udz - k1 * e1z) / V
+        hdx = (udy * rz - udz * ry) + (uy * vz - uz * vy)
+        hdy = (udz * rx - udx * rz) + (uz * vx - ux * vz)
+        hdz = (udx * ry - udy * rx) + (ux * vy - uy * vx)
+        k2 = e2x * hdx + e2y * hdy + e2z * hdz
+        d2x, d2y, d2z = (hdx - k2 * e2x) / hn, (hdy - k2 * e2y) / hn, (hdz - k2 * e2z) / hn
+        # e3 = e1 x e2 => e3_dot = d1 x e2 + e1 x d2
+        d3x = (d1y * e2z - d1z * e2y) + (e1y * d2z - e1z * d2y)
+        d3y = (d1z * e2x - d1x * e2z) + (e1z * d2x - e1x * d2z)
+        d3z = (d1x * e2y - d1y * e2x) + (e1x * d2y - e1y * d2x)
+        pw = d2x * e3x + d2y * e3y + d2z * e3z     # omega . w1
+        qw = d3x * e1x + d3y * e1y + d3z * e1z     # omega . w2
+        rw = d1x * e2x + d1y * e2y + d1z * e2z     # omega . w3
+        aux[A_OMEGA_W_N] = pw * e1x + qw * e2x + rw * e3x
+        aux[A_OMEGA_W_N + 1] = pw * e1y + qw * e2y + rw * e3y
+        aux[A_OMEGA_W_N + 2] = pw * e1z + qw * e2z + rw * e3z
+        aux[A_R] = r
+        aux[A_SIN_GAMMA] = (e1x * rx + e1y * ry + e1z * rz) / r
+
+
+@njit(cache=True)
+def _rk4(x, p, tau_B, F_B, n_sub, dt, ws, C, aux):
+    """n_sub RK4 substeps of dt with tau_B, F_B held; MRP shadow switch between substeps;
+    aux filled at the final state."""
+    k1, k2, k3, k4, xt = ws[0], ws[1], ws[2], ws[3], ws[4]
+    h2 = 0.5 * dt
+    h6 = dt / 6.0
+    for _ in range(n_sub):
+        _deriv(x, p, tau_B, F_B, k1, C, aux, False)
+        for j in range(12):
+            xt[j] = x[j] + h2 * k1[j]
+        _deriv(xt, p, tau_B, F_B, k2, C, aux, False)
+        for j in range(12):
+            xt[j] = x[j] + h2 * k2[j]
+        _deriv(xt, p, tau_B, F_B, k3, C, aux, False)
+        for j in range(12):
+            xt[j] = x[j] + dt * k3[j]
+        _deriv(xt, p, tau_B, F_B, k4, C, aux, False)
+        for j in range(12):
+            x[j] += h6 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+        ss = x[6] * x[6] + x[7] * x[7] + x[8] * x[8]
+        if ss > 1.0:   # shadow set -sigma/|sigma|^2
+            x[6], x[7], x[8] = -x[6] / ss, -x[7] / ss, -x[8] / ss
+    _deriv(x, p, tau_B, F_B, k1, C, aux, True)
+
+
+@njit(cache=True)
+def _step_kernel(x, u, gain, bias, T, Fj, has_force, tau_ext, p, n_sub, dt, thrust_N,
+                 frac, tau_jets, F_B, tau_tot, ws, C, aux, book, dt_control):
+    """One control period: produced thrust fractions from the (held) command and the
+    fault state, jet torque T frac (+ force), RK4 over the period. Returns a STEP_* code."""
+    for j in range(frac.shape[0]):
+        if u[j] > 1:
+            return STEP_BAD_U
+    impulse = 0.0
+    for j in range(frac.shape[0]):
+        frac[j] = gain[j] * u[j] + bias[j]
+        impulse += frac[j] * thrust_N[j]
+    book[0] += impulse * dt_control
+    for i in range(3):
+        s = 0.0
+        f = 0.0
+        for j in range(frac.shape[0]):
+            s += T[i, j] * frac[j]
+            if has_force:
+                f += Fj[i, j] * frac[j]
+        tau_jets[i] = s
+        F_B[i] = f
+        tau_tot[i] = s + tau_ext[i]
+    _rk4(x, p, tau_tot, F_B, n_sub, dt, ws, C, aux)
+    for j in range(12):
+        if not math.isfinite(x[j]):
+            return STEP_NON_FINITE
+    return STEP_OK
+
+
+@njit(cache=True)
+def _sense(x, aux, frac, sig, gyro_bias, blocks_g, blocks_a, blocks_n, blocks_c, i, nav_noise,
+           out_w, out_s, out_r, out_v, out_a, out_c):
+    """Sample the sensor frame (spec 10-plant.md, sensors) from the state and unit-normal
+    noise rows i. sig = [gyro, attitude, pos, vel, chamber] noise 1-sigma."""
+    for j in range(3):
+        out_w[j] = x[9 + j] + gyro_bias[j] + sig[0] * blocks_g[i, j]
+    # attitude: small rotation d (MRP ~ theta/4) composed after sigma_BN: C_meas = C(d) C_BN
+    s1, s2, s3 = x[6], x[7], x[8]
+    d1, d2, d3 = 0.25 * sig[1] * blocks_a[i, 0], 0.25 * sig[1] * blocks_a[i, 1], 0.25 * sig[1] * blocks_a[i, 2]
+    ss = s1 * s1 + s2 * s2 + s3 * s3
+    dd = d1 * d1 + d2 * d2 + d3 * d3
+    den = 1.0 + ss * dd - 2.0 * (s1 * d1 + s2 * d2 + s3 * d3)
+    c1, c2, c3 = d2 * s3 - d3 * s2, d3 * s1 - d1 * s3, d1 * s2 - d2 * s1
+    m1 = ((1.0 - ss) * d1 + (1.0 - dd) * s1 - 2.0 * c1) / den
+    m2 = ((1.0 - ss) * d2 + (1.0 - dd) * s2 - 2.0 * c2) / den
+    m3 = ((1.0 - ss) * d3 + (1.0 - dd) * s3 - 2.0 * c3) / den
+    mm = m1 * m1 + m2 * m2 + m3 * m3
+    if mm > 1.0:
+        m1, m2, m3 = -m1 / mm, -m2 / mm, -m3 / mm
+    out_s[0], out_s[1], out_s[2] = m1, m2, m3
+    for j in range(3):
+        if nav_noise:
+            out_r[j] = x[j] + sig[2] * blocks_n[i, j]
+            out_v[j] = x[3 + j] + sig[3] * blocks_n[i, 3 + j]
+        else:
+            out_r[j] = x[j]
+            out_v[j] = x[3 + j]
+        out_a[j] = aux[A_ACC_B + j]
+    for j in range(frac.shape[0]):
+        out_c[j] = frac[j] + sig[4] * blocks_c[i, j]
+
+
+def state_derivative(x: np.ndarray, p: np.ndarray, tau_B=None, F_B=None) -> tuple[np.ndarray, np.ndarray]:
+    """(x_dot, aux) at state x with parameter vector p (for tests and analysis)."""
+    dx = np.empty(12)
+    aux = np.zeros(N_AUX)
+    tau = np.zeros(3) if tau_B is None else np.asarray(tau_B, float)
+    F = np.zeros(3) if F_B is None else np.asarray(F_B, float)
+    _deriv(np.asarray(x, float), p, tau, F, dx, np.empty((3, 3)), aux, True)
+    return dx, aux
+
+
+def params_vector(scenario: Scenario) -> np.ndarray:
+    """The truth parameter vector p: nominal vehicle and planet, dispersed by scenario.truth
+    (spec 30-scenarios.md, uncertainty)."""
+    pl, veh, tr = scenario.planet, scenario.vehicle, scenario.truth
+    ae = veh.aero
+    I = inertia_matrix(inertia_vector(veh.inertia_kgm2) * tr.inertia_scale)
+    p = np.zeros(N_P)
+    p[P_MU], p[P_RE], p[P_OMEGA] = pl.mu_m3ps2, pl.radius_m, pl.omega_radps
+    p[P_J2], p[P_USE_J2] = pl.j2, float(pl.use_j2)
+    p[P_RHO_MODEL] = {"exponential": 0.0, "polynomial": 1.0}[pl.density_model]
+    p[P_RHO0], p[P_HSCALE], p[P_RHO_SCALE] = pl.rho0_kgpm3, pl.scale_height_m, tr.density_scale
+    p[P_MASS], p[P_S], p[P_LREF] = veh.mass_kg, veh.S_ref_m2, veh.l_ref_m
+    p[P_ALPHA_TRIM], p[P_CL], p[P_CD], p[P_CLA], p[P_CYB] = ae.alpha_trim_rad, ae.C_L, ae.C_D, ae.C_Lalpha, ae.C_Ybeta
+    p[P_CMA] = ae.C_malpha * tr.C_malpha_scale
+    p[P_CNB] = ae.C_nbeta * tr.C_nbeta_scale
+    p[P_CLB] = ae.C_lbeta * tr.C_lbeta_scale
+    p[P_CLP], p[P_CMQ], p[P_CNR] = ae.C_lp, ae.C_mq, ae.C_nr
+    p[P_I:P_I + 9] = I.ravel()
+    p[P_IINV:P_IINV + 9] = np.linalg.inv(I).ravel()
+    return p
+
+
+def local_axes(r_N: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(north, east, up) unit vectors in N at position r_N (spherical planet)."""
+    up = r_N / np.linalg.norm(r_N)
+    lam = math.atan2(r_N[1], r_N[0])
+    east = np.array([-math.sin(lam), math.cos(lam), 0.0])
+    north = np.cross(up, east)
+    return north, east, up
+
+
+def initial_translation(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """(r_N, v_N) at t = 0 from altitude, planet-relative speed, flight-path angle, heading
+    (clockwise from north), latitude, longitude; N and the planet frame coincide at t = 0."""
+    pl = scenario.planet
+    lat, lon = scenario.latitude_rad, scenario.longitude_rad
+    rn = pl.radius_m + scenario.altitude_m
+    r_N = rn * np.array([math.cos(lat) * math.cos(lon), math.cos(lat) * math.sin(lon), math.sin(lat)])
+    north, east, up = local_axes(r_N)
+    V, g, psi = scenario.speed_rel_mps, scenario.flight_path_rad, scenario.heading_rad
+    u = V * (math.cos(g) * math.cos(psi) * north + math.cos(g) * math.sin(psi) * east + math.sin(g) * up)
+    v_N = u + np.array([-pl.omega_radps * r_N[1], pl.omega_radps * r_N[0], 0.0])
+    return r_N, v_N
+
+
+_SRC_GYRO, _SRC_ATT, _SRC_NAV, _SRC_CHAMBER = 0, 1, 2, 3   # one noise stream per source
+_BLOCK = 4096
+
+
+class _Noise:
+    """Unit-normal noise drawn in blocks from one PCG64 stream per sensor source; a given
+    seed reproduces every stream, and adding a source does not change the others."""
+
+    def __init__(self, seed: int):
+        def gen(src):
+            return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(src,))))
+        self.gens = [gen(s) for s in (_SRC_GYRO, _SRC_ATT, _SRC_NAV, _SRC_CHAMBER)]
+        self.i = _BLOCK
+        self.refill()
+
+    def refill(self):
+        self.g = self.gens[0].standard_normal((_BLOCK, 3))
+        self.a = self.gens[1].standard_normal((_BLOCK, 3))
+        self.n = self.gens[2].standard_normal((_BLOCK, 6))
+        self.c = self.gens[3].standard_normal((_BLOCK, N_JETS))
+        self.i = 0
+
+
+class Plant:
+    """The vehicle in its environment, stepped one control period at a time.
+
+    Public state: k (step index), t_s, sensors (0-d interfaces.records.SENSORS record,
+    refilled in place), x (state view: r_N, v_N, sigma_BN, omega_BN_B), aux (derived
+    outputs at t_k, indices A_*), fault_state (int8[18]), fault_eta (float[18]).
+    """
+
+    def __init__(self, scenario: Scenario, seed: int | None = None):
+        if seed is None:
+            seed = scenario.seed
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        self.scenario = scenario
+        self.seed = int(seed)
+        veh = scenario.vehicle
+        self.dt_control_s = scenario.dt_control_s
+        self.dt_control_ns = int(round(scenario.dt_control_s * 1e9))
+        self.n_sub = scenario.substeps
+        self.dt_sub_s = scenario.dt_control_s / self.n_sub
+        self.p = params_vector(scenario)
+        self.inertia_truth_kgm2 = self.p[P_I:P_I + 9].reshape(3, 3).copy()
+        self._T = np.ascontiguousarray(veh.torque_matrix_Nm, dtype=float)
+        self._has_force = veh.jet_force_B_N is not None
+        self._Fj = np.ascontiguousarray(veh.jet_force_B_N if self._has_force else np.zeros((3, N_JETS)), dtype=float)
+        self._thrust = np.ascontiguousarray(veh.thrust_N, dtype=float)
+        self._g0 = scenario.planet.g0_mps2
+        self._isp = veh.isp_s
+
+        # fault model: produced fraction = gain * u + bias
+        self.fault_state = np.zeros(N_JETS, dtype=np.int8)
+        self.fault_eta = np.ones(N_JETS)
+        self._gain = np.ones(N_JETS)
+        self._bias = np.zeros(N_JETS)
+        dt = self.dt_control_s
+        self._schedule = [(max(0, math.ceil(f.t_s / dt - 1e-9)), f) for f in scenario.faults]
+        self._schedule.sort(key=lambda e: e[0])
+        self._next_fault = 0
+
+        # work arrays for the kernels
+        self.x = np.zeros(12)
+        self.aux = np.zeros(N_AUX)
+        self._ws = np.zeros((5, 12))
+        self._C = np.zeros((3, 3))
+        self._frac = np.zeros(N_JETS)
+        self._tau_jets = np.zeros(3)
+        self._F_B = np.zeros(3)
+        self._tau_tot = np.zeros(3)
+        self._tau_ext = np.zeros(3)
+        self._zero3 = np.zeros(3)
+        self._book = np.zeros(1)            # total impulse [N s]
+        self._u0 = np.zeros(N_JETS, dtype=np.uint8)
+        self._status = STEP_OK
+
+        sn = scenario.sensors
+        self._sig = np.array([sn.gyro_noise_radps, sn.attitude_noise_rad, sn.nav_pos_noise_m,
+                              sn.nav_vel_noise_mps, sn.chamber_noise])
+        self._gyro_bias = np.asarray(sn.gyro_bias_radps, dtype=float).copy()
+        self._nav_noise = bool(sn.nav_noise)
+        self._noise = _Noise(self.seed)
+        self.sensors = records.new(records.SENSORS)
+        s = self.sensors
+        self._out = (s["omega_BN_B"], s["sigma_BN"], s["r_N"], s["v_N"], s["accel_B"], s["chamber"])
+
+        # initial state: trim attitude at the scenario's bank; omega = omega_WN so that
+        # alpha, beta and bank stay put at t = 0
+        r_N, v_N = initial_translation(scenario)
+        self.x[0:3], self.x[3:6] = r_N, v_N
+        C_WN = _wind_dcm(r_N, v_N, scenario.planet.omega_radps)
+        from common.frames import R1, R2
+        C_BN = R2(veh.aero.alpha_trim_rad) @ R1(scenario.bank0_rad) @ C_WN
+        self.x[6:9] = mrp.from_dcm(C_BN)
+        _, aux = state_derivative(self.x, self.p)
+        self.x[9:12] = C_BN @ aux[A_OMEGA_W_N:A_OMEGA_W_N + 3]
+        self.k = 0
+        self._apply_scheduled()
+        self._refresh_aux()
+        self._sample()
+
+    # ---- time ----
+    @property
+    def t_s(self) -> float:
+        return self.k * self.dt_control_s
+
+    @property
+    def t_ns(self) -> int:
+        return self.k * self.dt_control_ns
+
+    # ---- stepping ----
+    def step(self, u, tau_ext_B=None) -> np.ndarray:
+        """Integrate [t_k, t_k+1) with jet command u (18,) of 0/1 held, plus an optional
+        ideal external torque tau_ext_B [N m] (open-loop and test use); return the sensor
+        record for k+1 (the same object every step)."""
+        if type(u) is not np.ndarray or u.dtype != np.uint8:
+            u = _as_command(u)
+        elif u.shape != (N_JETS,):
+            raise ValueError(f"u must have shape ({N_JETS},), got {u.shape}")
+        if tau_ext_B is None:
+            tau = self._zero3
+        else:
+            tau = np.asarray(tau_ext_B, dtype=float)
+            if tau.shape != (3,) or not np.all(np.isfinite(tau)):
+                raise ValueError(f"tau_ext_B must be 3 finite numbers, got {tau_ext_B!r}")
+        self._tau_ext[:] = tau
+        st = _step_kernel(self.x, u, self._gain, self._bias, self._T, self._Fj, self._has_force, tau,
+                          self.p, self.n_sub, self.dt_sub_s, self._thrust, self._frac, self._tau_jets,
+                          self._F_B, self._tau_tot, self._ws, self._C, self.aux, self._book, self.dt_control_s)
+        if st == STEP_BAD_U:
+            raise ValueError("u must hold only 0 or 1")
+        if st == STEP_NON_FINITE:
+            self._status = STEP_NON_FINITE
+        self.k += 1
+        if self._next_fault < len(self._schedule) and self._schedule[self._next_fault][0] <= self.k:
+            self._apply_scheduled()
+        self._sample()
+        return self.sensors
+
+    def _sample(self) -> None:
+        nz = self._noise
+        if nz.i >= _BLOCK:
+            nz.refill()
+        o = self._out
+        _sense(self.x, self.aux, self._frac, self._sig, self._gyro_bias, nz.g, nz.a, nz.n, nz.c, nz.i,
+               self._nav_noise, o[0], o[1], o[2], o[3], o[4], o[5])
+        nz.i += 1
+        s = self.sensors
+        s["k"] = self.k
+        s["t_ns"] = self.k * self.dt_control_ns
+
+    def _refresh_aux(self) -> None:
+        _deriv(self.x, self.p, self._tau_tot, self._F_B, self._ws[0], self._C, self.aux, True)
+
+    def set_state(self, r_N=None, v_N=None, sigma_BN=None, omega_BN_B=None) -> None:
+        """Overwrite parts of the state (tests, Monte Carlo set-up); re-samples nothing."""
+        for sl, val, name in ((slice(0, 3), r_N, "r_N"), (slice(3, 6), v_N, "v_N"),
+                              (slice(6, 9), sigma_BN, "sigma_BN"), (slice(9, 12), omega_BN_B, "omega_BN_B")):
+            if val is None:
+                continue
+            a = np.asarray(val, dtype=float)
+            if a.shape != (3,) or not np.all(np.isfinite(a)):
+                raise ValueError(f"{name} must be 3 finite numbers, got {val!r}")
+            self.x[sl] = a
+        self.x[6:9] = mrp.switch_shadow(self.x[6:9])
+        self._refresh_aux()
+
+    # ---- faults ----
+    def set_fault(self, jet: int, kind: str, eta: float = 1.0) -> None:
+        """Inject or clear a fault now (spec 10-plant.md, jet faults). jet 1..18, 0 = all;
+        kind 'off' | 'stuck' | 'degraded' (0 < eta < 1) | 'clear'."""
+        if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= jet <= N_JETS:
+            raise ValueError(f"jet must be an integer 0..{N_JETS} (0 = all), got {jet!r}")
+        if kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {kind!r}")
+        if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating, np.integer)) or not math.isfinite(eta):
+            raise ValueError(f"eta must be a finite number, got {eta!r}")
+        if kind == "degraded":
+            if not 0.0 < eta < 1.0:
+                raise ValueError(f"degraded needs 0 < eta < 1, got {eta}")
+        elif eta != 1.0:
+            raise ValueError(f"eta applies to kind 'degraded' only, got eta={eta} for {kind!r}")
+        idx = range(N_JETS) if jet == 0 else (int(jet) - 1,)
+        for j in idx:
+            if kind == "off":
+                self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = FAILED_OFF, 1.0, 0.0, 0.0
+            elif kind == "stuck":
+                self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = STUCK_ON, 1.0, 0.0, 1.0
+            elif kind == "degraded":
+                self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = DEGRADED, eta, eta, 0.0
+            else:
+                self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = NOMINAL, 1.0, 1.0, 0.0
+
+    def _apply_scheduled(self) -> None:
+        while self._next_fault < len(self._schedule) and self._schedule[self._next_fault][0] <= self.k:
+            f = self._schedule[self._next_fault][1]
+            for j in f.jets:
+                self.set_fault(j, f.kind, f.eta if f.kind == "degraded" else 1.0)
+            self._next_fault += 1
+
+    # ---- outputs ----
+    def done(self) -> tuple[bool, str]:
+        """(finished, reason): 'mach' | 'altitude' | 'timeout' | 'non_finite' | ''."""
+        if self._status == STEP_NON_FINITE:
+            return True, "non_finite"
+        a = self.aux
+        if a[A_MACH] <= self.scenario.end_mach:
+            return True, "mach"
+        if a[A_H] <= self.scenario.end_altitude_m:
+            return True, "altitude"
+        if self.k * self.dt_control_s >= self.scenario.max_duration_s - 1e-9:
+            return True, "timeout"
+        return False, ""
+
+    @property
+    def propellant_kg(self) -> float:
+        return float(self._book[0] / (self._isp * self._g0))
+
+    def truth(self) -> dict:
+        """The full truth at t_k (spec 40-interfaces.md, sim/truth), as plain values."""
+        x, a = self.x, self.aux
+        r_N, v_N = x[0:3].copy(), x[3:6].copy()
+        om = self.scenario.planet.omega_radps
+        u = v_N - np.array([-om * r_N[1], om * r_N[0], 0.0])
+        north, east, up = local_axes(r_N)
+        V = float(np.linalg.norm(u))
+        lon = math.atan2(r_N[1], r_N[0]) - om * self.t_s
+        return {
+            "k": self.k, "t_s": self.t_s, "t_ns": self.t_ns,
+            "h_m": float(a[A_H]), "V_rel_mps": V,
+            "gamma_rad": math.asin(max(-1.0, min(1.0, float(u @ up) / V))),
+            "psi_rad": math.atan2(float(u @ east), float(u @ north)),
+            "lat_rad": math.asin(r_N[2] / np.linalg.norm(r_N)),
+            "lon_rad": lon - 2.0 * math.pi * math.floor((lon + math.pi) / (2.0 * math.pi)),
+            "mach": float(a[A_MACH]), "qbar_pa": float(a[A_QBAR]), "rho_kgpm3": float(a[A_RHO]),
+            "alpha_rad": float(a[A_ALPHA]), "beta_rad": float(a[A_BETA]), "bank_rad": float(a[A_BANK]),
+            "sigma_BN": x[6:9].copy(), "omega_BN_B": x[9:12].copy(), "r_N": r_N, "v_N": v_N,
+            "tau_jets_B": self._tau_jets.copy(), "tau_ext_B": self._tau_ext.copy(),
+            "tau_aero_B": a[A_TAU_AERO_B:A_TAU_AERO_B + 3].copy(),
+            "jet_thrust_frac": self._frac.copy(),
+            "decel_g": float(np.linalg.norm(a[A_F_AERO_N:A_F_AERO_N + 3])) / self.scenario.vehicle.mass_kg / self._g0,
+            "fault_state": self.fault_state.copy(), "fault_eta": self.fault_eta.copy(),
+            "propellant_kg": self.propellant_kg,
+        }
+
+    def fill_truth(self, rec: np.ndarray | None = None) -> np.ndarray:
+        """The truth as an interfaces.records.TRUTH record (filled in place when given)."""
+        if rec is None:
+            rec = records.new(records.TRUTH)
+        for name, val in self.truth().items():
+            rec[name] = val
+        return rec
+
+
+def _wind_dcm(r_N: np.ndarray, v_N: np.ndarray, omega_planet: float) -> np.ndarray:
+    from common.frames import v_rel_N, wind_dcm
+    return wind_dcm(r_N, v_rel_N(r_N, v_N, omega_planet))
+
+
+def _as_command(u) -> np.ndarray:
+    a = np.asarray(u)
+    if a.shape != (N_JETS,):
+        raise ValueError(f"u must have shape ({N_JETS},), got {a.shape}")
+    if a.dtype == np.bool_:
+        return a.view(np.uint8)
+    if not np.all((a == 0) | (a == 1)):
+        raise ValueError("u must hold only 0 or 1")
+    return a.astype(np.uint8)

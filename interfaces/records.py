@@ -64,3 +64,36 @@ EVENT = np.dtype([
     ("text", "S50"),               # human-readable
     ("_pad", "u1", (6,)),          # keeps the record a multiple of 8 bytes
 ])
+
+# sim -> viewers: the full truth at step k (sim/plant.py Plant.fill_truth; spec 40-interfaces.md).
+# fault_state per jet: 0 nominal, 1 failed off, 2 stuck on, 3 degraded (as fsw/health.py).
+TRUTH = np.dtype([
+    ("k", "<i8"),                      # step index
+    ("t_ns", "<i8"),                   # simulated time [ns]
+    ("t_s", "<f8"),                    # simulated time [s]
+    ("h_m", "<f8"),                    # altitude above the spherical planet [m]
+    ("V_rel_mps", "<f8"),              # planet-relative speed [m/s]
+    ("gamma_rad", "<f8"),              # flight-path angle [rad]
+    ("psi_rad", "<f8"),                # heading, clockwise from north [rad]
+    ("lat_rad", "<f8"),                # latitude [rad]
+    ("lon_rad", "<f8"),                # longitude, planet-fixed [rad]
+    ("mach", "<f8"),                   # Mach number [-]
+    ("qbar_pa", "<f8"),                # dynamic pressure [Pa]
+    ("rho_kgpm3", "<f8"),              # truth density [kg/m^3]
+    ("alpha_rad", "<f8"),              # angle of attack [rad]
+    ("beta_rad", "<f8"),               # sideslip [rad]
+    ("bank_rad", "<f8"),               # bank angle [rad]
+    ("decel_g", "<f8"),                # aerodynamic deceleration [g0]
+    ("propellant_kg", "<f8"),          # propellant used so far [kg]
+    ("sigma_BN", "<f8", (3,)),         # attitude MRP, |sigma| <= 1
+    ("omega_BN_B", "<f8", (3,)),       # body rate [rad/s]
+    ("r_N", "<f8", (3,)),              # position, inertial [m]
+    ("v_N", "<f8", (3,)),              # velocity, inertial [m/s]
+    ("tau_jets_B", "<f8", (3,)),       # jet torque applied over the last period [N m]
+    ("tau_ext_B", "<f8", (3,)),        # ideal external torque over the last period [N m]
+    ("tau_aero_B", "<f8", (3,)),       # aerodynamic moment at t_k [N m]
+    ("jet_thrust_frac", "<f8", (N_JETS,)),  # thrust produced over the last period / full thrust [-]
+    ("fault_eta", "<f8", (N_JETS,)),   # thrust factor of degraded jets (1 otherwise) [-]
+    ("fault_state", "i1", (N_JETS,)),  # per-jet fault state (see above)
+    ("_pad", "u1", (6,)),              # keeps the record a multiple of 8 bytes
+])

@@ -66,7 +66,7 @@ class BankProfile:
         self.rate_limit_radps = float(rate_limit_radps)
         self.accel_limit_radps2 = float(accel_limit_radps2)
         self.phi0_rad = steps[0][1]
-        # segments: (t_start, duration, phi_from, delta)
+        # segments: (t_start, duration, phi_from, delta, phi_to)
         starts, segs = [], []
         lag = 0.0
         t_free, phi = 0.0, steps[0][1]
@@ -78,7 +78,7 @@ class BankProfile:
             t0 = max(t, t_free)
             lag = max(lag, t0 - t)
             starts.append(t0)
-            segs.append((t0, T, phi, d))
+            segs.append((t0, T, phi, d, b))
             t_free, phi = t0 + T, b
         self._starts = starts
         self._segs = segs
@@ -86,17 +86,17 @@ class BankProfile:
 
     def transitions(self) -> list[tuple[float, float, float, float]]:
         """(t_start, duration, phi_from, phi_to) of each transition."""
-        return [(t0, T, p, p + d) for t0, T, p, d in self._segs]
+        return [(t0, T, p, b) for t0, T, p, _, b in self._segs]
 
     def evaluate(self, t_s: float) -> tuple[float, float, float]:
         """(phi_r [rad], phidot_r [rad/s], phiddot_r [rad/s^2]) at time t_s."""
         i = bisect.bisect_right(self._starts, t_s) - 1
         if i < 0:
             return self.phi0_rad, 0.0, 0.0
-        t0, T, p, d = self._segs[i]
+        t0, T, p, d, b = self._segs[i]
         x = (t_s - t0) / T
         if x >= 1.0:
-            return p + d, 0.0, 0.0
+            return b, 0.0, 0.0
         x2 = x * x
         s = x2 * x * (10.0 + x * (-15.0 + 6.0 * x))
         s1 = x2 * (30.0 + x * (-60.0 + 30.0 * x)) / T
@@ -228,13 +228,13 @@ def _guidance_kernel(phi, phid, phidd, alpha, omega_planet, mu, r_N, v_N, vrel_N
     cp, sp = math.cos(phi), math.sin(phi)
     C_RW = np.empty((3, 3))
     C_RW[0, 0] = ca
-    C_RW[0, 1] = -sa * sp
+    C_RW[0, 1] = sa * sp
     C_RW[0, 2] = -sa * cp
     C_RW[1, 0] = 0.0
     C_RW[1, 1] = cp
     C_RW[1, 2] = sp
     C_RW[2, 0] = sa
-    C_RW[2, 1] = ca * sp
+    C_RW[2, 1] = -ca * sp
     C_RW[2, 2] = ca * cp
     C_RN = np.empty((3, 3))
     for i in range(3):

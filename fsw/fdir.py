@@ -134,6 +134,43 @@ def _jet_monitor(u, p, iso_state, cnt, sum_dg, thr, persist_n, new_kind, eta_new
     return n_new, n_bad
 
 
+@njit(cache=True)
+def _residual_step(w, w0, dt_s, tau_cmd, tau_aero, I, a, res_f):
+    """r = I (w - w0)/dt + wm x I wm - tau_aero - tau_cmd with wm = (w + w0)/2; res_f += a (r - res_f).
+    Returns |tau_cmd| + |tau_aero|, or -1.0 (nothing updated) if any input is non-finite."""
+    for i in range(3):
+        if not (math.isfinite(w[i]) and math.isfinite(w0[i]) and math.isfinite(tau_cmd[i])
+                and math.isfinite(tau_aero[i])):
+            return -1.0
+        for j in range(3):
+            if not math.isfinite(I[i, j]):
+                return -1.0
+    wm0 = 0.5 * (w[0] + w0[0])
+    wm1 = 0.5 * (w[1] + w0[1])
+    wm2 = 0.5 * (w[2] + w0[2])
+    d0 = (w[0] - w0[0]) / dt_s
+    d1 = (w[1] - w0[1]) / dt_s
+    d2 = (w[2] - w0[2]) / dt_s
+    h0 = I[0, 0] * wm0 + I[0, 1] * wm1 + I[0, 2] * wm2
+    h1 = I[1, 0] * wm0 + I[1, 1] * wm1 + I[1, 2] * wm2
+    h2 = I[2, 0] * wm0 + I[2, 1] * wm1 + I[2, 2] * wm2
+    r0 = I[0, 0] * d0 + I[0, 1] * d1 + I[0, 2] * d2 + (wm1 * h2 - wm2 * h1) - tau_aero[0] - tau_cmd[0]
+    r1 = I[1, 0] * d0 + I[1, 1] * d1 + I[1, 2] * d2 + (wm2 * h0 - wm0 * h2) - tau_aero[1] - tau_cmd[1]
+    r2 = I[2, 0] * d0 + I[2, 1] * d1 + I[2, 2] * d2 + (wm0 * h1 - wm1 * h0) - tau_aero[2] - tau_cmd[2]
+    res_f[0] += a * (r0 - res_f[0])
+    res_f[1] += a * (r1 - res_f[1])
+    res_f[2] += a * (r2 - res_f[2])
+    return (math.sqrt(tau_cmd[0] ** 2 + tau_cmd[1] ** 2 + tau_cmd[2] ** 2)
+            + math.sqrt(tau_aero[0] ** 2 + tau_aero[1] ** 2 + tau_aero[2] ** 2))
+
+
+def _f64(x, shape) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.shape != shape:
+        raise ValueError(f"residual_check: expected shape {shape}, got {a.shape}")
+    return a
+
+
 def _check_params(params: dict, plist: list[Param]) -> dict[str, float]:
     out = {}
     for p in plist:
@@ -391,18 +428,15 @@ class Fdir:
         ``residual_alarm`` set. Returns |r_f| [N*m]. Non-finite inputs skip the sample."""
         if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s: must be finite and > 0, got {dt_s!r}")
-        w, w0 = omega_B, omega_prev_B
-        if not (np.isfinite(w).all() and np.isfinite(w0).all() and np.isfinite(tau_cmd_B).all()
-                and np.isfinite(tau_aero_est_B).all() and np.isfinite(I_hat).all()):
-            return self.residual_norm_Nm
-        wm = 0.5 * (w + w0)
-        r = I_hat @ ((w - w0) / dt_s) + np.cross(wm, I_hat @ wm) - tau_aero_est_B - tau_cmd_B
-        tau_ref = float(np.linalg.norm(tau_cmd_B) + np.linalg.norm(tau_aero_est_B))
         tau_f = self.p["fdir.res_tau_s"]
         a = 1.0 if tau_f <= 0 else min(1.0, dt_s / tau_f)
-        self._res_f += a * (r - self._res_f)
+        tau_ref = _residual_step(_f64(omega_B, (3,)), _f64(omega_prev_B, (3,)), float(dt_s), _f64(tau_cmd_B, (3,)),
+                                 _f64(tau_aero_est_B, (3,)), _f64(I_hat, (3, 3)), a, self._res_f)
+        if tau_ref < 0:
+            return self.residual_norm_Nm
         self._tau_ref_f += a * (tau_ref - self._tau_ref_f)
-        norm = float(np.linalg.norm(self._res_f))
+        rf = self._res_f
+        norm = math.sqrt(rf[0] * rf[0] + rf[1] * rf[1] + rf[2] * rf[2])
         self.residual_norm_Nm = norm
         limit = self.p["fdir.res_thr_Nm"] + self.p["fdir.res_rel"] * self._tau_ref_f
         if norm > limit:

@@ -13,9 +13,28 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from .events import EventLog, Severity
 from .params import Param
+
+
+@njit(cache=True)
+def _drive(u_on, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s):
+    """Write the command into ``last`` (uint8), count 0->1 transitions against the previous
+    content of ``last``, add on-time; returns the propellant used over this period [kg]."""
+    used = 0.0
+    for k in range(last.shape[0]):
+        on = gate and u_on[k] != 0 and not inhibit[k]
+        if on:
+            if last[k] == 0:
+                pulses[k] += 1
+            on_time_s[k] += dt_s
+            used += mdot_kgps[k]
+            last[k] = 1
+        else:
+            last[k] = 0
+    return used * dt_s
 
 
 class JetDriver:
@@ -43,9 +62,7 @@ class JetDriver:
         self.propellant_kg = 0.0
         self.seq = 0                                          # commands issued
         self.last_command = np.zeros(n, dtype=np.uint8)       # the command in force (sent last)
-        self._on = np.zeros(n, dtype=bool)
-        self._prev_on = np.zeros(n, dtype=bool)
-        self._rise = np.zeros(n, dtype=bool)
+        self._u8 = np.zeros(n, dtype=np.uint8)
 
     def _check_jet(self, jet) -> int:
         if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= int(jet) <= self.n:
@@ -78,17 +95,10 @@ class JetDriver:
         u = np.asarray(u_alloc)
         if u.shape != (self.n,):
             raise ValueError(f"u_alloc: must have shape ({self.n},), got {u.shape}")
-        on = self._on
-        if self.armed and jets_enabled:
-            np.greater(u, 0.5, out=on)
-            on &= ~self.inhibit
-        else:
-            on[:] = False
-        np.greater(on, self._prev_on, out=self._rise)       # 0 -> 1 transitions
-        self.pulses += self._rise
-        np.add(self.on_time_s, self.dt_s, out=self.on_time_s, where=on)
-        self.propellant_kg += float(self._mdot_kgps @ on) * self.dt_s
-        self._prev_on[:] = on
-        self.last_command[:] = on
+        if u.dtype != np.uint8:
+            np.greater(u, 0.5, out=self._u8, casting="unsafe")      # NaN -> off
+            u = self._u8
+        self.propellant_kg += _drive(u, self.armed and bool(jets_enabled), self.inhibit, self.last_command,
+                                     self.pulses, self.on_time_s, self._mdot_kgps, self.dt_s)
         self.seq += 1
         return self.last_command

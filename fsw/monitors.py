@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from interfaces.records import SENSORS
 
@@ -35,6 +36,52 @@ MARS_RADIUS_M = 3396.2e3   # default only; pass the planet's radius from data/pl
 
 REASONS = ("format", "nonfinite", "range", "duplicate", "out_of_order", "chamber_nonfinite", "chamber_range")
 _VEC_FIELDS = ("omega_BN_B", "sigma_BN", "r_N", "v_N", "accel_B")
+_VEC_NAMES = ("OMEGA", "SIGMA", "R", "V", "ACCEL")
+
+# The float part of a SENSORS record is one contiguous run of float64: the five 3-vectors
+# in _VEC_FIELDS order, then the chamber pressures. check() views it without copying.
+_F0 = SENSORS.fields["omega_BN_B"][1]
+_N_CH = SENSORS.fields["chamber"][0].shape[0]
+_N_F = 15 + _N_CH
+assert all(SENSORS.fields[f][1] == _F0 + 24 * i for i, f in enumerate(_VEC_FIELDS))
+assert SENSORS.fields["chamber"][1] == _F0 + 120 and SENSORS.itemsize == _F0 + 8 * _N_F
+
+
+@njit(cache=True)
+def _frame_kernel(x, lims, n_vec, out):
+    """x: the 15 vector floats then the chamber pressures; lims: (lo, hi) of |vector| per
+    field, then (chamber_lo, chamber_hi). Returns 0 = accepted, 1 + i = vector i non-finite,
+    101 + i = |vector i| out of range (|v| in out[0]). Bad chamber entries become NaN;
+    out[1], out[2] = how many were non-finite / out of range, out[3], out[4] = first of each."""
+    for i in range(n_vec):
+        ss = 0.0
+        for j in range(3):
+            v = x[3 * i + j]
+            if not math.isfinite(v):
+                return 1 + i
+            ss += v * v
+        mag = math.sqrt(ss)
+        if mag < lims[i, 0] or mag > lims[i, 1]:
+            out[0] = mag
+            return 101 + i
+    lo, hi = lims[n_vec, 0], lims[n_vec, 1]
+    out[1] = 0.0
+    out[2] = 0.0
+    out[3] = -1.0
+    out[4] = -1.0
+    for k in range(3 * n_vec, x.shape[0]):
+        c = x[k]
+        if not math.isfinite(c):
+            if out[3] < 0:
+                out[3] = k - 3 * n_vec
+            out[1] += 1.0
+            x[k] = np.nan
+        elif c < lo or c > hi:
+            if out[4] < 0:
+                out[4] = k - 3 * n_vec
+            out[2] += 1.0
+            x[k] = np.nan
+    return 0
 
 
 class SensorMonitor:
@@ -73,6 +120,9 @@ class SensorMonitor:
         self._v_max = p["fdir.v_max_mps"]
         self._a_max = p["fdir.accel_max_mps2"]
         self._ch_lo, self._ch_hi = p["fdir.chamber_lo"], p["fdir.chamber_hi"]
+        self._lims = np.array([[0.0, self._omega_max], [0.0, self._sigma_max], [self._r_min, self._r_max],
+                               [0.0, self._v_max], [0.0, self._a_max], [self._ch_lo, self._ch_hi]])
+        self._out = np.zeros(5)
         self.counts: dict[str, int] = {r: 0 for r in REASONS}
         self.accepted = 0
         self.last_k: int | None = None
@@ -102,29 +152,27 @@ class SensorMonitor:
             self._no_fresh(t_s)
 
     def check(self, t_s: float, frame) -> bool:
-        """Validate one SENSORS record; True = accepted (fresh and credible)."""
-        if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != ():
+        """Validate one SENSORS record; True = accepted (fresh and credible). Bad chamber
+        entries are set to NaN in the record (see the module docstring)."""
+        if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != () \
+                or not frame.flags.c_contiguous or not frame.flags.writeable:
             return self._reject(t_s, "format", "SENSOR FRAME BAD FORMAT: REJECTED")
-        for name in _VEC_FIELDS:
-            if not np.isfinite(frame[name]).all():
-                return self._reject(t_s, "nonfinite", f"SENSOR FRAME NON-FINITE {name.split('_')[0].upper()}")
+        x = np.ndarray((_N_F,), dtype=np.float64, buffer=frame, offset=_F0)
         k = int(frame["k"])
-        if k < 0:
+        # one pass over the floats: vectors finite and credible, bad chamber entries -> NaN
+        code = _frame_kernel(x, self._lims, 5, self._out) if k >= 0 else -1
+        if code == -1:
             return self._reject(t_s, "range", f"SENSOR FRAME BAD K {k}")
-        checks = (("omega", frame["omega_BN_B"], 0.0, self._omega_max),
-                  ("sigma", frame["sigma_BN"], 0.0, self._sigma_max),
-                  ("r", frame["r_N"], self._r_min, self._r_max),
-                  ("v", frame["v_N"], 0.0, self._v_max),
-                  ("accel", frame["accel_B"], 0.0, self._a_max))
-        for name, vec, lo, hi in checks:
-            mag = math.sqrt(float(vec @ vec))
-            if not lo <= mag <= hi:
-                return self._reject(t_s, "range", f"SENSOR {name.upper()} OUT OF RANGE {mag:.4g}")
+        if 1 <= code <= 5:
+            return self._reject(t_s, "nonfinite", f"SENSOR FRAME NON-FINITE {_VEC_NAMES[code - 1]}")
+        if code > 100:
+            return self._reject(t_s, "range", f"SENSOR {_VEC_NAMES[code - 101]} OUT OF RANGE {self._out[0]:.4g}")
         if self.last_k is not None and k <= self.last_k:
             if k == self.last_k:
                 return self._reject(t_s, "duplicate", f"SENSOR FRAME K {k} DUPLICATE")
             return self._reject(t_s, "out_of_order", f"SENSOR FRAME K {k} OUT OF ORDER")
-        self._mask_chamber(t_s, frame["chamber"])
+        if self._out[1] or self._out[2]:
+            self._report_chamber(t_s)
         self.last_k = k
         self.accepted += 1
         self.missed = 0
@@ -133,19 +181,13 @@ class SensorMonitor:
             self.events.emit(t_s, Severity.NOTICE, "monitor", "sensors_recovered", "SENSORS RECOVERED")
         return True
 
-    def _mask_chamber(self, t_s: float, ch: np.ndarray) -> None:
-        # one comparison pass in the common (all good) case
-        if ch.min() >= self._ch_lo and ch.max() <= self._ch_hi:
-            return
-        nonfinite = ~np.isfinite(ch)
-        out = ~nonfinite & ((ch < self._ch_lo) | (ch > self._ch_hi))
-        n_nf, n_out = int(nonfinite.sum()), int(out.sum())
+    def _report_chamber(self, t_s: float) -> None:
+        n_nf, n_out = int(self._out[1]), int(self._out[2])
         self.counts["chamber_nonfinite"] += n_nf
         self.counts["chamber_range"] += n_out
-        ch[nonfinite | out] = np.nan
         if n_nf:
             self.events.emit(t_s, Severity.WARNING, "monitor", "chamber_nonfinite",
-                             f"CHAMBER NON-FINITE JET {int(np.flatnonzero(nonfinite)[0]) + 1}", rate_limited=True)
+                             f"CHAMBER NON-FINITE JET {int(self._out[3]) + 1}", rate_limited=True)
         if n_out:
             self.events.emit(t_s, Severity.WARNING, "monitor", "chamber_range",
-                             f"CHAMBER OUT OF RANGE JET {int(np.flatnonzero(out)[0]) + 1}", rate_limited=True)
+                             f"CHAMBER OUT OF RANGE JET {int(self._out[4]) + 1}", rate_limited=True)

@@ -1,0 +1,334 @@
+"""The executive: rate groups driven by one base tick (spec 20-fsw.md, Executive).
+
+After F Prime's ActiveRateGroup: each rate group is an integer divisor of the base tick
+(RG1 every tick = control, RG2 every 5 = 10 Hz, RG3 every 50 = 1 Hz at a 50 Hz base) and
+calls its tasks in registration order. Two clock sources behind one interface,
+``release(k_hint) -> (k, t_release_ns)``:
+
+- ``LockstepClock``: the tick is the arrival of sensor frame k — the caller hands it in;
+  the release time is the moment it is handed in (no jitter by definition);
+- ``RealTimeClock``: absolute releases t0 + k·period on the monotonic clock (never drift),
+  waited for with an absolute clock_nanosleep and an optional final spin.
+
+Every cycle records its release, its release jitter (start − scheduled release), the
+compute time of each task and in total, and whether it finished before its deadline
+(release + deadline_ns, by default one period). A late cycle is a cycle slip: counted and
+reported as a rate-limited event, never absorbed silently. Statistics live in
+preallocated ring buffers; percentiles are computed only when asked (telemetry).
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import time
+from typing import Callable
+
+import numpy as np
+
+from .events import EventLog, Severity
+from .params import Param
+
+PARAMS = [
+    Param("executive.rg2_divisor", 1, 50, "", "RG2 runs every N control ticks", integer=True, ground_settable=False),
+    Param("executive.rg3_divisor", 1, 500, "", "RG3 runs every N control ticks", integer=True, ground_settable=False),
+    Param("executive.deadline_frac", 0.05, 1.0, "", "deadline as a fraction of the control period",
+          ground_settable=False),
+    Param("executive.spin_us", 0.0, 5000.0, "us", "real-time clock: final busy-wait before each release",
+          ground_settable=False),
+]
+
+
+# --------------------------------------------------------------------------- sleeping
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+_CLOCK_MONOTONIC = 1      # Linux <time.h>
+_TIMER_ABSTIME = 1
+try:
+    _libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    _clock_nanosleep = _libc.clock_nanosleep
+    _clock_nanosleep.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.POINTER(_Timespec), ctypes.c_void_p]
+    _clock_nanosleep.restype = ctypes.c_int
+except (OSError, AttributeError):          # not Linux/glibc: relative sleeps
+    _clock_nanosleep = None
+
+
+def sleep_until_ns(t_ns: int, now_ns: Callable[[], int] = time.monotonic_ns) -> None:
+    """Sleep until the monotonic clock reads ``t_ns`` (absolute: no drift from the time
+    spent computing the remaining interval). Interruptible: a signal (Ctrl-C) ends the
+    sleep and its Python handler runs on return."""
+    if _clock_nanosleep is not None:
+        ts = _Timespec(t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+        _clock_nanosleep(_CLOCK_MONOTONIC, _TIMER_ABSTIME, ctypes.byref(ts), None)
+    else:
+        dt = t_ns - now_ns()
+        if dt > 0:
+            time.sleep(dt * 1e-9)
+
+
+# --------------------------------------------------------------------------- clocks
+class LockstepClock:
+    """The tick is the arrival of sensor frame k (handed in by the caller)."""
+
+    mode = "lockstep"
+
+    def __init__(self, now_ns: Callable[[], int] = time.monotonic_ns):
+        self.now_ns = now_ns
+        self.missed = 0
+        self._k = -1
+
+    def release(self, k_hint: int | None = None) -> tuple[int, int]:
+        k = self._k + 1 if k_hint is None else int(k_hint)
+        self._k = k
+        return k, self.now_ns()
+
+
+class RealTimeClock:
+    """Releases at t0 + k·period_ns on the monotonic clock.
+
+    ``release`` sleeps (absolute clock_nanosleep) until ``spin_ns`` before the release and
+    busy-waits the rest (spin_ns = 0: sleep only). If the caller is already later than a
+    whole period behind, the missed releases are skipped (counted in ``missed``) so that
+    tick k stays at time t0 + k·period: rate groups keep their phase with time.
+    ``now_ns`` and ``sleep_until`` are injectable (tests use a fake clock).
+    """
+
+    mode = "realtime"
+
+    def __init__(self, period_ns: int, *, spin_ns: int = 0,
+                 now_ns: Callable[[], int] = time.monotonic_ns,
+                 sleep_until: Callable[[int], None] | None = None):
+        if period_ns <= 0 or spin_ns < 0 or spin_ns >= period_ns:
+            raise ValueError(f"RealTimeClock: need period_ns > 0 and 0 <= spin_ns < period_ns, "
+                             f"got {period_ns}, {spin_ns}")
+        self.period_ns = int(period_ns)
+        self.spin_ns = int(spin_ns)
+        self.now_ns = now_ns
+        self.sleep_until = sleep_until or (lambda t: sleep_until_ns(t, now_ns))
+        self.t0_ns: int | None = None
+        self.missed = 0
+        self._k = -1
+
+    def start(self, t0_ns: int | None = None) -> None:
+        """Release 0 at ``t0_ns`` (default: one period from now)."""
+        self.t0_ns = self.now_ns() + self.period_ns if t0_ns is None else int(t0_ns)
+        self._k = -1
+
+    def release(self, k_hint: int | None = None) -> tuple[int, int]:
+        if self.t0_ns is None:
+            self.start()
+        k = self._k + 1
+        t_rel = self.t0_ns + k * self.period_ns
+        now = self.now_ns()
+        if now >= t_rel + self.period_ns:
+            k_now = (now - self.t0_ns) // self.period_ns
+            self.missed += k_now - k
+            k, t_rel = k_now, self.t0_ns + k_now * self.period_ns
+        else:
+            wake = t_rel - self.spin_ns
+            while now < wake:                 # loop: a signal may end the sleep early
+                self.sleep_until(wake)
+                now = self.now_ns()
+            while now < t_rel:
+                now = self.now_ns()
+        self._k = k
+        return k, t_rel
+
+
+# --------------------------------------------------------------------------- statistics
+class TimingStats:
+    """Ring buffers of the last ``capacity`` cycles (preallocated), totals since start."""
+
+    def __init__(self, capacity: int, task_names: list[str]):
+        if capacity < 1:
+            raise ValueError("TimingStats: capacity must be >= 1")
+        self.capacity = capacity
+        self.task_names = list(task_names)
+        self.k = np.zeros(capacity, np.int64)
+        self.t_release_ns = np.zeros(capacity, np.int64)
+        self.jitter_ns = np.zeros(capacity, np.int64)
+        self.compute_ns = np.zeros(capacity, np.int64)
+        self.slip = np.zeros(capacity, bool)
+        self.task_ns = np.full((capacity, len(task_names)), -1, np.int64)   # -1: not run
+        self.n = 0           # cycles recorded since start
+
+    def _filled(self, a: np.ndarray) -> np.ndarray:
+        return a[: min(self.n, self.capacity)]
+
+    def percentiles(self, field: str, qs=(50, 99)) -> dict[str, float]:
+        """p50 / p99 / max of 'jitter_ns' or 'compute_ns' over the ring (NaN when empty)."""
+        a = self._filled(getattr(self, field))
+        if a.size == 0:
+            return {**{f"p{q}": float("nan") for q in qs}, "max": float("nan")}
+        out = {f"p{q}": float(np.percentile(a, q)) for q in qs}
+        out["max"] = float(a.max())
+        return out
+
+    def task_percentiles(self, name: str, qs=(50, 99)) -> dict[str, float]:
+        col = self._filled(self.task_ns)[:, self.task_names.index(name)]
+        col = col[col >= 0]
+        if col.size == 0:
+            return {**{f"p{q}": float("nan") for q in qs}, "max": float("nan"), "runs": 0}
+        out = {f"p{q}": float(np.percentile(col, q)) for q in qs}
+        out.update(max=float(col.max()), runs=int(col.size))
+        return out
+
+
+# --------------------------------------------------------------------------- executive
+class Cycle:
+    """What a task is given: the base tick k, its release time, and (lockstep) the frame.
+    One object, reused every cycle."""
+
+    __slots__ = ("k", "t_release_ns", "t_start_ns", "frame")
+
+    def __init__(self):
+        self.k, self.t_release_ns, self.t_start_ns, self.frame = -1, 0, 0, None
+
+
+class Executive:
+    """Rate groups over one base tick.
+
+    ``add(group, name, fn)`` registers ``fn(cycle)`` in rate group 1, 2 or 3 (in call
+    order); ``tick(frame, k)`` runs one base tick (lockstep: now; real time: at the next
+    release); ``run(n_cycles, should_stop)`` loops ticks. Task exceptions are caught,
+    counted and reported (rate-limited ERROR event) so one bad task does not stop the
+    loop, unless ``catch_task_errors=False``.
+    """
+
+    def __init__(self, period_ns: int, clock: LockstepClock | RealTimeClock,
+                 divisors: tuple[int, ...] = (1, 5, 50), *, events: EventLog | None = None,
+                 deadline_ns: int | None = None, history: int = 4096,
+                 catch_task_errors: bool = True):
+        if period_ns <= 0:
+            raise ValueError(f"Executive: period_ns must be > 0, got {period_ns}")
+        if not divisors or any(int(d) != d or d < 1 for d in divisors):
+            raise ValueError(f"Executive: divisors must be integers >= 1, got {divisors}")
+        if deadline_ns is not None and deadline_ns <= 0:
+            raise ValueError(f"Executive: deadline_ns must be > 0, got {deadline_ns}")
+        self.period_ns = int(period_ns)
+        self.clock = clock
+        self.divisors = tuple(int(d) for d in divisors)
+        self.events = events if events is not None else EventLog()
+        self.deadline_ns = int(deadline_ns) if deadline_ns is not None else self.period_ns
+        self.history = history
+        self.catch_task_errors = catch_task_errors
+        self._groups: list[list[tuple[int, str, Callable]]] = [[] for _ in self.divisors]
+        self._names: list[str] = []
+        self.stats: TimingStats | None = None
+        self.cycle = Cycle()
+        self.cycles = 0
+        self.slips = 0
+        self.task_errors = 0
+        self.last_slip_k = -1
+
+    @classmethod
+    def from_params(cls, params: dict, period_ns: int, clock, **kw) -> "Executive":
+        """From validated parameters (fsw/params.py load_params(PARAMS))."""
+        return cls(period_ns, clock, (1, int(params["executive.rg2_divisor"]),
+                                      int(params["executive.rg3_divisor"])),
+                   deadline_ns=int(round(params["executive.deadline_frac"] * period_ns)), **kw)
+
+    def add(self, group: int, name: str, fn: Callable[[Cycle], object]) -> None:
+        if self.stats is not None:
+            raise RuntimeError("Executive.add: tasks are registered before the first tick")
+        if not 1 <= group <= len(self.divisors):
+            raise ValueError(f"Executive.add: group must be 1..{len(self.divisors)}, got {group}")
+        if name in self._names:
+            raise ValueError(f"Executive.add: task name {name!r} already used")
+        if not callable(fn):
+            raise TypeError(f"Executive.add: task {name!r} is not callable")
+        self._groups[group - 1].append((len(self._names), name, fn))
+        self._names.append(name)
+
+    def tasks(self) -> list[tuple[int, str]]:
+        """(group, name) in execution order."""
+        return [(g + 1, name) for g, grp in enumerate(self._groups) for _, name, _ in grp]
+
+    def tick(self, frame=None, k: int | None = None, t_s: float | None = None) -> bool:
+        """One base tick. Lockstep: ``frame`` (and its step index ``k``) handed in, run now.
+        Real time: wait for the next release. ``t_s``: time stamp of events raised (default:
+        the release time). Returns True if the cycle met its deadline."""
+        if self.stats is None:
+            self.stats = TimingStats(self.history, self._names)
+        now_ns = self.clock.now_ns
+        missed_before = self.clock.missed
+        k, t_rel = self.clock.release(k)
+        t_start = now_ns()
+        cyc = self.cycle
+        cyc.k, cyc.t_release_ns, cyc.t_start_ns, cyc.frame = k, t_rel, t_start, frame
+
+        st = self.stats
+        i = st.n % st.capacity
+        task_row = st.task_ns[i]
+        task_row[:] = -1
+        t = t_start
+        for g, grp in enumerate(self._groups):
+            if k % self.divisors[g]:
+                continue
+            for idx, name, fn in grp:
+                try:
+                    fn(cyc)
+                except Exception as e:
+                    if not self.catch_task_errors:
+                        raise
+                    self.task_errors += 1
+                    self.events.emit(self._t_s(t_s, t_rel), Severity.ERROR, "executive", "task_error",
+                                     f"task {name}: {type(e).__name__}"[:50], rate_limited=True)
+                t_end = now_ns()
+                task_row[idx] = t_end - t
+                t = t_end
+        t_end = t
+        late = t_end > t_rel + self.deadline_ns
+        st.k[i], st.t_release_ns[i] = k, t_rel
+        st.jitter_ns[i], st.compute_ns[i], st.slip[i] = t_start - t_rel, t_end - t_start, late
+        st.n += 1
+        self.cycles += 1
+        if self.clock.missed != missed_before:
+            n = self.clock.missed - missed_before
+            self.events.emit(self._t_s(t_s, t_rel), Severity.WARNING, "executive", "release_missed",
+                             f"{n} release(s) missed before tick {k}", rate_limited=True)
+        if late:
+            self.slips += 1
+            self.last_slip_k = k
+            self.events.emit(self._t_s(t_s, t_rel), Severity.WARNING, "executive", "cycle_slip",
+                             f"cycle slip k={k}: {(t_end - t_rel) / 1e6:.2f} > "
+                             f"{self.deadline_ns / 1e6:.2f} ms", rate_limited=True)
+        return not late
+
+    @staticmethod
+    def _t_s(t_s: float | None, t_rel_ns: int) -> float:
+        return t_s if t_s is not None else t_rel_ns * 1e-9
+
+    def run(self, n_cycles: int | None = None, should_stop: Callable[[], bool] | None = None,
+            on_slack: Callable[[int], None] | None = None) -> int:
+        """Real-time loop: tick until ``n_cycles`` or ``should_stop()``; returns cycles run.
+        ``on_slack(ns_left)`` runs after each on-time cycle with the time left before the
+        next release (e.g. fsw/rt.py's collect_in_slack)."""
+        if isinstance(self.clock, LockstepClock):
+            raise RuntimeError("Executive.run: a lockstep executive is ticked by its frames")
+        n = 0
+        while (n_cycles is None or n < n_cycles) and not (should_stop and should_stop()):
+            on_time = self.tick()
+            n += 1
+            if on_slack is not None and on_time:
+                left = self.cycle.t_release_ns + self.period_ns - self.clock.now_ns()
+                if left > 0:
+                    on_slack(left)
+        return n
+
+    @property
+    def missed_releases(self) -> int:
+        return self.clock.missed
+
+    def telemetry(self) -> dict:
+        """Loop timing for telemetry: counts, and p50/p99/max of jitter and compute [us]."""
+        st = self.stats
+        out = {"cycles": self.cycles, "slips": self.slips, "missed_releases": self.clock.missed,
+               "task_errors": self.task_errors, "mode": self.clock.mode}
+        if st is None:
+            return out
+        for field in ("jitter_ns", "compute_ns"):
+            for q, v in st.percentiles(field).items():
+                out[f"{field[:-3]}_{q}_us"] = v / 1e3
+        return out

@@ -1,0 +1,237 @@
+"""fsw/executive.py: rate-group order and divisors, deterministic cycle slips with a fake
+clock, missed releases, drift-free releases, statistics, task errors."""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from fsw.events import EventLog, Severity
+from fsw.executive import PARAMS, Executive, LockstepClock, RealTimeClock, sleep_until_ns
+from fsw.params import load_params
+
+MS = 1_000_000
+
+
+class FakeTime:
+    """A monotonic clock the test drives: tasks 'cost' time by advancing it."""
+
+    def __init__(self, t0: int = 1_000 * MS, per_read_ns: int = 0):
+        self.t = t0
+        self.per_read_ns = per_read_ns      # time that passes at each read (for spin loops)
+        self.sleeps: list[int] = []
+
+    def now(self) -> int:
+        self.t += self.per_read_ns
+        return self.t
+
+    def sleep_until(self, t: int) -> None:
+        self.sleeps.append(t)
+        self.t = max(self.t, t)
+
+
+def test_rate_groups_run_in_registration_order_at_their_divisors():
+    ex = Executive(20 * MS, LockstepClock(), (1, 5, 50))
+    log = []
+    for g, name in [(1, "nav"), (1, "control"), (2, "fdir_slow"), (3, "heartbeat"), (1, "driver")]:
+        ex.add(g, name, lambda c, name=name: log.append((c.k, name)))
+    assert ex.tasks() == [(1, "nav"), (1, "control"), (1, "driver"), (2, "fdir_slow"), (3, "heartbeat")]
+    for _ in range(120):
+        ex.tick()
+    expected = []                      # enumerated independently of the executive
+    for k in range(120):
+        expected += [(k, "nav"), (k, "control"), (k, "driver")]
+        if k % 5 == 0:
+            expected.append((k, "fdir_slow"))
+        if k % 50 == 0:
+            expected.append((k, "heartbeat"))
+    assert log == expected
+    assert sum(1 for _, n in log if n == "fdir_slow") == 24 and sum(1 for _, n in log if n == "heartbeat") == 3
+    assert ex.slips == 0 and ex.cycles == 120
+    with pytest.raises(RuntimeError):
+        ex.add(1, "late", lambda c: None)
+
+
+def test_lockstep_ticks_follow_the_frame_step_index_and_hand_the_frame_to_tasks():
+    ex = Executive(20 * MS, LockstepClock(), (1, 5, 50))
+    seen = []
+    ex.add(1, "control", lambda c: seen.append(("c", c.k, c.frame)))
+    ex.add(2, "slow", lambda c: seen.append(("s", c.k, c.frame)))
+    for k in (12, 13, 15, 16, 20):            # a frame may be missing (14, 17-19)
+        ex.tick(frame=f"frame{k}", k=k)
+    assert seen == [("c", 12, "frame12"), ("c", 13, "frame13"), ("c", 15, "frame15"), ("s", 15, "frame15"),
+                    ("c", 16, "frame16"), ("c", 20, "frame20"), ("s", 20, "frame20")]
+
+
+def test_an_overrunning_task_is_a_cycle_slip_counted_and_reported_once():
+    ft = FakeTime()
+    period = 20 * MS
+    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=ft.sleep_until)
+    events = EventLog()
+    ex = Executive(period, clock, (1, 5, 50), events=events)
+    cost = {"nav": 1 * MS, "control": 4 * MS}
+
+    def task(name):
+        def run(c):
+            ft.t += cost[name] + (21 * MS if (name == "control" and c.k == 7) else 0)
+        return run
+    ex.add(1, "nav", task("nav"))
+    ex.add(1, "control", task("control"))
+    clock.start(ft.t)
+    t0 = clock.t0_ns
+    for _ in range(12):
+        ex.tick()
+    st = ex.stats
+    assert ex.slips == 1 and ex.last_slip_k == 7 and ex.missed_releases == 0
+    np.testing.assert_array_equal(st.slip[:12], np.arange(12) == 7)
+    # releases never move: t0 + k * period
+    np.testing.assert_array_equal(st.t_release_ns[:12], t0 + np.arange(12) * period)
+    # cycle 7 ends at 7p + 26 ms = 8p + 6 ms: cycle 8 starts 6 ms late and still meets its deadline
+    expected_jitter = np.zeros(12, np.int64)
+    expected_jitter[8] = 6 * MS
+    np.testing.assert_array_equal(st.jitter_ns[:12], expected_jitter)
+    expected_compute = np.full(12, 5 * MS)
+    expected_compute[7] = 26 * MS
+    np.testing.assert_array_equal(st.compute_ns[:12], expected_compute)
+    assert st.task_percentiles("control")["max"] == 25 * MS and st.task_percentiles("nav")["p50"] == 1 * MS
+    slips = [e for e in events.history if e.code == "cycle_slip"]
+    assert len(slips) == 1 and slips[0].severity == Severity.WARNING and slips[0].source == "executive"
+    assert "k=7" in slips[0].text and len(slips[0].text) <= 50
+    tm = ex.telemetry()
+    assert tm["slips"] == 1 and tm["compute_max_us"] == 26_000 and tm["jitter_max_us"] == 6_000
+
+
+def test_overrun_beyond_a_period_skips_missed_releases_and_keeps_the_phase():
+    ft = FakeTime()
+    period = 20 * MS
+    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=ft.sleep_until)
+    events = EventLog()
+    ex = Executive(period, clock, (1, 5), events=events)
+    ran = []
+    ex.add(1, "control", lambda c: (ran.append(c.k), setattr(ft, "t", ft.t + (50 * MS if c.k == 3 else MS))))
+    ex.add(2, "slow", lambda c: ran.append(("slow", c.k)))
+    clock.start(ft.t)
+    for _ in range(5):
+        ex.tick()
+    # cycle 3 ends at 3p + 50 ms = 5.5p: release 4 is gone, release 5 runs half a period late
+    assert [r for r in ran if not isinstance(r, tuple)] == [0, 1, 2, 3, 5]
+    assert ("slow", 5) in ran and ("slow", 0) in ran     # RG2 phase tied to time, not to count
+    assert ex.missed_releases == 1 and ex.slips == 1
+    assert ex.stats.jitter_ns[4] == period // 2
+    assert [e.code for e in events.history] == ["cycle_slip", "release_missed"]
+
+
+def test_slip_events_are_rate_limited_but_every_slip_is_counted():
+    ft = FakeTime()
+    period = 20 * MS
+    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=ft.sleep_until)
+    events = EventLog(min_interval_s=1.0)
+    ex = Executive(period, clock, (1,), events=events, deadline_ns=10 * MS)
+    ex.add(1, "slow_control", lambda c: setattr(ft, "t", ft.t + 12 * MS))   # every cycle late
+    clock.start(ft.t)
+    n = 200                                     # 4 s of releases
+    for _ in range(n):
+        ex.tick()
+    assert ex.slips == n and ex.missed_releases == 0
+    delivered = [e for e in events.history if e.code == "cycle_slip"]
+    assert 4 <= len(delivered) <= 5
+    assert events.suppressed == n - len(delivered)
+    assert "suppressed" in delivered[1].text
+
+
+def test_spin_mode_sleeps_to_release_minus_spin_then_busy_waits():
+    ft = FakeTime(per_read_ns=1_000)           # each clock read takes 1 us
+    period, spin = 20 * MS, 300_000
+    clock = RealTimeClock(period, spin_ns=spin, now_ns=ft.now, sleep_until=ft.sleep_until)
+    clock.start(ft.t + period)
+    for k in range(3):
+        kk, t_rel = clock.release()
+        assert kk == k and t_rel == clock.t0_ns + k * period
+        assert ft.sleeps[-1] == t_rel - spin
+        assert t_rel <= ft.t < t_rel + 2_000     # spun to the release, overshoot <= 2 reads
+    with pytest.raises(ValueError):
+        RealTimeClock(period, spin_ns=period)
+
+
+def test_real_clock_releases_are_absolute_and_never_drift():
+    period = 2 * MS
+    clock = RealTimeClock(period)
+    ex = Executive(period, clock, (1,))
+    ex.add(1, "work", lambda c: sum(range(200)))
+    ex.run(n_cycles=40)
+    st = ex.stats
+    n = ex.cycles
+    ks = st.k[:n]
+    np.testing.assert_array_equal(st.t_release_ns[:n], clock.t0_ns + ks * period)
+    assert np.all(st.jitter_ns[:n] >= 0)          # never released early
+    assert ks[-1] == 39 + ex.missed_releases
+    tm = ex.telemetry()
+    print(f"\nreal clock 500 Hz, 40 cycles: jitter p50 {tm['jitter_p50_us']:.0f} us, "
+          f"max {tm['jitter_max_us']:.0f} us, slips {tm['slips']}")
+    # sleep_until_ns itself: wakes at or after the target
+    t = time.monotonic_ns() + MS
+    sleep_until_ns(t)
+    assert time.monotonic_ns() >= t
+
+
+def test_task_errors_are_caught_counted_reported_and_later_tasks_still_run():
+    events = EventLog()
+    ex = Executive(20 * MS, LockstepClock(), (1,), events=events)
+    after = []
+
+    def bad(c):
+        raise ZeroDivisionError("boom")
+    ex.add(1, "bad", bad)
+    ex.add(1, "after", lambda c: after.append(c.k))
+    for _ in range(3):
+        ex.tick(t_s=0.02 * len(after))
+    assert ex.task_errors == 3 and after == [0, 1, 2]
+    errs = [e for e in events.history if e.code == "task_error"]
+    assert errs and errs[0].severity == Severity.ERROR and "ZeroDivisionError" in errs[0].text
+
+    strict = Executive(20 * MS, LockstepClock(), (1,), catch_task_errors=False)
+    strict.add(1, "bad", bad)
+    with pytest.raises(ZeroDivisionError):
+        strict.tick()
+
+
+def test_ring_buffers_keep_the_last_cycles_and_percentiles_are_over_them():
+    ft = FakeTime()
+    ex = Executive(20 * MS, LockstepClock(now_ns=ft.now), (1, 2), history=8)
+    ex.add(1, "work", lambda c: setattr(ft, "t", ft.t + 1_000 * c.k))
+    ex.add(2, "half", lambda c: setattr(ft, "t", ft.t + 7))
+    for _ in range(20):
+        ex.tick()
+    st = ex.stats
+    last = np.arange(12, 20)
+    assert st.percentiles("compute_ns")["max"] == 1_000 * 19 + 7 * (19 % 2 == 0)
+    work = st.task_percentiles("work")
+    assert work["runs"] == 8 and work["p50"] == np.percentile(1_000 * last, 50)
+    assert st.task_percentiles("half")["runs"] == 4 and st.task_percentiles("half")["max"] == 7
+    assert np.all(st.jitter_ns[:8] == 0)               # lockstep: released when handed in
+    empty = Executive(20 * MS, LockstepClock(), (1,)).telemetry()
+    assert empty["cycles"] == 0 and "jitter_p50_us" not in empty
+
+
+def test_parameters_from_the_defaults_file_and_bad_configuration():
+    p = load_params(PARAMS)
+    ex = Executive.from_params(p, 20 * MS, LockstepClock())
+    assert ex.divisors == (1, 5, 50) and ex.deadline_ns == 20 * MS
+    for bad in [dict(period_ns=0), dict(divisors=(1, 0)), dict(divisors=(1, 2.5)), dict(deadline_ns=-1)]:
+        kw = dict(period_ns=20 * MS, clock=LockstepClock())
+        kw.update(bad)
+        with pytest.raises(ValueError):
+            Executive(**kw)
+    ex2 = Executive(20 * MS, LockstepClock())
+    with pytest.raises(ValueError):
+        ex2.add(4, "x", lambda c: None)
+    ex2.add(1, "x", lambda c: None)
+    with pytest.raises(ValueError):
+        ex2.add(2, "x", lambda c: None)
+    with pytest.raises(TypeError):
+        ex2.add(1, "y", 3)
+    with pytest.raises(RuntimeError):
+        ex2.run(1)
+    assert math.isclose(p["executive.deadline_frac"], 1.0)

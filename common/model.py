@@ -285,6 +285,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         if (not isinstance(jets, list) or not jets
                 or not all(isinstance(j, int) and not isinstance(j, bool) and 1 <= j <= N_JETS for j in jets)):
             raise f.error("jets", f"must be a non-empty list of jet numbers 1..{N_JETS}, got {jets!r}")
+        if len(set(jets)) != len(jets):
+            raise f.error("jets", f"lists a jet more than once: {jets!r}")
+        if kind != "degraded" and f.has("eta"):
+            raise f.error("eta", f"applies to kind = \"degraded\" only, not {kind!r}")
         eta = f.num("eta", default=1.0 if kind != "degraded" else None, lo=0, hi=1, lo_open=True, hi_open=kind == "degraded")
         if kind == "degraded" and eta is None:
             raise f.error("eta", "required for kind = \"degraded\" (0 < eta < 1)")

@@ -1,0 +1,172 @@
+"""Real-time hygiene for the FSW process (spec 20-fsw.md, Executive; 50-performance.md).
+
+Call order in a process shell:
+
+    from fsw import rt
+    rt.single_threaded_numerics()      # first: before NumPy / numba are imported
+    import numpy ...                   # then everything else
+    ... build the FSW objects, open sessions, warm up (first calls compile / allocate)
+    report = rt.apply(cpus=[1], priority=80)   # affinity, SCHED_FIFO, mlockall, timer slack
+    rt.gc_out_of_cycle()               # collect once, freeze survivors, disable automatic GC
+    executive.run(on_slack=rt.collect_in_slack())   # young-generation GC only in slack time
+
+Each step falls back cleanly when not permitted and says so in the returned report;
+``apply`` reads the state back from the kernel rather than assuming its calls worked.
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import gc
+import os
+import sys
+from typing import Callable
+
+THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
+              "VECLIB_MAXIMUM_THREADS", "BLIS_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+MCL_CURRENT, MCL_FUTURE = 1, 2          # Linux <sys/mman.h>
+PR_SET_TIMERSLACK, PR_GET_TIMERSLACK = 29, 30
+
+
+def _libc():
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    except OSError:
+        return None
+
+
+_LIBC = _libc()
+
+
+def _mlockall(flags: int) -> tuple[bool, str]:
+    """(ok, reason); a seam the tests replace to exercise the failure path."""
+    if _LIBC is None:
+        return False, "libc not available"
+    if _LIBC.mlockall(flags) != 0:
+        err = ctypes.get_errno()
+        return False, f"mlockall: {os.strerror(err)} (errno {err})"
+    return True, ""
+
+
+def single_threaded_numerics() -> dict:
+    """Pin BLAS/OpenMP/numba pools to one thread. Must run before NumPy is imported: the
+    BLAS reads its variable once, at load. Returns {env, numpy_was_imported, numba_threads,
+    messages}."""
+    messages = []
+    for name in THREAD_ENV:
+        os.environ[name] = "1"
+    numpy_loaded = "numpy" in sys.modules
+    if numpy_loaded:
+        messages.append("numpy was imported before single_threaded_numerics(): "
+                        "its BLAS may already have started a thread pool")
+    numba_threads = None
+    if "numba" in sys.modules:          # imported already: its pool may be larger
+        try:
+            import numba
+            numba.set_num_threads(1)
+            numba_threads = numba.get_num_threads()
+        except Exception as e:          # e.g. NUMBA_NUM_THREADS fixed lower than requested
+            messages.append(f"numba threads not set: {e}")
+    return {"env": {n: os.environ[n] for n in THREAD_ENV}, "numpy_was_imported": numpy_loaded,
+            "numba_threads": numba_threads, "messages": messages}
+
+
+def gc_out_of_cycle() -> dict:
+    """After initialisation: collect everything, move the survivors to the permanent
+    generation (never scanned again), and disable automatic collection so that it cannot
+    start in the middle of a cycle. Young garbage is then collected by ``collect_in_slack``."""
+    collected = gc.collect()
+    gc.freeze()
+    gc.disable()
+    return {"collected": collected, "frozen": gc.get_freeze_count(), "enabled": gc.isenabled()}
+
+
+def collect_in_slack(min_slack_ns: int = 5_000_000, min_gen0: int = 200) -> Callable[[int], None]:
+    """An ``Executive.run(on_slack=...)`` hook: ``gc.collect(0)`` (young objects only, tens
+    of microseconds) when at least ``min_slack_ns`` remain before the next release and at
+    least ``min_gen0`` allocations are pending. ``hook.collections`` counts its runs."""
+    def hook(ns_left: int) -> None:
+        if ns_left >= min_slack_ns and gc.get_count()[0] >= min_gen0:
+            gc.collect(0)
+            hook.collections += 1
+    hook.collections = 0
+    return hook
+
+
+def set_timer_slack(ns: int = 1) -> bool:
+    """Timer slack of this thread (default 50 us on Linux delays every timed wake-up of a
+    SCHED_OTHER thread; recent kernels give SCHED_FIFO threads none, and read back 0).
+    True if the kernel accepted the request."""
+    if _LIBC is None:
+        return False
+    return _LIBC.prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) == 0
+
+
+def get_timer_slack_ns() -> int | None:
+    """The timer slack in force for this thread [ns] (None if unknown)."""
+    if _LIBC is None:
+        return None
+    v = _LIBC.prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0)
+    return v if v >= 0 else None
+
+
+def apply(cpus: list[int] | None = None, priority: int | None = None,
+          lock_memory: bool = True, timer_slack_ns: int | None = 1) -> dict:
+    """Apply what is permitted; report what is in force (read back from the kernel).
+
+    cpus: CPU set for this process (None: leave). priority: SCHED_FIFO priority 1..99
+    (None: stay SCHED_OTHER). lock_memory: mlockall(MCL_CURRENT | MCL_FUTURE).
+    Returns {affinity, sched_fifo, priority, mlockall, timer_slack_ns (read back: 0 for a
+    SCHED_FIFO thread), messages}; every
+    refused step leaves the process as it was and adds a message (the warning to log).
+    """
+    messages: list[str] = []
+    # before SCHED_FIFO: the kernel ignores slack requests of real-time threads
+    if timer_slack_ns is not None and not set_timer_slack(timer_slack_ns):
+        messages.append("timer slack not set")
+    if cpus is not None:
+        try:
+            os.sched_setaffinity(0, set(int(c) for c in cpus))
+        except (OSError, ValueError, TypeError) as e:
+            messages.append(f"affinity {cpus} not set: {type(e).__name__}: {e}")
+    if priority is not None:
+        try:
+            lo, hi = os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO)
+            if not lo <= int(priority) <= hi:
+                raise ValueError(f"priority {priority} outside {lo}..{hi}")
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
+        except (OSError, ValueError, AttributeError) as e:
+            messages.append(f"SCHED_FIFO not set, staying SCHED_OTHER: {type(e).__name__}: {e}")
+    mlocked = False
+    if lock_memory:
+        mlocked, why = _mlockall(MCL_CURRENT | MCL_FUTURE)
+        if not mlocked:
+            messages.append(f"memory not locked: {why}")
+    try:
+        affinity = sorted(os.sched_getaffinity(0))
+    except OSError:
+        affinity = None
+    try:
+        fifo = os.sched_getscheduler(0) == os.SCHED_FIFO
+        prio = os.sched_getparam(0).sched_priority if fifo else None
+    except OSError:
+        fifo, prio = False, None
+    return {"affinity": affinity, "sched_fifo": fifo, "priority": prio, "mlockall": mlocked,
+            "timer_slack_ns": get_timer_slack_ns(), "messages": messages}
+
+
+def restore() -> None:
+    """Back to SCHED_OTHER, all CPUs, memory unlocked, GC enabled (for tests and teardown)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except OSError:
+        pass
+    try:
+        os.sched_setaffinity(0, range(os.cpu_count() or 1))
+    except OSError:
+        pass
+    if _LIBC is not None:
+        _LIBC.munlockall()
+    gc.unfreeze()
+    gc.enable()

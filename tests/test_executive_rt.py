@@ -1,0 +1,103 @@
+"""fsw/rt.py: the report tells the truth (checked against the kernel's /proc view in a
+child process), and every refused step falls back cleanly."""
+from __future__ import annotations
+
+import gc
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fsw import rt
+
+ROOT = Path(__file__).resolve().parents[1]
+
+CHILD = r"""
+import json, os, sys
+from fsw import rt
+env = rt.single_threaded_numerics()
+import numpy, numba
+rep = rt.apply(cpus=[0], priority=10, lock_memory=True)
+gcrep = rt.gc_out_of_cycle()
+status = dict(l.split(":", 1) for l in open("/proc/self/status").read().splitlines() if ":" in l)
+stat = open("/proc/self/stat").read().rsplit(")", 1)[1].split()
+print(json.dumps({"env": env, "rep": rep, "gc": gcrep, "numba_threads": numba.get_num_threads(),
+                  "vmlck_kb": int(status["VmLck"].split()[0]),
+                  "cpus_allowed": status["Cpus_allowed_list"].strip(),
+                  "rt_priority": int(stat[39 - 2]), "policy": int(stat[40 - 2]),
+                  "omp": os.environ["OMP_NUM_THREADS"]}))
+"""
+
+
+def _can_rt() -> bool:
+    return os.geteuid() == 0
+
+
+@pytest.mark.skipif(not _can_rt(), reason="needs root (CAP_SYS_NICE, CAP_IPC_LOCK)")
+def test_apply_report_matches_what_the_kernel_says():
+    out = subprocess.run([sys.executable, "-c", CHILD], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    rep = r["rep"]
+    # /proc/self/stat: field 40 rt_priority, field 41 policy (1 = SCHED_FIFO)
+    assert rep["sched_fifo"] is True and r["policy"] == 1
+    assert rep["priority"] == 10 == r["rt_priority"]
+    assert rep["affinity"] == [0] and r["cpus_allowed"] == "0"
+    assert rep["mlockall"] is True and r["vmlck_kb"] > 1000      # the whole image is locked
+    assert rep["timer_slack_ns"] in (0, 1) and rep["messages"] == []     # 0: FIFO threads have none
+    assert r["env"]["numpy_was_imported"] is False and r["omp"] == "1" and r["numba_threads"] == 1
+    assert r["gc"]["enabled"] is False and r["gc"]["frozen"] > 0
+
+
+def test_refused_steps_fall_back_and_say_so(monkeypatch):
+    def deny(*a, **k):
+        raise PermissionError(1, "Operation not permitted")
+    monkeypatch.setattr(os, "sched_setscheduler", deny)
+    monkeypatch.setattr(os, "sched_setaffinity", deny)
+    monkeypatch.setattr(rt, "_mlockall", lambda flags: (False, "mlockall: Operation not permitted (errno 1)"))
+    before_aff = sorted(os.sched_getaffinity(0))
+    before_pol = os.sched_getscheduler(0)
+    rep = rt.apply(cpus=[0], priority=50, lock_memory=True, timer_slack_ns=None)
+    assert rep["sched_fifo"] is False and rep["priority"] is None and rep["mlockall"] is False
+    assert rep["affinity"] == before_aff and os.sched_getscheduler(0) == before_pol
+    msgs = " | ".join(rep["messages"])
+    assert "SCHED_FIFO not set" in msgs and "affinity [0] not set" in msgs and "memory not locked" in msgs
+    assert len(rep["messages"]) == 3
+
+
+def test_invalid_requests_are_refused_without_raising():
+    rep = rt.apply(cpus=[9999], priority=1000, lock_memory=False, timer_slack_ns=None)
+    assert rep["sched_fifo"] is False and rep["mlockall"] is False
+    assert any("affinity" in m for m in rep["messages"]) and any("outside" in m for m in rep["messages"])
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER
+
+
+def test_gc_is_kept_out_of_the_cycle_and_collected_in_slack():
+    try:
+        rep = rt.gc_out_of_cycle()
+        assert rep["enabled"] is False and not gc.isenabled() and gc.get_freeze_count() > 0
+        hook = rt.collect_in_slack(min_slack_ns=1_000_000, min_gen0=100)
+        for _ in range(500):                    # cyclic garbage: only the cycle collector frees it
+            a = []
+            a.append(a)
+        del a
+        pending = gc.get_count()[0]
+        assert pending >= 100
+        hook(500_000)                           # not enough slack: nothing happens
+        assert hook.collections == 0 and gc.get_count()[0] >= pending
+        hook(2_000_000)
+        assert hook.collections == 1 and gc.get_count()[0] < 100
+    finally:
+        gc.unfreeze()
+        gc.enable()
+
+
+def test_timer_slack_is_set_and_read_back_for_a_normal_thread():
+    before = rt.get_timer_slack_ns()
+    try:
+        assert rt.set_timer_slack(1000) and rt.get_timer_slack_ns() == 1000
+    finally:
+        rt.set_timer_slack(before)

@@ -384,3 +384,23 @@ def test_update_cost_is_small():
     for i in range(n):
         fdir.update(i * DT, u, p)
     assert (time.perf_counter() - t0) / n < 200e-6
+
+
+def test_inhibit_mirror_survives_reconfiguration():
+    fdir = Fdir(params(), DT, EventLog())
+    fdir.set_inhibit(0.0, 9, True)
+    assert fdir.health_active.inhibited[8] and fdir.health_version == 1
+    assert not fdir.health_active.usable()[8]
+    fdir.override(0.1, 2, "failed_off")                    # a refresh keeps the mask
+    assert fdir.health_active.inhibited[8]
+    fdir.set_inhibit(0.2, 0, False)
+    assert not fdir.health_active.inhibited.any() and fdir.health_version == 3
+    with pytest.raises(ValueError):
+        fdir.set_inhibit(0.0, 19, True)
+
+
+def test_every_fdir_key_in_the_defaults_file_is_declared():
+    from common.config import load_toml
+    from fsw.params import DEFAULT_FILE
+    declared = {p.name.split(".", 1)[1] for p in Fdir.PARAMS}
+    assert set(load_toml(DEFAULT_FILE)["fdir"]) == declared

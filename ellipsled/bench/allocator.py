@@ -1,0 +1,220 @@
+"""Allocator benchmark (spec 50-performance.md): solve time of fsw.allocation.Allocator
+against a plain HiGHS MILP of the same problem in the same run, with optimality checked on
+every demand against HiGHS (mip_rel_gap = 0) and exhaustive enumeration.
+
+The jet-health configurations and the demand generator are shared with the tests
+(tests/test_allocation_*.py) so that both exercise the same cases.
+
+    python -m ellipsled.bench.allocator [--quick] [--out runs/bench_allocator.json]
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from common.model import load_vehicle
+from fsw.allocation import Allocator, effective_model, solve_enumeration_many, solve_highs
+from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
+from fsw.params import load_params
+
+
+@dataclass(frozen=True)
+class Case:
+    """One allocation configuration: jet health plus the objective's parameters."""
+    name: str
+    health: JetHealth
+    w: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    penalty_per_N: float = 0.01
+    fault_tolerance: bool = True
+
+
+def _health(failed=(), stuck=(), degraded=(), inhibited=()) -> JetHealth:
+    """degraded: (jet, eta) pairs; jets 1-based."""
+    h = JetHealth()
+    for j in failed:
+        h.set(j, FAILED_OFF)
+    for j in stuck:
+        h.set(j, STUCK_ON)
+    for j, eta in degraded:
+        h.set(j, DEGRADED, eta)
+    for j in inhibited:
+        h.inhibited[j - 1] = True
+    return h
+
+
+def cases() -> list[Case]:
+    """The ≥ 20 configurations of the tests and the benchmark: nominal, the paper's cases
+    1-3 sets, single and mixed faults, identical columns split by degradation, and
+    objective variants (weights, zero penalty = maximal ties, a zero weight)."""
+    out = [
+        Case("nominal", _health()),
+        Case("case1-failed-1-2-17-18", _health(failed=(1, 2, 17, 18))),
+        Case("case2-stuck-2-3-4-5-8-9-10", _health(stuck=(2, 3, 4, 5, 8, 9, 10))),
+        Case("case3-degraded-3-7-14-15", _health(degraded=((3, .5), (7, .5), (14, .5), (15, .5)))),
+        Case("failed-1", _health(failed=(1,))),
+        Case("failed-13", _health(failed=(13,))),
+        Case("failed-1-6", _health(failed=(1, 2, 3, 4, 5, 6))),
+        Case("stuck-1", _health(stuck=(1,))),
+        Case("stuck-13", _health(stuck=(13,))),
+        Case("stuck-13-16", _health(stuck=(13, 16))),
+        Case("stuck-1-7", _health(stuck=(1, 7))),
+        Case("degraded-2-0.3", _health(degraded=((2, .3),))),
+        Case("degraded-13-0.7", _health(degraded=((13, .7),))),
+        Case("degraded-1-7-0.5-identical", _health(degraded=((1, .5), (7, .5)))),
+        Case("inhibited-4-10", _health(inhibited=(4, 10))),
+        Case("mixed-f1-s8-d14-i6", _health(failed=(1,), stuck=(8,), degraded=((14, .5),), inhibited=(6,))),
+        Case("mixed-f13-14-s15", _health(failed=(13, 14), stuck=(15,))),
+        Case("mixed-s5-d11-0.4-f18", _health(stuck=(5,), degraded=((11, .4),), failed=(18,))),
+        Case("nominal-weights-1-2-0.5", _health(), w=(1.0, 2.0, 0.5), penalty_per_N=0.05),
+        Case("nominal-zero-penalty", _health(), penalty_per_N=0.0),
+        Case("case1-zero-yaw-weight", _health(failed=(1, 2, 17, 18)), w=(1.0, 1.0, 0.0)),
+        Case("case2-heavy-penalty", _health(stuck=(2, 3, 4, 5, 8, 9, 10)), penalty_per_N=1.0),
+        Case("ft-off-with-case1-health", _health(failed=(1, 2, 17, 18)), fault_tolerance=False),
+    ]
+    rng = np.random.default_rng(20110807)
+    for i in range(3):                      # seeded random mixed faults
+        h = JetHealth()
+        for k in rng.choice(18, size=5, replace=False):
+            kind = rng.integers(4)
+            if kind == 0:
+                h.set(k + 1, FAILED_OFF)
+            elif kind == 1:
+                h.set(k + 1, STUCK_ON)
+            elif kind == 2:
+                h.set(k + 1, DEGRADED, float(np.round(rng.uniform(0.2, 0.9), 2)))
+            else:
+                h.inhibited[k] = True
+        out.append(Case(f"random-mixed-{i}", h))
+    return out
+
+
+def demands(T: np.ndarray, thrust: np.ndarray, case: Case, n: int, seed: int) -> np.ndarray:
+    """n demands [N m] of every kind: random at three scales, zeros on some axes, exactly
+    achievable torques (and their negatives), huge, tiny, pure-axis."""
+    rng = np.random.default_rng(seed)
+    usable, cols, b, _ = effective_model(T, thrust, case.health, case.penalty_per_N,
+                                         case.fault_tolerance)
+    kinds = 8
+    k = np.arange(n) % kinds
+    D = np.empty((n, 3))
+    for i in range(n):
+        if k[i] == 0:
+            D[i] = rng.normal(0.0, 100.0, 3)
+        elif k[i] == 1:
+            D[i] = rng.normal(0.0, 600.0, 3)
+        elif k[i] == 2:                         # zeros on one or two axes
+            D[i] = rng.normal(0.0, 300.0, 3)
+            D[i, rng.choice(3, size=rng.integers(1, 3), replace=False)] = 0.0
+        elif k[i] == 3:                         # exactly achievable (incl. the stuck bias)
+            u = (rng.random(T.shape[1]) < rng.uniform(0.1, 0.6)) & usable
+            D[i] = b + cols @ u
+        elif k[i] == 4:                         # achievable, negated, or achievable + tiny
+            u = (rng.random(T.shape[1]) < 0.3) & usable
+            D[i] = (cols @ u) * rng.choice([-1.0, 1.0]) + rng.choice([0.0, 1e-7, -1e-7], 3)
+        elif k[i] == 5:                         # huge
+            D[i] = rng.normal(0.0, 1.0, 3) * 10.0 ** rng.uniform(4, 6)
+        elif k[i] == 6:                         # tiny
+            D[i] = rng.normal(0.0, 1.0, 3) * 10.0 ** rng.uniform(-9, -2)
+        else:                                   # pure axis
+            D[i] = 0.0
+            D[i, rng.integers(3)] = rng.choice([-1.0, 1.0]) * 10.0 ** rng.uniform(0, 3.5)
+    return D
+
+
+def params_for(case: Case) -> dict[str, float]:
+    return {"allocator.w_roll": case.w[0], "allocator.w_pitch": case.w[1],
+            "allocator.w_yaw": case.w[2], "allocator.penalty_per_N": case.penalty_per_N,
+            "allocator.fault_tolerance": float(case.fault_tolerance)}
+
+
+def run(quick: bool) -> dict:
+    """Solve time of the allocator vs HiGHS over ≥ 10,000 demands on all cases, objective
+    mismatches against both references, and the table rebuild time per configuration."""
+    v = load_vehicle("ellipsled")
+    T, thrust = v.torque_matrix_Nm, v.thrust_N
+    all_cases = cases()
+    n_per_case = -(-10_000 // len(all_cases))          # ≥ 10,000 demands in total
+    highs_per_case = 40 if quick else n_per_case
+    al = Allocator(T, thrust, load_params(Allocator.PARAMS))
+    ours_ns, highs_ns, rebuild_ms = [], [], []
+    mism_enum = mism_highs = mism_u = n_deg = 0
+    n_dem = n_highs = 0
+    gc.disable()
+    try:
+        for ci, case in enumerate(all_cases):
+            al.set_params(params_for(case))
+            t0 = time.perf_counter()
+            al.set_health(case.health)
+            rebuild_ms.append({"case": case.name, "set_health_ms": (time.perf_counter() - t0) * 1e3,
+                               "rebuild_ms": al.rebuild_time_s * 1e3, "candidates": al.n_candidates})
+            D = demands(T, thrust, case, n_per_case, seed=1000 + ci)
+            U_e, obj_e, deg_e = solve_enumeration_many(T, thrust, case.health, np.array(case.w),
+                                                       case.penalty_per_N, D, case.fault_tolerance)
+            for i, d in enumerate(D):
+                t = time.perf_counter_ns()
+                u = al.solve(d)
+                ours_ns.append(time.perf_counter_ns() - t)
+                n_dem += 1
+                n_deg += al.degraded
+                if abs(al.objective - obj_e[i]) > 1e-7 + 1e-12 * abs(obj_e[i]) or al.degraded != deg_e[i]:
+                    mism_enum += 1
+                if not np.array_equal(u, U_e[i]):
+                    mism_u += 1
+                if i < highs_per_case:
+                    ours_obj, ours_deg = al.objective, al.degraded
+                    t = time.perf_counter_ns()
+                    _, obj_h, deg_h = solve_highs(T, thrust, case.health, np.array(case.w),
+                                                  case.penalty_per_N, d, case.fault_tolerance)
+                    highs_ns.append(time.perf_counter_ns() - t)
+                    n_highs += 1
+                    if abs(ours_obj - obj_h) > 1e-6 + 1e-9 * abs(obj_h) or ours_deg != deg_h:
+                        mism_highs += 1
+    finally:
+        gc.enable()
+    ours_us = np.array(ours_ns) / 1e3
+    highs_us = np.array(highs_ns) / 1e3
+    p50, p99 = np.percentile(ours_us, [50, 99])
+    h50, h99 = np.percentile(highs_us, [50, 99])
+    return {
+        "figure": "allocator solve time per demand [us]",
+        "p50_us": float(p50), "p99_us": float(p99), "max_us": float(ours_us.max()),
+        "highs_p50_us": float(h50), "highs_p99_us": float(h99), "highs_max_us": float(highs_us.max()),
+        "speedup": float(h50 / p50), "speedup_basis": "HiGHS p50 / allocator p50 (same run)",
+        "speedup_p99": float(h99 / p99),
+        "mismatches": int(mism_enum + mism_highs),
+        "mismatches_vs_enumeration": int(mism_enum), "mismatches_vs_highs": int(mism_highs),
+        "u_differs_from_enumeration_tiebreak": int(mism_u),
+        "demands": int(n_dem), "highs_demands": int(n_highs),
+        "highs_note": ("quick: HiGHS on the first %d demands of each configuration" % highs_per_case
+                       if quick else "HiGHS on every demand"),
+        "degraded_demands": int(n_deg),
+        "configs": len(all_cases),
+        "rebuild_ms_max": float(max(r["rebuild_ms"] for r in rebuild_ms)),
+        "rebuild": rebuild_ms,
+        "targets": {"p99_us_max": 100.0, "speedup_min": 200.0, "mismatches": 0},
+        "pass": bool(p99 <= 100.0 and h50 / p50 >= 200.0 and mism_enum + mism_highs == 0),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="HiGHS on a subset of demands only")
+    ap.add_argument("--out", default="runs/bench_allocator.json")
+    a = ap.parse_args(argv)
+    res = run(a.quick)
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(res, indent=2))
+    short = {k: v for k, v in res.items() if k != "rebuild"}
+    print(json.dumps(short, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -110,6 +110,11 @@ class RealTimeClock:
         self.missed = 0
         self._k = -1
 
+    @classmethod
+    def from_params(cls, params: dict, period_ns: int, **kw) -> "RealTimeClock":
+        """With the final spin of ``executive.spin_us`` (fsw/params.py load_params(PARAMS))."""
+        return cls(period_ns, spin_ns=int(round(params["executive.spin_us"] * 1e3)), **kw)
+
     def start(self, t0_ns: int | None = None) -> None:
         """Release 0 at ``t0_ns`` (default: one period from now)."""
         self.t0_ns = self.now_ns() + self.period_ns if t0_ns is None else int(t0_ns)

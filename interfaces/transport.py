@@ -116,10 +116,12 @@ def wait_for_subscriber(pub: zenoh.Publisher, timeout_s: float, poll_s: float = 
         time.sleep(poll_s)
 
 
-def recv(sub: zenoh.Subscriber, timeout_s: float, spin_s: float = 200e-6,
-         poll_s: float = 50e-6) -> zenoh.Sample | None:
-    """The next sample, or None after ``timeout_s``. Spins on ``try_recv`` for ``spin_s``
-    (a reply usually arrives within ~100 us), then polls every ``poll_s``; Ctrl-C works."""
+def recv(sub: zenoh.Subscriber, timeout_s: float, spin_s: float = 0.0,
+         poll_s: float = 20e-6) -> zenoh.Sample | None:
+    """The next sample, or None after ``timeout_s``. Spins on ``try_recv`` for ``spin_s``,
+    then polls every ``poll_s``; Ctrl-C works. Measured here (2 shared cores, loaded):
+    polling every 20 us gave the best round trip (p50 ~350 us vs ~250 us for zenoh's
+    blocking recv, which ignores Ctrl-C); spinning helped only with an idle core."""
     s = sub.try_recv()
     if s is not None:
         return s

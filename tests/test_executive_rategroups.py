@@ -219,6 +219,7 @@ def test_parameters_from_the_defaults_file_and_bad_configuration():
     p = load_params(PARAMS)
     ex = Executive.from_params(p, 20 * MS, LockstepClock())
     assert ex.divisors == (1, 5, 50) and ex.deadline_ns == 20 * MS
+    assert RealTimeClock.from_params(p, 20 * MS).spin_ns == round(p["executive.spin_us"] * 1e3)
     for bad in [dict(period_ns=0), dict(divisors=(1, 0)), dict(divisors=(1, 2.5)), dict(deadline_ns=-1)]:
         kw = dict(period_ns=20 * MS, clock=LockstepClock())
         kw.update(bad)

@@ -11,6 +11,8 @@ import time
 
 import numpy as np
 
+from common.frames import wrap_pi
+
 from common.model import Scenario
 from .allocation import Allocator
 from .control import SamiController
@@ -19,7 +21,7 @@ from .fdir import Fdir
 from .guidance import BankProfile, Guidance
 from .health import JetHealth
 from .jetdriver import JetDriver
-from .modes import Mode, ModeManager
+from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation
 from .params import Param, load_params
@@ -43,7 +45,7 @@ class FlightSoftware:
         self.scenario = scenario
         veh, planet = scenario.vehicle, scenario.planet
         self.dt_s = scenario.dt_control_s
-        self.events = events or EventLog()
+        self.events = events if events is not None else EventLog()
         overrides = dict(scenario.fsw)
         if param_overrides:
             overrides.update(param_overrides)
@@ -59,7 +61,8 @@ class FlightSoftware:
         self.fdir = Fdir(self.params, self.dt_s, self.events)
         self.driver = JetDriver(veh.thrust_N, veh.isp_s, planet.g0_mps2, self.dt_s, self.events)
         self.modes = ModeManager(self.events)
-        self.monitor = SensorMonitor(self.events, self.dt_s)
+        self.monitor = SensorMonitor(self.events, self.dt_s, self.params, planet.radius_m)
+        self.failsafes = Failsafes(self.params, self.modes)
 
         if start_mode != Mode.STANDBY:
             self.modes.request(0.0, start_mode, "start")
@@ -76,6 +79,7 @@ class FlightSoftware:
         self.alloc_ns = 0
         self.reconfig_times: list[float] = []
         self.cycles = 0
+        self.bank_err_rad = 0.0
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
@@ -84,8 +88,7 @@ class FlightSoftware:
         t_s = frame["t_ns"] * 1e-9
         ok = self.monitor.check(t_s, frame)
         if not ok or self.monitor.stale:
-            self._have_prev = False
-            return self.driver.command(self._zero_u(), False)
+            return self._hold_off(t_s)
         self.k = int(frame["k"])
         self.t_s = t_s
         if self.fdir.update(t_s, self.driver.last_command, frame["chamber"]):
@@ -96,6 +99,10 @@ class FlightSoftware:
         nav = self.nav.update(t_s, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
                               frame["accel_B"])
         self.guidance.update(nav)
+        self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
+        if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,
+                                   tracking_error_rad=self.bank_err_rad) == FailsafeAction.HOLD_JETS_OFF:
+            return self._hold_off(t_s)
         mode = self.modes.mode
         if mode == Mode.ENTRY:
             self.control.freeze = not self.modes.adaptation_enabled
@@ -115,6 +122,22 @@ class FlightSoftware:
                              "ALLOCATION DEGRADED (infeasible)", rate_limited=True)
         self._have_prev = True
         return self.driver.command(u_alloc, self.modes.jets_enabled)
+
+    def no_frame(self, t_s: float) -> np.ndarray:
+        """A control cycle in which no fresh sensor frame arrived (SIL): counts towards
+        STALE and holds the jets off once stale."""
+        self.cycles += 1
+        self.monitor.tick(t_s, got_frame=False)
+        if self.monitor.stale:
+            return self._hold_off(t_s)
+        return self.driver.command(self._zero_u(), False)
+
+    def _hold_off(self, t_s: float) -> np.ndarray:
+        """Jets off, nothing learnt: a rejected frame or stale sensors."""
+        self._have_prev = False
+        self.u_cal_B[:] = 0.0
+        self.tau_alloc_B[:] = 0.0
+        return self.driver.command(self._zero_u(), False)
 
     def _zero_u(self) -> np.ndarray:
         if not hasattr(self, "_zu"):

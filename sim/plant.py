@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 
 from common import atmosphere, mrp
+from common.frames import R1, R2, v_rel_N, wind_dcm
 from common.model import FAULT_KINDS, N_JETS, Scenario, inertia_matrix, inertia_vector
 from interfaces import records
 
@@ -390,9 +391,13 @@ class _Noise:
 class Plant:
     """The vehicle in its environment, stepped one control period at a time.
 
-    Public state: k (step index), t_s, sensors (0-d interfaces.records.SENSORS record,
-    refilled in place), x (state view: r_N, v_N, sigma_BN, omega_BN_B), aux (derived
-    outputs at t_k, indices A_*), fault_state (int8[18]), fault_eta (float[18]).
+    Public state: k (step index), t_s, t_ns, sensors (0-d interfaces.records.SENSORS
+    record, refilled in place), x (the state array: r_N, v_N, sigma_BN, omega_BN_B; read
+    it, write it only through set_state), aux (derived outputs at t_k, indices A_*),
+    fault_state (int8[18], NOMINAL/FAILED_OFF/STUCK_ON/DEGRADED), fault_eta (float[18]),
+    inertia_truth_kgm2, p (truth parameter vector, indices P_*), propellant_kg.
+    Methods: step(u, tau_ext_B=None), set_fault(jet, kind, eta), schedule_fault(t_s, jet,
+    kind, eta), set_state(...), done(), truth(), fill_truth(rec=None).
     """
 
     def __init__(self, scenario: Scenario, seed: int | None = None):
@@ -421,10 +426,11 @@ class Plant:
         self.fault_eta = np.ones(N_JETS)
         self._gain = np.ones(N_JETS)
         self._bias = np.zeros(N_JETS)
-        dt = self.dt_control_s
-        self._schedule = [(max(0, math.ceil(f.t_s / dt - 1e-9)), f) for f in scenario.faults]
-        self._schedule.sort(key=lambda e: e[0])
+        self._schedule: list[tuple[int, int, str, float]] = []   # (k_apply, jet, kind, eta), sorted
         self._next_fault = 0
+        for f in scenario.faults:
+            for j in f.jets:
+                self._insert_fault(f.t_s, j, f.kind, f.eta if f.kind == "degraded" else 1.0)
 
         # work arrays for the kernels
         self.x = np.zeros(12)
@@ -438,7 +444,6 @@ class Plant:
         self._tau_ext = np.zeros(3)
         self._zero3 = np.zeros(3)
         self._book = np.zeros(1)            # total impulse [N s]
-        self._u0 = np.zeros(N_JETS, dtype=np.uint8)
         self._status = STEP_OK
 
         sn = scenario.sensors
@@ -455,8 +460,7 @@ class Plant:
         # alpha, beta and bank stay put at t = 0
         r_N, v_N = initial_translation(scenario)
         self.x[0:3], self.x[3:6] = r_N, v_N
-        C_WN = _wind_dcm(r_N, v_N, scenario.planet.omega_radps)
-        from common.frames import R1, R2
+        C_WN = wind_dcm(r_N, v_rel_N(r_N, v_N, scenario.planet.omega_radps))
         C_BN = R2(veh.aero.alpha_trim_rad) @ R1(scenario.bank0_rad) @ C_WN
         self.x[6:9] = mrp.from_dcm(C_BN)
         _, aux = state_derivative(self.x, self.p)
@@ -536,17 +540,7 @@ class Plant:
     def set_fault(self, jet: int, kind: str, eta: float = 1.0) -> None:
         """Inject or clear a fault now (spec 10-plant.md, jet faults). jet 1..18, 0 = all;
         kind 'off' | 'stuck' | 'degraded' (0 < eta < 1) | 'clear'."""
-        if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= jet <= N_JETS:
-            raise ValueError(f"jet must be an integer 0..{N_JETS} (0 = all), got {jet!r}")
-        if kind not in FAULT_KINDS:
-            raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {kind!r}")
-        if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating, np.integer)) or not math.isfinite(eta):
-            raise ValueError(f"eta must be a finite number, got {eta!r}")
-        if kind == "degraded":
-            if not 0.0 < eta < 1.0:
-                raise ValueError(f"degraded needs 0 < eta < 1, got {eta}")
-        elif eta != 1.0:
-            raise ValueError(f"eta applies to kind 'degraded' only, got eta={eta} for {kind!r}")
+        _check_fault(jet, kind, eta)
         idx = range(N_JETS) if jet == 0 else (int(jet) - 1,)
         for j in idx:
             if kind == "off":
@@ -558,11 +552,25 @@ class Plant:
             else:
                 self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = NOMINAL, 1.0, 1.0, 0.0
 
+    def schedule_fault(self, t_s: float, jet: int, kind: str, eta: float = 1.0) -> None:
+        """Apply set_fault(jet, kind, eta) at the first step boundary with t >= t_s (at the
+        next boundary if t_s is already past). Validated now: ValueError on bad input."""
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) or not math.isfinite(t_s):
+            raise ValueError(f"t_s must be a finite number, got {t_s!r}")
+        _check_fault(jet, kind, eta)
+        self._insert_fault(max(float(t_s), (self.k + 1) * self.dt_control_s), jet, kind, eta)
+
+    def _insert_fault(self, t_s: float, jet: int, kind: str, eta: float) -> None:
+        k_apply = max(0, math.ceil(t_s / self.dt_control_s - 1e-9))
+        i = len(self._schedule)
+        while i > self._next_fault and self._schedule[i - 1][0] > k_apply:   # stable: same k keeps order
+            i -= 1
+        self._schedule.insert(i, (k_apply, int(jet), kind, float(eta)))
+
     def _apply_scheduled(self) -> None:
         while self._next_fault < len(self._schedule) and self._schedule[self._next_fault][0] <= self.k:
-            f = self._schedule[self._next_fault][1]
-            for j in f.jets:
-                self.set_fault(j, f.kind, f.eta if f.kind == "degraded" else 1.0)
+            _, jet, kind, eta = self._schedule[self._next_fault]
+            self.set_fault(jet, kind, eta)
             self._next_fault += 1
 
     # ---- outputs ----
@@ -619,9 +627,18 @@ class Plant:
         return rec
 
 
-def _wind_dcm(r_N: np.ndarray, v_N: np.ndarray, omega_planet: float) -> np.ndarray:
-    from common.frames import v_rel_N, wind_dcm
-    return wind_dcm(r_N, v_rel_N(r_N, v_N, omega_planet))
+def _check_fault(jet, kind, eta) -> None:
+    if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= jet <= N_JETS:
+        raise ValueError(f"jet must be an integer 0..{N_JETS} (0 = all), got {jet!r}")
+    if kind not in FAULT_KINDS:
+        raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {kind!r}")
+    if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating, np.integer)) or not math.isfinite(eta):
+        raise ValueError(f"eta must be a finite number, got {eta!r}")
+    if kind == "degraded":
+        if not 0.0 < eta < 1.0:
+            raise ValueError(f"degraded needs 0 < eta < 1, got {eta}")
+    elif eta != 1.0:
+        raise ValueError(f"eta applies to kind 'degraded' only, got eta={eta} for {kind!r}")
 
 
 def _as_command(u) -> np.ndarray:

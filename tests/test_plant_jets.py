@@ -2,7 +2,6 @@
 and jets given by geometry (T = r x F)."""
 from __future__ import annotations
 
-import itertools
 from dataclasses import replace
 from pathlib import Path
 
@@ -10,7 +9,6 @@ import numpy as np
 import pytest
 
 from common import mrp
-from common.config import DATA_DIR
 from common.model import load_scenario, load_vehicle
 from sim.plant import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON, Plant
 
@@ -208,7 +206,6 @@ def test_jets_by_geometry_reproduce_r_cross_F_and_add_their_force(tmp_path):
     assert np.allclose(veh.jet_force_B_N.T, F)
     plant = Plant(quiet(SC.with_(vehicle=veh)))
     for j in (0, 9, 17):
-        v0 = plant.x[3:6].copy()
         s = plant.step(unit(j))
         tr = plant.truth()
         assert np.allclose(tr["tau_jets_B"], np.cross(pos[j], F[j]))
@@ -224,4 +221,28 @@ def test_jets_by_geometry_reproduce_r_cross_F_and_add_their_force(tmp_path):
         dv = plant.x[3:6] - plant2.x[3:6]
         C = mrp.to_dcm(tr["sigma_BN"])
         assert np.allclose(dv, C.T @ F[j] / veh.mass_kg * DT, rtol=1e-3, atol=1e-9)
-        assert np.linalg.norm(v0) > 0
+
+
+def test_faults_scheduled_by_call_apply_at_their_time_in_order_and_bad_ones_are_refused():
+    plant = Plant(quiet(SC))
+    plant.schedule_fault(0.1, 3, "stuck")
+    plant.schedule_fault(0.1, 3, "degraded", 0.4)       # same boundary: applied after, wins
+    plant.schedule_fault(0.05, 0, "off")                  # 0.05 s -> boundary k = 3 (t = 0.06)
+    for bad in [(float("nan"), 3, "off", 1.0), (1.0, 30, "off", 1.0), (1.0, 3, "degraded", 1.5)]:
+        with pytest.raises(ValueError):
+            plant.schedule_fault(*bad)
+    zero = np.zeros(18, np.uint8)
+    states = []
+    for _ in range(6):
+        plant.step(np.ones(18, np.uint8))
+        states.append((plant.k, plant.fault_state[2], plant.fault_eta[2], plant.fault_state[0]))
+    assert states[1] == (2, NOMINAL, 1.0, NOMINAL)
+    assert states[2] == (3, FAILED_OFF, 1.0, FAILED_OFF)
+    assert states[4] == (5, DEGRADED, 0.4, FAILED_OFF)
+    plant.step(zero)
+    assert plant.truth()["tau_jets_B"] == pytest.approx(np.zeros(3))
+    plant.schedule_fault(0.0, 0, "clear")                 # in the past: next boundary
+    plant.step(np.ones(18, np.uint8))
+    assert np.all(plant.fault_state == NOMINAL)
+    plant.step(np.ones(18, np.uint8))
+    assert np.allclose(plant.truth()["tau_jets_B"], T.sum(axis=1))

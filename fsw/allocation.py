@@ -23,9 +23,10 @@ Method (exact by construction, see tests/test_allocation_*.py):
   2. Inside the sign box the objective is linear: with s_i = sign(tau_d,i) (+1 for 0),
      objective = sum_i w_i |tau_d,i| - score,  score = sum_i w_i s_i tau_i - c.
      score does not depend on the demand, only on its octant, so for each of the 8
-     octants the candidates are sorted by score once. A query is the first candidate in
-     that order inside the box |tau_i| <= |tau_d,i| (same sign), followed by a short scan
-     of the score ties.
+     octants the candidates that can lie in it (s_i tau_i >= 0 on every axis) are sorted
+     by score once. A query is the first candidate in that order inside the box
+     |tau_i| <= |tau_d,i| (blocks of BLOCK rows whose component-wise minimum is outside
+     are skipped), followed by a short scan of the score ties.
   3. If none is inside the box: an exhaustive scan of all candidates for the
      unconstrained objective (degraded).
 

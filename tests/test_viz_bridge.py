@@ -1,0 +1,131 @@
+"""gse/viz bridge over real Zenoh sessions on loopback, and the live sinks' bindings/memory."""
+from __future__ import annotations
+
+import time
+import urllib.request
+
+import numpy as np
+import psutil
+import pytest
+import rerun as rr
+
+from gse.viz import RerunLogger, open_sinks
+from gse.viz.bridge import PROPOSED_FSW_STATE, Bridge, make_codecs
+from interfaces import codec, records
+from interfaces import keys as K
+from interfaces import transport as T
+from tests.test_viz_recording import _column, _read
+
+
+def _publish(session, k, codecs, k0, n, seq0):
+    pubs = {name: T.publisher(session, key) for name, key in
+            (("truth", k.truth), ("fsw", k.state), ("event", k.events))}
+    for p in pubs.values():
+        assert T.wait_for_subscriber(p, 5.0)
+    tr, fs = records.new(records.TRUTH), records.new(getattr(records, "FSW_STATE", PROPOSED_FSW_STATE))
+    for i in range(n):
+        kk = k0 + i
+        tr["k"] = fs["k"] = kk
+        tr["t_ns"] = fs["t_ns"] = kk * 20_000_000
+        tr["bank_rad"] = 0.01 * kk
+        tr["sigma_BN"] = [0, 0, 0.1]
+        tr["r_N"] = [3.4e6, 0, 0]
+        fs["bank_ref_rad"] = -0.01 * kk
+        fs["jets_cmd"][:] = 0
+        fs["jets_cmd"][kk % 18] = 1
+        pubs["truth"].put(codecs["truth"].encode(tr, seq0 + i, 0))
+        pubs["fsw"].put(codecs["fsw"].encode(fs, seq0 + i, 0))
+        if i == 3:
+            pubs["truth"].put(b"garbage that is not a frame")
+            bad = bytearray(codecs["truth"].encode(tr, seq0 + 1000 + i, 0))
+            bad[-9] ^= 0xFF                                   # corrupted payload (CRC)
+            pubs["truth"].put(bytes(bad))
+            pubs["event"].put(codecs["event"].encode(
+                codec.event_record(kk * 20_000_000, 4, "fdir", "jet_failed_off", "jet 3 off"), seq0 + i, 0))
+    return pubs
+
+
+def test_bridge_logs_what_is_published_survives_bad_payloads_and_publisher_restart(tmp_path):
+    port = T.free_port()
+    k = K.keys("viztest")
+    sinks = open_sinks("file", tmp_path, name="live", display=False, say=lambda m: None)
+    logger = RerunLogger(sinks.rec, flush_rows=16, flush_s=0.2)
+    bs = T.open_session("bridge", [T.loopback(port)], None)
+    bridge = Bridge(bs, k, logger)
+    ps = None
+    try:
+        for round_, (k0, seq0) in enumerate(((0, 1), (40, 1))):   # restart: seq starts again
+            ps = T.open_session("sim", None, [T.loopback(port)])
+            codecs = {name: codec.Codec(c.dtype, c.schema_id, c.version, publisher_id=0x1000 + round_)
+                      for name, c in make_codecs().items()}
+            pubs = _publish(ps, k, codecs, k0, 20, seq0)
+            deadline = time.monotonic() + 10
+            while bridge.received["fsw"] < 20 * (round_ + 1) and time.monotonic() < deadline:
+                if not bridge.poll():
+                    time.sleep(0.005)
+            T.close(*pubs.values(), ps)                            # publishers go away
+            ps = None
+            bridge.poll()
+        stats = bridge.stats()
+    finally:
+        logger.close()
+        bridge.close()
+        T.close(ps, bs)
+        sinks.close()
+    assert stats["truth_rejects"] == {"size": 2, "crc": 2}        # garbage + corrupted, each round
+    assert stats["logger"]["rows_truth"] == 40 and stats["logger"]["rows_fsw"] == 40
+    ents, _ = _read(sinks.rrd_path)
+    steps, _, bank = _column(ents["/bank/actual_deg"], "Scalars:scalars")
+    expected_k = list(range(20)) + list(range(40, 60))
+    assert list(steps) == expected_k
+    np.testing.assert_allclose([b[0] for b in bank], np.degrees(0.01 * np.array(expected_k)), atol=1e-12)
+    steps, _, ref = _column(ents["/bank/reference_deg"], "Scalars:scalars")
+    np.testing.assert_allclose([b[0] for b in ref], np.degrees(-0.01 * np.array(expected_k)), atol=1e-12)
+    _, _, text = _column(ents["/events"], "TextLog:text")
+    flat = [t for row in text for t in row]
+    assert sum("jet_failed_off" in t for t in flat) == 2
+    assert any("bad_payload" in t for t in flat)                 # rejections shown as events
+
+
+def _listen_addrs(pid: int) -> set[str]:
+    try:
+        return {c.laddr.ip for c in psutil.Process(pid).net_connections(kind="tcp")
+                if c.status == psutil.CONN_LISTEN}
+    except psutil.Error:
+        return set()
+
+
+def test_web_mode_binds_loopback_only_and_serves_the_viewer(tmp_path):
+    s = open_sinks("web", tmp_path, display=False, say=lambda m: None)
+    try:
+        assert s.web_url.startswith("http://127.0.0.1:") and "127.0.0.1" in s.grpc_uri
+        deadline, body = time.monotonic() + 15, None
+        while body is None and time.monotonic() < deadline:
+            try:
+                body = urllib.request.urlopen(s.web_url, timeout=2).read()
+            except OSError:
+                time.sleep(0.2)
+        assert body and b"<html" in body.lower()
+        addrs = _listen_addrs(psutil.Process().pid) | _listen_addrs(s.procs[0].pid)
+        assert addrs == {"127.0.0.1"}, addrs
+    finally:
+        s.close()
+    assert s.procs == []
+
+
+def test_server_sink_memory_is_bounded_without_viewer():
+    """No viewer ever connects: the hosted server keeps at most its memory limit."""
+    proc = psutil.Process()
+    rec = rr.RecordingStream("memtest")
+    rec.set_sinks(rr.GrpcServerSink("127.0.0.1", T.free_port(), server_memory_limit="8MiB"))
+    x = np.random.default_rng(1).random((5000, 40))
+    rss0 = proc.memory_info().rss
+    for i in range(100):            # 100 x 1.6 MB = 160 MB sent
+        rec.send_columns("a", indexes=[rr.TimeColumn("step", sequence=np.arange(i * 5000, (i + 1) * 5000))],
+                         columns=rr.Scalars.columns(scalars=x))
+        time.sleep(0.002)
+    rec.flush()
+    time.sleep(0.5)
+    growth_mb = (proc.memory_info().rss - rss0) / 2**20
+    rec.disconnect()
+    assert growth_mb < 100, growth_mb       # unbounded buffering would hold > 160 MB

@@ -1,0 +1,522 @@
+"""Ground-station client (system 255) for the ellipsled vehicle, shared by the console and
+the command-line tools: a UDP socket, the verify-first signed link, a state model of what
+the vehicle reports, commands and parameters with retries, and the .tlog.
+
+Addressing: the client listens on ``listen`` (default udp:127.0.0.1:14550, where the
+vehicle sends its telemetry; "port 0" = ephemeral) and sends to ``vehicle`` if given,
+else to the source address of the vehicle's first accepted frame. The vehicle answers the
+sender of every accepted signed frame, so a client on an ephemeral port with
+``vehicle="udp:127.0.0.1:14555"`` works while another client (the console) holds 14550.
+
+Signing: every frame sent is signed with the key (commands and parameter writes must be);
+each client should use its own ``link_id`` when several share one key and system/component
+id (the console uses 0, the CLI a per-process one), so their timestamp streams stay apart.
+
+Nothing here blocks except the explicit waiting calls (``wait_*``, ``command``,
+``param_*``), which poll with ``select`` up to their timeout.
+"""
+from __future__ import annotations
+
+import os
+import select
+import socket
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.framing import FrameSplitter
+from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
+
+from fsw.groundlink import parse_udp      # one parser of "udp:HOST:PORT" for both ends
+
+from .tlog import TlogWriter
+
+GCS_SYSTEM_ID = 255
+GCS_COMPONENT_ID = mav.MAV_COMP_ID_MISSIONPLANNER        # 190
+VEHICLE_SYSTEM_ID = 1
+VEHICLE_COMPONENT_ID = 1
+DEFAULT_LISTEN = "udp:127.0.0.1:14550"
+DEFAULT_VEHICLE = "udp:127.0.0.1:14555"
+
+
+def result_name(result: int | None) -> str:
+    """'ACCEPTED', 'DENIED', ... for a MAV_RESULT; 'TIMEOUT' for None."""
+    if result is None:
+        return "TIMEOUT"
+    entry = mav.enums["MAV_RESULT"].get(result)
+    return entry.name.removeprefix("MAV_RESULT_") if entry is not None else f"RESULT_{result}"
+
+
+@dataclass
+class StatusText:
+    t_unix_s: float
+    severity: int
+    text: str
+
+    @property
+    def severity_name(self) -> str:
+        e = mav.enums["MAV_SEVERITY"].get(self.severity)
+        return e.name.removeprefix("MAV_SEVERITY_") if e is not None else str(self.severity)
+
+
+@dataclass
+class Ack:
+    t_unix_s: float
+    command: int
+    result: int
+
+    @property
+    def name(self) -> str:
+        return result_name(self.result)
+
+
+@dataclass
+class PendingCommand:
+    """A COMMAND_LONG waiting for its COMMAND_ACK (``result`` None until it arrives;
+    ``done`` also when every retry timed out)."""
+    command: int
+    params: tuple[float, ...]
+    timeout_s: float
+    retries: int
+    sent: int = 0
+    deadline: float = 0.0
+    result: int | None = None
+    done: bool = False
+
+    @property
+    def result_name(self) -> str:
+        return result_name(self.result)
+
+
+@dataclass
+class VehicleState:
+    """What the vehicle last reported: latest message of each type, named values,
+    events, acknowledgements, parameters."""
+    latest: dict[str, object] = field(default_factory=dict)
+    named: dict[str, float] = field(default_factory=dict)
+    events: deque = field(default_factory=lambda: deque(maxlen=500))
+    acks: deque = field(default_factory=lambda: deque(maxlen=100))
+    params: dict[str, float] = field(default_factory=dict)
+    param_count: int | None = None
+    rx_counts: dict[str, int] = field(default_factory=dict)
+    last_heartbeat_t: float | None = None
+    events_total: int = 0
+
+
+class GroundClient:
+    """One ground station end of the link (see the module docstring)."""
+
+    def __init__(self, key: SigningKey, *, listen: str = DEFAULT_LISTEN, vehicle: str | None = None,
+                 system_id: int = GCS_SYSTEM_ID, component_id: int = GCS_COMPONENT_ID, link_id: int = 0,
+                 tlog: str | os.PathLike[str] | None = None, clock=time.time):
+        if not isinstance(key, SigningKey):
+            raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
+        self.clock = clock
+        self.link = SignedLink(key, system_id=system_id, component_id=component_id, link_id=link_id,
+                               on_reject=self._on_reject)
+        self.vehicle_addr: tuple[str, int] | None = parse_udp(vehicle, "vehicle") if vehicle else None
+        self._vehicle_fixed = self.vehicle_addr is not None
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        addr = parse_udp(listen, "listen")
+        try:
+            self.sock.bind(addr)
+        except OSError as e:
+            self.sock.close()
+            raise OSError(f"ground client cannot listen on {listen}: {e.strerror or e}") from None
+        self.sock.setblocking(False)
+        self.tlog = TlogWriter(tlog) if tlog is not None else None
+        self._splitter = FrameSplitter()
+        self.state = VehicleState()
+        self.rejections: deque[Rejection] = deque(maxlen=100)
+        self.rejected = 0
+        self.pending: list[PendingCommand] = []
+        self._rx_times: deque[float] = deque(maxlen=4096)
+        self._tx_times: deque[float] = deque(maxlen=4096)
+        self.stats = {"rx_datagrams": 0, "rx_frames": 0, "rx_messages": 0, "tx_frames": 0, "tx_errors": 0}
+        self._buf = bytearray(65536)
+
+    # ---------------------------------------------------------------- basics
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.sock.getsockname()
+
+    def close(self) -> None:
+        self.sock.close()
+        if self.tlog is not None:
+            self.tlog.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def set_vehicle(self, addr: tuple[str, int]) -> None:
+        """Send to ``addr`` from now on (and stop learning it from telemetry)."""
+        self.vehicle_addr = (str(addr[0]), int(addr[1]))
+        self._vehicle_fixed = True
+
+    def _on_reject(self, rej: Rejection) -> None:
+        self.rejected += 1
+        self.rejections.append(rej)
+
+    def send(self, msg) -> bool:
+        """Sign and send one message to the vehicle; False if its address is not known yet."""
+        if self.vehicle_addr is None:
+            return False
+        frame = self.link.pack(msg)
+        try:
+            self.sock.sendto(frame, self.vehicle_addr)
+        except OSError:
+            self.stats["tx_errors"] += 1
+            return False
+        self.stats["tx_frames"] += 1
+        self._tx_times.append(self.clock())
+        if self.tlog is not None:
+            self.tlog.write(frame)
+        return True
+
+    def send_heartbeat(self) -> bool:
+        return self.send(mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0,
+                                                       mav.MAV_STATE_ACTIVE, 3))
+
+    def poll(self, timeout_s: float = 0.0) -> int:
+        """Receive every waiting datagram (waiting up to ``timeout_s`` for the first);
+        returns the number of messages accepted. Also services pending commands."""
+        n = 0
+        if timeout_s > 0:
+            try:
+                select.select([self.sock], [], [], timeout_s)
+            except (OSError, ValueError):
+                return 0
+        while True:
+            try:
+                size, addr = self.sock.recvfrom_into(self._buf)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                continue
+            data = bytes(self._buf[:size])
+            now = self.clock()
+            self.stats["rx_datagrams"] += 1
+            if self.tlog is not None:
+                for frame in self._splitter.split_datagram(data):
+                    self.tlog.write(frame, now)
+                    self.stats["rx_frames"] += 1
+            for msg in self.link.receive(data):
+                if msg.get_srcSystem() != VEHICLE_SYSTEM_ID:
+                    continue
+                if not msg.get_signed():        # only a vehicle heartbeat may be unsigned
+                    if msg.get_type() != "HEARTBEAT":
+                        continue
+                if not self._vehicle_fixed and self.vehicle_addr != addr and msg.get_signed():
+                    self.vehicle_addr = addr
+                self._rx_times.append(now)
+                self.stats["rx_messages"] += 1
+                self._update(msg, now)
+                n += 1
+        self.service()
+        return n
+
+    def _update(self, msg, now: float) -> None:
+        st = self.state
+        t = msg.get_type()
+        st.latest[t] = msg
+        st.rx_counts[t] = st.rx_counts.get(t, 0) + 1
+        if t == "HEARTBEAT":
+            st.last_heartbeat_t = now
+        elif t == "STATUSTEXT":
+            st.events.append(StatusText(now, msg.severity, _text(msg.text)))
+            st.events_total += 1
+        elif t == "NAMED_VALUE_FLOAT":
+            st.named[_text(msg.name)] = msg.value
+        elif t == "COMMAND_ACK":
+            st.acks.append(Ack(now, msg.command, msg.result))
+            for p in self.pending:
+                if not p.done and p.command == msg.command:
+                    p.result, p.done = msg.result, True
+                    break
+        elif t == "PARAM_VALUE":
+            st.params[_text(msg.param_id)] = msg.param_value
+            st.param_count = msg.param_count
+
+    # ---------------------------------------------------------------- rates
+    def rate_hz(self, which: str = "rx", window_s: float = 2.0) -> float:
+        times = self._rx_times if which == "rx" else self._tx_times
+        now = self.clock()
+        return sum(1 for t in times if now - t <= window_s) / window_s
+
+    def link_age_s(self) -> float | None:
+        """Seconds since the vehicle's last heartbeat (None if never seen)."""
+        t = self.state.last_heartbeat_t
+        return None if t is None else self.clock() - t
+
+    # ---------------------------------------------------------------- waiting
+    def wait_for(self, predicate, timeout_s: float) -> bool:
+        """Poll until ``predicate()`` is true or ``timeout_s`` elapses."""
+        end = time.monotonic() + timeout_s
+        while True:
+            if predicate():
+                return True
+            left = end - time.monotonic()
+            if left <= 0:
+                return False
+            self.poll(min(left, 0.05))
+
+    def wait_vehicle(self, timeout_s: float = 3.0) -> bool:
+        """Until the vehicle's address is known (given, or learned from its telemetry)."""
+        return self.wait_for(lambda: self.vehicle_addr is not None, timeout_s)
+
+    # ---------------------------------------------------------------- commands
+    def start_command(self, command: int, *params: float, timeout_s: float = 1.0,
+                      retries: int = 3) -> PendingCommand:
+        """Send a COMMAND_LONG now; ``poll``/``service`` resend it on timeout (confirmation
+        counting up) until its COMMAND_ACK arrives or the retries are spent."""
+        p = tuple(float(x) for x in params) + (0.0,) * (7 - len(params))
+        if len(p) != 7:
+            raise ValueError(f"COMMAND_LONG takes at most 7 parameters, got {len(params)}")
+        pc = PendingCommand(int(command), p, float(timeout_s), int(retries))
+        self.pending.append(pc)
+        self._send_pending(pc)
+        return pc
+
+    def _send_pending(self, pc: PendingCommand) -> None:
+        msg = mav.MAVLink_command_long_message(VEHICLE_SYSTEM_ID, VEHICLE_COMPONENT_ID, pc.command,
+                                               min(pc.sent, 255), *pc.params)
+        self.send(msg)
+        pc.sent += 1
+        pc.deadline = time.monotonic() + pc.timeout_s
+
+    def service(self) -> None:
+        """Resend pending commands whose ACK is late; give up after the retries."""
+        now = time.monotonic()
+        for pc in self.pending:
+            if not pc.done and now >= pc.deadline:
+                if pc.sent > pc.retries:
+                    pc.done = True
+                else:
+                    self._send_pending(pc)
+        self.pending = [p for p in self.pending if not p.done]
+
+    def command(self, command: int, *params: float, timeout_s: float = 1.0, retries: int = 3) -> int | None:
+        """Send and wait: the MAV_RESULT, or None if no ACK came (all retries timed out)."""
+        pc = self.start_command(command, *params, timeout_s=timeout_s, retries=retries)
+        self.wait_for(lambda: pc.done, timeout_s * (retries + 1) + 0.1)
+        return pc.result
+
+    def start(self, req: "Request", timeout_s: float = 1.0, retries: int = 3) -> PendingCommand | None:
+        """Non-blocking (console): send a Request; a command returns its PendingCommand,
+        a parameter action returns None (its PARAM_VALUE lands in ``state.params``)."""
+        if req.command:
+            return self.start_command(req.command, *req.params, timeout_s=timeout_s, retries=retries)
+        if req.param == "list":
+            self.param_request_list()
+        elif req.param == "get":
+            self.send(mav.MAVLink_param_request_read_message(VEHICLE_SYSTEM_ID, VEHICLE_COMPONENT_ID,
+                                                             req.param_id.encode("ascii"), -1))
+        elif req.param == "set":
+            self.state.params.pop(req.param_id, None)
+            self.send(mav.MAVLink_param_set_message(VEHICLE_SYSTEM_ID, VEHICLE_COMPONENT_ID,
+                                                    req.param_id.encode("ascii"), req.value,
+                                                    mav.MAV_PARAM_TYPE_REAL32))
+        return None
+
+    # ---------------------------------------------------------------- parameters
+    def param_request_list(self) -> None:
+        self.send(mav.MAVLink_param_request_list_message(VEHICLE_SYSTEM_ID, VEHICLE_COMPONENT_ID))
+
+    def param_list(self, timeout_s: float = 3.0) -> dict[str, float]:
+        """Every parameter (id -> value) the vehicle sends within ``timeout_s``."""
+        self.param_request_list()
+        self.wait_for(lambda: self.state.param_count is not None
+                      and len(self.state.params) >= self.state.param_count, timeout_s)
+        return dict(self.state.params)
+
+    def param_get(self, param_id: str, timeout_s: float = 1.0, retries: int = 3) -> float | None:
+        pid = param_id.upper()
+        for _ in range(retries + 1):
+            self.state.params.pop(pid, None)
+            self.send(mav.MAVLink_param_request_read_message(VEHICLE_SYSTEM_ID, VEHICLE_COMPONENT_ID,
+                                                             pid.encode("ascii"), -1))
+            if self.wait_for(lambda: pid in self.state.params, timeout_s):
+                return self.state.params[pid]
+        return None
+
+    def param_set(self, param_id: str, value: float, timeout_s: float = 1.0,
+                  retries: int = 3) -> float | None:
+        """Send PARAM_SET and wait for the PARAM_VALUE echo: the vehicle's value after the
+        set (equal to ``value`` in float32 if accepted, the unchanged one if refused), or
+        None if no answer came."""
+        pid = param_id.upper()
+        for _ in range(retries + 1):
+            self.state.params.pop(pid, None)
+            self.send(mav.MAVLink_param_set_message(VEHICLE_SYSTEM_ID, VEHICLE_COMPONENT_ID, pid.encode("ascii"),
+                                                    float(value), mav.MAV_PARAM_TYPE_REAL32))
+            if self.wait_for(lambda: pid in self.state.params, timeout_s):
+                return self.state.params[pid]
+        return None
+
+
+def float32_equal(a: float, b: float) -> bool:
+    """True if a and b are the same float32 (what PARAM_VALUE carries)."""
+    import struct
+    try:
+        return struct.pack("<f", a) == struct.pack("<f", b)
+    except (OverflowError, struct.error):
+        return False
+
+
+def _text(raw) -> str:
+    if isinstance(raw, bytes):
+        raw = raw.decode("ascii", "replace")
+    return str(raw).rstrip("\x00")
+
+
+def load_key(path: str | os.PathLike[str] | None) -> SigningKey:
+    """The signing key from ``path`` or $ELLIPSLED_SIGNING_KEY_FILE (SigningKeyError if neither)."""
+    return SigningKey.from_file(Path(path) if path else None)
+
+
+
+# ---------------------------------------------------------------- the command vocabulary
+# One definition of what an operator can ask, shared by the console's command line and
+# the non-interactive CLI.
+
+INJECT_TYPES = {"clear": mav.FAILURE_TYPE_OK, "off": mav.FAILURE_TYPE_OFF, "stuck": mav.FAILURE_TYPE_STUCK,
+                "degraded": mav.FAILURE_TYPE_WRONG}
+MARK_KINDS = {"healthy": mav.ELLIPSLED_JET_HEALTH_NOMINAL, "failed": mav.ELLIPSLED_JET_HEALTH_FAILED_OFF,
+              "stuck": mav.ELLIPSLED_JET_HEALTH_STUCK_ON, "degraded": mav.ELLIPSLED_JET_HEALTH_DEGRADED,
+              "inhibited": mav.ELLIPSLED_JET_HEALTH_INHIBITED}
+MODES = {"standby": mav.ELLIPSLED_MODE_STANDBY, "entry": mav.ELLIPSLED_MODE_ENTRY, "safe": mav.ELLIPSLED_MODE_SAFE}
+ON_OFF = {"on": 1, "off": 0}
+
+USAGE = """commands:
+  inject JET off|stuck|clear        inject JET degraded ETA     (JET 1..18, 0 = all)
+  clear JET                          (FDIR latch, override, inhibit; 0 = all)
+  mark JET failed|stuck|healthy|inhibited      mark JET degraded ETA
+  mode standby|entry|safe            arm on|off            ft on|off
+  delay SECONDS                      (FDIR reconfiguration delay)
+  param list | param get ID | param set ID VALUE"""
+
+
+@dataclass(frozen=True)
+class Request:
+    """One operator request: a COMMAND_LONG (``command``, ``params``) or a parameter
+    action (``param``: 'list' | 'get' | 'set')."""
+    label: str
+    command: int = 0
+    params: tuple[float, ...] = ()
+    param: str = ""
+    param_id: str = ""
+    value: float = float("nan")
+
+
+def _num(word: str, what: str) -> float:
+    try:
+        v = float(word)
+    except ValueError:
+        raise ValueError(f"{what}: expected a number, got {word!r}") from None
+    return v
+
+
+def _jet(word, allow_all: bool) -> int:
+    try:
+        j = int(word)
+    except (TypeError, ValueError):
+        raise ValueError(f"jet: expected an integer, got {word!r}") from None
+    lo = 0 if allow_all else 1
+    if not lo <= j <= 18:           # also checked by the vehicle; caught early for the operator
+        raise ValueError(f"jet: must be in {lo}..18{' (0 = all)' if allow_all else ''}, got {j}")
+    return j
+
+
+def _choice(word: str, table: dict, what: str):
+    w = str(word).lower()
+    if w not in table:
+        raise ValueError(f"{what}: expected one of {'|'.join(table)}, got {word!r}")
+    return w, table[w]
+
+
+def make_request(verb: str, *args: str) -> Request:
+    """A Request from words, e.g. ("inject", "17", "off"), ("param", "set", "C_D_MIN", "0.4").
+    ValueError with a message naming the bad word."""
+    verb = verb.lower()
+    a = list(args)
+
+    def need(n_min: int, n_max: int, usage: str):
+        if not n_min <= len(a) <= n_max:
+            raise ValueError(f"usage: {usage}")
+
+    if verb == "inject":
+        need(2, 3, "inject JET off|stuck|degraded|clear [ETA]")
+        jet = _jet(a[0], True)
+        kind, ftype = _choice(a[1], INJECT_TYPES, "kind")
+        eta = 0.0
+        if kind == "degraded":
+            if len(a) != 3:
+                raise ValueError("inject degraded needs ETA in (0, 1)")
+            eta = _num(a[2], "eta")
+        elif len(a) == 3:
+            raise ValueError(f"eta applies to degraded only (kind {kind})")
+        label = f"inject jet {jet} {kind}" + (f" eta {eta:g}" if kind == "degraded" else "")
+        return Request(label, mav.MAV_CMD_INJECT_FAILURE, (mav.FAILURE_UNIT_SYSTEM_MOTOR, ftype, jet, eta))
+    if verb == "mark":
+        need(2, 3, "mark JET failed|stuck|degraded|healthy|inhibited [ETA]")
+        jet = _jet(a[0], False)
+        kind, code = _choice(a[1], MARK_KINDS, "kind")
+        eta = 1.0
+        if kind == "degraded":
+            if len(a) != 3:
+                raise ValueError("mark degraded needs ETA in (0, 1)")
+            eta = _num(a[2], "eta")
+        elif len(a) == 3:
+            raise ValueError(f"eta applies to degraded only (kind {kind})")
+        return Request(f"mark jet {jet} {kind}" + (f" eta {eta:g}" if kind == "degraded" else ""),
+                       mav.ELLIPSLED_CMD_FDIR_MARK_JET, (jet, code, eta))
+    if verb == "clear":
+        need(1, 1, "clear JET (0 = all)")
+        jet = _jet(a[0], True)
+        return Request(f"clear jet {jet}", mav.ELLIPSLED_CMD_FDIR_CLEAR, (jet,))
+    if verb == "mode":
+        need(1, 1, "mode standby|entry|safe")
+        name, code = _choice(a[0], MODES, "mode")
+        return Request(f"mode {name}", mav.ELLIPSLED_CMD_SET_MODE, (code,))
+    if verb == "arm":
+        need(1, 1, "arm on|off")
+        name, v = _choice(a[0], ON_OFF, "arm")
+        return Request(f"arm {name}", mav.ELLIPSLED_CMD_ARM_JETS, (v,))
+    if verb == "ft":
+        need(1, 1, "ft on|off")
+        name, v = _choice(a[0], ON_OFF, "ft")
+        return Request(f"fault tolerance {name}", mav.ELLIPSLED_CMD_FAULT_TOLERANCE, (v,))
+    if verb == "delay":
+        need(1, 1, "delay SECONDS")
+        d = _num(a[0], "delay")
+        return Request(f"fdir delay {d:g} s", mav.ELLIPSLED_CMD_FDIR_SET_DELAY, (d,))
+    if verb == "param":
+        if not a:
+            raise ValueError("usage: param list | param get ID | param set ID VALUE")
+        sub = a[0].lower()
+        if sub == "list" and len(a) == 1:
+            return Request("param list", param="list")
+        if sub == "get" and len(a) == 2:
+            return Request(f"param get {a[1].upper()}", param="get", param_id=a[1].upper())
+        if sub == "set" and len(a) == 3:
+            return Request(f"param set {a[1].upper()} {a[2]}", param="set", param_id=a[1].upper(),
+                           value=_num(a[2], "value"))
+        raise ValueError("usage: param list | param get ID | param set ID VALUE")
+    raise ValueError(f"unknown command {verb!r}\n{USAGE}")
+
+
+def parse_line(text: str) -> Request:
+    """A Request from one command line ("inject 17 off")."""
+    words = str(text).split()
+    if not words:
+        raise ValueError(USAGE)
+    return make_request(words[0], *words[1:])
+
+
+__all__ = ["GroundClient", "VehicleState", "PendingCommand", "StatusText", "Ack", "result_name",
+           "float32_equal", "load_key", "make_request", "parse_line", "Request", "USAGE", "DEFAULT_LISTEN", "DEFAULT_VEHICLE", "GCS_SYSTEM_ID"]

@@ -1,0 +1,270 @@
+"""The ground console (``ellipsled gse console``): a Textual terminal UI over a GroundClient.
+
+Shows: link status (vehicle heartbeat age, rx/tx message rates, rejections, mode, armed,
+MAV_STATE), entry state (altitude, speed, gamma, Mach, qbar, alpha, beta), bank vs
+reference and the error, the 18-jet grid (commanded, firing, health), loop timing and
+allocator figures, the events (STATUSTEXT with severity) and the acknowledgements.
+
+Commands from the command line at the bottom (the vocabulary of gse.client.USAGE, e.g.
+"inject 17 off", "mark 3 degraded 0.5", "param set C_LAMBDA_RADPS 1.2") or keys, when
+the command line is not focused (Escape leaves it, ":" enters it):
+  i inject...  c clear...  k mark...  p param set...   (prefill the command line)
+  a arm/disarm toggle   f fault tolerance toggle   1 STANDBY  2 ENTRY  3 SAFE   q quit
+Commands go out without blocking the UI; their ACK (or TIMEOUT after the retries)
+appears in the acknowledgements panel.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+from rich.table import Table
+from rich.text import Text
+from textual.app import App, ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.widgets import Footer, Input, RichLog, Static
+
+from interfaces.mavlink import dialect as mav
+
+from .client import GroundClient, PendingCommand, make_request, parse_line, result_name
+
+MODE_NAMES = {0: "STANDBY", 1: "ENTRY", 2: "SAFE"}
+HEALTH_CELLS = {0: ("N", "green"), 1: ("F", "bold red"), 2: ("S", "bold magenta"), 3: ("D", "yellow"),
+                4: ("I", "cyan")}
+SEVERITY_STYLE = {0: "bold white on red", 1: "bold red", 2: "bold red", 3: "red", 4: "yellow", 5: "cyan",
+                  6: "white", 7: "dim"}
+SEVERITY_NAME = {0: "EMERG", 1: "ALERT", 2: "CRIT", 3: "ERROR", 4: "WARN", 5: "NOTICE", 6: "INFO", 7: "DEBUG"}
+
+
+def _deg(x) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{math.degrees(x):8.2f}°"
+
+
+def _state_name(code: int) -> str:
+    e = mav.enums["MAV_STATE"].get(code)
+    return e.name.removeprefix("MAV_STATE_") if e is not None else str(code)
+
+
+class GroundConsole(App):
+    """The console; ``client`` is a GroundClient the app polls (never blocks on it)."""
+
+    CSS = """
+    #top { height: 1; }
+    #main { height: 1fr; }
+    #left { width: 46; }
+    #right { width: 1fr; }
+    .panel { border: round $primary; padding: 0 1; }
+    #events { height: 1fr; border: round $primary; }
+    #acks { height: 8; border: round $primary; }
+    #cmdline { dock: bottom; }
+    """
+    BINDINGS = [
+        Binding("q", "quit", "quit"),
+        Binding("colon", "focus_cmd", "command line"),
+        Binding("escape", "blur_cmd", "leave command line", show=False),
+        Binding("i", "prefill('inject ')", "inject"),
+        Binding("c", "prefill('clear ')", "clear"),
+        Binding("k", "prefill('mark ')", "mark"),
+        Binding("p", "prefill('param set ')", "param"),
+        Binding("a", "toggle_arm", "arm/disarm"),
+        Binding("f", "toggle_ft", "fault tol."),
+        Binding("1", "mode('standby')", "STANDBY"),
+        Binding("2", "mode('entry')", "ENTRY"),
+        Binding("3", "mode('safe')", "SAFE"),
+    ]
+
+    def __init__(self, client: GroundClient, *, timeout_s: float = 1.0, retries: int = 3,
+                 poll_s: float = 0.05, refresh_s: float = 0.2, heartbeat_s: float = 1.0):
+        super().__init__()
+        self.client = client
+        self.timeout_s = timeout_s
+        self.retries = retries
+        self.poll_s = poll_s
+        self.refresh_s = refresh_s
+        self.heartbeat_s = heartbeat_s
+        self.inflight: list[tuple[str, PendingCommand]] = []
+        self.ack_lines: list[str] = []      # what the acknowledgements panel shows (newest last)
+        self.ft_on = True
+        self._events_shown = 0
+        self._last_hb = 0.0
+
+    # ---------------------------------------------------------------- layout
+    def compose(self) -> ComposeResult:
+        yield Static(id="top")
+        with Horizontal(id="main"):
+            with Vertical(id="left"):
+                yield Static(id="entry", classes="panel")
+                yield Static(id="jets", classes="panel")
+                yield Static(id="timing", classes="panel")
+            with Vertical(id="right"):
+                yield RichLog(id="events", max_lines=500, markup=False)
+                yield RichLog(id="acks", max_lines=100, markup=False)
+        yield Input(placeholder="command (e.g. inject 17 off) - Enter to send, Esc to leave", id="cmdline")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.title = "ellipsled ground console"
+        self.query_one("#events", RichLog).border_title = "events"
+        self.query_one("#acks", RichLog).border_title = "acknowledgements"
+        self.set_interval(self.poll_s, self._pump)
+        self.set_interval(self.refresh_s, self.refresh_view)
+        self.refresh_view()
+
+    # ---------------------------------------------------------------- link pump
+    def _pump(self) -> None:
+        c = self.client
+        now = time.monotonic()
+        if now - self._last_hb >= self.heartbeat_s:
+            c.send_heartbeat()
+            self._last_hb = now
+        c.poll(0.0)
+        still = []
+        for label, pc in self.inflight:
+            if pc.done:
+                self._ack_line(f"{label}: {result_name(pc.result)}")
+            else:
+                still.append((label, pc))
+        self.inflight = still
+        log = self.query_one("#events", RichLog)
+        evs = list(c.state.events)
+        new = c.state.events_total - self._events_shown
+        for e in evs[max(0, len(evs) - new):]:
+            log.write(Text(f"{time.strftime('%H:%M:%S', time.localtime(e.t_unix_s))} "
+                           f"{SEVERITY_NAME.get(e.severity, e.severity):<6} {e.text}",
+                           style=SEVERITY_STYLE.get(e.severity, "")))
+        self._events_shown = c.state.events_total
+
+    def _ack_line(self, line: str) -> None:
+        self.ack_lines.append(line)
+        self.query_one("#acks", RichLog).write(line)
+
+    # ---------------------------------------------------------------- commands
+    def submit(self, text: str) -> None:
+        """Run one command line (also what pressing Enter in the command line does)."""
+        try:
+            req = parse_line(text)
+        except ValueError as e:
+            self._ack_line(f"! {e}")
+            return
+        self._send(req)
+
+    def _send(self, req) -> None:
+        if self.client.vehicle_addr is None:
+            self._ack_line(f"{req.label}: no vehicle yet (no telemetry received)")
+            return
+        if req.command == mav.ELLIPSLED_CMD_FAULT_TOLERANCE:
+            self.ft_on = bool(req.params[0])
+        pc = self.client.start(req, self.timeout_s, self.retries)
+        if pc is not None:
+            self.inflight.append((req.label, pc))
+            self._ack_line(f"{req.label}: sent")
+        else:
+            self._ack_line(f"{req.label}: sent (answer in PARAM_VALUE)")
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        text = event.value.strip()
+        event.input.value = ""
+        if text:
+            self.submit(text)
+
+    def action_focus_cmd(self) -> None:
+        self.query_one("#cmdline", Input).focus()
+
+    def action_blur_cmd(self) -> None:
+        self.set_focus(None)
+
+    def action_prefill(self, text: str) -> None:
+        inp = self.query_one("#cmdline", Input)
+        inp.value = text
+        inp.cursor_position = len(text)
+        inp.focus()
+
+    def action_toggle_arm(self) -> None:
+        hb = self.client.state.latest.get("HEARTBEAT")
+        armed = bool(hb and hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+        self._send(make_request("arm", "off" if armed else "on"))
+
+    def action_toggle_ft(self) -> None:
+        self._send(make_request("ft", "off" if self.ft_on else "on"))
+
+    def action_mode(self, name: str) -> None:
+        self._send(make_request("mode", name))
+
+    # ---------------------------------------------------------------- view
+    def refresh_view(self) -> None:
+        c = self.client
+        st = c.state
+        hb = st.latest.get("HEARTBEAT")
+        age = c.link_age_s()
+        if hb is None:
+            top = Text(" no vehicle heartbeat yet", style="bold yellow")
+        else:
+            armed = "ARMED" if hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED else "disarmed"
+            status = _state_name(hb.system_status)
+            style = {"ACTIVE": "green", "CRITICAL": "bold red", "EMERGENCY": "bold white on red"}.get(status, "yellow")
+            where = f"{c.vehicle_addr[0]}:{c.vehicle_addr[1]}" if c.vehicle_addr else "?"
+            top = Text.assemble(
+                (f" {MODE_NAMES.get(hb.custom_mode, hb.custom_mode)} ", "bold"), (f"{status} ", style),
+                f"{armed}  link: hb {age:.1f}s ago  rx {c.rate_hz('rx'):.0f}/s  tx {c.rate_hz('tx'):.1f}/s  "
+                f"rejected {c.rejected}  vehicle {where}")
+        self.query_one("#top", Static).update(top)
+        self.query_one("#entry", Static).update(self._entry_table())
+        self.query_one("#jets", Static).update(self._jet_table())
+        self.query_one("#timing", Static).update(self._timing_table())
+
+    def _entry_table(self) -> Table:
+        t = Table.grid(padding=(0, 1))
+        t.add_column(style="bold")
+        t.add_column(justify="right")
+        es = self.client.state.latest.get("ELLIPSLED_ENTRY_STATE")
+        if es is None:
+            t.add_row("entry state", "-")
+            return t
+        err = math.remainder(es.bank - es.bank_ref, 2 * math.pi)
+        t.add_row("altitude", f"{es.altitude / 1e3:8.2f} km")
+        t.add_row("speed", f"{es.speed:8.1f} m/s")
+        t.add_row("gamma", _deg(es.flight_path_angle))
+        t.add_row("Mach / qbar", f"{es.mach:5.2f} / {es.qbar:7.0f} Pa")
+        t.add_row("alpha / beta", f"{_deg(es.alpha)} {_deg(es.beta)}")
+        t.add_row("bank", _deg(es.bank))
+        t.add_row("bank ref", _deg(es.bank_ref))
+        t.add_row(Text("bank error", style="bold"),
+                  Text(_deg(err), style="bold red" if abs(err) > math.radians(10) else "bold green"))
+        return t
+
+    def _jet_table(self) -> Table:
+        js = self.client.state.latest.get("ELLIPSLED_JET_STATUS")
+        t = Table(title="jets: cmd / fire / health", show_header=False, box=None, padding=(0, 1))
+        for _ in range(6):
+            t.add_column(justify="center")
+        cells = []
+        for j in range(18):
+            if js is None:
+                cells.append(Text(f"{j + 1:2d} ---", style="dim"))
+                continue
+            cmd = "●" if js.commanded >> j & 1 else "·"
+            fire = "*" if js.firing >> j & 1 else "·"
+            letter, style = HEALTH_CELLS.get(js.health[j], ("?", "white"))
+            cells.append(Text(f"{j + 1:2d} {cmd}{fire}{letter}", style=style))
+        for r in range(3):
+            t.add_row(*cells[r * 6:(r + 1) * 6])
+        return t
+
+    def _timing_table(self) -> Table:
+        t = Table.grid(padding=(0, 1))
+        t.add_column(style="bold")
+        t.add_column()
+        lt = self.client.state.latest.get("ELLIPSLED_LOOP_TIMING")
+        cs = self.client.state.latest.get("ELLIPSLED_CONTROL_STATUS")
+        if lt is not None:
+            t.add_row(f"RG{lt.rate_group} compute", f"p50 {lt.compute_p50:.0f} p99 {lt.compute_p99:.0f} "
+                                                     f"max {lt.compute_max:.0f} us")
+            t.add_row("jitter", f"p50 {lt.jitter_p50:.0f} p99 {lt.jitter_p99:.0f} max {lt.jitter_max:.0f} us")
+            t.add_row("cycle slips", str(lt.cycle_slips))
+        if cs is not None:
+            t.add_row("allocator", f"{cs.alloc_solves} solves p99 {cs.alloc_p99:.0f} us, {cs.alloc_degraded} degraded")
+            t.add_row("u_cal", " ".join(f"{x:7.0f}" for x in cs.u_cal) + " N m")
+        if lt is None and cs is None:
+            t.add_row("timing", "-")
+        return t

@@ -1,0 +1,292 @@
+"""Ground link commands: every COMMAND_LONG the vehicle knows, answered with the right
+MAV_RESULT over real signed UDP on loopback, and its effect checked on the FSW objects
+(or on the plant the injection was forwarded to). Also: HEARTBEAT system_status follows
+mode and FDIR.
+
+The rig (``Rig``) is shared by the other ground-link and gse tests: a FlightSoftware built
+from case1 (its scheduled faults removed: the tests inject from the ground), the plant from sim.plant, a GroundLink on an ephemeral port with a fake
+scheduling clock, and a GroundClient with a key file written in tmp_path.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from common.model import load_scenario
+from fsw.flightsoftware import FlightSoftware
+from fsw.groundlink import GroundLink
+from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
+from fsw.modes import Mode
+from gse.client import GroundClient, make_request
+from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.signing import SigningKey
+from sim.plant import Plant
+
+ACCEPTED, DENIED, UNSUPPORTED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED, mav.MAV_RESULT_UNSUPPORTED
+
+
+class Clock:
+    def __init__(self, t: float = 1000.0):
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def write_key(tmp_path, name: str = "ground.key") -> SigningKey:
+    path = tmp_path / name
+    SigningKey.generate().write_file(path)
+    return SigningKey.from_file(path)
+
+
+class Rig:
+    """FSW + plant + ground link + ground client, stepped by the test."""
+
+    def __init__(self, tmp_path, *, inject="plant", rates=None, tlog=None, key=None):
+        # case1 with its scheduled faults removed: the ground injects them instead
+        self.scn = load_scenario("case1").with_(faults=())
+        self.plant = Plant(self.scn)
+        self.fsw = FlightSoftware(self.scn)
+        self.key = key or write_key(tmp_path)
+        self.clock = Clock()
+        self.injected: list[tuple[int, str, float]] = []
+        self.inject_answer = True
+        self.gcs = GroundClient(self.key, listen="udp:127.0.0.1:0", tlog=tlog)
+        cb = self._inject if inject == "plant" else inject
+        self.gl = GroundLink(self.fsw, self.key, gcs=f"udp:127.0.0.1:{self.gcs.address[1]}",
+                             bind="udp:127.0.0.1:0", inject=cb, rates=rates, clock=self.clock)
+        self.gcs.set_vehicle(self.gl.address)
+        self.frame = self.plant.sensors
+        self.k = 0
+
+    def _inject(self, jet, kind, eta):
+        self.injected.append((jet, kind, eta))
+        if self.inject_answer is not True:
+            return self.inject_answer
+        self.plant.set_fault(jet, kind, eta)
+        return True
+
+    def fly(self, n: int, tick_every: int = 5) -> None:
+        """n control cycles; the link ticks every ``tick_every`` (RG2), the fake clock
+        advancing by the time that elapsed in simulation."""
+        for _ in range(n):
+            u = self.fsw.control_step(self.frame)
+            if self.k % tick_every == 0:
+                self.clock.t += tick_every * self.scn.dt_control_s
+                self.gl.tick(self.frame)
+            self.frame = self.plant.step(u)
+            self.k += 1
+
+    def exchange(self, until, timeout_s: float = 3.0) -> bool:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            self.gl.tick(self.frame)
+            self.gcs.poll(0.005)
+            if until():
+                return True
+        return False
+
+    def command(self, *words):
+        pc = self.gcs.start(make_request(*words), timeout_s=1.0, retries=2)
+        assert self.exchange(lambda: pc.done), f"no ACK for {words}"
+        return pc.result
+
+    def raw_command(self, command: int, *params):
+        pc = self.gcs.start_command(command, *params, timeout_s=1.0, retries=2)
+        assert self.exchange(lambda: pc.done), f"no ACK for command {command}"
+        return pc.result
+
+    def texts(self) -> list[str]:
+        self.exchange(lambda: False, 0.05)
+        return [e.text for e in self.gcs.state.events]
+
+    def close(self):
+        self.gl.close()
+        self.gcs.close()
+
+
+@pytest.fixture
+def rig(tmp_path):
+    r = Rig(tmp_path)
+    r.fly(10)
+    yield r
+    r.close()
+
+
+# --------------------------------------------------------------------------- injection
+
+@pytest.mark.parametrize("words, expect", [
+    (("inject", "17", "off"), (17, "off", 1.0)),
+    (("inject", "5", "stuck"), (5, "stuck", 1.0)),
+    (("inject", "3", "degraded", "0.4"), (3, "degraded", 0.4)),
+    (("inject", "0", "clear"), (0, "clear", 1.0)),
+])
+def test_valid_injection_is_forwarded_to_the_plant_and_accepted(rig, words, expect):
+    assert rig.command(*words) == ACCEPTED
+    jet, kind, eta = rig.injected[-1]
+    assert (jet, kind) == expect[:2] and math.isclose(eta, expect[2], rel_tol=1e-6)
+    state = {"off": FAILED_OFF, "stuck": STUCK_ON, "degraded": DEGRADED, "clear": NOMINAL}[kind]
+    assert (rig.plant.fault_state == state).any() or (jet == 0 and (rig.plant.fault_state == NOMINAL).all())
+    if jet:
+        assert rig.plant.fault_state[jet - 1] == state
+
+
+def test_injection_of_all_jets_reaches_every_jet(rig):
+    assert rig.command("inject", "0", "off") == ACCEPTED
+    assert (rig.plant.fault_state == FAILED_OFF).all()
+
+
+def test_invalid_injections_are_refused_never_forwarded(rig):
+    inj = mav.MAV_CMD_INJECT_FAILURE
+    unit, off, wrong = mav.FAILURE_UNIT_SYSTEM_MOTOR, mav.FAILURE_TYPE_OFF, mav.FAILURE_TYPE_WRONG
+    cases = [
+        ((unit, off, 19, 0), DENIED),                       # jet 19
+        ((unit, off, -1, 0), DENIED),
+        ((unit, off, 2.5, 0), DENIED),                      # not an integer
+        ((unit, off, float("nan"), 0), DENIED),
+        ((unit, wrong, 4, 0.0), DENIED),                    # eta <= 0
+        ((unit, wrong, 4, 1.0), DENIED),                    # eta >= 1
+        ((unit, wrong, 4, -0.3), DENIED),
+        ((unit, wrong, 4, float("nan")), DENIED),
+        ((unit, mav.FAILURE_TYPE_GARBAGE, 4, 0), UNSUPPORTED),   # type 3: unknown here
+        ((unit, mav.FAILURE_TYPE_INTERMITTENT, 4, 0), UNSUPPORTED),
+        ((unit, 99, 4, 0), UNSUPPORTED),
+        ((mav.FAILURE_UNIT_SENSOR_GYRO, off, 4, 0), UNSUPPORTED),   # not an RCS jet
+        ((100, off, 4, 0), UNSUPPORTED),
+    ]
+    for params, expect in cases:
+        assert rig.raw_command(inj, *params) == expect, params
+    assert rig.injected == []
+    assert (rig.plant.fault_state == NOMINAL).all()
+    texts = rig.texts()
+    assert any("JET 19 DENIED" in t for t in texts)
+    assert any("ETA" in t and "DENIED" in t for t in texts)
+    assert any("TYPE 3 UNSUPPORTED" in t for t in texts)
+
+
+def test_plant_unavailable_gives_temporarily_rejected_and_errors_are_mapped(tmp_path):
+    def refusing(jet, kind, eta):
+        raise ValueError("no such jet")
+
+    def broken(jet, kind, eta):
+        raise RuntimeError("zenoh closed")
+
+    r = Rig(tmp_path)
+    try:
+        r.fly(2)
+        r.inject_answer = False
+        assert r.command("inject", "17", "off") == mav.MAV_RESULT_TEMPORARILY_REJECTED
+        r.gl.inject = refusing
+        assert r.command("inject", "17", "off") == DENIED
+        r.gl.inject = broken
+        assert r.command("inject", "17", "off") == mav.MAV_RESULT_FAILED
+        r.gl.inject = None
+        assert r.command("inject", "17", "off") == UNSUPPORTED
+        assert (r.plant.fault_state == NOMINAL).all()
+        assert any("PLANT UNAVAILABLE" in t for t in r.texts())
+    finally:
+        r.close()
+
+
+# --------------------------------------------------------------------------- other commands
+
+def test_mode_commands_follow_the_allowed_transitions(rig):
+    assert rig.fsw.modes.mode == Mode.ENTRY
+    assert rig.command("mode", "safe") == ACCEPTED and rig.fsw.modes.mode == Mode.SAFE
+    assert rig.command("mode", "standby") == ACCEPTED and rig.fsw.modes.mode == Mode.STANDBY
+    assert rig.command("mode", "safe") == DENIED and rig.fsw.modes.mode == Mode.STANDBY   # STANDBY -> SAFE not allowed
+    assert rig.command("mode", "entry") == ACCEPTED and rig.fsw.modes.mode == Mode.ENTRY
+    assert rig.raw_command(mav.ELLIPSLED_CMD_SET_MODE, 3) == DENIED
+    assert rig.raw_command(mav.ELLIPSLED_CMD_SET_MODE, 1.5) == DENIED
+    assert rig.fsw.modes.mode == Mode.ENTRY
+
+
+def test_arm_disarm_and_the_standard_arm_command(rig):
+    assert rig.fsw.driver.armed
+    assert rig.command("arm", "off") == ACCEPTED and not rig.fsw.driver.armed
+    rig.fly(5)
+    assert not rig.fsw.driver.last_command.any()           # disarmed: nothing fires
+    assert rig.raw_command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == ACCEPTED and rig.fsw.driver.armed
+    assert rig.raw_command(mav.ELLIPSLED_CMD_ARM_JETS, 2) == DENIED and rig.fsw.driver.armed
+
+
+def test_fault_tolerance_on_off(rig):
+    assert rig.command("ft", "off") == ACCEPTED
+    assert rig.fsw.allocator.fault_tolerance is False and rig.fsw.params["allocator.fault_tolerance"] == 0.0
+    assert rig.command("ft", "on") == ACCEPTED
+    assert rig.fsw.allocator.fault_tolerance is True and rig.fsw.params["allocator.fault_tolerance"] == 1.0
+    assert rig.raw_command(mav.ELLIPSLED_CMD_FAULT_TOLERANCE, 0.5) == DENIED
+
+
+def test_fdir_mark_clear_and_delay(rig):
+    fsw = rig.fsw
+    assert rig.command("mark", "3", "degraded", "0.5") == ACCEPTED
+    assert fsw.fdir.health_active.state[2] == DEGRADED and math.isclose(fsw.fdir.health_active.eta[2], 0.5)
+    assert fsw.allocator._health.state[2] == DEGRADED            # the allocator adopted it at once
+    assert rig.command("mark", "7", "failed") == ACCEPTED and fsw.fdir.health_active.state[6] == FAILED_OFF
+    assert rig.command("mark", "8", "stuck") == ACCEPTED and fsw.fdir.health_active.state[7] == STUCK_ON
+    assert rig.command("mark", "9", "inhibited") == ACCEPTED
+    assert fsw.driver.inhibit[8] and fsw.fdir.health_active.inhibited[8]
+    assert rig.command("mark", "3", "healthy") == ACCEPTED and fsw.fdir.health_active.state[2] == NOMINAL
+    assert rig.command("clear", "0") == ACCEPTED
+    assert (fsw.fdir.health_active.state == NOMINAL).all() and not fsw.driver.inhibit.any()
+    assert (fsw.allocator._health.state == NOMINAL).all()
+    # invalid marks
+    mark = mav.ELLIPSLED_CMD_FDIR_MARK_JET
+    assert rig.raw_command(mark, 19, 1, 1) == DENIED
+    assert rig.raw_command(mark, 0, 1, 1) == DENIED                # mark needs one jet
+    assert rig.raw_command(mark, 3, 3, 1.0) == DENIED              # degraded with eta 1
+    assert rig.raw_command(mark, 3, 7, 1.0) == DENIED              # unknown health
+    assert rig.raw_command(mav.ELLIPSLED_CMD_FDIR_CLEAR, 19) == DENIED
+    # delay
+    assert rig.command("delay", "1.5") == ACCEPTED and fsw.fdir.delay_s == 1.5 and fsw.params["fdir.delay_s"] == 1.5
+    for bad in (-1.0, 61.0, float("nan"), float("inf")):
+        assert rig.raw_command(mav.ELLIPSLED_CMD_FDIR_SET_DELAY, bad) == DENIED
+    assert fsw.fdir.delay_s == 1.5
+    texts = rig.texts()
+    assert "GND MARK JET 3 DEGRADED ETA 0.50" in texts and "FDIR DELAY 1.50 S" in texts
+
+
+def test_unknown_command_is_unsupported_and_other_targets_are_ignored(rig):
+    assert rig.raw_command(12345) == UNSUPPORTED
+    assert rig.raw_command(mav.MAV_CMD_NAV_TAKEOFF) == UNSUPPORTED
+    # a command for system 7 gets no answer at all
+    before = len(rig.gcs.state.acks)
+    rig.gcs.send(mav.MAVLink_command_long_message(7, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0))
+    rig.exchange(lambda: False, 0.2)
+    assert len(rig.gcs.state.acks) == before and rig.fsw.driver.armed
+
+
+def test_heartbeat_system_status_follows_mode_and_fdir(rig):
+    def status():
+        rig.gcs.state.latest.pop("HEARTBEAT", None)
+        rig.clock.t += 1.0
+        assert rig.exchange(lambda: "HEARTBEAT" in rig.gcs.state.latest)
+        hb = rig.gcs.state.latest["HEARTBEAT"]
+        return hb.system_status, hb.custom_mode, bool(hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    assert status() == (mav.MAV_STATE_ACTIVE, Mode.ENTRY, True)
+    rig.command("mark", "4", "failed")
+    assert status()[0] == mav.MAV_STATE_CRITICAL
+    rig.command("mode", "safe")
+    assert status()[:2] == (mav.MAV_STATE_EMERGENCY, Mode.SAFE)
+    rig.command("clear", "0")
+    rig.command("mode", "standby")
+    rig.command("arm", "off")
+    assert status() == (mav.MAV_STATE_STANDBY, Mode.STANDBY, False)
+
+
+def test_fdir_detection_of_an_injected_failure_reaches_the_ground(rig):
+    """End to end in one process: inject jet 17 off from the ground, fly, FDIR declares it,
+    its STATUSTEXT and the CRITICAL heartbeat come down."""
+    assert rig.command("inject", "17", "off") == ACCEPTED
+    rig.fly(150)
+    assert any(d["jet"] == 17 and d["kind"] == "failed_off" for d in rig.fsw.fdir.detections)
+    texts = rig.texts()
+    assert "JET 17 FAILED OFF" in texts
+    js = rig.gcs.state.latest["ELLIPSLED_JET_STATUS"]
+    assert js.health[16] == mav.ELLIPSLED_JET_HEALTH_FAILED_OFF
+    assert np.count_nonzero(np.array(js.health)) == 1

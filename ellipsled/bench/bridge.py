@@ -1,0 +1,150 @@
+"""Benchmark of the Rerun logging path of the bridge (gse/viz/logger.py).
+
+- Logger at 50 Hz over a full entry (22,500 steps; 450 s at real pace): CPU seconds per
+  logged step (truth + FSW row), reported as the share of one core at 50 Hz
+  (cpu_pct = cpu_per_step x 50 x 100), and RSS growth over the run. Sinks: an .rrd file
+  and the loopback gRPC server (no viewer connected, its memory limit applies).
+- Baseline in the same run: one ``rr.log`` per signal per frame (the ~40 scalar signals)
+  vs the batched ``send_columns`` path, per frame.
+"""
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+import rerun as rr
+
+from gse.viz.logger import SCALAR_CHANNELS, SOURCE_FIELDS, RerunLogger
+from gse.viz.sinks import open_sinks
+
+RATE_HZ = 50.0
+FULL_ENTRY_STEPS = 22_500
+
+
+def _rows(n: int, rng: np.random.Generator) -> tuple[list[dict], list[dict]]:
+    """A pool of realistic truth / FSW rows (values vary so nothing compresses away)."""
+    def one(fields):
+        out = {}
+        for f, shp in fields.items():
+            if f in ("jets_cmd",):
+                out[f] = (rng.random(shp) < 0.2).astype(np.uint8)
+            elif f in ("health", "mode"):
+                out[f] = np.zeros(shp, dtype=np.int8) + (1 if f == "mode" else 0)
+            elif f == "sigma_BN" or f == "sigma_RN":
+                out[f] = 0.1 * rng.standard_normal(shp)
+            elif f == "r_N":
+                out[f] = 3.4e6 * np.array([1.0, 0.0, 0.0]) + 1e3 * rng.standard_normal(shp)
+            else:
+                out[f] = rng.standard_normal(shp) if shp else float(rng.standard_normal())
+        return out
+    return [one(SOURCE_FIELDS["truth"]) for _ in range(n)], [one(SOURCE_FIELDS["fsw"]) for _ in range(n)]
+
+
+def _logger_run(n_steps: int, mode: str, out_dir: Path, rng) -> dict:
+    proc = psutil.Process()
+    sinks = open_sinks(mode, out_dir, name=f"bench-{mode.replace('+', '-')}", display=False, say=lambda m: None)
+    log = RerunLogger(sinks.rec, flush_rows=50, flush_s=1.0)
+    truth, fsw = _rows(256, rng)
+    # warm-up (imports, first chunks), not counted
+    for k in range(100):
+        log.log_truth(k, k / RATE_HZ, truth[k % 256])
+        log.log_fsw(k, k / RATE_HZ, fsw[k % 256])
+    log.flush()
+    rss0 = proc.memory_info().rss
+    rss_mid = None
+    c0, w0 = proc.cpu_times(), time.perf_counter()
+    for k in range(100, 100 + n_steps):
+        log.log_truth(k, k / RATE_HZ, truth[k % 256])
+        log.log_fsw(k, k / RATE_HZ, fsw[k % 256])
+        if k == 100 + n_steps // 2:
+            rss_mid = proc.memory_info().rss
+    log.close()
+    c1, w1 = proc.cpu_times(), time.perf_counter()
+    rss1 = proc.memory_info().rss
+    sinks.close()
+    # process CPU (SDK background threads included)
+    cpu_s = (c1.user - c0.user) + (c1.system - c0.system)
+    per_step = cpu_s / n_steps
+    return {
+        "mode": mode, "steps": n_steps,
+        "cpu_s": cpu_s, "wall_s": w1 - w0,
+        "cpu_us_per_step": per_step * 1e6,
+        "cpu_pct_at_50Hz": per_step * RATE_HZ * 100.0,
+        "rss_growth_MB": (rss1 - rss0) / 2**20,
+        "rss_growth_second_half_MB": (rss1 - rss_mid) / 2**20 if rss_mid else None,
+        "send_columns_calls": log.stats["send_columns"],
+        "send_columns_per_step": log.stats["send_columns"] / n_steps,
+        "rrd_MB": (sinks.rrd_path.stat().st_size / 2**20) if sinks.rrd_path and sinks.rrd_path.exists() else None,
+    }
+
+
+def _per_signal_baseline(n_frames: int, out_dir: Path, rng) -> dict:
+    """One rr.log per signal per frame, same signals as the logger's scalar channels."""
+    rec = rr.RecordingStream("bench-baseline")
+    rec.set_sinks(rr.FileSink(out_dir / "baseline.rrd"))
+    ents = []
+    for c in SCALAR_CHANNELS:
+        width = 1 if c.index is not None else int(np.prod(SOURCE_FIELDS[c.source][c.field]) or 1)
+        ents.append((c.entity, width))
+    vals = rng.standard_normal((n_frames, 64))
+    t0 = time.perf_counter()
+    for k in range(n_frames):
+        rec.set_time("step", sequence=k)
+        rec.set_time("sim_time", duration=k / RATE_HZ)
+        for e, w in ents:
+            rec.log(e, rr.Scalars(vals[k, :w]))
+    rec.flush()
+    dt = time.perf_counter() - t0
+    rec.disconnect()
+    return {"signals": len(ents), "frames": n_frames, "us_per_frame": dt / n_frames * 1e6}
+
+
+def _batched_frames(n_frames: int, out_dir: Path, rng) -> dict:
+    rec = rr.RecordingStream("bench-batched")
+    rec.set_sinks(rr.FileSink(out_dir / "batched.rrd"))
+    log = RerunLogger(rec, flush_rows=50, flush_s=math.inf)
+    truth, fsw = _rows(256, rng)
+    for k in range(100):                        # warm-up (first-use conversions), not counted
+        log.log_truth(k, k / RATE_HZ, truth[k % 256])
+        log.log_fsw(k, k / RATE_HZ, fsw[k % 256])
+    log.flush()
+    t0 = time.perf_counter()
+    for k in range(100, 100 + n_frames):
+        log.log_truth(k, k / RATE_HZ, truth[k % 256])
+        log.log_fsw(k, k / RATE_HZ, fsw[k % 256])
+    log.close()
+    dt = time.perf_counter() - t0
+    rec.disconnect()
+    return {"frames": n_frames, "us_per_frame": dt / n_frames * 1e6}
+
+
+def run(quick: bool) -> dict:
+    rng = np.random.default_rng(7)
+    n_steps = 3000 if quick else FULL_ENTRY_STEPS
+    n_base = 1000 if quick else 3000
+    with tempfile.TemporaryDirectory() as d:
+        out = Path(d)
+        file_run = _logger_run(n_steps, "file", out, rng)
+        web_run = _logger_run(n_steps, "file+web", out, rng) if not quick else None
+        base = _per_signal_baseline(n_base, out, rng)
+        batched = _batched_frames(n_base, out, rng)
+    res = {
+        "rate_hz": RATE_HZ, "quick": quick,
+        "logger_file": file_run,
+        "per_signal_rr_log": base,
+        "send_columns_batched": batched,
+        "speedup_batched_vs_per_signal": base["us_per_frame"] / batched["us_per_frame"],
+    }
+    if web_run is not None:
+        res["logger_file_and_grpc_server"] = web_run
+    return res
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+    print(json.dumps(run("--quick" in sys.argv), indent=2))

@@ -12,7 +12,7 @@ N_JETS = 18
 
 # name -> trailing shape; all float64 except where noted in _DTYPES
 FIELDS: dict[str, tuple[int, ...]] = {
-    "t_s": (),
+    "k": (), "t_s": (),
     # truth (plant)
     "bank_rad": (), "alpha_rad": (), "beta_rad": (), "omega_BN_B": (3,), "sigma_BN": (3,),
     "h_m": (), "V_rel_mps": (), "gamma_rad": (), "psi_rad": (), "lat_rad": (), "lon_rad": (),
@@ -22,7 +22,12 @@ FIELDS: dict[str, tuple[int, ...]] = {
     "theta_hat": (9,), "jets_cmd": (N_JETS,), "health": (N_JETS,), "mode": (),
     "alloc_degraded": (), "compute_us": (), "alloc_us": (),
 }
-_DTYPES = {"jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8}
+# Which side of the SIL records each field (the batch runner records both).
+TRUTH_FIELDS = ("k", "t_s", "bank_rad", "alpha_rad", "beta_rad", "omega_BN_B", "sigma_BN", "h_m", "V_rel_mps",
+                "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa", "decel_g", "tau_jets_B")
+FSW_FIELDS = tuple(k for k in FIELDS if k not in TRUTH_FIELDS)
+
+_DTYPES = {"k": np.int64, "jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8}
 
 
 class History:
@@ -57,3 +62,46 @@ class History:
                 h.a[k][:n] = z[k]
         h.n = n
         return h
+
+
+def record_truth(h: History, i: int, truth: dict) -> None:
+    """The plant's half of row i (from sim.plant.Plant.truth() or a TRUTH record)."""
+    a = h.a
+    for k in TRUTH_FIELDS:
+        a[k][i] = truth[k]
+
+
+def record_fsw(h: History, i: int, fsw, u: np.ndarray, compute_ns: int) -> None:
+    """The flight software's half of row i, after its control cycle for that step."""
+    a = h.a
+    a["k"][i] = fsw.k
+    a["t_s"][i] = fsw.t_s
+    g = fsw.guidance
+    a["bank_ref_rad"][i] = g.phi_r
+    a["bankdot_ref_radps"][i] = g.phidot_r
+    a["sigma_RN"][i] = g.sigma_RN
+    a["u_cal_B"][i] = fsw.u_cal_B
+    a["tau_alloc_B"][i] = fsw.tau_alloc_B
+    a["theta_hat"][i] = fsw.control.theta_hat
+    a["jets_cmd"][i] = u
+    a["health"][i] = fsw.health.state
+    a["mode"][i] = int(fsw.modes.mode)
+    a["alloc_degraded"][i] = fsw.allocator.degraded
+    a["compute_us"][i] = compute_ns * 1e-3
+    a["alloc_us"][i] = fsw.alloc_ns * 1e-3
+
+
+def merge(truth: History, fsw: History) -> History:
+    """One History from the SIL's two halves, aligned on the step index k."""
+    kt, kf = truth["k"], fsw["k"]
+    common = np.intersect1d(kt, kf)
+    it = np.searchsorted(kt, common)
+    jf = np.searchsorted(kf, common)
+    h = History(max(len(common), 1))
+    h.n = len(common)
+    for name in TRUTH_FIELDS:
+        h.a[name][: h.n] = truth.a[name][it]
+    for name in FSW_FIELDS:
+        h.a[name][: h.n] = fsw.a[name][jf]
+    h.a["k"][: h.n] = common
+    return h

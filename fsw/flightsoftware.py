@@ -24,16 +24,11 @@ from .jetdriver import JetDriver
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation
-from .params import Param, load_params
-
-EXECUTIVE_PARAMS = [
-    Param("executive.rg2_divisor", 1, 50, "", "RG2 runs every N control ticks", integer=True, ground_settable=False),
-    Param("executive.rg3_divisor", 1, 500, "", "RG3 runs every N control ticks", integer=True, ground_settable=False),
-]
-
+from .params import load_params
+from . import executive
 
 def all_params() -> list[Param]:
-    return (SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + EXECUTIVE_PARAMS)
+    return (SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + executive.PARAMS)
 
 
 class FlightSoftware:
@@ -194,6 +189,10 @@ class FlightSoftware:
             self.fdir.set_param(name, v)
         self.params[name] = v
         return v
+
+    def allocator_health(self) -> JetHealth:
+        """The health the allocator is solving with (nominal when fault tolerance is off)."""
+        return self.fdir.health_active if self.allocator.fault_tolerance else JetHealth()
 
     @property
     def health(self) -> JetHealth:

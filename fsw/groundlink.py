@@ -167,6 +167,7 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "ELLIPSLED_LOOP_TIMING": 1.0,
 }
 MAX_RATE_HZ = 100.0
+DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
 
 # Messages a ground station may send unsigned (see the module docstring).
 ALLOW_UNSIGNED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
@@ -625,9 +626,11 @@ class GroundLink:
 
     def _due(self, name: str, now: float) -> bool:
         hz = self.rates_hz[name]
-        if hz <= 0.0 or now < self._next_due[name]:
+        if hz <= 0.0:
             return False
         period = 1.0 / hz
+        if now < self._next_due[name] - DUE_SLACK * period:     # slack: tick jitter must not skip a period
+            return False
         nxt = self._next_due[name] + period
         self._next_due[name] = nxt if nxt > now else now + period
         return True
@@ -698,7 +701,7 @@ class GroundLink:
         load = 0
         if 1 in self._loop_timing or 0 in self._loop_timing:
             rg = self._loop_timing.get(0) or self._loop_timing.get(1)
-            load = int(min(1000.0, max(0.0, rg[3] * 1e-6 / self.fsw.dt_s * 1000.0)))
+            load = int(round(min(1000.0, max(0.0, rg[3] * 1e-6 / self.fsw.dt_s * 1000.0))))
         return mav.MAVLink_sys_status_message(present, enabled, health, load, 0xFFFF, -1, -1, 0,
                                               min(self.rejections, 0xFFFF), 0, 0, 0, 0)
 

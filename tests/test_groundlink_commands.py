@@ -77,6 +77,7 @@ class Rig:
             if self.k % tick_every == 0:
                 self.clock.t += tick_every * self.scn.dt_control_s
                 self.gl.tick(self.frame)
+                self.gcs.poll(0.0)
             self.frame = self.plant.step(u)
             self.k += 1
 

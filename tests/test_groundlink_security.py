@@ -1,0 +1,177 @@
+"""Ground link security: commands must arrive signed with the vehicle key; unsigned,
+wrongly signed, tampered and replayed commands are rejected (no ACK, no effect), counted
+and reported as rate-limited WARNING events; an unsigned ground heartbeat is accepted; a
+forged frame with a far-future timestamp does not lock out the genuine ground station;
+random bytes and malformed frames on the port never crash the link and the FSW flies on.
+
+Independent truth: frames are built here with pymavlink's own packer (unsigned) and the
+MAVLink signing/CRC rules, not with the link under test.
+"""
+from __future__ import annotations
+
+import logging
+import random
+import socket
+import time
+
+import pytest
+
+from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.signing import Reject, Signer, SigningKey
+
+from tests.test_groundlink_commands import Rig
+
+ARM_OFF = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0)
+
+
+@pytest.fixture
+def rig(tmp_path):
+    r = Rig(tmp_path)
+    r.fly(3)
+    yield r
+    r.close()
+
+
+def send_raw(rig, data: bytes) -> None:
+    rig.gcs.sock.sendto(data, rig.gl.address)
+
+
+def settle(rig, s: float = 0.1) -> None:
+    rig.exchange(lambda: False, s)
+
+
+def link_events(rig):
+    return [e for e in rig.fsw.events.history if e.source == "link" and e.code == "link_reject"]
+
+
+def resign_crc(frame: bytearray, msgid: int) -> None:
+    """Recompute the CRC of a MAVLink 2 frame after a payload edit (signature untouched)."""
+    plen = frame[1]
+    crc = mav.x25crc(bytes(frame[1:10 + plen]))
+    crc.accumulate(bytes((mav.mavlink_map[msgid].crc_extra,)))
+    frame[10 + plen] = crc.crc & 0xFF
+    frame[11 + plen] = crc.crc >> 8
+
+
+def test_unsigned_command_rejected_counted_and_reported(rig):
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    send_raw(rig, ARM_OFF.pack(unsigned))
+    settle(rig)
+    assert rig.fsw.driver.armed and not rig.gcs.state.acks
+    assert rig.gl.link.counts[Reject.UNSIGNED] == 1 and rig.gl.rejections == 1
+    ev = link_events(rig)
+    assert len(ev) == 1 and ev[0].severity == mav.MAV_SEVERITY_WARNING
+    assert ev[0].text == "link rejected unsigned 255/190 msg 76"
+    assert ev[0].text in rig.texts()                 # and it went to the ground as STATUSTEXT
+
+
+def test_wrong_key_and_tampered_and_replayed_commands_rejected(rig):
+    attacker = Signer(SigningKey.generate(), system_id=255, component_id=190, link_id=3)
+    send_raw(rig, attacker.pack(ARM_OFF))
+
+    genuine = Signer(rig.key, system_id=255, component_id=190, link_id=5)
+    # tamper: flip param1 (arm flag) of a genuinely signed "disarm" into "arm" = 1.0 float
+    tampered = bytearray(genuine.pack(ARM_OFF))
+    tampered[10:14] = bytes.fromhex("0000803f")       # param1 = 1.0 (payload starts with param1)
+    resign_crc(tampered, mav.MAVLINK_MSG_ID_COMMAND_LONG)
+    send_raw(rig, bytes(tampered))
+    settle(rig)
+    assert rig.gl.link.counts[Reject.BAD_SIGNATURE] == 2
+    assert rig.fsw.driver.armed and not rig.gcs.state.acks
+
+    good = genuine.pack(ARM_OFF)
+    send_raw(rig, good)
+    assert rig.exchange(lambda: len(rig.gcs.state.acks) == 1)
+    assert rig.gcs.state.acks[0].result == mav.MAV_RESULT_ACCEPTED and not rig.fsw.driver.armed
+    rig.fsw.driver.arm(rig.fsw.t_s, True)
+    send_raw(rig, good)                               # replay of the accepted frame
+    settle(rig)
+    assert rig.gl.link.counts[Reject.REPLAY] == 1
+    assert len(rig.gcs.state.acks) == 1 and rig.fsw.driver.armed
+    assert rig.gl.rejections == 3
+
+
+def test_unsigned_ground_heartbeat_accepted(rig):
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    hb = mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+    send_raw(rig, hb.pack(unsigned))
+    settle(rig)
+    assert rig.gl.ground_heartbeat_t == rig.clock.t
+    assert rig.gl.rejections == 0 and rig.gl.link.verifier.accepted_unsigned == 1
+
+
+def test_forged_future_timestamp_does_not_lock_out_the_genuine_ground(rig):
+    """The pymavlink 2.4.50 weakness: a forged frame (bad signature) on the ground's stream
+    with a timestamp a day ahead; the genuine command right after must still be accepted."""
+    now = time.time()
+    forger = Signer(SigningKey.generate(), system_id=255, component_id=190, link_id=0,
+                    clock=lambda: now + 86400.0)
+    send_raw(rig, forger.pack(ARM_OFF))
+    settle(rig)
+    assert rig.gl.link.counts[Reject.BAD_SIGNATURE] == 1
+    assert rig.command("arm", "off") == mav.MAV_RESULT_ACCEPTED      # rig.gcs: stream 255/190/0
+    assert not rig.fsw.driver.armed
+
+
+def test_rejection_events_are_rate_limited_but_every_rejection_is_counted(rig):
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    for _ in range(30):
+        send_raw(rig, ARM_OFF.pack(unsigned))
+    settle(rig, 0.2)
+    assert rig.gl.rejections == 30
+    assert len(link_events(rig)) == 1                 # one per second of FSW time
+    rig.fly(60)                                       # 1.2 s of FSW time
+    send_raw(rig, ARM_OFF.pack(unsigned))
+    settle(rig)
+    ev = link_events(rig)
+    assert len(ev) == 2 and ev[1].text.endswith("(+29 suppressed)")
+    rig.gcs.state.latest.pop("SYS_STATUS", None)
+    rig.clock.t += 1.0
+    assert rig.exchange(lambda: "SYS_STATUS" in rig.gcs.state.latest)
+    assert rig.gcs.state.latest["SYS_STATUS"].errors_comm == 31
+
+
+def test_random_bytes_and_malformed_frames_never_crash_and_the_fsw_flies_on(rig, caplog):
+    rng = random.Random(5)
+    genuine = Signer(rig.key, system_id=255, component_id=190, link_id=9)
+    good = genuine.pack(ARM_OFF)
+    blobs = []
+    for i in range(300):
+        kind = i % 5
+        if kind == 0:
+            blobs.append(bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 600))))
+        elif kind == 1:
+            blobs.append(good[:rng.randint(1, len(good) - 1)])                  # truncated
+        elif kind == 2:
+            b = bytearray(good)
+            b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)                    # bit flip
+            blobs.append(bytes(b))
+        elif kind == 3:
+            blobs.append(b"\xfd" + bytes(rng.getrandbits(8) for _ in range(rng.randint(0, 300))))
+        else:
+            blobs.append(b"\xfe\xff" + b"\x00" * rng.randint(0, 20))            # v1 magic, long length
+    cycles0 = rig.fsw.cycles
+    with caplog.at_level(logging.ERROR):
+        for i, blob in enumerate(blobs):
+            send_raw(rig, blob)
+            if i % 30 == 0:
+                rig.fly(5, tick_every=1)
+        rig.fly(20, tick_every=1)
+        settle(rig, 0.2)
+    assert not [r for r in caplog.records if "ground link" in r.getMessage()]
+    assert rig.gl.stats["rx_datagrams"] >= 290         # (loopback UDP does not drop; margin anyway)
+    assert rig.fsw.cycles == cycles0 + 10 * 5 + 20
+    assert rig.fsw.driver.armed                         # none of the flipped frames got through
+    assert rig.gl.rejections > 0 and not rig.gcs.state.acks
+    assert rig.command("arm", "off") == mav.MAV_RESULT_ACCEPTED
+
+
+def test_oversized_datagram_does_not_break_the_link(rig):
+    big = b"\xfd" * 65000
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.sendto(big, rig.gl.address)
+    finally:
+        s.close()
+    settle(rig)
+    assert rig.command("ft", "off") == mav.MAV_RESULT_ACCEPTED

@@ -1,0 +1,146 @@
+"""Ground link telemetry: configured rates are met, every event becomes one STATUSTEXT,
+the attitude and entry-state telemetry agree with the plant's truth, a stock pymavlink
+client with only common.xml sees the vehicle, its attitude and its STATUSTEXT.
+
+Independent truth: sim.plant.Plant.truth() (altitude, speed, gamma, psi, latitude,
+longitude, bank), pymavlink's own quaternion-to-Euler conversion, and counting.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.quaternion import Quaternion
+
+from fsw.groundlink import DEFAULT_RATES_HZ, GroundLink
+from interfaces.mavlink import dialect as mav
+
+from tests.test_groundlink_commands import Clock, Rig, write_key
+
+
+@pytest.fixture
+def rig(tmp_path):
+    r = Rig(tmp_path)
+    yield r
+    r.close()
+
+
+def test_stream_rates_follow_the_configuration(tmp_path):
+    rates = {"ATTITUDE": 4.0, "ELLIPSLED_ENTRY_STATE": 2.0, "ATTITUDE_TARGET": 0.0}
+    r = Rig(tmp_path, rates=rates)
+    try:
+        r.fly(500)                                # 10 s of flight, link ticked at 10 Hz
+        r.exchange(lambda: False, 0.3)
+        n = r.gcs.state.rx_counts
+        # first sample at t=0.1 s then one per period over 10 s (fake clock)
+        assert n["HEARTBEAT"] == 10
+        assert n["ATTITUDE"] == 40
+        assert n["ELLIPSLED_ENTRY_STATE"] == 20
+        assert n["ATTITUDE_QUATERNION"] == 100                # default 10 Hz
+        assert "ATTITUDE_TARGET" not in n
+        assert n["NAMED_VALUE_FLOAT"] == 6 * 50
+    finally:
+        r.close()
+
+
+def test_bad_rate_configuration_is_refused(tmp_path, rig):
+    key = write_key(tmp_path, "k2")
+    for bad in ({"ATTITUDE": -1.0}, {"ATTITUDE": float("nan")}, {"NOPE": 1.0}, {"ATTITUDE": 1000.0}):
+        with pytest.raises(ValueError, match="rates"):
+            GroundLink(rig.fsw, key, bind="udp:127.0.0.1:0", rates=bad, clock=Clock())
+    with pytest.raises(ValueError, match="gcs"):
+        GroundLink(rig.fsw, key, gcs="udp:localhost", bind="udp:127.0.0.1:0")
+    assert set(DEFAULT_RATES_HZ) >= {"HEARTBEAT", "ACTUATOR_OUTPUT_STATUS", "ELLIPSLED_LOOP_TIMING"}
+
+
+def test_every_event_becomes_one_statustext_with_its_severity(rig):
+    rig.fly(20)
+    for i in range(5):
+        rig.fsw.events.emit(rig.fsw.t_s, 3 + (i % 3), "test", f"code{i}", f"TEST EVENT {i}")
+    rig.fsw.events.drain()                       # another consumer draining the queue changes nothing
+    rig.exchange(lambda: False, 0.2)
+    hist = rig.fsw.events.history
+    got = [(e.severity, e.text) for e in rig.gcs.state.events]
+    assert got == [(int(e.severity), e.text[:50]) for e in hist]
+    assert ("MODE STANDBY->ENTRY (start)" in [t for _, t in got])
+
+
+def test_attitude_and_entry_state_agree_with_the_plant_truth(rig):
+    rig.fly(100)
+    rig.clock.t += 1.0
+    rig.gl.tick(rig.frame)
+    rig.exchange(lambda: False, 0.1)
+    truth = rig.plant.truth()
+    st = rig.gcs.state.latest
+    es = st["ELLIPSLED_ENTRY_STATE"]
+    assert es.altitude == pytest.approx(truth["h_m"], abs=200.0)
+    assert es.speed == pytest.approx(truth["V_rel_mps"], abs=2.0)
+    for field, key, tol in (("flight_path_angle", "gamma_rad", 2e-3), ("heading", "psi_rad", 2e-3),
+                            ("latitude", "lat_rad", 1e-4), ("longitude", "lon_rad", 1e-4),
+                            ("bank", "bank_rad", 0.02), ("alpha", "alpha_rad", 0.02)):
+        assert abs(math.remainder(getattr(es, field) - truth[key], 2 * math.pi)) < tol, field
+    # ATTITUDE (our 3-2-1 Euler of C_BL) equals pymavlink's Euler of ATTITUDE_QUATERNION
+    att, aq = st["ATTITUDE"], st["ATTITUDE_QUATERNION"]
+    roll, pitch, yaw = Quaternion([aq.q1, aq.q2, aq.q3, aq.q4]).euler
+    for a, b in ((att.roll, roll), (att.pitch, pitch), (att.yaw, yaw)):
+        assert abs(math.remainder(a - b, 2 * math.pi)) < 1e-5
+    # the reference attitude is near the body attitude (the controller tracks it)
+    tgt = st["ATTITUDE_TARGET"]
+    dq = abs(float(np.dot([aq.q1, aq.q2, aq.q3, aq.q4], tgt.q)))
+    assert 2 * math.degrees(math.acos(min(1.0, dq))) < 10.0
+    nv = rig.gcs.state.named
+    assert nv["bank_deg"] == pytest.approx(math.degrees(es.bank), abs=1e-3)
+    assert nv["berr_deg"] == pytest.approx(math.degrees(math.remainder(es.bank - es.bank_ref, 2 * math.pi)), abs=1e-3)
+    assert nv["alt_km"] == pytest.approx(es.altitude / 1e3, rel=1e-6)
+    assert all(len(n) <= 10 for n in nv)
+    # 18 jets in the 32 slots of ACTUATOR_OUTPUT_STATUS, as commanded
+    ao = st["ACTUATOR_OUTPUT_STATUS"]
+    assert ao.active == (1 << 18) - 1 and list(ao.actuator[18:]) == [0.0] * 14
+    assert list(ao.actuator[:18]) == [float(x) for x in rig.fsw.driver.last_command]
+    js = st["ELLIPSLED_JET_STATUS"]
+    assert js.commanded == sum(int(u) << i for i, u in enumerate(rig.fsw.driver.last_command))
+    fire = sum(1 << i for i, p in enumerate(rig.frame["chamber"]) if p > 0.5)
+    assert js.firing == fire and list(js.pulses) == [int(x) for x in rig.fsw.driver.pulses]
+
+
+def test_loop_timing_from_the_executive_is_forwarded(rig):
+    rig.gl.set_loop_timing(0, jitter_p50_us=12, jitter_p99_us=40, jitter_max_us=90, compute_p50_us=300,
+                           compute_p99_us=700, compute_max_us=1500, cycle_slips=2)
+    rig.fly(10)
+    assert rig.exchange(lambda: "ELLIPSLED_LOOP_TIMING" in rig.gcs.state.latest)
+    lt = rig.gcs.state.latest["ELLIPSLED_LOOP_TIMING"]
+    assert (lt.rate_group, lt.cycle_slips, lt.compute_p99, lt.jitter_max) == (0, 2, 700.0, 90.0)
+    rig.clock.t += 1.0
+    rig.exchange(lambda: False, 0.1)
+    assert rig.gcs.state.latest["SYS_STATUS"].load == 15          # 300 us of a 20 ms period = 1.5 %
+
+
+def test_stock_pymavlink_common_client_sees_vehicle_attitude_and_statustext(tmp_path, rig):
+    probe = __import__("socket").socket()
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    try:
+        key = write_key(tmp_path, "k3")
+        gl = GroundLink(rig.fsw, key, gcs=f"udp:127.0.0.1:{port}", bind="udp:127.0.0.1:0", clock=rig.clock)
+        try:
+            seen = {}
+            for _ in range(30):
+                u = rig.fsw.control_step(rig.frame)
+                rig.clock.t += 0.1
+                gl.tick(rig.frame)
+                rig.frame = rig.plant.step(u)
+                while (m := conn.recv_match(blocking=True, timeout=0.02)) is not None:
+                    seen.setdefault(m.get_type(), m)
+            assert {"HEARTBEAT", "ATTITUDE", "STATUSTEXT", "SYS_STATUS", "ATTITUDE_QUATERNION"} <= set(seen)
+            assert seen["HEARTBEAT"].get_srcSystem() == 1 and seen["HEARTBEAT"].get_srcComponent() == 1
+            assert seen["HEARTBEAT"].system_status == mav.MAV_STATE_ACTIVE
+            assert math.isfinite(seen["ATTITUDE"].roll)
+            assert conn.target_system == 1
+        finally:
+            gl.close()
+    finally:
+        conn.close()

@@ -6,6 +6,7 @@ N components to B components, omega is expressed in B. sigma_dot = 1/4 B(sigma) 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
 def tilde(v: np.ndarray) -> np.ndarray:
@@ -49,11 +50,24 @@ def switch_shadow(sigma: np.ndarray) -> np.ndarray:
     return -sigma / s2 if s2 > 1.0 else sigma
 
 
+@njit(cache=True)
 def to_dcm(sigma: np.ndarray) -> np.ndarray:
-    """C_BN from sigma_BN."""
-    s2 = float(sigma @ sigma)
-    st = tilde(sigma)
-    return np.eye(3) + (8.0 * st @ st - 4.0 * (1.0 - s2) * st) / (1.0 + s2) ** 2
+    """C_BN from sigma_BN: I + (8[s x]^2 - 4(1 - s.s)[s x]) / (1 + s.s)^2, written out."""
+    s1, s2_, s3 = sigma[0], sigma[1], sigma[2]
+    ss = s1 * s1 + s2_ * s2_ + s3 * s3
+    d = 1.0 / (1.0 + ss) ** 2
+    a = 1.0 - ss
+    C = np.empty((3, 3))
+    C[0, 0] = 1.0 + d * (8.0 * (-s2_ * s2_ - s3 * s3))
+    C[1, 1] = 1.0 + d * (8.0 * (-s1 * s1 - s3 * s3))
+    C[2, 2] = 1.0 + d * (8.0 * (-s1 * s1 - s2_ * s2_))
+    C[0, 1] = d * (8.0 * s1 * s2_ + 4.0 * a * s3)
+    C[0, 2] = d * (8.0 * s1 * s3 - 4.0 * a * s2_)
+    C[1, 0] = d * (8.0 * s1 * s2_ - 4.0 * a * s3)
+    C[1, 2] = d * (8.0 * s2_ * s3 + 4.0 * a * s1)
+    C[2, 0] = d * (8.0 * s1 * s3 + 4.0 * a * s2_)
+    C[2, 1] = d * (8.0 * s2_ * s3 - 4.0 * a * s1)
+    return C
 
 
 def from_dcm(C: np.ndarray) -> np.ndarray:

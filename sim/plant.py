@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from common import atmosphere, mrp
-from common.frames import R1, R2, v_rel_N, wind_dcm
+from common.frames import R1, R2, local_axes, v_rel_N, wind_dcm
 from common.model import FAULT_KINDS, N_JETS, Scenario, inertia_matrix, inertia_vector
 from interfaces import records
 
@@ -340,15 +340,6 @@ def params_vector(scenario: Scenario) -> np.ndarray:
     p[P_I:P_I + 9] = I.ravel()
     p[P_IINV:P_IINV + 9] = np.linalg.inv(I).ravel()
     return p
-
-
-def local_axes(r_N: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(north, east, up) unit vectors in N at position r_N (spherical planet)."""
-    up = r_N / np.linalg.norm(r_N)
-    lam = math.atan2(r_N[1], r_N[0])
-    east = np.array([-math.sin(lam), math.cos(lam), 0.0])
-    north = np.cross(up, east)
-    return north, east, up
 
 
 def initial_translation(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:

@@ -59,6 +59,7 @@ class GroundConsole(App):
     #acks { height: 8; border: round $primary; }
     #cmdline { dock: bottom; }
     """
+    AUTO_FOCUS = None           # keys act until ":" enters the command line
     BINDINGS = [
         Binding("q", "quit", "quit"),
         Binding("colon", "focus_cmd", "command line"),
@@ -143,7 +144,7 @@ class GroundConsole(App):
     def submit(self, text: str) -> None:
         """Run one command line (also what pressing Enter in the command line does)."""
         try:
-            req = parse_line(text)
+            req = parse_line(text.lstrip(":"))
         except ValueError as e:
             self._ack_line(f"! {e}")
             return

@@ -134,7 +134,7 @@ from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing import SignedLink, SigningKey, Rejection
 
 from .events import Severity
-from .health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
+from .health import NOMINAL
 from .modes import Mode
 
 log = logging.getLogger(__name__)

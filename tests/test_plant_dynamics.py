@@ -224,7 +224,7 @@ def test_initial_state_from_scenario_and_rates_follow_the_wind_frame():
     assert tr["h_m"] == pytest.approx(125e3, abs=1e-6)
     assert tr["V_rel_mps"] == pytest.approx(7300.0, rel=1e-12)
     assert tr["gamma_rad"] == pytest.approx(math.radians(-12), abs=1e-12)
-    assert tr["psi_rad"] == pytest.approx(math.radians(90), abs=1e-12)
+    assert tr["psi_rad"] == pytest.approx(SC.heading_rad, abs=1e-12)
     assert tr["lat_rad"] == pytest.approx(0.0, abs=1e-12) and tr["lon_rad"] == pytest.approx(0.0, abs=1e-12)
     assert tr["bank_rad"] == pytest.approx(math.radians(90), abs=1e-12)
     assert tr["alpha_rad"] == pytest.approx(SC.vehicle.aero.alpha_trim_rad, abs=1e-12)

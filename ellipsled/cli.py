@@ -52,6 +52,8 @@ def main(argv: list[str] | None = None) -> int:
     _add_plant(sub)
     _add_batch(sub)
     _add_report(sub)
+    from gse.cli import add_gse_parser
+    add_gse_parser(sub)
     a = ap.parse_args(argv)
     try:
         return int(a.func(a) or 0)

@@ -164,9 +164,13 @@ class FlightSoftware:
         """RG3: nothing periodic beyond telemetry yet (the ground link adds its heartbeat here)."""
 
     # ---------------------------------------------------------------- commands
+    def health_changed(self) -> None:
+        """Hand the allocator the health FDIR now holds (after an override, clear or inhibit)."""
+        self.allocator.set_health(self.fdir.health_active)
+
     def set_fault_tolerance(self, on: bool) -> None:
         self.allocator.set_fault_tolerance(on)
-        self.allocator.set_health(self.fdir.health_active)
+        self.health_changed()
 
     def set_param(self, name: str, value: float) -> float:
         """Validated ground parameter set; raises ValueError (value unchanged) when refused."""
@@ -183,8 +187,8 @@ class FlightSoftware:
             if name == "allocator.fault_tolerance":
                 self.set_fault_tolerance(bool(v))
             else:
-                self.allocator.set_param(name, v)
-                self.allocator.set_health(self.fdir.health_active)
+                self.allocator.set_params({**self.params, name: v})
+                self.health_changed()
         elif section == "fdir":
             self.fdir.set_param(name, v)
         self.params[name] = v

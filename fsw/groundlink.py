@@ -130,6 +130,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from common import frames, mrp
+from common.frames import local_axes
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing import SignedLink, SigningKey, Rejection
 
@@ -233,10 +234,7 @@ def _ascii(text: str, n: int) -> bytes:
 
 def _local_ned_dcm(r_N: np.ndarray) -> np.ndarray:
     """C_LN: rows north, east, down at r_N (spherical planet, N3 = spin axis)."""
-    up = r_N / np.linalg.norm(r_N)
-    lam = math.atan2(r_N[1], r_N[0])
-    east = np.array([-math.sin(lam), math.cos(lam), 0.0])
-    north = np.cross(up, east)
+    north, east, up = local_axes(r_N)
     return np.vstack((north, east, -up))
 
 
@@ -461,7 +459,7 @@ class GroundLink:
 
     def _reconfigure(self) -> None:
         """FDIR's active health changed by a ground command: the allocator adopts it now."""
-        self.fsw.allocator.set_health(self.fsw.fdir.health_active)
+        self.fsw.health_changed()
 
     def _cmd_inject(self, p) -> tuple[int, str]:
         unit, ftype, jet, eta = p[0], p[1], p[2], p[3]

@@ -99,11 +99,13 @@ def schema_by_id(schema_id: int) -> Schema | None:
     return None
 
 
-# One line per payload type. Reserved ids: 5 = TRUTH (sim/truth), 6 = FSW_STATE (fsw/state).
+# One line per payload type.
 register("SENSORS", 1, records.SENSORS, 1, keys.SENSORS)
 register("JETS", 2, records.JETS, 1, keys.JETS)
 register("FAULT", 3, records.FAULT, 1, keys.FAULTS)
 register("EVENT", 4, records.EVENT, 1, keys.EVENTS)
+register("TRUTH", 5, records.TRUTH, 1, keys.TRUTH)
+register("FSW_STATE", 6, records.FSW_STATE, 1, keys.STATE)
 
 
 # --------------------------------------------------------------------------- sequence guard

@@ -97,3 +97,27 @@ TRUTH = np.dtype([
     ("fault_state", "i1", (N_JETS,)),  # per-jet fault state (see above)
     ("_pad", "u1", (6,)),              # keeps the record a multiple of 8 bytes
 ])
+
+# fsw -> viewers, once per control cycle: what the flight software is doing (fsw/state).
+FSW_STATE = np.dtype([
+    ("k", "<i8"),                          # step index of the sensor frame answered
+    ("t_ns", "<i8"),                       # simulated time of frame k [ns]
+    ("t_release_ns", "<i8"),               # FSW cycle release (FSW monotonic clock) [ns]
+    ("bank_ref_rad", "<f8"),               # guidance bank reference [rad]
+    ("bankdot_ref_radps", "<f8"),          # its rate [rad/s]
+    ("bank_err_rad", "<f8"),               # FSW bank (navigation) - reference, wrapped [rad]
+    ("sigma_RN", "<f8", (3,)),             # reference attitude MRP
+    ("u_cal_B", "<f8", (3,)),              # commanded (control) torque [N m]
+    ("tau_alloc_B", "<f8", (3,)),          # torque of the allocated jet set [N m]
+    ("theta_hat", "<f8", (9,)),            # adaptive parameter estimates [kg m^2 x6, d x3]
+    ("eta_hat", "<f8", (N_JETS,)),         # estimated jet thrust factors [-]
+    ("compute_us", "<f8"),                 # FSW cycle compute time [us]
+    ("alloc_us", "<f8"),                   # allocator time [us]
+    ("jitter_us", "<f8"),                  # release time - scheduled release time [us]
+    ("slips", "<u4"),                      # cycle slips so far
+    ("jets_cmd", "u1", (N_JETS,)),         # 1 = open
+    ("health", "i1", (N_JETS,)),           # fsw/health.py states
+    ("mode", "i1"),                        # fsw/modes.py Mode
+    ("alloc_degraded", "u1"),              # 1 = allocation infeasible, degraded solution
+    ("_pad", "u1", (6,)),
+])

@@ -10,7 +10,7 @@ import pytest
 import rerun as rr
 
 from gse.viz import RerunLogger, open_sinks
-from gse.viz.bridge import PROPOSED_FSW_STATE, Bridge, make_codecs
+from gse.viz.bridge import Bridge, make_codecs
 from interfaces import codec, records
 from interfaces import keys as K
 from interfaces import transport as T
@@ -22,7 +22,7 @@ def _publish(session, k, codecs, k0, n, seq0):
             (("truth", k.truth), ("fsw", k.state), ("event", k.events))}
     for p in pubs.values():
         assert T.wait_for_subscriber(p, 5.0)
-    tr, fs = records.new(records.TRUTH), records.new(getattr(records, "FSW_STATE", PROPOSED_FSW_STATE))
+    tr, fs = records.new(records.TRUTH), records.new(records.FSW_STATE)
     for i in range(n):
         kk = k0 + i
         tr["k"] = fs["k"] = kk

@@ -34,43 +34,11 @@ from interfaces import keys as keymod
 # Proposed layout of the fsw/state record (to be moved to interfaces/records.py as
 # FSW_STATE and registered in interfaces/codec.py with the reserved id 6). Field names are
 # those of gse/viz/logger.py SOURCE_FIELDS['fsw'] and ellipsled/history.py FIELDS.
-PROPOSED_FSW_STATE = np.dtype([
-    ("k", "<i8"),                          # step index of the sensor frame answered
-    ("t_ns", "<i8"),                       # simulated time of frame k [ns]
-    ("t_release_ns", "<i8"),               # FSW cycle release (FSW monotonic clock) [ns]
-    ("bank_ref_rad", "<f8"),               # guidance bank reference [rad]
-    ("bankdot_ref_radps", "<f8"),          # its rate [rad/s]
-    ("bank_err_rad", "<f8"),               # FSW bank (navigation) - reference, wrapped [rad]
-    ("sigma_RN", "<f8", (3,)),             # reference attitude MRP
-    ("u_cal_B", "<f8", (3,)),              # commanded (control) torque [N m]
-    ("tau_alloc_B", "<f8", (3,)),          # torque of the allocated jet set [N m]
-    ("theta_hat", "<f8", (9,)),            # adaptive parameter estimates
-    ("eta_hat", "<f8", (18,)),             # estimated jet thrust factors [-]
-    ("compute_us", "<f8"),                 # FSW cycle compute time [us]
-    ("alloc_us", "<f8"),                   # allocator time [us]
-    ("jitter_us", "<f8"),                  # release time - ideal release time [us]
-    ("slips", "<u4"),                      # cycle slips so far
-    ("jets_cmd", "u1", (18,)),             # 1 = open
-    ("health", "i1", (18,)),               # fsw/health.py states
-    ("mode", "i1"),                        # fsw/modes.py Mode
-    ("alloc_degraded", "u1"),              # 1 = allocator fell back / degraded
-    ("_pad", "u1", (6,)),
-])
-TRUTH_SCHEMA_ID, FSW_STATE_SCHEMA_ID = 5, 6     # reserved in interfaces/codec.py
-
-
-def _codec(name: str, dtype: np.dtype, schema_id: int, on_reject) -> codec.Codec:
-    """The registered codec of ``name``; until TRUTH / FSW_STATE are registered, one built
-    from the records.py dtype (or the proposed one) with the reserved id, version 1."""
-    if name in codec.REGISTRY:
-        return codec.Codec.for_schema(name, on_reject=on_reject)
-    return codec.Codec(dtype, schema_id, 1, on_reject=on_reject)   # TODO(lead): drop once registered
 
 
 def make_codecs(on_reject=None) -> dict[str, codec.Codec]:
-    fsw_dtype = getattr(records, "FSW_STATE", PROPOSED_FSW_STATE)
-    return {"truth": _codec("TRUTH", records.TRUTH, TRUTH_SCHEMA_ID, on_reject),
-            "fsw": _codec("FSW_STATE", fsw_dtype, FSW_STATE_SCHEMA_ID, on_reject),
+    return {"truth": codec.Codec.for_schema("TRUTH", on_reject=on_reject),
+            "fsw": codec.Codec.for_schema("FSW_STATE", on_reject=on_reject),
             "event": codec.Codec.for_schema("EVENT", on_reject=on_reject)}
 
 

@@ -133,6 +133,11 @@ class SensorMonitor:
     def jets_must_hold_off(self) -> bool:
         return self.stale
 
+    def restart_sequence(self) -> None:
+        """A new sensor source (a restarted plant) counts its steps from 0 again: forget
+        the last step index so its frames are not rejected as out of order."""
+        self.last_k = None
+
     def _reject(self, t_s: float, reason: str, text: str) -> bool:
         self.counts[reason] += 1
         self.events.emit(t_s, Severity.WARNING, "monitor", f"frame_{reason}", text[:50], rate_limited=True)

@@ -44,6 +44,26 @@ FAULT_OFF = 1          # FAILURE_TYPE_OFF: failed off
 FAULT_STUCK = 2        # FAILURE_TYPE_STUCK: stuck on
 FAULT_DEGRADED = 4     # FAILURE_TYPE_WRONG: degraded, eta in (0, 1)
 FAULT_KINDS = (FAULT_CLEAR, FAULT_OFF, FAULT_STUCK, FAULT_DEGRADED)
+FAULT_NAMES = {FAULT_CLEAR: "clear", FAULT_OFF: "off", FAULT_STUCK: "stuck", FAULT_DEGRADED: "degraded"}
+FAULT_CODES = {v: k for k, v in FAULT_NAMES.items()}
+
+
+def check_fault_request(jet, kind: str, eta) -> None:
+    """What the plant can apply: jet 0..18 (0 = all), kind clear|off|stuck|degraded, eta
+    in (0, 1) for degraded and 1 otherwise. ValueError with the reason if not. The plant
+    and the FSW's ground link both judge requests with this one rule."""
+    import math
+    if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= jet <= N_JETS:
+        raise ValueError(f"jet must be an integer 0..{N_JETS} (0 = all), got {jet!r}")
+    if kind not in FAULT_CODES:
+        raise ValueError(f"fault kind must be one of {', '.join(FAULT_CODES)}, got {kind!r}")
+    if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating, np.integer)) or not math.isfinite(eta):
+        raise ValueError(f"eta must be a finite number, got {eta!r}")
+    if kind == "degraded":
+        if not 0.0 < eta < 1.0:
+            raise ValueError(f"degraded needs 0 < eta < 1, got {eta}")
+    elif eta != 1.0:
+        raise ValueError(f"eta applies to kind 'degraded' only, got eta={eta} for {kind!r}")
 
 FAULT = np.dtype([
     ("t_apply_ns", "<i8"),         # simulated time at which to apply [ns]; < 0 = at the next step

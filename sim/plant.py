@@ -618,18 +618,7 @@ class Plant:
         return rec
 
 
-def _check_fault(jet, kind, eta) -> None:
-    if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= jet <= N_JETS:
-        raise ValueError(f"jet must be an integer 0..{N_JETS} (0 = all), got {jet!r}")
-    if kind not in FAULT_KINDS:
-        raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {kind!r}")
-    if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating, np.integer)) or not math.isfinite(eta):
-        raise ValueError(f"eta must be a finite number, got {eta!r}")
-    if kind == "degraded":
-        if not 0.0 < eta < 1.0:
-            raise ValueError(f"degraded needs 0 < eta < 1, got {eta}")
-    elif eta != 1.0:
-        raise ValueError(f"eta applies to kind 'degraded' only, got eta={eta} for {kind!r}")
+_check_fault = records.check_fault_request
 
 
 def _as_command(u) -> np.ndarray:

@@ -46,6 +46,28 @@ def _add_report(sub):
     p.set_defaults(func=run)
 
 
+def _add_sil(sub):
+    from ellipsled.sil import fsw_node, launcher, sim_node
+
+    p = sub.add_parser("run", help="the SIL: plant, flight software and viewers as processes over Zenoh")
+    launcher.add_arguments(p)
+    p.set_defaults(func=launcher.main)
+    p = sub.add_parser("sim", help="the plant process of the SIL")
+    sim_node.add_arguments(p)
+    p.set_defaults(func=sim_node.main)
+    p = sub.add_parser("fsw", help="the flight-software process of the SIL")
+    fsw_node.add_arguments(p)
+    p.set_defaults(func=fsw_node.main)
+
+    def viz(a):
+        from gse.viz.bridge import bridge_main
+        return bridge_main(a)
+    from gse.viz.bridge import add_arguments as viz_arguments
+    p = sub.add_parser("viz", help="the Rerun bridge: Zenoh truth/state/events -> Rerun")
+    viz_arguments(p)
+    p.set_defaults(func=viz)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="ellipsled", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -54,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     _add_report(sub)
     from gse.cli import add_gse_parser
     add_gse_parser(sub)
+    _add_sil(sub)
     a = ap.parse_args(argv)
     try:
         return int(a.func(a) or 0)

@@ -74,8 +74,7 @@ def record_truth(h: History, i: int, truth: dict) -> None:
 def record_fsw(h: History, i: int, fsw, u: np.ndarray, compute_ns: int) -> None:
     """The flight software's half of row i, after its control cycle for that step."""
     a = h.a
-    a["k"][i] = fsw.k
-    a["t_s"][i] = fsw.t_s
+    a["k"][i] = fsw.k          # the same step index as the truth half: merge() aligns on it
     g = fsw.guidance
     a["bank_ref_rad"][i] = g.phi_r
     a["bankdot_ref_radps"][i] = g.phidot_r

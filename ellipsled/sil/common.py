@@ -1,0 +1,68 @@
+"""What the SIL processes share: command-line options, signals, the session set-up."""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+
+from interfaces import transport
+from interfaces.keys import keys
+
+DEFAULT_PREFIX = "ellipsled/ellipsled"
+
+
+def add_common_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenario", nargs="?", default="nominal", help="scenario name (data/scenarios) or .toml path")
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--ft-off", action="store_true", help="fault tolerance off")
+    p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
+                      help="deterministic: the plant waits for each jet command (default)")
+    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
+                      help="the plant runs on its own clock; the FSW on absolute deadlines")
+    p.set_defaults(mode="lockstep")
+    p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                   help="Zenoh endpoint(s) to listen on, e.g. tcp/127.0.0.1:7447")
+    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   help="Zenoh endpoint(s) to connect to")
+    p.add_argument("--zenoh-config", default=None, metavar="FILE",
+                   help="a Zenoh JSON5 configuration (router, peers, TLS, access control) used instead of "
+                        "the embedded loopback peer configuration")
+    p.add_argument("--prefix", default=DEFAULT_PREFIX, help="key-expression prefix of this run/vehicle")
+    p.add_argument("--out", default=None, help="folder for this process's records")
+    p.add_argument("--rt", action="store_true", help="real-time hygiene: SCHED_FIFO, affinity, mlockall")
+    p.add_argument("--rt-priority", type=int, default=80)
+    p.add_argument("--cpu", type=int, default=None, help="pin to this CPU")
+
+
+class Stop:
+    """SIGINT/SIGTERM set a flag the loops poll; a blocking wait never ignores Ctrl-C."""
+
+    def __init__(self):
+        self.requested = False
+        self.signal = None
+        signal.signal(signal.SIGINT, self._on)
+        signal.signal(signal.SIGTERM, self._on)
+
+    def _on(self, signum, frame):
+        self.requested = True
+        self.signal = signum
+
+    def __bool__(self) -> bool:
+        return self.requested
+
+
+def open_node(role: str, args):
+    """(session, keys) for a node, from its options."""
+    session = transport.open_session(role, args.listen, args.connect, args.zenoh_config)
+    return session, keys(args.prefix)
+
+
+def say(role: str, text: str) -> None:
+    print(f"[{role}] {text}", file=sys.stderr, flush=True)
+
+
+def now_ns() -> int:
+    return time.monotonic_ns()

@@ -1,0 +1,279 @@
+"""``ellipsled fsw``: the flight-software process.
+
+The same FlightSoftware and Topology (rate groups) as the batch runner. Lockstep: each
+sensor frame that arrives is a tick. Real time: releases at absolute times on the
+monotonic clock, phase-locked to the plant's publication of step 0 plus --rt-offset-us;
+each release takes the newest sensor frame (waiting up to --frame-wait-us for the one due).
+Out: the jet command (fsw/jets), the FSW state for viewers (fsw/state), events
+(fsw/events), ground injections forwarded to the plant (sim/faults), and the MAVLink
+ground link when a signing key is given.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+from fsw import rt
+
+rt.single_threaded_numerics()   # before NumPy spins up any thread pool
+
+import numpy as np  # noqa: E402
+
+from common.frames import wrap_pi  # noqa: E402
+from ellipsled.batch import alloc_sample, fsw_report, prepare  # noqa: E402
+from ellipsled.history import History, record_fsw  # noqa: E402
+from fsw.events import EventLog, Severity  # noqa: E402
+from fsw.executive import LockstepClock, RealTimeClock, sleep_until_ns  # noqa: E402
+from fsw.flightsoftware import FlightSoftware  # noqa: E402
+from fsw.topology import Topology  # noqa: E402
+from interfaces import records, transport  # noqa: E402
+from interfaces.codec import Codec, event_record  # noqa: E402
+
+from .common import Stop, add_common_arguments, now_ns, open_node, say  # noqa: E402
+
+ROLE = "fsw"
+
+
+def add_arguments(p) -> None:
+    add_common_arguments(p)
+    p.add_argument("--rt-offset-us", type=float, default=300.0,
+                   help="real time: release this long after the plant publishes a step")
+    p.add_argument("--frame-wait-us", type=float, default=3000.0,
+                   help="real time: at a release, wait this long at most for the frame due")
+    p.add_argument("--gcs", default="udp:127.0.0.1:14550", help="ground station address (MAVLink)")
+    p.add_argument("--mavlink-bind", default="udp:127.0.0.1:14555", help="the vehicle's MAVLink address")
+    p.add_argument("--signing-key", default=None,
+                   help="MAVLink signing key file (or $ELLIPSLED_SIGNING_KEY_FILE); no key = no ground link")
+    p.add_argument("--wait-peers", type=float, default=30.0)
+
+
+class FswNode:
+    def __init__(self, args):
+        self.args = args
+        self.stop = Stop()
+        self.scn = prepare(args.scenario, args.ft_off, args.duration)
+        self.events = EventLog()
+        self.fsw = FlightSoftware(self.scn, self.events)
+        self.session, self.K = open_node(ROLE, args)
+        self.sub_sensors = transport.subscriber(self.session, self.K.sensors,
+                                                newest_only=args.mode == "realtime")
+        self.pub_jets = transport.publisher(self.session, self.K.jets)
+        self.pub_state = transport.publisher(self.session, self.K.state, express=False)
+        self.pub_events = transport.publisher(self.session, self.K.events, express=False)
+        self.pub_faults = transport.publisher(self.session, self.K.faults)
+        self.token = transport.declare_alive(self.session, self.K, ROLE)
+        self.dec_sensors = Codec.for_schema("SENSORS", on_reject=self._rejected)
+        self.enc_jets = Codec.for_schema("JETS")
+        self.enc_state = Codec.for_schema("FSW_STATE")
+        self.enc_events = Codec.for_schema("EVENT")
+        self.enc_faults = Codec.for_schema("FAULT")
+        self.frame = records.new(records.SENSORS)        # our own copy of the newest frame
+        self.jets = records.new(records.JETS)
+        self.state = records.new(records.FSW_STATE)
+        self.fault = records.new(records.FAULT)
+        self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
+        self.samples: list[dict] = []
+        self.events_sent = 0
+        self.fault_seq = 0
+        self.source_id = None
+        self.last_frame_wall = 0.0
+        self.next_k = 0
+        self.jitter_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)   # every tick, whole run
+        self.ticks = 0
+        clock = LockstepClock() if args.mode == "lockstep" else RealTimeClock(
+            int(round(self.scn.dt_control_s * 1e9)), spin_ns=int(self.fsw.params["executive.spin_us"] * 1e3))
+        self.topo = Topology(self.fsw, clock, frame_source=self._newest_frame)
+        self.topo.add(1, "publish", self._publish)
+        self.topo.add(2, "events", self._publish_events)
+        self.link = self._ground_link()
+        if self.link is not None:
+            self.topo.add(2, "groundlink", lambda c: self.link.tick(self.frame))
+
+    # ------------------------------------------------------------------ inputs
+    def _rejected(self, reason: str, detail: str) -> None:
+        self.events.emit(self.fsw.t_s, Severity.WARNING, "link", f"rx_{reason}",
+                         f"SENSOR PAYLOAD REJECTED: {reason}"[:50], rate_limited=True)
+
+    def _accept(self, sample) -> bool:
+        """Decode a sensor sample into our frame copy; note a new plant (restart)."""
+        rec = self.dec_sensors.decode(sample.payload.to_bytes(), out=self.frame)
+        if rec is None:
+            return False
+        pid = self.dec_sensors.last_publisher_id
+        if self.source_id is not None and pid != self.source_id:
+            self.fsw.monitor.restart_sequence()
+            self.events.emit(self.fsw.t_s, Severity.NOTICE, "link", "new_sensor_source", "NEW SENSOR SOURCE")
+        self.source_id = pid
+        self.last_frame_wall = time.monotonic()
+        return True
+
+    def _newest_frame(self):
+        """Real time: the newest fresh frame (waiting briefly for the one due), or None."""
+        deadline = now_ns() + int(self.args.frame_wait_us * 1e3)
+        got = False
+        while True:
+            s, _ = transport.latest(self.sub_sensors)
+            if s is not None and self._accept(s):
+                got = True
+                if int(self.frame["k"]) >= self.next_k:
+                    break
+            if now_ns() >= deadline:
+                break
+            time.sleep(20e-6)
+        if not got:
+            return None
+        self.next_k = int(self.frame["k"]) + 1
+        return self.frame
+
+    # ------------------------------------------------------------------ outputs
+    def _publish(self, cyc) -> None:
+        fsw, topo = self.fsw, self.topo
+        if not topo.got_frame:
+            return
+        j = self.jets
+        j["k"] = fsw.k
+        j["t_release_ns"] = cyc.t_release_ns
+        j["u"] = topo.u
+        t = now_ns()
+        j["t_publish_ns"] = t
+        self.pub_jets.put(self.enc_jets.encode(j, fsw.k, t))
+        st = self.state
+        g = fsw.guidance
+        st["k"], st["t_ns"], st["t_release_ns"] = fsw.k, int(round(fsw.t_s * 1e9)), cyc.t_release_ns
+        st["bank_ref_rad"], st["bankdot_ref_radps"] = g.phi_r, g.phidot_r
+        st["bank_err_rad"] = fsw.bank_err_rad
+        st["sigma_RN"], st["u_cal_B"], st["tau_alloc_B"] = g.sigma_RN, fsw.u_cal_B, fsw.tau_alloc_B
+        st["theta_hat"] = fsw.control.theta_hat
+        st["eta_hat"] = fsw.health.eta
+        st["compute_us"] = topo.last_compute_ns * 1e-3
+        st["alloc_us"] = fsw.alloc_ns * 1e-3
+        st["jitter_us"] = (cyc.t_start_ns - cyc.t_release_ns) * 1e-3
+        st["slips"] = topo.executive.slips
+        st["jets_cmd"], st["health"] = topo.u, fsw.health.state
+        st["mode"], st["alloc_degraded"] = int(fsw.modes.mode), fsw.allocator.degraded
+        self.pub_state.put(self.enc_state.encode(st, fsw.k, t))
+
+    def _publish_events(self, cyc) -> None:
+        hist = self.events.history
+        while self.events_sent < len(hist):
+            e = hist[self.events_sent]
+            rec = event_record(int(round(e.t_s * 1e9)), int(e.severity), e.source, e.code, e.text)
+            self.pub_events.put(self.enc_events.encode(rec, self.events_sent, now_ns()))
+            self.events_sent += 1
+
+    def inject(self, jet: int, kind: str, eta: float) -> bool:
+        """Ground fault injection: forwarded to the plant. ValueError when the plant could
+        not apply it; False when no plant is there to take it."""
+        records.check_fault_request(jet, kind, eta)
+        if time.monotonic() - self.last_frame_wall > 1.0:
+            return False
+        f = self.fault
+        f["jet"], f["kind"], f["eta"] = jet, records.FAULT_CODES[kind], eta
+        f["t_apply_ns"], f["request_id"] = 0, self.fault_seq
+        self.pub_faults.put(self.enc_faults.encode(f, self.fault_seq, now_ns()))
+        self.fault_seq += 1
+        return True
+
+    def _ground_link(self):
+        path = self.args.signing_key or os.environ.get("ELLIPSLED_SIGNING_KEY_FILE")
+        if not path:
+            say(ROLE, "no signing key (--signing-key or ELLIPSLED_SIGNING_KEY_FILE): MAVLink ground link off")
+            return None
+        from fsw.groundlink import GroundLink
+        from interfaces.mavlink.signing import SigningKey
+        key = SigningKey.from_file(path)
+        gl = GroundLink(self.fsw, key, gcs=self.args.gcs, bind=self.args.mavlink_bind, inject=self.inject)
+        say(ROLE, f"MAVLink ground link on {self.args.mavlink_bind}, ground station {self.args.gcs}")
+        return gl
+
+    # ------------------------------------------------------------------ loops
+    def _record(self) -> None:
+        cyc = self.topo.executive.cycle
+        if self.ticks >= len(self.jitter_ns):
+            self.jitter_ns = np.concatenate((self.jitter_ns, np.zeros_like(self.jitter_ns)))
+        self.jitter_ns[self.ticks] = cyc.t_start_ns - cyc.t_release_ns
+        self.ticks += 1
+        if not self.topo.got_frame:
+            return
+        record_fsw(self.history, self.history.row(), self.fsw, self.topo.u, self.topo.last_compute_ns)
+        if self.fsw.k % 1000 == 0:
+            self.samples.append(alloc_sample(self.fsw))
+
+    def run_lockstep(self) -> None:
+        while not self.stop:
+            s = transport.recv(self.sub_sensors, 0.1)
+            if s is None or not self._accept(s):
+                continue
+            self.topo.tick(self.frame)
+            self._record()
+
+    def run_realtime(self) -> None:
+        # phase-lock to the plant: wait for its first frame, release rt-offset after each publication
+        first = None
+        while not self.stop and first is None:
+            s = transport.recv(self.sub_sensors, 0.1)
+            if s is not None and self._accept(s):
+                first = int(self.frame["k"])
+        if first is None:
+            return
+        period = self.topo.executive.period_ns
+        t_pub0 = self.dec_sensors.last_t_pub_ns
+        self.topo.executive.clock.start(t_pub0 - first * period + int(self.args.rt_offset_us * 1e3))
+        self.next_k = first
+        while not self.stop:
+            self.topo.tick()
+            self._record()
+
+    def run(self) -> int:
+        a = self.args
+        if a.rt:
+            rep = rt.apply(cpus=[a.cpu] if a.cpu is not None else None, priority=a.rt_priority)
+            say(ROLE, f"real-time: {rep}")
+            self.rt_report = rep
+        rt.gc_out_of_cycle()
+        say(ROLE, f"{self.scn.name}, {a.mode}; waiting for the plant")
+        if not transport.wait_for_alive(self.session, self.K.alive_sim, a.wait_peers):
+            say(ROLE, f"no plant joined within {a.wait_peers:g} s")
+        (self.run_realtime if a.mode == "realtime" else self.run_lockstep)()
+        self.write()
+        return 0
+
+    def write(self) -> None:
+        if not self.args.out:
+            return
+        out = Path(self.args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        self.history.save(out / "fsw_history.npz")
+        rep = fsw_report(self.fsw, self.topo.executive.slips, self.samples)
+        ex = self.topo.executive.telemetry()
+        jit = self.jitter_ns[: self.ticks] / 1e3
+        rep.update({
+            "mode": self.args.mode, "ticks": self.ticks,
+            "jitter_p50_us": float(np.percentile(jit, 50)) if len(jit) else None,
+            "jitter_p99_us": float(np.percentile(jit, 99)) if len(jit) else None,
+            "jitter_max_us": float(np.max(jit)) if len(jit) else None,
+            "executive": ex, "params": self.fsw.params, "sensor_rejects": dict(self.dec_sensors.rejects),
+            "monitor_counts": dict(self.fsw.monitor.counts),
+            "event_log": [{"t_s": e.t_s, "severity": e.severity.name, "source": e.source, "code": e.code,
+                           "text": e.text} for e in self.events.history],
+            "rt": getattr(self, "rt_report", None),
+            "ground_link": (dict(self.link.stats) if self.link is not None and hasattr(self.link, "stats") else None),
+        })
+        (out / "fsw.json").write_text(json.dumps(rep, indent=2, default=str) + "\n")
+
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+        transport.close(self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
+                        self.pub_faults, self.session)
+
+
+def main(args) -> int:
+    node = FswNode(args)
+    try:
+        return node.run()
+    finally:
+        node.close()

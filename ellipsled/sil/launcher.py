@@ -1,0 +1,209 @@
+"""``ellipsled run``: the whole SIL on one machine with one command.
+
+Starts the plant (listening on a free loopback port), the flight software, the Rerun
+bridge and optionally the ground console, all on an embedded Zenoh configuration (peer
+mode, no scouting, explicit 127.0.0.1 endpoints: no router to install). When the plant
+finishes, or on Ctrl-C / SIGTERM, every child is stopped by its pid (SIGTERM, then SIGKILL
+after a timeout). The run writes the same summary.json as the batch runner, plus sil.json
+(speed, latency, jitter) and the per-process records. Across machines: pass
+--zenoh-config FILE (router or peers, TLS, access control) — configuration, not code.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ellipsled.batch import format_summary, judge, prepare
+from ellipsled.history import History, merge
+from interfaces import transport
+
+from .common import DEFAULT_PREFIX, say
+
+ROLE = "run"
+STOP_TIMEOUT_S = 5.0
+
+
+def add_arguments(p) -> None:
+    p.add_argument("scenario", nargs="?", default="nominal", help="scenario name (data/scenarios) or .toml path")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
+                      help="deterministic, as fast as the CPU allows (default)")
+    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
+                      help="the plant on its own clock at --speed, the FSW on absolute deadlines")
+    p.set_defaults(mode="lockstep")
+    p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--out", default="runs/sil", help="output folder")
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--ft-off", action="store_true")
+    p.add_argument("--speed", type=float, default=1.0, help="real time: simulated seconds per wall second")
+    p.add_argument("--rerun", default="auto",
+                   help="viewer | web | file | none | auto (viewer with a display, else file); '+' joins")
+    p.add_argument("--console", action="store_true", help="open the ground console beside the SIL")
+    p.add_argument("--signing-key", default=None,
+                   help="MAVLink signing key file; default: a fresh key for this run in a private temp folder")
+    p.add_argument("--zenoh-config", default=None, metavar="FILE", help="Zenoh JSON5 configuration for every node")
+    p.add_argument("--endpoint", default=None, help="the plant's listen endpoint (default tcp/127.0.0.1:<free>)")
+    p.add_argument("--prefix", default=DEFAULT_PREFIX)
+    p.add_argument("--rt", action="store_true", help="SCHED_FIFO/affinity/mlockall for sim (CPU 0) and fsw (CPU 1)")
+    p.add_argument("--fsw-timeout", type=float, default=10.0)
+    p.add_argument("--no-plots", action="store_true")
+
+
+class Launcher:
+    def __init__(self, args):
+        self.args = args
+        self.out = Path(args.out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.children: dict[str, subprocess.Popen] = {}
+        self.logs = []
+        self.stop = False
+        self.tmpdir = None
+
+    def _on_signal(self, signum, frame):
+        self.stop = True
+
+    def _key_file(self) -> str:
+        if self.args.signing_key:
+            return self.args.signing_key
+        if os.environ.get("ELLIPSLED_SIGNING_KEY_FILE"):
+            return os.environ["ELLIPSLED_SIGNING_KEY_FILE"]
+        from interfaces.mavlink.signing import SigningKey
+        self.tmpdir = tempfile.mkdtemp(prefix="ellipsled-key-")
+        path = os.path.join(self.tmpdir, "signing.key")
+        SigningKey.generate().write_file(path)
+        return path
+
+    def spawn(self, role: str, argv: list[str], quiet: bool) -> None:
+        cmd = [sys.executable, "-m", "ellipsled.cli"] + argv
+        if quiet:
+            log = open(self.out / f"{role}.log", "w")
+            self.logs.append(log)
+            p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        else:
+            p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        self.children[role] = p
+
+    def terminate(self, role: str) -> int | None:
+        p = self.children.get(role)
+        if p is None:
+            return None
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+            try:
+                p.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                say(ROLE, f"{role} (pid {p.pid}) did not stop within {STOP_TIMEOUT_S:g} s: killing it")
+                p.kill()
+                p.wait(STOP_TIMEOUT_S)
+        return p.returncode
+
+    def run(self) -> int:
+        a = self.args
+        old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            return self._run()
+        finally:
+            for role in ("sim", "fsw", "viz"):
+                self.terminate(role)
+            for log in self.logs:
+                log.close()
+            if self.tmpdir:
+                shutil.rmtree(self.tmpdir, ignore_errors=True)
+            for s, h in old.items():
+                signal.signal(s, h)
+
+    def _run(self) -> int:
+        a = self.args
+        endpoint = a.endpoint or transport.loopback(transport.free_port())
+        common = ["--prefix", a.prefix] + (["--zenoh-config", a.zenoh_config] if a.zenoh_config else [])
+        scen = [a.scenario] + (["--seed", str(a.seed)] if a.seed is not None else []) \
+            + (["--ft-off"] if a.ft_off else []) + (["--duration", str(a.duration)] if a.duration is not None else [])
+        mode = ["--realtime" if a.mode == "realtime" else "--lockstep"]
+        quiet = a.console
+        key = self._key_file()
+        viz = a.rerun != "none"
+        if viz:
+            self.spawn("viz", ["viz", "--connect", endpoint, "--rerun", a.rerun, "--out", str(self.out),
+                               "--name", "run"] + common, quiet=True)
+        self.spawn("fsw", ["fsw"] + scen + mode + common + ["--connect", endpoint, "--out", str(self.out),
+                                                           "--signing-key", key]
+                   + (["--rt", "--cpu", "1"] if a.rt else []), quiet)
+        self.spawn("sim", ["sim"] + scen + mode + common + ["--listen", endpoint, "--out", str(self.out),
+                                                           "--speed", str(a.speed), "--fsw-timeout", str(a.fsw_timeout)]
+                   + (["--wait-bridge"] if viz else []) + (["--rt", "--cpu", "0"] if a.rt else []), quiet)
+        say(ROLE, f"SIL {a.mode}: plant on {endpoint}; pids " +
+            ", ".join(f"{r} {p.pid}" for r, p in self.children.items()))
+        if not a.signing_key and self.tmpdir:
+            say(ROLE, f"ground link signing key for this run: {key} "
+                      f"(e.g. ELLIPSLED_SIGNING_KEY_FILE={key} ellipsled gse inject --jet 17 --kind off)")
+        if a.console:
+            self._console(key)
+        sim = self.children["sim"]
+        while not self.stop and sim.poll() is None:
+            time.sleep(0.05)
+            for role in ("fsw", "viz"):
+                p = self.children.get(role)
+                if p is not None and p.poll() is not None and not getattr(p, "_reported", False):
+                    p._reported = True
+                    say(ROLE, f"{role} (pid {p.pid}) exited with {p.returncode}")
+        if self.stop:
+            say(ROLE, "stopping (signal)")
+        rc_sim = self.terminate("sim")
+        self.terminate("fsw")
+        self.terminate("viz")
+        return self.summarize(rc_sim)
+
+    def _console(self, key: str) -> None:
+        """The ground console in the foreground; the run goes on until the user quits it."""
+        from gse.cli import main as gse_main
+        gse_main(["gse", "console", "--signing-key", key, "--tlog", str(self.out / "console.tlog")])
+
+    def summarize(self, rc_sim) -> int:
+        a = self.args
+        try:
+            sim_info = json.loads((self.out / "sim.json").read_text())
+            fsw_info = json.loads((self.out / "fsw.json").read_text())
+            h = merge(History.load(self.out / "sim_history.npz"), History.load(self.out / "fsw_history.npz"))
+        except (OSError, ValueError, KeyError) as e:
+            say(ROLE, f"no complete records to summarize ({e}); see the logs in {self.out}")
+            return 1
+        scn = prepare(a.scenario, a.ft_off, a.duration)
+        seed = scn.seed if a.seed is None else a.seed
+        faults = [tuple(x) for x in sim_info["faults_applied"]]
+        summary = judge(h, scn, seed, sim_info["end_reason"], fsw_info, faults, fsw_info["params"])
+        summary["mode"] = f"sil-{a.mode}"
+        summary["wall_s"] = sim_info["wall_s"]
+        summary["realtime_factor"] = sim_info["realtime_factor"]
+        sil = {"mode": a.mode, "realtime_factor": sim_info["realtime_factor"], "wall_s": sim_info["wall_s"],
+               "latency_p50_us": sim_info["latency_p50_us"], "latency_p99_us": sim_info["latency_p99_us"],
+               "latency_max_us": sim_info["latency_max_us"], "latency_samples": sim_info["latency_samples"],
+               "jitter_p50_us": fsw_info["jitter_p50_us"], "jitter_p99_us": fsw_info["jitter_p99_us"],
+               "jitter_max_us": fsw_info["jitter_max_us"], "slips": fsw_info["cycle_slips"],
+               "sim_counts": sim_info["counts"], "sim_rejects": sim_info["rejects"],
+               "fsw_sensor_rejects": fsw_info["sensor_rejects"], "end_reason": sim_info["end_reason"],
+               "message": sim_info["message"], "rt": fsw_info.get("rt")}
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (self.out / "sil.json").write_text(json.dumps(sil, indent=2) + "\n")
+        h.save(self.out / "history.npz")
+        if not a.no_plots:
+            from ellipsled.plots import plot_run
+            plot_run(h, self.out, summary["scenario"])
+        print(format_summary(summary))
+        if a.mode == "realtime":
+            f = lambda x: "n/a" if x is None else f"{x:.0f}"  # noqa: E731
+            print(f"  real time: latency p50 {f(sil['latency_p50_us'])} us p99 {f(sil['latency_p99_us'])} us;"
+                  f" release jitter p50 {f(sil['jitter_p50_us'])} us p99 {f(sil['jitter_p99_us'])} us"
+                  f" max {f(sil['jitter_max_us'])} us; slips {sil['slips']}")
+        print(f"wrote {self.out / 'summary.json'}")
+        return 0 if summary["completed"] else 1
+
+
+def main(args) -> int:
+    return Launcher(args).run()

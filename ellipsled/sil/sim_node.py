@@ -1,0 +1,262 @@
+"""``ellipsled sim``: the plant process.
+
+Lockstep: publish the sensor frame of step k, wait for the jet command that answers k,
+integrate [t_k, t_k+1). If the FSW stops answering, end the run after --fsw-timeout with a
+clear message. Real time: step k is released at t0 + k·period/speed on the monotonic
+clock; the newest jet command received by the deadline is applied and its latency
+recorded; with no fresh command for --miss-periods periods the jets are held off.
+Fault injections arrive on sim/faults and are applied at the next step boundary.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ellipsled.batch import end_reason_of, prepare, scheduled_faults
+from ellipsled.history import History, record_truth
+from fsw.executive import sleep_until_ns
+from interfaces import records, transport
+from interfaces.codec import Codec
+from sim.plant import Plant
+
+from .common import Stop, add_common_arguments, now_ns, open_node, say
+
+ROLE = "sim"
+
+
+def add_arguments(p) -> None:
+    add_common_arguments(p)
+    p.add_argument("--speed", type=float, default=1.0, help="real time: simulated seconds per wall second")
+    p.add_argument("--fsw-timeout", type=float, default=10.0,
+                   help="lockstep: end the run when the FSW has not answered for this long [s]")
+    p.add_argument("--wait-peers", type=float, default=30.0, help="how long to wait for the FSW at start [s]")
+    p.add_argument("--wait-bridge", action="store_true", help="also wait for the Rerun bridge before step 0")
+    p.add_argument("--miss-periods", type=int, default=3,
+                   help="real time: hold jets off after this many periods without a fresh command")
+
+
+class SimNode:
+    def __init__(self, args):
+        self.args = args
+        self.stop = Stop()
+        self.scn = prepare(args.scenario, args.ft_off, args.duration)
+        self.seed = self.scn.seed if args.seed is None else args.seed
+        self.plant = Plant(self.scn, self.seed)
+        self.session, self.K = open_node(ROLE, args)
+        self.pub_sensors = transport.publisher(self.session, self.K.sensors)
+        self.pub_truth = transport.publisher(self.session, self.K.truth)
+        self.sub_jets = transport.subscriber(self.session, self.K.jets, newest_only=args.mode == "realtime")
+        self.sub_faults = transport.subscriber(self.session, self.K.faults)
+        self.token = transport.declare_alive(self.session, self.K, ROLE)
+        self.enc_sensors = Codec.for_schema("SENSORS")
+        self.enc_truth = Codec.for_schema("TRUTH")
+        self.dec_jets = Codec.for_schema("JETS", on_reject=self._rejected)
+        self.dec_faults = Codec.for_schema("FAULT", on_reject=self._rejected)
+        self.truth_rec = records.new(records.TRUTH)
+        self.u = np.zeros(records.N_JETS, dtype=np.uint8)
+        self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
+        self.faults_applied = list(scheduled_faults(self.scn))
+        self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
+                       "faults_applied": 0}
+        self.rejects: dict[str, int] = {}
+        self.latency_ns: list[int] = []
+        self.end_reason = ""
+        self.message = ""
+
+    def _rejected(self, reason: str, detail: str) -> None:
+        self.rejects[reason] = self.rejects.get(reason, 0) + 1
+        if self.rejects[reason] in (1, 10, 100, 1000):
+            say(ROLE, f"rejected payload ({reason}): {detail} [{self.rejects[reason]} so far]")
+
+    # ------------------------------------------------------------------ faults
+    def apply_faults(self) -> None:
+        while True:
+            s = self.sub_faults.try_recv()
+            if s is None:
+                return
+            rec = self.dec_faults.decode(s.payload.to_bytes())
+            if rec is None:
+                continue
+            jet, eta = int(rec["jet"]), float(rec["eta"])
+            kind = records.FAULT_NAMES.get(int(rec["kind"]))
+            try:
+                if kind is None:
+                    raise ValueError(f"unknown fault kind code {int(rec['kind'])}")
+                if kind != "degraded":
+                    eta = 1.0
+                self.plant.set_fault(jet, kind, eta)
+            except ValueError as e:
+                self.counts["fault_rejected"] += 1
+                say(ROLE, f"fault request refused: {e}")
+                continue
+            self.counts["faults_applied"] += 1
+            jets = range(1, records.N_JETS + 1) if jet == 0 else (jet,)
+            self.faults_applied += [(self.plant.t_s, j, kind) for j in jets]
+            say(ROLE, f"t={self.plant.t_s:.2f}s fault applied: jet {jet or 'all'} {kind}"
+                      + (f" eta={eta:g}" if kind == "degraded" else ""))
+
+    # ------------------------------------------------------------------ I/O
+    def publish_sensors(self) -> int:
+        t = now_ns()
+        self.pub_sensors.put(self.enc_sensors.encode(self.plant.sensors, self.plant.k, t))
+        return t
+
+    def record_and_publish_truth(self) -> None:
+        truth = self.plant.truth()
+        record_truth(self.history, self.history.row(), truth)
+        for name, val in truth.items():
+            self.truth_rec[name] = val
+        self.pub_truth.put(self.enc_truth.encode(self.truth_rec, self.plant.k, now_ns()))
+
+    def _take_command(self, rec) -> int:
+        self.u[:] = rec["u"]
+        return int(rec["k"])
+
+    # ------------------------------------------------------------------ lockstep
+    def wait_command(self, k: int) -> bool:
+        """Lockstep: block (interruptibly) until the command answering k arrives."""
+        t_last = time.monotonic()
+        while not self.stop:
+            s = transport.recv(self.sub_jets, 0.05)
+            if s is None:
+                if time.monotonic() - t_last > self.args.fsw_timeout:
+                    self.end_reason = "fsw_timeout"
+                    self.message = (f"the FSW has not answered sensor frame k={k} (t={self.plant.t_s:.2f} s) "
+                                    f"for {self.args.fsw_timeout:g} s: ending the run")
+                    return False
+                continue
+            rec = self.dec_jets.decode(s.payload.to_bytes())
+            if rec is None:
+                continue
+            kc = int(rec["k"])
+            if kc == k:
+                self._take_command(rec)
+                return True
+            self.counts["stale_commands"] += 1    # an answer to an older frame (or a replay)
+        self.end_reason = "stopped"
+        return False
+
+    def run_lockstep(self) -> None:
+        while not self.stop:
+            self.apply_faults()
+            self.publish_sensors()
+            if not self.wait_command(self.plant.k):
+                return
+            self.record_and_publish_truth()
+            done, reason = self.plant.done()
+            if done:
+                self.end_reason = reason
+                return
+            self.plant.step(self.u)
+        self.end_reason = self.end_reason or "stopped"
+
+    # ------------------------------------------------------------------ real time
+    def run_realtime(self) -> None:
+        period = int(round(self.scn.dt_control_s * 1e9 / self.args.speed))
+        margin = min(2_000_000, period // 4)
+        t0 = now_ns() + 50_000_000
+        last_cmd_k = -10**9
+        holding = False
+        while not self.stop:
+            k = self.plant.k
+            release = t0 + k * period
+            sleep_until_ns(release)
+            if now_ns() > release + period:      # fell a whole period behind: re-phase, count it
+                self.counts["late_commands"] += 1
+            self.apply_faults()
+            t_pub = self.publish_sensors()
+            deadline = release + period - margin
+            got = False
+            while now_ns() < deadline and not self.stop:
+                s = transport.recv(self.sub_jets, max(0.0, (deadline - now_ns()) * 1e-9), poll_s=20e-6)
+                if s is None:
+                    break
+                rec = self.dec_jets.decode(s.payload.to_bytes())
+                if rec is None:
+                    continue
+                kc = int(rec["k"])
+                if kc < last_cmd_k:
+                    self.counts["stale_commands"] += 1
+                    continue
+                last_cmd_k = self._take_command(rec)
+                if kc == k:
+                    self.latency_ns.append(now_ns() - t_pub)
+                    got = True
+                    break
+            if not got:
+                self.counts["missed_commands"] += 1
+            if k - last_cmd_k >= self.args.miss_periods:
+                self.u[:] = 0
+                if not holding:
+                    holding = True
+                    say(ROLE, f"t={self.plant.t_s:.2f}s no jet command for {k - last_cmd_k} periods: jets held off")
+            elif holding:
+                holding = False
+                say(ROLE, f"t={self.plant.t_s:.2f}s jet commands back: resuming")
+            self.record_and_publish_truth()
+            done, reason = self.plant.done()
+            if done:
+                self.end_reason = reason
+                return
+            self.plant.step(self.u)
+        self.end_reason = self.end_reason or "stopped"
+
+    # ------------------------------------------------------------------ main
+    def run(self) -> int:
+        a = self.args
+        if a.rt:
+            from fsw import rt
+            rep = rt.apply(cpus=[a.cpu] if a.cpu is not None else None, priority=a.rt_priority)
+            say(ROLE, f"real-time: {rep}")
+        say(ROLE, f"{self.scn.name} seed {self.seed}, {a.mode}; waiting for the FSW")
+        if not (transport.wait_for_alive(self.session, self.K.alive_fsw, a.wait_peers)
+                and transport.wait_for_subscriber(self.pub_sensors, a.wait_peers)
+                and (not a.wait_bridge or (transport.wait_for_alive(self.session, self.K.alive_bridge, a.wait_peers)
+                                           and transport.wait_for_subscriber(self.pub_truth, a.wait_peers)))):
+            self.end_reason = "no_fsw"
+            self.message = f"no FSW{' or bridge' if a.wait_bridge else ''} joined within {a.wait_peers:g} s"
+        else:
+            wall0 = time.perf_counter()
+            (self.run_realtime if a.mode == "realtime" else self.run_lockstep)()
+            self.wall_s = time.perf_counter() - wall0
+        if self.message:
+            say(ROLE, self.message)
+        self.write()
+        say(ROLE, f"end: {self.end_reason} at t={self.plant.t_s:.2f} s")
+        return 0 if self.end_reason in ("mach", "altitude", "timeout") else 3
+
+    def write(self) -> None:
+        if not self.args.out:
+            return
+        out = Path(self.args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        self.history.save(out / "sim_history.npz")
+        lat = np.array(self.latency_ns, dtype=float) / 1e3
+        wall = getattr(self, "wall_s", None)
+        info = {
+            "scenario": self.scn.name, "seed": self.seed, "mode": self.args.mode,
+            "end_reason": end_reason_of(self.end_reason, self.args.duration), "message": self.message,
+            "t_end_s": self.plant.t_s, "steps": self.history.n, "wall_s": wall,
+            "realtime_factor": (self.plant.t_s / wall) if wall else None,
+            "faults_applied": self.faults_applied, "counts": self.counts, "rejects": self.rejects,
+            "latency_p50_us": float(np.percentile(lat, 50)) if len(lat) else None,
+            "latency_p99_us": float(np.percentile(lat, 99)) if len(lat) else None,
+            "latency_max_us": float(np.max(lat)) if len(lat) else None,
+            "latency_samples": int(len(lat)),
+        }
+        (out / "sim.json").write_text(json.dumps(info, indent=2) + "\n")
+
+    def close(self) -> None:
+        transport.close(self.token, self.sub_jets, self.sub_faults, self.pub_sensors, self.pub_truth, self.session)
+
+
+def main(args) -> int:
+    node = SimNode(args)
+    try:
+        return node.run()
+    finally:
+        node.close()

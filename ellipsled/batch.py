@@ -137,6 +137,7 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
     plant = Plant(scn, seed)
     fsw = FlightSoftware(scn, EventLog())
     topo = Topology(fsw, LockstepClock())
+    topo.warm_up(plant.sensors)
     h = History(int(math.ceil(scn.max_duration_s / scn.dt_control_s)) + 2)
     samples = []
     frame = plant.sensors

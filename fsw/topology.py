@@ -41,6 +41,14 @@ class Topology:
         else:
             self.u = self.fsw.control_step(frame)
 
+    def warm_up(self, frame) -> None:
+        """Run one control cycle of a throwaway FlightSoftware on ``frame`` so every compiled
+        kernel is loaded before the first real cycle (the first call of each numba kernel
+        costs tens of ms). The flying instance's state is untouched."""
+        spare = FlightSoftware(self.fsw.scenario, param_overrides=None)
+        spare.control_step(frame)
+        spare.slow_step()
+
     def add(self, group: int, name: str, fn: Callable[[Cycle], object]) -> None:
         self.executive.add(group, name, fn)
 

@@ -203,10 +203,14 @@ class FswNode:
             self.samples.append(alloc_sample(self.fsw))
 
     def run_lockstep(self) -> None:
+        warm = False
         while not self.stop:
             s = transport.recv(self.sub_sensors, 0.1)
             if s is None or not self._accept(s):
                 continue
+            if not warm:
+                self.topo.warm_up(self.frame)
+                warm = True
             self.topo.tick(self.frame)
             self._record()
 
@@ -219,6 +223,7 @@ class FswNode:
                 first = int(self.frame["k"])
         if first is None:
             return
+        self.topo.warm_up(self.frame)
         period = self.topo.executive.period_ns
         t_pub0 = self.dec_sensors.last_t_pub_ns
         self.topo.executive.clock.start(t_pub0 - first * period + int(self.args.rt_offset_us * 1e3))

@@ -121,7 +121,10 @@ class Launcher:
 
     def _run(self) -> int:
         a = self.args
+        # peers route nothing for each other (no router, no gossip): every viewer connects to
+        # both data sources, the plant and the FSW, each listening on its own loopback port
         endpoint = a.endpoint or transport.loopback(transport.free_port())
+        fsw_endpoint = transport.loopback(transport.free_port())
         common = ["--prefix", a.prefix] + (["--zenoh-config", a.zenoh_config] if a.zenoh_config else [])
         scen = [a.scenario] + (["--seed", str(a.seed)] if a.seed is not None else []) \
             + (["--ft-off"] if a.ft_off else []) + (["--duration", str(a.duration)] if a.duration is not None else [])
@@ -130,10 +133,10 @@ class Launcher:
         key = self._key_file()
         viz = a.rerun != "none"
         if viz:
-            self.spawn("viz", ["viz", "--connect", endpoint, "--rerun", a.rerun, "--out", str(self.out),
+            self.spawn("viz", ["viz", "--connect", endpoint, "--connect", fsw_endpoint, "--rerun", a.rerun, "--out", str(self.out),
                                "--name", "run"] + common, quiet=True)
-        self.spawn("fsw", ["fsw"] + scen + mode + common + ["--connect", endpoint, "--out", str(self.out),
-                                                           "--signing-key", key]
+        self.spawn("fsw", ["fsw"] + scen + mode + common + ["--connect", endpoint, "--listen", fsw_endpoint,
+                                                           "--out", str(self.out), "--signing-key", key]
                    + (["--rt", "--cpu", "1"] if a.rt else []), quiet)
         self.spawn("sim", ["sim"] + scen + mode + common + ["--listen", endpoint, "--out", str(self.out),
                                                            "--speed", str(a.speed), "--fsw-timeout", str(a.fsw_timeout)]

@@ -191,7 +191,7 @@ class SimNode:
                 self.counts["missed_commands"] += 1
             if k - last_cmd_k >= self.args.miss_periods:
                 self.u[:] = 0
-                if not holding:
+                if not holding and last_cmd_k >= 0:
                     holding = True
                     say(ROLE, f"t={self.plant.t_s:.2f}s no jet command for {k - last_cmd_k} periods: jets held off")
             elif holding:

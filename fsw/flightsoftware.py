@@ -122,6 +122,7 @@ class FlightSoftware:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards
         STALE and holds the jets off once stale."""
         self.cycles += 1
+        self.t_s = t_s
         self.monitor.tick(t_s, got_frame=False)
         if self.monitor.stale:
             return self._hold_off(t_s)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import os
 import secrets
 import struct
+import time
 import zlib
 from dataclasses import dataclass
 from typing import Callable
@@ -118,13 +119,19 @@ class SequenceGuard:
       the current publisher (``publisher_changes`` += 1) and the old id is retired; a frame
       from a retired id afterwards means two publishers are live on one topic:
       ``second_publisher``, rejected and counted. With ``takeover=False`` only the first
-      publisher ever seen is accepted.
+      publisher ever seen is accepted. With ``takeover_after_s`` a new publisher takes over
+      only once the current one has been silent that long (a restart); before that it is
+      a second publisher — so one stray or hostile frame cannot lock out the owner.
     """
 
     RETIRED_MAX = 16
 
-    def __init__(self, takeover: bool = True):
+    def __init__(self, takeover: bool = True, takeover_after_s: float | None = None,
+                 now_ns=time.monotonic_ns):
         self.takeover = takeover
+        self.takeover_after_ns = None if takeover_after_s is None else int(takeover_after_s * 1e9)
+        self._now_ns = now_ns
+        self._last_ns = 0
         self.publisher_id: int | None = None
         self.last_seq = -1
         self.accepted = 0
@@ -136,14 +143,17 @@ class SequenceGuard:
         self._retired: list[int] = []
 
     def reset(self) -> None:
-        self.__init__(self.takeover)
+        self.__init__(self.takeover, None if self.takeover_after_ns is None else self.takeover_after_ns / 1e9,
+                      self._now_ns)
 
     def check(self, publisher_id: int, seq: int) -> str | None:
         """None if the frame is acceptable (and recorded), else the rejection reason."""
         if self.publisher_id is None:
             self.publisher_id = publisher_id
         elif publisher_id != self.publisher_id:
-            if not self.takeover or publisher_id in self._retired:
+            owner_live = (self.takeover_after_ns is not None
+                          and self._now_ns() - self._last_ns < self.takeover_after_ns)
+            if not self.takeover or publisher_id in self._retired or owner_live:
                 self.second_publisher += 1
                 self.last_error = (f"second publisher {publisher_id:#010x} on a topic owned by "
                                    f"{self.publisher_id:#010x}")
@@ -161,6 +171,8 @@ class SequenceGuard:
             self.lost += seq - self.last_seq - 1
         self.last_seq = seq
         self.accepted += 1
+        if self.takeover_after_ns is not None:
+            self._last_ns = self._now_ns()
         return None
 
 

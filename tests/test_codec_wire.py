@@ -307,3 +307,19 @@ def test_event_record_round_trip_and_truncation():
     assert C.record_text(got["source"]) == "fdir" and C.record_text(got["code"]) == "jet_failed_off"
     back = C.record_text(got["text"])
     assert len(text.encode()) > 50 and text.startswith(back.rstrip("\ufffd")) and len(back) > 40
+
+
+def test_takeover_after_silence_keeps_the_owner_against_a_stray_publisher():
+    """A second publisher is refused while the owner is live, and takes over only after the
+    owner has been silent for takeover_after_s (a restart)."""
+    from interfaces.codec import SequenceGuard
+    t = [0]
+    g = SequenceGuard(takeover_after_s=1.0, now_ns=lambda: t[0])
+    assert g.check(0xA, 0) is None
+    t[0] += 10_000_000
+    assert g.check(0xB, 0) == "second_publisher"          # owner live: intruder refused
+    assert g.check(0xA, 1) is None                          # owner still accepted
+    t[0] += 2_000_000_000
+    assert g.check(0xB, 5) is None                          # owner silent 2 s: restart takes over
+    assert g.publisher_id == 0xB and g.publisher_changes == 1
+    assert g.check(0xA, 2) == "second_publisher"          # the old owner is now retired

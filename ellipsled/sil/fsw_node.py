@@ -30,7 +30,7 @@ from fsw.executive import LockstepClock, RealTimeClock, sleep_until_ns  # noqa: 
 from fsw.flightsoftware import FlightSoftware  # noqa: E402
 from fsw.topology import Topology  # noqa: E402
 from interfaces import records, transport  # noqa: E402
-from interfaces.codec import Codec, event_record  # noqa: E402
+from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 
 from .common import Stop, add_common_arguments, now_ns, open_node, say  # noqa: E402
 
@@ -65,7 +65,9 @@ class FswNode:
         self.pub_events = transport.publisher(self.session, self.K.events, express=False)
         self.pub_faults = transport.publisher(self.session, self.K.faults)
         self.token = transport.declare_alive(self.session, self.K, ROLE)
-        self.dec_sensors = Codec.for_schema("SENSORS", on_reject=self._rejected)
+        # a restarted plant takes over the sensor key after 1 s of silence, not before
+        self.dec_sensors = Codec.for_schema("SENSORS", guard=SequenceGuard(takeover_after_s=1.0),
+                                            on_reject=self._rejected)
         self.enc_jets = Codec.for_schema("JETS")
         self.enc_state = Codec.for_schema("FSW_STATE")
         self.enc_events = Codec.for_schema("EVENT")

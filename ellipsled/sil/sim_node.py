@@ -20,7 +20,7 @@ from ellipsled.batch import end_reason_of, prepare, scheduled_faults
 from ellipsled.history import History, record_truth
 from fsw.executive import sleep_until_ns
 from interfaces import records, transport
-from interfaces.codec import Codec
+from interfaces.codec import Codec, SequenceGuard
 from sim.plant import Plant
 
 from .common import Stop, add_common_arguments, now_ns, open_node, say
@@ -54,7 +54,8 @@ class SimNode:
         self.token = transport.declare_alive(self.session, self.K, ROLE)
         self.enc_sensors = Codec.for_schema("SENSORS")
         self.enc_truth = Codec.for_schema("TRUTH")
-        self.dec_jets = Codec.for_schema("JETS", on_reject=self._rejected)
+        # the FSW owns the jets key; another publisher takes over only after 1 s of silence
+        self.dec_jets = Codec.for_schema("JETS", guard=SequenceGuard(takeover_after_s=1.0), on_reject=self._rejected)
         self.dec_faults = Codec.for_schema("FAULT", on_reject=self._rejected)
         self.truth_rec = records.new(records.TRUTH)
         self.u = np.zeros(records.N_JETS, dtype=np.uint8)

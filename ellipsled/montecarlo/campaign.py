@@ -1,0 +1,237 @@
+"""A Monte Carlo campaign: its data file, the per-run draw, and the dispersed scenario.
+
+Spec 30-scenarios.md (Monte Carlo campaign). A run's noise seed and dispersions are a pure
+function of (master seed, run_id): ``draw_run`` never depends on other runs, on the order
+runs finish, or on the machine, so a campaign can be resumed, extended or spread over a
+cluster, and any run is rebuilt from its record by ``apply_dispersion``.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from common.config import ConfigError, Table, load_toml, resolve
+from common.model import INERTIA_KEYS, N_JETS, FaultEvent, Scenario, Truth, inertia_matrix, inertia_vector
+
+AERO_KEYS = ("C_lbeta", "C_malpha", "C_nbeta")
+BROKEN_FDIR_DELAY_S = -1.0   # outside fdir.delay_s's bounds: the FSW refuses it, run() raises
+
+
+@dataclass(frozen=True)
+class Dispersions:
+    """Uniform ranges (lo, hi); counts are inclusive integer ranges."""
+    inertia_scale: tuple[float, float]
+    density_scale: tuple[float, float]
+    aero_scale: tuple[float, float]
+    bank0_err_deg: tuple[float, float]
+    flight_path_offset_deg: tuple[float, float]
+    fdir_delay_s: tuple[float, float]
+    fault_t_s: tuple[float, float]
+    n_failed_off: tuple[int, int]
+    n_stuck_on: tuple[int, int]
+    n_degraded: tuple[int, int]
+    degraded_eta: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Criteria:
+    """What makes a run a success (spec: completes, finite, bounded error, no cycle slip)."""
+    completed: bool
+    finite: bool
+    bank_err_max_after_fault_deg: float
+    max_cycle_slips: int
+
+    def failures(self, summary: dict) -> list[str]:
+        """The criteria this run's summary.json breaks (empty: success)."""
+        out = []
+        if self.completed and not summary.get("completed"):
+            out.append("completed")
+        if self.finite and summary.get("nonfinite", True):
+            out.append("finite")
+        e = summary.get("bank_err_max_after_fault_deg")
+        t_f, t_end = summary.get("fault_t_s"), summary.get("t_end_s")
+        fault_flown = t_f is None or t_end is None or t_f <= t_end   # else vacuous: the run ended first
+        if fault_flown and (e is None or not e <= self.bank_err_max_after_fault_deg):
+            out.append("bank_err_max_after_fault_deg")
+        slips = summary.get("cycle_slips")
+        if slips is None or slips > self.max_cycle_slips:
+            out.append("max_cycle_slips")
+        return out
+
+
+@dataclass(frozen=True)
+class Campaign:
+    name: str
+    description: str
+    file: str
+    scenario: str              # base scenario (name in data/scenarios or path)
+    runs: int
+    master_seed: int
+    dispersions: Dispersions
+    success: Criteria
+    break_runs: tuple[int, ...] = ()   # [testing]: runs given an invalid FDIR delay (run() raises)
+
+    def record(self) -> dict:
+        """Plain JSON of everything that decides the draws and the verdicts (campaign.json)."""
+        d = asdict(self)
+        d.pop("file")
+        return json.loads(json.dumps(d))
+
+
+def _range(t: Table, key: str, lo: float | None = None, hi: float | None = None, lo_open: bool = False,
+           hi_open: bool = False, integer: bool = False) -> tuple:
+    v = t.raw(key)
+    if integer and (not isinstance(v, list) or not all(isinstance(x, int) and not isinstance(x, bool) for x in v)):
+        raise t.error(key, f"must be [lo, hi] with integers, got {v!r}")
+    a = t.vec(key, 2, lo=lo, hi=hi, lo_open=lo_open, hi_open=hi_open)
+    if a[0] > a[1]:
+        raise t.error(key, f"lo must not exceed hi, got {v!r}")
+    return (int(a[0]), int(a[1])) if integer else (float(a[0]), float(a[1]))
+
+
+def load_campaign(name_or_path: str | Path) -> Campaign:
+    """Read and validate a campaign file (data/campaigns/<name>.toml or a path)."""
+    path = resolve("campaigns", name_or_path)
+    root = Table(load_toml(path), path)
+    c = root.table("campaign")
+    d = root.table("dispersions")
+    f = d.table("faults")
+    disp = Dispersions(
+        inertia_scale=_range(d, "inertia_scale", lo=0, lo_open=True),
+        density_scale=_range(d, "density_scale", lo=0, lo_open=True),
+        aero_scale=_range(d, "aero_scale", lo=0, lo_open=True),
+        bank0_err_deg=_range(d, "bank0_err_deg", lo=-180, hi=180),
+        flight_path_offset_deg=_range(d, "flight_path_offset_deg", lo=-10, hi=10),
+        fdir_delay_s=_range(d, "fdir_delay_s", lo=0, hi=60),
+        fault_t_s=_range(f, "t_s", lo=0),
+        n_failed_off=_range(f, "failed_off", lo=0, hi=N_JETS, integer=True),
+        n_stuck_on=_range(f, "stuck_on", lo=0, hi=N_JETS, integer=True),
+        n_degraded=_range(f, "degraded", lo=0, hi=N_JETS, integer=True),
+        degraded_eta=_range(f, "degraded_eta", lo=0, hi=1, lo_open=True, hi_open=True),
+    )
+    if disp.n_failed_off[1] + disp.n_stuck_on[1] + disp.n_degraded[1] > N_JETS:
+        raise f.error("failed_off", f"the largest fault sets together exceed the {N_JETS} jets")
+    s = root.table("success")
+    crit = Criteria(
+        completed=s.bool("completed", default=True),
+        finite=s.bool("finite", default=True),
+        bank_err_max_after_fault_deg=s.num("bank_err_max_after_fault_deg", lo=0, lo_open=True),
+        max_cycle_slips=s.num("max_cycle_slips", default=0, lo=0, integer=True),
+    )
+    tst = root.table("testing", default={})
+    br = tst.raw("break_runs", default=[])
+    if not isinstance(br, list) or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in br):
+        raise tst.error("break_runs", f"must be a list of run ids (integers >= 0), got {br!r}")
+    camp = Campaign(
+        name=c.str("name"), description=c.str("description", default=""), file=str(path),
+        scenario=c.str("scenario"),
+        runs=c.num("runs", lo=1, integer=True),
+        master_seed=c.num("master_seed", lo=0, hi=2**63 - 1, integer=True),
+        dispersions=disp, success=crit, break_runs=tuple(sorted(set(br))),
+    )
+    for t in (c, f, d, s, tst, root):
+        t.reject_unknown()
+    return camp
+
+
+def run_rng(master_seed: int, run_id: int) -> tuple[int, np.random.Generator]:
+    """(noise seed, dispersion generator) of one run: independent streams per run_id."""
+    if isinstance(run_id, bool) or not isinstance(run_id, (int, np.integer)) or run_id < 0:
+        raise ValueError(f"run_id must be an integer >= 0, got {run_id!r}")
+    ss = np.random.SeedSequence(int(master_seed), spawn_key=(int(run_id),))
+    seed = int(ss.generate_state(1, np.uint32)[0])
+    return seed, np.random.Generator(np.random.PCG64(ss.spawn(1)[0]))
+
+
+def draw_run(camp: Campaign, base: Scenario, run_id: int, master_seed: int | None = None) -> tuple[int, dict]:
+    """(noise seed, dispersions) of run ``run_id``. Dispersions are plain values
+    (floats, ints, tuples of jet numbers): exactly what is recorded and re-applied."""
+    seed, rng = run_rng(camp.master_seed if master_seed is None else master_seed, run_id)
+    d = camp.dispersions
+    h0 = inertia_vector(base.vehicle.inertia_kgm2)
+    for _ in range(1000):   # products of inertia may make a draw non-physical: redraw (deterministic)
+        isc = rng.uniform(*d.inertia_scale, size=6)
+        if np.min(np.linalg.eigvalsh(inertia_matrix(h0 * isc))) > 0:
+            break
+    else:
+        raise ValueError("inertia_scale: no positive-definite truth inertia in 1000 draws; narrow the range")
+    out = {f"inertia_scale_{k}": float(x) for k, x in zip(INERTIA_KEYS, isc)}
+    out["density_scale"] = float(rng.uniform(*d.density_scale))
+    for k in AERO_KEYS:
+        out[f"{k}_scale"] = float(rng.uniform(*d.aero_scale))
+    out["bank0_err_deg"] = float(rng.uniform(*d.bank0_err_deg))
+    out["flight_path_offset_deg"] = float(rng.uniform(*d.flight_path_offset_deg))
+    out["fdir_delay_s"] = float(rng.uniform(*d.fdir_delay_s))
+    out["fault_t_s"] = float(rng.uniform(*d.fault_t_s))
+    n_off = int(rng.integers(d.n_failed_off[0], d.n_failed_off[1] + 1))
+    n_stuck = int(rng.integers(d.n_stuck_on[0], d.n_stuck_on[1] + 1))
+    n_deg = int(rng.integers(d.n_degraded[0], d.n_degraded[1] + 1))
+    jets = [int(j) + 1 for j in rng.permutation(N_JETS)]
+    out["jets_failed_off"] = tuple(sorted(jets[:n_off]))
+    out["jets_stuck_on"] = tuple(sorted(jets[n_off:n_off + n_stuck]))
+    out["jets_degraded"] = tuple(sorted(jets[n_off + n_stuck:n_off + n_stuck + n_deg]))
+    out["degraded_eta"] = tuple(float(x) for x in rng.uniform(*d.degraded_eta, size=n_deg))
+    if run_id in camp.break_runs:
+        out["fdir_delay_s"] = BROKEN_FDIR_DELAY_S
+    return seed, out
+
+
+def apply_dispersion(base: Scenario, disp: dict, seed: int, name: str) -> Scenario:
+    """The base scenario with one run's dispersions: truth = nominal x scales (its own
+    truth and faults are replaced), initial bank = reference start + error."""
+    try:
+        isc = np.array([float(disp[f"inertia_scale_{k}"]) for k in INERTIA_KEYS])
+        truth = Truth(inertia_scale=isc, density_scale=float(disp["density_scale"]),
+                      **{f"{k}_scale": float(disp[f"{k}_scale"]) for k in AERO_KEYS})
+        t_f = float(disp["fault_t_s"])
+        off, stuck, deg = (tuple(int(j) for j in disp[k]) for k in ("jets_failed_off", "jets_stuck_on", "jets_degraded"))
+        eta = tuple(float(x) for x in disp["degraded_eta"])
+        bank_err = math.radians(float(disp["bank0_err_deg"]))
+        gamma_off = math.radians(float(disp["flight_path_offset_deg"]))
+        delay = float(disp["fdir_delay_s"])
+    except KeyError as e:
+        raise ValueError(f"dispersion record lacks {e.args[0]!r}") from None
+    if len(eta) != len(deg):
+        raise ValueError(f"degraded_eta has {len(eta)} values for {len(deg)} degraded jets")
+    if not all(math.isfinite(x) for x in (*isc, truth.density_scale, t_f, bank_err, gamma_off, delay, *eta)):
+        raise ValueError("dispersion record holds a non-finite value")
+    faults = []
+    if off:
+        faults.append(FaultEvent(t_s=t_f, jets=off, kind="off"))
+    if stuck:
+        faults.append(FaultEvent(t_s=t_f, jets=stuck, kind="stuck"))
+    faults += [FaultEvent(t_s=t_f, jets=(j,), kind="degraded", eta=e) for j, e in zip(deg, eta)]
+    fsw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.fsw.items()}
+    fsw.setdefault("fdir", {})["delay_s"] = delay
+    return base.with_(name=name, seed=int(seed), truth=truth, faults=tuple(faults), fsw=fsw,
+                      bank0_rad=base.bank_schedule[0][1] + bank_err,
+                      flight_path_rad=base.flight_path_rad + gamma_off)
+
+
+def dispersion_columns(disp: dict) -> dict:
+    """The record's columns (``disp.<name>``): jet sets as JSON text, plus their sizes."""
+    out = {}
+    for k, v in disp.items():
+        out[f"disp.{k}"] = json.dumps(list(v)) if isinstance(v, tuple) else v
+    out["disp.n_failed_off"] = len(disp["jets_failed_off"])
+    out["disp.n_stuck_on"] = len(disp["jets_stuck_on"])
+    out["disp.n_degraded"] = len(disp["jets_degraded"])
+    return out
+
+
+def dispersion_from_columns(row: dict) -> dict:
+    """Inverse of ``dispersion_columns`` (JSON floats round-trip exactly)."""
+    out = {}
+    for k, v in row.items():
+        if not k.startswith("disp.") or k[5:] in ("n_failed_off", "n_stuck_on", "n_degraded"):
+            continue
+        out[k[5:]] = tuple(json.loads(v)) if isinstance(v, str) else v
+    return out
+
+
+__all__ = ["Campaign", "Criteria", "Dispersions", "ConfigError", "load_campaign", "run_rng", "draw_run",
+           "apply_dispersion", "dispersion_columns", "dispersion_from_columns"]

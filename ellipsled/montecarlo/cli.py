@@ -1,0 +1,117 @@
+"""Command line of the Monte Carlo campaign, and the bridge for ``ellipsled batch
+--from-campaign DIR --run ID`` (one run rebuilt from its record)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import NamedTuple
+
+from common.model import Scenario
+
+
+def _positive_int(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {s!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def _nonneg_int(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {s!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
+    return v
+
+
+def _positive_float(s: str) -> float:
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {s!r}") from None
+    if not (v > 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {s}")
+    return v
+
+
+def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
+    """``ellipsled montecarlo <campaign> --runs N --out DIR [--scheduler ADDRESS]
+    [--workers K] [--duration S] [--seed S]``."""
+    p = subparsers.add_parser("montecarlo", help="dispersed Monte Carlo campaign on Dask (local or a cluster)",
+                              description=main.__doc__)
+    p.add_argument("campaign", help="campaign name (data/campaigns) or .toml path")
+    p.add_argument("--runs", type=_positive_int, default=None, help="number of runs (default: the campaign's)")
+    p.add_argument("--out", required=True, help="campaign folder: results.parquet, summary.md, plots; "
+                                                "an existing one is resumed")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="existing Dask scheduler, e.g. tcp://host:8786 (default: an embedded local cluster)")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="worker processes of the embedded cluster (default: one per core)")
+    p.add_argument("--duration", type=_positive_float, default=None, help="stop every run after S s of flight")
+    p.add_argument("--seed", type=_nonneg_int, default=None, help="master seed (default: the campaign's)")
+    p.add_argument("--flush-s", type=_positive_float, default=5.0, help="write finished rows at least this often")
+    p.add_argument("--dashboard", action="store_true", help="embedded cluster: Dask dashboard on 127.0.0.1")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=main)
+    return p
+
+
+def main(args) -> int:
+    """Run or resume a campaign; Ctrl-C stops cleanly (rerun the same command to resume)."""
+    from .engine import run_campaign
+    if args.scheduler and args.workers:
+        print("ellipsled montecarlo: --workers applies to the embedded cluster only; ignored with --scheduler",
+              file=sys.stderr)
+    res = run_campaign(args.campaign, args.out, runs=args.runs, master_seed=args.seed, duration_s=args.duration,
+                       scheduler=args.scheduler, workers=args.workers, dashboard=args.dashboard,
+                       progress=not args.no_progress, flush_s=args.flush_s)
+    if res.dashboard:
+        print(f"dashboard was at {res.dashboard}")
+    if res.interrupted:
+        print(f"ellipsled montecarlo: interrupted; {res.recorded} of {res.runs} runs recorded in "
+              f"{Path(args.out) / 'results.parquet'}; run the same command again to resume", file=sys.stderr)
+        return 130
+    print(f"{res.recorded} of {res.runs} runs recorded ({res.new} new, {res.failed_new} of them raised) "
+          f"in {res.wall_s:.1f} s; summary: {Path(args.out) / 'summary.md'}")
+    return 0
+
+
+class CampaignRun(NamedTuple):
+    scenario: Scenario
+    seed: int
+    duration_s: float | None
+    record: dict
+
+
+def scenario_for_run(campaign_dir: str | Path, run_id: int) -> CampaignRun:
+    """Rebuild run ``run_id`` of a campaign folder from its record: the recorded seed and
+    dispersions applied to the campaign's snapshot of its base scenario."""
+    from common.model import load_scenario
+    from .campaign import apply_dispersion, dispersion_from_columns
+    from .engine import RESULTS_DIR, SCENARIO_FILE, read_meta
+    from .store import ResultStore
+    d = Path(campaign_dir)
+    meta = read_meta(d)
+    rec = ResultStore(d / RESULTS_DIR).row(run_id)
+    base = load_scenario(d / SCENARIO_FILE)
+    scn = apply_dispersion(base, dispersion_from_columns(rec), rec["seed"], f"{meta['campaign']['name']}-{run_id}")
+    return CampaignRun(scn, int(rec["seed"]), meta["duration_s"], rec)
+
+
+def apply_campaign_run(args) -> None:
+    """For ``ellipsled batch --from-campaign DIR --run ID``: set ``args.scenario``,
+    ``args.seed`` and ``args.duration`` (unless given) from the run's record."""
+    if args.run is None:
+        raise ValueError("--from-campaign needs --run ID")
+    if getattr(args, "seed", None) is not None:
+        raise ValueError("--seed conflicts with --from-campaign (the record holds the seed)")
+    r = scenario_for_run(args.from_campaign, args.run)
+    args.scenario, args.seed = r.scenario, r.seed
+    if getattr(args, "duration", None) is None:
+        args.duration = r.duration_s

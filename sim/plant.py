@@ -310,6 +310,91 @@ def _sense(x, aux, frac, sig, gyro_bias, blocks_g, blocks_a, blocks_n, blocks_c,
         out_c[j] = frac[j] + sig[4] * blocks_c[i, j]
 
 
+# ---- the truth vector: the float part of interfaces.records.TRUTH, in its order ----
+TRUTH_SCALARS = ("t_s", "h_m", "V_rel_mps", "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa",
+                 "rho_kgpm3", "alpha_rad", "beta_rad", "bank_rad", "decel_g", "propellant_kg")
+TRUTH_VECTORS = (("sigma_BN", 3), ("omega_BN_B", 3), ("r_N", 3), ("v_N", 3), ("tau_jets_B", 3), ("tau_ext_B", 3),
+                 ("tau_aero_B", 3), ("jet_thrust_frac", N_JETS), ("fault_eta", N_JETS))
+T_SIGMA, T_OMEGA, T_R, T_V, T_TAU_JETS, T_TAU_EXT, T_TAU_AERO = 15, 18, 21, 24, 27, 30, 33
+T_FRAC, T_ETA = 36, 36 + N_JETS
+N_TRUTH_F = 36 + 2 * N_JETS
+
+
+@njit(cache=True)
+def _truth_kernel(x, aux, book, tau_jets, tau_ext, frac, fault_eta, fault_state, k, dt, dt_ns, om, mass, g0,
+                  isp, out_f, out_i, out_s):
+    """The truth at step k (spec 40-interfaces.md, sim/truth): floats into out_f (TRUTH_SCALARS
+    then TRUTH_VECTORS), [k, t_ns] into out_i, the fault states into out_s. The same
+    arithmetic, term for term, as the NumPy version it replaced (bit-identical results)."""
+    rx, ry, rz = x[0], x[1], x[2]
+    ux, uy, uz = x[3] + om * ry, x[4] - om * rx, x[5]          # v - Omega x r
+    V = math.sqrt(ux * ux + uy * uy + uz * uz)
+    rn = math.sqrt(rx * rx + ry * ry + rz * rz)
+    upx, upy, upz = rx / rn, ry / rn, rz / rn                 # local axes (common/frames.local_axes)
+    lam = math.atan2(ry, rx)
+    ex, ey, ez = -math.sin(lam), math.cos(lam), 0.0
+    nx, ny, nz = upy * ez - upz * ey, upz * ex - upx * ez, upx * ey - upy * ex
+    t_s = k * dt
+    c = (ux * upx + uy * upy + uz * upz) / V
+    c = c if c < 1.0 else 1.0                                # Python max(-1, min(1, c)), NaN -> 1
+    c = c if c > -1.0 else -1.0
+    lon = lam - om * t_s
+    fx, fy, fz = aux[A_F_AERO_N], aux[A_F_AERO_N + 1], aux[A_F_AERO_N + 2]
+    out_f[0] = t_s
+    out_f[1] = aux[A_H]
+    out_f[2] = V
+    out_f[3] = math.asin(c)
+    out_f[4] = math.atan2(ux * ex + uy * ey + uz * ez, ux * nx + uy * ny + uz * nz)
+    out_f[5] = math.asin(rz / rn)
+    out_f[6] = lon - 2.0 * math.pi * math.floor((lon + math.pi) / (2.0 * math.pi))
+    out_f[7] = aux[A_MACH]
+    out_f[8] = aux[A_QBAR]
+    out_f[9] = aux[A_RHO]
+    out_f[10] = aux[A_ALPHA]
+    out_f[11] = aux[A_BETA]
+    out_f[12] = aux[A_BANK]
+    out_f[13] = math.sqrt(fx * fx + fy * fy + fz * fz) / mass / g0
+    out_f[14] = book[0] / (isp * g0)
+    for j in range(3):
+        out_f[T_SIGMA + j] = x[6 + j]
+        out_f[T_OMEGA + j] = x[9 + j]
+        out_f[T_R + j] = x[j]
+        out_f[T_V + j] = x[3 + j]
+        out_f[T_TAU_JETS + j] = tau_jets[j]
+        out_f[T_TAU_EXT + j] = tau_ext[j]
+        out_f[T_TAU_AERO + j] = aux[A_TAU_AERO_B + j]
+    for j in range(frac.shape[0]):
+        out_f[T_FRAC + j] = frac[j]
+        out_f[T_ETA + j] = fault_eta[j]
+        out_s[j] = fault_state[j]
+    out_i[0] = k
+    out_i[1] = k * dt_ns
+
+
+def _truth_layout_ok() -> bool:
+    """True when interfaces.records.TRUTH is [k, t_ns] int64, then the truth vector as
+    contiguous float64, then fault_state int8: fill_truth then writes records in place."""
+    f = records.TRUTH.fields
+    try:
+        off = 16
+        ok = f["k"][0] == np.dtype("<i8") and f["k"][1] == 0 and f["t_ns"][0] == np.dtype("<i8") \
+            and f["t_ns"][1] == 8
+        for name in TRUTH_SCALARS:
+            ok = ok and f[name][0] == np.dtype("<f8") and f[name][1] == off
+            off += 8
+        for name, n in TRUTH_VECTORS:
+            ok = ok and f[name][0] == np.dtype(("<f8", (n,))) and f[name][1] == off
+            off += 8 * n
+        return bool(ok and off == 16 + 8 * N_TRUTH_F and f["fault_state"][0] == np.dtype(("i1", (N_JETS,)))
+                    and f["fault_state"][1] == off)
+    except KeyError:
+        return False
+
+
+_TRUTH_FAST = _truth_layout_ok()
+_TRUTH_STATE_OFFSET = 16 + 8 * N_TRUTH_F
+
+
 def state_derivative(x: np.ndarray, p: np.ndarray, tau_B=None, F_B=None) -> tuple[np.ndarray, np.ndarray]:
     """(x_dot, aux) at state x with parameter vector p (for tests and analysis)."""
     dx = np.empty(12)
@@ -435,6 +520,7 @@ class Plant:
         self._tau_ext = np.zeros(3)
         self._zero3 = np.zeros(3)
         self._book = np.zeros(1)            # total impulse [N s]
+        self._ti = np.zeros(2, np.int64)    # scratch [k, t_ns] for truth()
         self._status = STEP_OK
 
         sn = scenario.sensors
@@ -582,40 +668,60 @@ class Plant:
     def propellant_kg(self) -> float:
         return float(self._book[0] / (self._isp * self._g0))
 
+    def _truth_into(self, out_f: np.ndarray, out_i: np.ndarray, out_s: np.ndarray) -> None:
+        _truth_kernel(self.x, self.aux, self._book, self._tau_jets, self._tau_ext, self._frac, self.fault_eta,
+                      self.fault_state, self.k, self.dt_control_s, self.dt_control_ns,
+                      self.scenario.planet.omega_radps, self.scenario.vehicle.mass_kg, self._g0, self._isp,
+                      out_f, out_i, out_s)
+
     def truth(self) -> dict:
-        """The full truth at t_k (spec 40-interfaces.md, sim/truth), as plain values."""
-        x, a = self.x, self.aux
-        r_N, v_N = x[0:3].copy(), x[3:6].copy()
-        om = self.scenario.planet.omega_radps
-        u = v_N - np.array([-om * r_N[1], om * r_N[0], 0.0])
-        north, east, up = local_axes(r_N)
-        V = float(np.linalg.norm(u))
-        lon = math.atan2(r_N[1], r_N[0]) - om * self.t_s
+        """The full truth at t_k (spec 40-interfaces.md, sim/truth), as plain values (Python
+        scalars; arrays are copies)."""
+        f, s = np.empty(N_TRUTH_F), np.empty(N_JETS, np.int8)   # fresh: the arrays below are views of f
+        self._truth_into(f, self._ti, s)
+        v = f[:15].tolist()
         return {
             "k": self.k, "t_s": self.t_s, "t_ns": self.t_ns,
-            "h_m": float(a[A_H]), "V_rel_mps": V,
-            "gamma_rad": math.asin(max(-1.0, min(1.0, float(u @ up) / V))),
-            "psi_rad": math.atan2(float(u @ east), float(u @ north)),
-            "lat_rad": math.asin(r_N[2] / np.linalg.norm(r_N)),
-            "lon_rad": lon - 2.0 * math.pi * math.floor((lon + math.pi) / (2.0 * math.pi)),
-            "mach": float(a[A_MACH]), "qbar_pa": float(a[A_QBAR]), "rho_kgpm3": float(a[A_RHO]),
-            "alpha_rad": float(a[A_ALPHA]), "beta_rad": float(a[A_BETA]), "bank_rad": float(a[A_BANK]),
-            "sigma_BN": x[6:9].copy(), "omega_BN_B": x[9:12].copy(), "r_N": r_N, "v_N": v_N,
-            "tau_jets_B": self._tau_jets.copy(), "tau_ext_B": self._tau_ext.copy(),
-            "tau_aero_B": a[A_TAU_AERO_B:A_TAU_AERO_B + 3].copy(),
-            "jet_thrust_frac": self._frac.copy(),
-            "decel_g": float(np.linalg.norm(a[A_F_AERO_N:A_F_AERO_N + 3])) / self.scenario.vehicle.mass_kg / self._g0,
-            "fault_state": self.fault_state.copy(), "fault_eta": self.fault_eta.copy(),
-            "propellant_kg": self.propellant_kg,
+            "h_m": v[1], "V_rel_mps": v[2], "gamma_rad": v[3], "psi_rad": v[4], "lat_rad": v[5], "lon_rad": v[6],
+            "mach": v[7], "qbar_pa": v[8], "rho_kgpm3": v[9],
+            "alpha_rad": v[10], "beta_rad": v[11], "bank_rad": v[12],
+            "sigma_BN": f[T_SIGMA:T_SIGMA + 3], "omega_BN_B": f[T_OMEGA:T_OMEGA + 3],
+            "r_N": f[T_R:T_R + 3], "v_N": f[T_V:T_V + 3],
+            "tau_jets_B": f[T_TAU_JETS:T_TAU_JETS + 3], "tau_ext_B": f[T_TAU_EXT:T_TAU_EXT + 3],
+            "tau_aero_B": f[T_TAU_AERO:T_TAU_AERO + 3],
+            "jet_thrust_frac": f[T_FRAC:T_FRAC + N_JETS],
+            "decel_g": v[13],
+            "fault_state": s, "fault_eta": f[T_ETA:T_ETA + N_JETS],
+            "propellant_kg": v[14],
         }
 
     def fill_truth(self, rec: np.ndarray | None = None) -> np.ndarray:
-        """The truth as an interfaces.records.TRUTH record (filled in place when given)."""
+        """The truth as an interfaces.records.TRUTH record (filled in place when given).
+        A writeable 0-d TRUTH ndarray is written by one compiled call (no dict, no
+        allocation): the batch and the SIL can record the truth every step through it."""
         if rec is None:
             rec = records.new(records.TRUTH)
-        for name, val in self.truth().items():
-            rec[name] = val
+        views = self.__dict__.get("_tviews")
+        if views is None or views[0] is not rec:
+            views = self._truth_views(rec)
+        if views is None:
+            for name, val in self.truth().items():
+                rec[name] = val
+        else:
+            self._truth_into(views[1], views[2], views[3])
         return rec
+
+    def _truth_views(self, rec):
+        """(rec, floats, [k, t_ns], fault_state) views into rec's buffer, or None when rec is not
+        a writeable 0-d TRUTH ndarray with the expected layout."""
+        if not (_TRUTH_FAST and type(rec) is np.ndarray and rec.dtype == records.TRUTH and rec.shape == ()
+                and rec.flags.writeable and rec.flags.c_contiguous):
+            return None
+        views = (rec, np.ndarray((N_TRUTH_F,), np.float64, buffer=rec, offset=16),
+                 np.ndarray((2,), np.int64, buffer=rec, offset=0),
+                 np.ndarray((N_JETS,), np.int8, buffer=rec, offset=_TRUTH_STATE_OFFSET))
+        self._tviews = views
+        return views
 
 
 _check_fault = records.check_fault_request

@@ -5,9 +5,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from common import atmosphere, frames, mrp
 from common.model import Planet, Vehicle
+
+_rho_exp = njit(cache=True)(atmosphere.density_exponential)
+_rho_poly = njit(cache=True)(atmosphere.density_polynomial)
+_speed_of_sound = njit(cache=True)(atmosphere.speed_of_sound)
+_F8 = np.dtype(np.float64)
+_MODEL_FLAG = {"exponential": 0, "polynomial": 1}
 
 
 class NavState:
@@ -39,6 +46,36 @@ class NavState:
         self.mach = 0.0
 
 
+@njit(cache=True)
+def _nav_kernel(sigma_BN, omega_BN_B, r_N, v_N, accel_B, omega_planet, radius_m, model, rho0, H_m,
+                n_sigma, n_omega, n_r, n_v, n_accel, n_vrel, n_C_WN, n_C_BN):
+    """One navigation update into the NavState arrays n_*; returns (V_rel, h, alpha, beta,
+    bank, rho, qbar, mach). Same steps as the NumPy code it replaced: copy the inputs,
+    v_rel = v - Omega x r, |v_rel|, h = |r| - R, C_WN, C_BN, aerodynamic angles, model
+    density (0 exponential, 1 polynomial), dynamic pressure, Mach."""
+    for j in range(3):
+        n_sigma[j] = sigma_BN[j]
+        n_omega[j] = omega_BN_B[j]
+        n_r[j] = r_N[j]
+        n_v[j] = v_N[j]
+        n_accel[j] = accel_B[j]
+    n_vrel[0] = n_v[0] + omega_planet * n_r[1]
+    n_vrel[1] = n_v[1] - omega_planet * n_r[0]
+    n_vrel[2] = n_v[2]
+    V = math.sqrt(n_vrel[0] * n_vrel[0] + n_vrel[1] * n_vrel[1] + n_vrel[2] * n_vrel[2])
+    h = math.sqrt(n_r[0] * n_r[0] + n_r[1] * n_r[1] + n_r[2] * n_r[2]) - radius_m
+    n_C_WN[:, :] = frames.wind_dcm(n_r, n_vrel)
+    n_C_BN[:, :] = mrp.to_dcm(n_sigma)
+    alpha, beta, bank = frames.aero_angles(n_C_BN, n_C_WN)
+    if model == 0:
+        rho = _rho_exp(h, rho0, H_m)
+    else:
+        rho = _rho_poly(h)
+    qbar = 0.5 * rho * V ** 2
+    mach = V / _speed_of_sound(h)
+    return V, h, alpha, beta, bank, rho, qbar, mach
+
+
 class Navigation:
     """Derives the flight condition from gyro, attitude and navigation sensors."""
 
@@ -46,6 +83,9 @@ class Navigation:
         self.planet = planet
         self.vehicle = vehicle
         self._density = atmosphere.DENSITY_MODELS[planet.density_model]
+        self._model = _MODEL_FLAG[planet.density_model]
+        self._consts = (float(planet.omega_radps), float(planet.radius_m), self._model,
+                        float(planet.rho0_kgpm3), float(planet.scale_height_m))
         self.state = NavState()
 
     def density(self, h_m: float) -> float:
@@ -54,20 +94,25 @@ class Navigation:
         return self._density(h_m)
 
     def update(self, t_s: float, sigma_BN, omega_BN_B, r_N, v_N, accel_B) -> NavState:
+        """The flight condition at t_s from one frame's attitude, rate, position, velocity
+        and sensed acceleration (anything that fills a 3-vector); returns the NavState,
+        updated in place. One compiled call when the inputs are float64 3-vectors."""
         n = self.state
         n.t_s = t_s
-        n.sigma_BN[:] = sigma_BN
-        n.omega_BN_B[:] = omega_BN_B
-        n.r_N[:] = r_N
-        n.v_N[:] = v_N
-        n.accel_B[:] = accel_B
-        n.vrel_N[:] = frames.v_rel_N(n.r_N, n.v_N, self.planet.omega_radps)
-        n.V_rel_mps = float(np.linalg.norm(n.vrel_N))
-        n.h_m = float(np.linalg.norm(n.r_N)) - self.planet.radius_m
-        n.C_WN[:] = frames.wind_dcm(n.r_N, n.vrel_N)
-        n.C_BN[:] = mrp.to_dcm(n.sigma_BN)
-        n.alpha_rad, n.beta_rad, n.bank_rad = frames.aero_angles(n.C_BN, n.C_WN)
-        n.rho_kgpm3 = self.density(n.h_m)
-        n.qbar_pa = 0.5 * n.rho_kgpm3 * n.V_rel_mps ** 2
-        n.mach = n.V_rel_mps / atmosphere.speed_of_sound(n.h_m)
+        nd = np.ndarray
+        if not (type(sigma_BN) is nd and sigma_BN.dtype == _F8 and sigma_BN.shape == (3,)
+                and type(omega_BN_B) is nd and omega_BN_B.dtype == _F8 and omega_BN_B.shape == (3,)
+                and type(r_N) is nd and r_N.dtype == _F8 and r_N.shape == (3,)
+                and type(v_N) is nd and v_N.dtype == _F8 and v_N.shape == (3,)
+                and type(accel_B) is nd and accel_B.dtype == _F8 and accel_B.shape == (3,)):
+            n.sigma_BN[:] = sigma_BN           # broadcast / convert as NumPy does, then the same kernel
+            n.omega_BN_B[:] = omega_BN_B
+            n.r_N[:] = r_N
+            n.v_N[:] = v_N
+            n.accel_B[:] = accel_B
+            sigma_BN, omega_BN_B, r_N, v_N, accel_B = n.sigma_BN, n.omega_BN_B, n.r_N, n.v_N, n.accel_B
+        om, R, model, rho0, H = self._consts
+        (n.V_rel_mps, n.h_m, n.alpha_rad, n.beta_rad, n.bank_rad, n.rho_kgpm3, n.qbar_pa,
+         n.mach) = _nav_kernel(sigma_BN, omega_BN_B, r_N, v_N, accel_B, om, R, model, rho0, H,
+                               n.sigma_BN, n.omega_BN_B, n.r_N, n.v_N, n.accel_B, n.vrel_N, n.C_WN, n.C_BN)
         return n

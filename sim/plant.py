@@ -325,7 +325,8 @@ def _truth_kernel(x, aux, book, tau_jets, tau_ext, frac, fault_eta, fault_state,
                   isp, out_f, out_i, out_s):
     """The truth at step k (spec 40-interfaces.md, sim/truth): floats into out_f (TRUTH_SCALARS
     then TRUTH_VECTORS), [k, t_ns] into out_i, the fault states into out_s. The same
-    arithmetic, term for term, as the NumPy version it replaced (bit-identical results)."""
+    arithmetic, term for term, as the NumPy version it replaced (equal to it but for a rare
+    last-bit difference in gamma and psi, where NumPy summed the dot products differently)."""
     rx, ry, rz = x[0], x[1], x[2]
     ux, uy, uz = x[3] + om * ry, x[4] - om * rx, x[5]          # v - Omega x r
     V = math.sqrt(ux * ux + uy * uy + uz * uz)

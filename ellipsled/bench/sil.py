@@ -1,0 +1,131 @@
+"""SIL benchmarks through the command the user runs (``ellipsled run``):
+
+- lockstep, multi-process over Zenoh, a full nominal entry: simulated time / wall time
+  (``summary.json`` and ``sil.json`` realtime_factor; target ≥ 20×);
+- real time at 50 Hz, idle and with ``stress-ng --cpu 2``: sensor-to-actuator latency and
+  release jitter p50/p99/max, cycle slips (``sil.json``).
+
+``ellipsled run <scenario> --lockstep|--realtime --duration S --out DIR --rerun none`` is
+called as a subprocess with a timeout. When the command is absent or fails, every figure
+is null with the reason.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+SIL_KEYS = ("realtime_factor", "latency_p50_us", "latency_p99_us", "jitter_p50_us", "jitter_p99_us",
+            "jitter_max_us", "slips")
+
+
+def run_command_available() -> tuple[bool, str]:
+    """Whether ``ellipsled run`` exists in this tree (asks the CLI itself)."""
+    try:
+        r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "run", "--help"], capture_output=True,
+                           text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return False, f"`ellipsled run --help` failed: {type(e).__name__}: {e}"
+    if r.returncode != 0 or "--lockstep" not in r.stdout or "--realtime" not in r.stdout:
+        return False, ("`ellipsled run` with --lockstep/--realtime not available in this tree "
+                       f"(exit {r.returncode}: {(r.stderr or r.stdout).strip()[-160:]})")
+    return True, ""
+
+
+def sil_run(mode: str, scenario: str, duration_s: float | None, timeout_s: float) -> dict:
+    """One ``ellipsled run``; returns {summary, sil, wall_s}. Raises RuntimeError with the cause."""
+    with tempfile.TemporaryDirectory(prefix="bench-sil-") as d:
+        cmd = [sys.executable, "-m", "ellipsled.cli", "run", scenario, f"--{mode}", "--out", d, "--rerun", "none"]
+        if duration_s is not None:
+            cmd += ["--duration", f"{duration_s:g}"]
+        t0 = time.perf_counter()
+        try:
+            r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            raise RuntimeError(f"`{' '.join(cmd[2:])}` timed out after {timeout_s:.0f} s") from None
+        wall = time.perf_counter() - t0
+        out = Path(d)
+        summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").is_file() else None
+        sil = json.loads((out / "sil.json").read_text()) if (out / "sil.json").is_file() else None
+        if sil is None and summary is None:
+            raise RuntimeError(f"`{' '.join(cmd[2:])}` exit {r.returncode}, no summary.json/sil.json: "
+                               f"{(r.stderr or r.stdout).strip()[-300:]}")
+        return {"summary": summary, "sil": sil, "wall_s": wall, "exit_code": r.returncode,
+                "command": "ellipsled " + " ".join(cmd[3:])}
+
+
+def _nulls(keys, reason: str) -> dict:
+    out = {}
+    for k in keys:
+        out[k] = None
+        out[f"{k}_reason"] = reason
+    return out
+
+
+def lockstep(quick: bool, available: tuple[bool, str] | None = None) -> dict:
+    ok, why = available or run_command_available()
+    if not ok:
+        return _nulls(("realtime_factor",), why)
+    dur = 60.0 if quick else None
+    try:
+        r = sil_run("lockstep", "nominal", dur, timeout_s=300 if quick else 1200)
+    except Exception as e:
+        return _nulls(("realtime_factor",), f"{type(e).__name__}: {e}")
+    s, sil = r["summary"] or {}, r["sil"] or {}
+    rtf = sil.get("realtime_factor", s.get("realtime_factor"))
+    res = {"figure": "lockstep SIL (sim, fsw over Zenoh): simulated time / wall time",
+           "realtime_factor": rtf, "baseline_simulated_s": s.get("t_end_s"),
+           "wall_s": s.get("wall_s"), "process_wall_s": r["wall_s"], "end_reason": s.get("end_reason"),
+           "completed": s.get("completed"), "cycle_slips": s.get("cycle_slips"), "command": r["command"],
+           "exit_code": r["exit_code"], "targets": {"realtime_factor_min": 20.0}}
+    if rtf is None:
+        res["realtime_factor_reason"] = "the run wrote no realtime_factor"
+    return res
+
+
+def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
+    """Idle and under load: the SIL's own latency / jitter / slips figures."""
+    from .jitter import background_load, ensure_tools
+    ok, why = available or run_command_available()
+    if not ok:
+        return {"idle": _nulls(SIL_KEYS[1:], why), "load": _nulls(SIL_KEYS[1:], why)}
+    dur = 10.0 if quick else 60.0
+
+    def one() -> dict:
+        try:
+            r = sil_run("realtime", "nominal", dur, timeout_s=dur + 180)
+        except Exception as e:
+            return _nulls(SIL_KEYS[1:], f"{type(e).__name__}: {e}")
+        sil = r["sil"]
+        if sil is None:
+            return _nulls(SIL_KEYS[1:], f"no sil.json written ({r['command']}, exit {r['exit_code']})")
+        out = {k: sil.get(k) for k in SIL_KEYS[1:]}
+        for k in SIL_KEYS[1:]:
+            if out[k] is None:
+                out[f"{k}_reason"] = "absent from sil.json"
+        out.update(duration_s=dur, command=r["command"], exit_code=r["exit_code"],
+                   extra={k: v for k, v in sil.items() if k not in SIL_KEYS})
+        return out
+
+    res = {"figure": "real-time SIL at 50 Hz: sensor-to-actuator latency and release jitter [us]",
+           "idle": one()}
+    tools_ok, tools_why = ensure_tools()
+    if not tools_ok:
+        res["load"] = _nulls(SIL_KEYS[1:], f"no background load: {tools_why}")
+    else:
+        try:
+            with background_load(2, timeout_s=dur + 300):
+                res["load"] = one()
+            res["load"]["background"] = "stress-ng --cpu 2"
+        except Exception as e:
+            res["load"] = _nulls(SIL_KEYS[1:], f"background load failed: {type(e).__name__}: {e}")
+    res["targets"] = {"latency_p99_us_max": 1000.0, "slips": 0}
+    return res
+
+
+if __name__ == "__main__":
+    q = "--quick" in sys.argv
+    print(json.dumps({"lockstep": lockstep(q), "realtime": realtime(q)}, indent=2))

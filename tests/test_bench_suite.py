@@ -1,0 +1,130 @@
+"""Benchmark suite smoke tests: JSON shape, the null + reason path, cyclictest histogram
+parsing against hand-built histograms, and a one-second real-time loop child.
+Timing figures are never asserted here (they go to the benchmark JSON)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+import pytest
+
+from ellipsled.bench import jitter, sil, suite
+
+
+def _boom(quick):
+    raise RuntimeError("no HiGHS here")
+
+
+def test_failing_section_nulls_only_its_figures(tmp_path):
+    out = tmp_path / "b.json"
+    res = suite.run_suite(True, out, sections={
+        "allocator": _boom,
+        "batch": lambda q: {"realtime_factor": float("nan"), "wall_s": 1.0},
+        "codec": suite.SECTIONS["codec"],
+    }, say=lambda m: None)
+    a = res["allocator"]
+    for k in suite.REQUIRED["allocator"]:
+        assert a[k] is None
+        assert "RuntimeError: no HiGHS here" in a[f"{k}_reason"]
+    # a NaN is never passed on as a number: null with a reason
+    assert res["batch"]["realtime_factor"] is None and res["batch"]["realtime_factor_reason"]
+    assert res["batch"]["wall_s"] == 1.0
+    # the healthy section measured real numbers
+    c = res["codec"]
+    assert c["rejected"] == 0
+    for k in suite.REQUIRED["codec"]:
+        assert isinstance(c[k], float) and c[k] > 0 and f"{k}_reason" not in c
+    # the file is strict JSON (no NaN) and equals the returned result
+    on_disk = json.loads(out.read_text(), parse_constant=lambda x: pytest.fail(f"non-JSON constant {x}"))
+    assert on_disk["allocator"]["p99_us"] is None
+    assert on_disk["codec"]["sensors"]["bytes"] == 320
+    # derived tables exist with reasons when their sources did not run
+    assert res["rt"]["sched_fifo"] is None and res["rt"]["sched_fifo_reason"]
+
+
+def test_table_shows_not_measured_with_reason():
+    res = {"quick": True, "machine": suite.machine(True),
+           "allocator": {}, "jitter": {"idle": {}, "load": {}}, "bridge": {"cpu_pct": 1.5, "mem_growth_mb": 0.2}}
+    suite.fill_required(res, "allocator", "section failed: X")
+    suite.fill_required(res, "jitter", "cyclictest missing")
+    md = suite.table(res)
+    assert "| allocator solve p50 / p99 / max [us] | n/m / n/m / n/m |" in md
+    assert "`allocator.p99_us`: section failed: X" in md
+    assert "`jitter.idle.cyclictest_p99_us`: cyclictest missing" in md
+    bridge_row = next(ln for ln in md.splitlines() if ln.startswith("| Rerun bridge"))
+    assert "1.50 / 0.20" in bridge_row and bridge_row.rstrip().endswith("| pass |")
+
+
+def test_required_keys_of_the_issue_are_declared():
+    need = {"allocator": {"p50_us", "p99_us", "max_us", "highs_p99_us", "speedup", "mismatches"},
+            "cycle": {"compute_p50_us", "compute_p99_us", "compute_max_us"},
+            "jitter.idle": {"p50_us", "p99_us", "max_us", "slips", "cyclictest_p99_us", "cyclictest_max_us"},
+            "jitter.load": {"p50_us", "p99_us", "max_us", "slips", "cyclictest_p99_us", "cyclictest_max_us"},
+            "latency": {"p50_us", "p99_us", "udp_p99_us"}, "sil_lockstep": {"realtime_factor"},
+            "batch": {"realtime_factor"}, "bridge": {"cpu_pct", "mem_growth_mb"},
+            "rt": {"sched_fifo", "affinity", "mlockall", "messages"},
+            "machine": {"nproc", "load", "python", "versions"}}
+    for sec, keys in need.items():
+        assert keys <= set(suite.REQUIRED[sec]), sec
+    assert set(suite.ORDER) == set(suite.SECTIONS)
+
+
+def _hist(counts: dict[int, int], overflow: int = 0, mx: int | None = None) -> str:
+    lines = ["# /dev/cpu_dma_latency set to 0us", "# Histogram"]
+    lines += [f"{b:06d} {counts.get(b, 0):06d}" for b in range(0, 100)]
+    n = sum(counts.values()) + overflow
+    lines += [f"# Total: {n:09d}", "# Min Latencies: 00003", "# Avg Latencies: 00012",
+              f"# Max Latencies: {mx if mx is not None else max(counts):05d}",
+              f"# Histogram Overflows: {overflow:05d}", "# Histogram Overflow at cycle number:", "# Thread 0:"]
+    return "\n".join(lines) + "\n"
+
+
+def test_cyclictest_histogram_percentiles():
+    # 1000 samples: 500 at 5 us, 490 at 10 us, 10 at 40 us -> p50 = 5, p99 = 10 (990th), max 40
+    r = jitter.parse_cyclictest(_hist({5: 500, 10: 490, 40: 10}))
+    assert (r["n"], r["p50_us"], r["p99_us"], r["max_us"], r["avg_us"]) == (1000, 5.0, 10.0, 40.0, 12.0)
+    # one more sample at 40 us moves the 99th percentile there (991 <= 0.99 * 1001 = 990.99 fails)
+    r = jitter.parse_cyclictest(_hist({5: 500, 10: 490, 40: 11}))
+    assert r["p99_us"] == 40.0
+    # p99 inside the overflow: unknown, not a made-up number
+    r = jitter.parse_cyclictest(_hist({5: 900}, overflow=100, mx=25000))
+    assert r["p50_us"] == 5.0 and r["p99_us"] is None and r["overflows"] == 100 and r["max_us"] == 25000.0
+    with pytest.raises(ValueError):
+        jitter.parse_cyclictest("cyclictest: command failed\n")
+
+
+def test_sil_absent_gives_null_and_reason():
+    r = sil.lockstep(True, available=(False, "`ellipsled run` not available"))
+    assert r["realtime_factor"] is None and "not available" in r["realtime_factor_reason"]
+    rt = sil.realtime(True, available=(False, "nope"))
+    for regime in ("idle", "load"):
+        for k in suite.REQUIRED["sil_realtime." + regime]:
+            assert rt[regime][k] is None and rt[regime][f"{k}_reason"] == "nope"
+
+
+def test_realtime_loop_child_reports_shape():
+    r = jitter.run_child(1.0, priority=jitter.PRIORITY, cpu=None)
+    assert 40 <= r["cycles"] <= 51
+    assert isinstance(r["slips"], int) and r["slips"] >= 0
+    for k in ("p50_us", "p99_us", "max_us", "compute_p99_us"):
+        assert math.isfinite(r[k]) and r[k] >= 0
+    assert r["p50_us"] <= r["p99_us"] <= r["max_us"]
+    assert set(r["tasks"]) == {"control", "fdir_slow", "housekeeping", "plant"}
+    assert set(r["rt"]) >= {"sched_fifo", "affinity", "mlockall", "messages"}
+    assert r["gc"]["enabled_in_loop"] is False          # GC kept out of the cycle
+    assert r["threads"]["env"]["OPENBLAS_NUM_THREADS"] == "1"
+    assert r["threads"]["numpy_imported_first"] is False
+
+
+def test_bench_parser_wiring(tmp_path):
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd")
+    suite.add_bench_parser(sub)
+    a = ap.parse_args(["bench", "--quick", "--out", str(tmp_path / "x.json"), "--only", "machine"])
+    assert a.quick and a.func is suite.main_args
+    assert a.func(a) == 0
+    assert json.loads((tmp_path / "x.json").read_text())["machine"]["nproc"] >= 1
+    assert (tmp_path / "x.md").read_text().startswith("Benchmark (quick)")
+    a = ap.parse_args(["bench", "--out", str(tmp_path / "x.json"), "--only", "nosuch"])
+    assert a.func(a) == 2

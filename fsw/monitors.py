@@ -41,10 +41,12 @@ _VEC_NAMES = ("OMEGA", "SIGMA", "R", "V", "ACCEL")
 # The float part of a SENSORS record is one contiguous run of float64: the five 3-vectors
 # in _VEC_FIELDS order, then the chamber pressures. check() views it without copying.
 _F0 = SENSORS.fields["omega_BN_B"][1]
+_K0 = SENSORS.fields["k"][1]
 _N_CH = SENSORS.fields["chamber"][0].shape[0]
 _N_F = 15 + _N_CH
 assert all(SENSORS.fields[f][1] == _F0 + 24 * i for i, f in enumerate(_VEC_FIELDS))
 assert SENSORS.fields["chamber"][1] == _F0 + 120 and SENSORS.itemsize == _F0 + 8 * _N_F
+assert SENSORS.fields["k"][0] == np.dtype("<i8") and _K0 % 8 == 0
 
 
 @njit(cache=True)
@@ -123,6 +125,7 @@ class SensorMonitor:
         self._lims = np.array([[0.0, self._omega_max], [0.0, self._sigma_max], [self._r_min, self._r_max],
                                [0.0, self._v_max], [0.0, self._a_max], [self._ch_lo, self._ch_hi]])
         self._out = np.zeros(5)
+        self._fviews: tuple = (None, None, None, None)   # (frame, its dtype, float view, k view) of the last frame
         self.counts: dict[str, int] = {r: 0 for r in REASONS}
         self.accepted = 0
         self.last_k: int | None = None
@@ -159,11 +162,17 @@ class SensorMonitor:
     def check(self, t_s: float, frame) -> bool:
         """Validate one SENSORS record; True = accepted (fresh and credible). Bad chamber
         entries are set to NaN in the record (see the module docstring)."""
-        if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != () \
-                or not frame.flags.c_contiguous or not frame.flags.writeable:
-            return self._reject(t_s, "format", "SENSOR FRAME BAD FORMAT: REJECTED")
-        x = np.ndarray((_N_F,), dtype=np.float64, buffer=frame, offset=_F0)
-        k = int(frame["k"])
+        fv = self._fviews
+        if frame is fv[0] and frame.dtype is fv[1] and frame.shape == () and frame.flags.writeable:
+            x, k = fv[2], int(fv[3][0])          # the same record as last time (a plant's sensors)
+        else:
+            if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != () \
+                    or not frame.flags.c_contiguous or not frame.flags.writeable:
+                return self._reject(t_s, "format", "SENSOR FRAME BAD FORMAT: REJECTED")
+            x = np.ndarray((_N_F,), dtype=np.float64, buffer=frame, offset=_F0)
+            ki = np.ndarray((1,), dtype=np.int64, buffer=frame, offset=_K0)
+            self._fviews = (frame, frame.dtype, x, ki)
+            k = int(ki[0])
         # one pass over the floats: vectors finite and credible, bad chamber entries -> NaN
         code = _frame_kernel(x, self._lims, 5, self._out) if k >= 0 else -1
         if code == -1:

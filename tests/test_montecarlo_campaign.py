@@ -215,3 +215,13 @@ def test_campaign_folder_refuses_a_different_campaign(tmp_path, camp):
     with pytest.raises(ValueError, match="dispersions"):
         prepare_out(out, other, 5, 10.0)
     assert os.path.exists(out / "scenario.toml")
+
+
+def test_a_second_campaign_process_on_the_same_folder_is_refused(tmp_path):
+    from ellipsled.montecarlo.engine import _exclusive
+    with _exclusive(tmp_path):
+        with pytest.raises(ValueError, match="another campaign process"):
+            with _exclusive(tmp_path):
+                pass
+    with _exclusive(tmp_path):   # released
+        pass

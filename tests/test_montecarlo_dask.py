@@ -136,7 +136,7 @@ def test_killing_a_worker_mid_campaign_loses_no_run(campaign_file, cluster, tmp_
         killed.update(worker=w, pid=pid, runs={int(str(k).rsplit("-", 1)[1]) for k in keys})
 
     out = tmp_path / "kill"
-    res = run_campaign(campaign_file, out, runs=6, duration_s=20.0, scheduler=cluster.scheduler_address,
+    res = run_campaign(campaign_file, out, runs=6, duration_s=60.0, scheduler=cluster.scheduler_address,
                        progress=False, on_result=kill_busy_worker)
     assert killed
     rows = _rows(out)

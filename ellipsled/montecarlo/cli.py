@@ -68,9 +68,16 @@ def main(args) -> int:
     if args.scheduler and args.workers:
         print("ellipsled montecarlo: --workers applies to the embedded cluster only; ignored with --scheduler",
               file=sys.stderr)
-    res = run_campaign(args.campaign, args.out, runs=args.runs, master_seed=args.seed, duration_s=args.duration,
-                       scheduler=args.scheduler, workers=args.workers, dashboard=args.dashboard,
-                       progress=not args.no_progress, flush_s=args.flush_s)
+    from common.config import ConfigError
+    try:
+        res = run_campaign(args.campaign, args.out, runs=args.runs, master_seed=args.seed, duration_s=args.duration,
+                           scheduler=args.scheduler, workers=args.workers, dashboard=args.dashboard,
+                           progress=not args.no_progress, flush_s=args.flush_s)
+    except ConfigError:
+        raise
+    except (ValueError, OSError) as e:   # a campaign folder of another campaign, an unreachable scheduler...
+        print(f"ellipsled montecarlo: {e}", file=sys.stderr)
+        return 2
     if res.dashboard:
         print(f"dashboard was at {res.dashboard}")
     if res.interrupted:

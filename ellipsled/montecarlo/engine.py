@@ -224,8 +224,10 @@ def connect(scheduler: str | None, workers: int | None, dashboard: bool = False)
     if scheduler:
         return Client(scheduler, timeout="30s"), None
     n = workers or os.cpu_count() or 1
+    # The scheduler always serves HTTP (health, metrics): a random loopback port, the
+    # dashboard pages only when asked for.
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0" if dashboard else None,
+                           scheduler_kwargs={"dashboard": bool(dashboard), "dashboard_address": "127.0.0.1:0"},
                            silence_logs=logging.ERROR)
     client = Client(cluster)
     plugin = type("IgnoreSigint", (_IgnoreSigint, WorkerPlugin), {})()
@@ -263,21 +265,45 @@ def run_campaign(campaign: Campaign | str | Path, out: str | Path, *, runs: int 
     if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be > 0, got {duration_s!r}")
     out = Path(out)
-    base = prepare_out(out, camp, master_seed, duration_s)
-    store = ResultStore(out / RESULTS_DIR)
-    done = set(store.run_ids())
-    todo = [i for i in range(runs) if i not in done]
-    t_start = time.monotonic()
-    res = CampaignResult(out, runs, len(done), 0, 0, False, 0.0)
-    if todo:
-        _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, workers, dashboard,
-                 Progress(runs, len(done & set(range(runs))), progress), flush_rows, flush_s, on_result)
-    res.recorded = len(store.run_ids())
-    res.wall_s = time.monotonic() - t_start
-    if summary and not res.interrupted:
-        from .summary import write_summary
-        write_summary(out, camp, store.read(), runs)
+    out.mkdir(parents=True, exist_ok=True)
+    with _exclusive(out):
+        base = prepare_out(out, camp, master_seed, duration_s)
+        store = ResultStore(out / RESULTS_DIR)
+        done = set(store.run_ids())
+        todo = [i for i in range(runs) if i not in done]
+        t_start = time.monotonic()
+        res = CampaignResult(out, runs, len(done), 0, 0, False, 0.0)
+        if todo:
+            _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, workers, dashboard,
+                     Progress(runs, len(done & set(range(runs))), progress), flush_rows, flush_s, on_result)
+        res.recorded = len(store.run_ids())
+        res.wall_s = time.monotonic() - t_start
+        if summary and not res.interrupted:
+            from .summary import write_summary
+            write_summary(out, camp, store.read(), runs)
     return res
+
+
+class _exclusive:
+    """One campaign process per folder (two would run the same run_ids twice). An
+    advisory lock: released by the kernel if the process dies."""
+
+    def __init__(self, out: Path):
+        self.path = out / ".lock"
+
+    def __enter__(self):
+        import fcntl
+        self.f = open(self.path, "a")
+        try:
+            fcntl.flock(self.f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.f.close()
+            raise ValueError(f"{self.path.parent}: another campaign process is running in this folder") from None
+        return self
+
+    def __exit__(self, *exc):
+        self.f.close()
+        return False
 
 
 def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, workers, dashboard, prog,

@@ -4,7 +4,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from common.config import ConfigError
+from fsw import rt
+
+# Every ellipsled process runs its numerics single-threaded (lean, deterministic hot loops,
+# two processes on two cores): pinned before NumPy or numba load their thread pools.
+rt.single_threaded_numerics()
+
+from common.config import ConfigError  # noqa: E402
 
 
 def _add_plant(sub):

@@ -18,9 +18,7 @@ from pathlib import Path
 
 from fsw import rt
 
-rt.single_threaded_numerics()   # before NumPy spins up any thread pool
-
-import numpy as np  # noqa: E402
+import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.frames import wrap_pi  # noqa: E402
 from ellipsled.batch import alloc_sample, fsw_report, prepare  # noqa: E402

@@ -183,6 +183,8 @@ class SimNode:
                 if kc < last_cmd_k:
                     self.counts["stale_commands"] += 1
                     continue
+                if last_cmd_k < 0:
+                    say(ROLE, f"t={self.plant.t_s:.2f}s first jet command")
                 last_cmd_k = self._take_command(rec)
                 if kc == k:
                     self.latency_ns.append(now_ns() - t_pub)

@@ -1,0 +1,258 @@
+"""The SIL with real processes: lockstep equals batch, real time keeps its deadlines, and
+the runtime faults (a process killed, garbage and hostile payloads) are survived and
+reported. Every process is started here and stopped by its pid, with timeouts."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ellipsled import batch
+from interfaces import records, transport
+from interfaces.codec import Codec
+from interfaces.keys import keys
+
+pytestmark = pytest.mark.slow
+
+PREFIX = "ellipsled/test"
+PY = [sys.executable, "-m", "ellipsled.cli"]
+
+
+class Procs:
+    """Processes of one test; whatever is still running at the end is killed."""
+
+    def __init__(self, tmp: Path):
+        self.tmp = tmp
+        self.p: dict[str, subprocess.Popen] = {}
+
+    def start(self, name: str, argv: list[str]) -> subprocess.Popen:
+        log = open(self.tmp / f"{name}.log", "w")
+        p = subprocess.Popen(PY + argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        self.p[name] = p
+        return p
+
+    def log(self, name: str) -> str:
+        return (self.tmp / f"{name}.log").read_text()
+
+    def stop(self, name: str, sig=signal.SIGTERM, timeout: float = 10.0) -> int:
+        p = self.p[name]
+        if p.poll() is None:
+            p.send_signal(sig)
+        try:
+            return p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(5)
+            raise AssertionError(f"{name} (pid {p.pid}) did not stop within {timeout} s")
+
+    def wait(self, name: str, timeout: float) -> int:
+        try:
+            return self.p[name].wait(timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"{name} did not finish within {timeout} s:\n{self.log(name)[-2000:]}")
+
+    def cleanup(self) -> None:
+        for p in self.p.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait(5)
+
+
+@pytest.fixture
+def procs(tmp_path):
+    pr = Procs(tmp_path)
+    yield pr
+    pr.cleanup()
+    for name, p in pr.p.items():
+        assert p.poll() is not None, f"{name} left running"
+
+
+def _node(role, scenario, mode, out, *, listen=None, connect=None, extra=()):
+    argv = [role, scenario, f"--{mode}", "--prefix", PREFIX, "--out", str(out)]
+    for e in listen or ():
+        argv += ["--listen", e]
+    for e in connect or ():
+        argv += ["--connect", e]
+    return argv + list(extra)
+
+
+def _json(path: Path) -> dict:
+    return json.loads(path.read_text())
+
+
+def test_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
+    """`ellipsled run --lockstep` (sim and fsw processes over Zenoh) flies exactly the
+    batch run: every history array and every summary figure equal, faults at 2.5 s."""
+    out = tmp_path / "sil"
+    r = subprocess.run(PY + ["run", "case1", "--lockstep", "--duration", "30", "--out", str(out),
+                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    s_sil = _json(out / "summary.json")
+    s_bat, h_bat, _ = batch.run("case1", duration_s=30)
+    h_sil = np.load(out / "history.npz")
+    assert h_sil["k"].shape == h_bat["k"].shape
+    for name in h_sil.files:
+        if name in ("compute_us", "alloc_us"):      # wall-clock measurements, not trajectory
+            continue
+        assert np.array_equal(h_sil[name], h_bat[name]), name
+    timing = {"wall_s", "realtime_factor", "control_cycle", "allocator", "mode", "cycle_slips", "events"}
+    for key, val in s_bat.items():
+        if key not in timing:
+            assert s_sil[key] == val, key
+    assert s_sil["allocator"]["solves"] == s_bat["allocator"]["solves"]
+    assert [d["jet"] for d in s_sil["fdir"]["detections"]] == [2, 17, 18, 1] or \
+        sorted(d["jet"] for d in s_sil["fdir"]["detections"]) == [1, 2, 17, 18]
+
+
+@pytest.mark.timing
+def test_realtime_sil_holds_its_deadlines(tmp_path):
+    """20 s of real time at 50 Hz on this 2-core machine: no cycle slip, a command for
+    (nearly) every step, jitter inside a generous bound (the figures go to the benchmark)."""
+    out = tmp_path / "rt"
+    r = subprocess.run(PY + ["run", "case1", "--realtime", "--rt", "--duration", "20", "--out", str(out),
+                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    sil = _json(out / "sil.json")
+    s = _json(out / "summary.json")
+    assert s["completed"] and s["t_end_s"] == pytest.approx(20.0)
+    assert sil["slips"] == 0, sil
+    assert sil["jitter_p99_us"] < 5000, sil
+    assert sil["latency_samples"] >= 0.95 * 1000, sil
+    assert sil["latency_p99_us"] < 20000, sil
+    assert s["bank_err_max_after_fault_deg"] < 5.0
+
+
+def test_plant_killed_fsw_holds_jets_off_and_recovers(tmp_path, procs):
+    """Kill the plant mid-run: the FSW declares its sensors stale, holds the jets off and
+    keeps running; a new plant process is picked up and commanded again."""
+    e_fsw = transport.loopback(transport.free_port())
+    procs.start("fsw", _node("fsw", "case1", "realtime", tmp_path / "fsw", listen=[e_fsw]))
+    procs.start("sim1", _node("sim", "case1", "realtime", tmp_path / "sim1", connect=[e_fsw],
+                              extra=["--duration", "60"]))
+    time.sleep(8.0)                                           # start-up, then a few seconds flying
+    assert procs.p["sim1"].poll() is None, procs.log("sim1")
+    procs.stop("sim1", signal.SIGKILL)
+    time.sleep(3.0)
+    assert procs.p["fsw"].poll() is None, "the FSW must keep running without its plant"
+    procs.start("sim2", _node("sim", "case1", "realtime", tmp_path / "sim2", connect=[e_fsw],
+                              extra=["--duration", "4"]))
+    assert procs.wait("sim2", 60) == 0, procs.log("sim2")
+    assert procs.stop("fsw") == 0
+    rep = _json(tmp_path / "fsw" / "fsw.json")
+    codes = [(e["code"], e["t_s"]) for e in rep["event_log"]]
+    stale = [t for c, t in codes if c == "sensors_stale"]
+    recovered = [t for c, t in codes if c == "sensors_recovered"]
+    assert stale, codes
+    assert recovered and recovered[-1] >= 0.0
+    # stale declared within 3 periods of the last frame (the FSW's clock advances each release)
+    h = np.load(tmp_path / "fsw" / "fsw_history.npz")
+    assert any(e["code"] == "new_sensor_source" for e in rep["event_log"])
+    assert rep["monitor_counts"]["out_of_order"] == 0, "the restarted plant's frames must be accepted"
+    sim2 = np.load(tmp_path / "sim2" / "sim_history.npz")
+    assert np.any(np.abs(sim2["tau_jets_B"]).sum(axis=1) > 0), "the new plant must be commanded"
+    # the first frame after the kill that the FSW saw came from the new plant, k restarted
+    k = h["k"]
+    assert np.any(np.diff(k) < 0)
+
+
+def test_fsw_killed_realtime_plant_holds_jets_off(tmp_path, procs):
+    """Kill the FSW in real time: the plant notices the missing commands, applies jets off
+    and keeps flying to the end of its run."""
+    e_sim = transport.loopback(transport.free_port())
+    procs.start("sim", _node("sim", "case1", "realtime", tmp_path / "sim", listen=[e_sim],
+                             extra=["--duration", "12", "--miss-periods", "3"]))
+    procs.start("fsw", _node("fsw", "case1", "realtime", tmp_path / "fsw", connect=[e_sim]))
+    # kill the FSW once the plant has flown a few seconds
+    deadline = time.monotonic() + 60
+    while "first jet command" not in procs.log("sim") and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(3.0)
+    procs.stop("fsw", signal.SIGKILL)
+    assert procs.wait("sim", 60) == 0, procs.log("sim")
+    info = _json(tmp_path / "sim" / "sim.json")
+    assert info["counts"]["missed_commands"] >= 3
+    assert "jets held off" in procs.log("sim")
+    h = np.load(tmp_path / "sim" / "sim_history.npz")
+    last = h["tau_jets_B"][-50:]                                # the final second: no command, no torque
+    assert np.all(last == 0.0)
+    assert np.any(np.abs(h["tau_jets_B"]).sum(axis=1) > 0)     # ... but the FSW did fly it before
+
+
+def test_fsw_killed_lockstep_plant_ends_with_a_clear_message(tmp_path, procs):
+    e_sim = transport.loopback(transport.free_port())
+    procs.start("sim", _node("sim", "nominal", "lockstep", tmp_path / "sim", listen=[e_sim],
+                             extra=["--fsw-timeout", "2"]))
+    procs.start("fsw", _node("fsw", "nominal", "lockstep", tmp_path / "fsw", connect=[e_sim]))
+    deadline = time.monotonic() + 60
+    while "waiting for the plant" not in procs.log("fsw") and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(3.0)
+    procs.stop("fsw", signal.SIGKILL)
+    rc = procs.wait("sim", 30)
+    assert rc == 3
+    info = _json(tmp_path / "sim" / "sim.json")
+    assert info["end_reason"] == "fsw_timeout"
+    assert "has not answered" in info["message"] and "ending the run" in info["message"]
+    assert "has not answered" in procs.log("sim")
+
+
+def test_garbage_replays_and_a_second_publisher_on_every_key(tmp_path, procs):
+    """While a lockstep run flies, a hostile process puts random bytes, truncated frames,
+    replays, out-of-order frames and a second JETS publisher on every key: the run
+    completes, every bad payload is rejected and counted, nothing crashes."""
+    e_sim = transport.loopback(transport.free_port())
+    e_fsw = transport.loopback(transport.free_port())
+    procs.start("sim", _node("sim", "case1", "lockstep", tmp_path / "sim", listen=[e_sim],
+                             extra=["--duration", "120"]))
+    procs.start("fsw", _node("fsw", "case1", "lockstep", tmp_path / "fsw", listen=[e_fsw], connect=[e_sim]))
+    K = keys(PREFIX)
+    s = transport.open_session("attacker", None, [e_sim, e_fsw])
+    try:
+        pubs = {k: transport.publisher(s, k) for k in (K.sensors, K.jets, K.faults, K.truth, K.state, K.events)}
+        sub = transport.subscriber(s, K.jets)
+        rng = np.random.default_rng(7)
+        intruder = Codec.for_schema("JETS")        # another publisher id on the jets key
+        fake = records.new(records.JETS)
+        captured = None
+        sent = 0
+        t_end = time.monotonic() + 90
+        while captured is None and time.monotonic() < t_end:    # the FSW owns the jets key first
+            smp = transport.recv(sub, 0.1)
+            if smp is not None:
+                captured = smp.payload.to_bytes()
+        assert captured is not None, procs.log("sim") + procs.log("fsw")
+        while procs.p["sim"].poll() is None and time.monotonic() < t_end:
+            for key, pub in pubs.items():
+                pub.put(rng.bytes(int(rng.integers(0, 400))))                  # random bytes
+                if captured is not None:
+                    pub.put(captured[: int(rng.integers(1, len(captured)))])    # truncated
+            if captured is not None:
+                pubs[K.jets].put(captured)                                      # replay
+            fake["k"], fake["u"] = sent, 1
+            pubs[K.jets].put(intruder.encode(fake, sent, time.monotonic_ns()))  # second publisher
+            sent += 1
+            time.sleep(0.005)
+    finally:
+        transport.close(s)
+    assert procs.wait("sim", 120) == 0, procs.log("sim")
+    assert procs.stop("fsw") == 0
+    sim = _json(tmp_path / "sim" / "sim.json")
+    fsw = _json(tmp_path / "fsw" / "fsw.json")
+    assert sim["end_reason"] == "duration" and sim["t_end_s"] == pytest.approx(120.0)
+    rj = sim["rejects"]
+    assert rj.get("size", 0) + rj.get("magic", 0) + rj.get("crc", 0) > 0
+    assert rj.get("second_publisher", 0) > 0
+    assert rj.get("replay_or_out_of_order", 0) > 0
+    assert sum(fsw["sensor_rejects"].values()) > 0
+    assert any(e["code"].startswith("rx_") for e in fsw["event_log"])
+    # the hostile commands never reached the plant: its jets obeyed the FSW only
+    h = np.load(tmp_path / "sim" / "sim_history.npz")
+    assert np.all(np.isfinite(h["bank_rad"]))
+    assert fsw["cycle_slips"] >= 0 and sent > 10

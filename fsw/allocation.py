@@ -45,13 +45,16 @@ applies the ground inhibit mask.
 """
 from __future__ import annotations
 
+import os
+import threading
 import time
-from collections import OrderedDict
+import weakref
+from collections import OrderedDict, deque
 
 import numpy as np
 from numba import njit
 
-from fsw.health import DEGRADED, NOMINAL, STUCK_ON, JetHealth
+from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
 from fsw.params import Param
 
 N_AXES = 3
@@ -64,6 +67,7 @@ KEY_QUANTUM_NM = 1e-7      # grid on which identical torque vectors are merged [
 BLOCK = 16                 # rows per block of the block-skipping scan
 CACHE_MAX_CONFIGS = 16     # health configurations whose tables are kept
 STATUS_OK, STATUS_DEGRADED, STATUS_REJECTED = 0, 1, 2
+ZERO3 = np.zeros(N_AXES)
 
 
 PARAMS: list[Param] = [
@@ -126,190 +130,444 @@ def _validate_problem(T, thrust, w, penalty_per_N):
 
 
 # ---------------------------------------------------------------- table construction
-@njit(cache=True)
-def _enumerate_groups(g_col, g_m, g_cum_pen, g_cum_pat, bias):
-    """All multiplicity vectors over the groups: group g contributes j * g_col[g], penalty
-    g_cum_pen[g, j] and bits g_cum_pat[g, j] for j = 0..g_m[g] members on. Built group by
-    group (each pass replicates the rows so far once per multiplicity)."""
+# The tables are rebuilt on every new health configuration, by nogil numba kernels over
+# preallocated work buffers (a background thread can run them while the control thread
+# keeps solving):
+#  - group identical columns;
+#  - enumerate the multiplicity vectors group by group, keeping the list of distinct
+#    partial torques sorted by phi = a . tau (a generic direction): adding j times a group
+#    column shifts phi by a constant, so each group is a sequential merge of sorted lists,
+#    and torques equal on the KEY_QUANTUM_NM grid, whose phi differ by less than a small
+#    window, are found (and merged) by comparing the keys of the few phi-neighbours;
+#  - per octant a stable sort by score: one counting pass into about 2 buckets per row
+#    (a monotone fixed-point image of the score), each bucket then finished exactly by an
+#    insertion sort on the float score (buckets hold ~1 row; a crowded one is merge sorted).
+PHI_DIR = (1.0, 0.7548776662466927, 0.5698402909980532)   # generic direction for phi = a . tau
+SORT_BUCKETS_MAX = 1 << 17  # buckets of the octant tables' one-pass bucket sort
+ROW = np.dtype([("t0", np.float64), ("t1", np.float64), ("t2", np.float64),
+                ("pen", np.float64), ("pat", np.int64), ("phi", np.float64)])   # one candidate
+
+
+@njit(cache=True, nogil=True)
+def _group_columns(cols, usable, c, quantum):
+    """Groups of identical effective columns (equal on the quantum grid) in order of their
+    lowest jet; the members of a group sorted by (penalty, jet) so that j members on are
+    the j cheapest, lowest-numbered. Zero columns (eta = 0) never help and are left out.
+    Returns g_col (G, 3), g_m (G,), g_cum_pen (G, m_max + 1), g_cum_pat (G, m_max + 1)."""
+    n = cols.shape[1]
+    key = np.zeros((n, 3), dtype=np.int64)
+    gid = -np.ones(n, dtype=np.int64)
+    lead = np.empty(n, dtype=np.int64)
+    G = 0
+    for k in range(n):
+        if not usable[k]:
+            continue
+        for i in range(3):
+            key[k, i] = np.int64(np.rint(cols[i, k] / quantum))
+        if key[k, 0] == 0 and key[k, 1] == 0 and key[k, 2] == 0:
+            continue
+        for g in range(G):
+            ld = lead[g]
+            if key[ld, 0] == key[k, 0] and key[ld, 1] == key[k, 1] and key[ld, 2] == key[k, 2]:
+                gid[k] = g
+                break
+        if gid[k] < 0:
+            lead[G] = k
+            gid[k] = G
+            G += 1
+    g_m = np.zeros(G, dtype=np.int64)
+    for k in range(n):
+        if gid[k] >= 0:
+            g_m[gid[k]] += 1
+    m_max = 0
+    for g in range(G):
+        m_max = max(m_max, g_m[g])
+    g_col = np.zeros((G, 3))
+    g_cum_pen = np.zeros((G, m_max + 1))
+    g_cum_pat = np.zeros((G, m_max + 1), dtype=np.int64)
+    members = np.empty(m_max, dtype=np.int64)
+    for g in range(G):
+        m = 0
+        for k in range(n):                 # ascending jet, then a stable sort by penalty
+            if gid[k] == g:
+                q = m
+                while q > 0 and c[members[q - 1]] > c[k]:
+                    members[q] = members[q - 1]
+                    q -= 1
+                members[q] = k
+                m += 1
+        for i in range(3):
+            g_col[g, i] = cols[i, members[0]]
+        for j in range(1, m + 1):
+            k = members[j - 1]
+            g_cum_pen[g, j] = g_cum_pen[g, j - 1] + c[k]
+            g_cum_pat[g, j] = g_cum_pat[g, j - 1] | (np.int64(1) << k)
+    return g_col, g_m, g_cum_pen, g_cum_pat
+
+
+@njit(cache=True, nogil=True)
+def _same_key(a, b, inv_q):
+    return (np.floor(a.t0 * inv_q + 0.5) == np.floor(b.t0 * inv_q + 0.5)
+            and np.floor(a.t1 * inv_q + 0.5) == np.floor(b.t1 * inv_q + 0.5)
+            and np.floor(a.t2 * inv_q + 0.5) == np.floor(b.t2 * inv_q + 0.5))
+
+
+@njit(cache=True, nogil=True)
+def _merge_shifted(cur, ncur, base, nbase, c0, c1, c2, dpen, dpat, dphi, out, inv_q, tol_pen, win):
+    """out = cur merged with (base + the shift), both sorted by phi; a row whose key equals
+    that of an earlier output row within the phi window is merged into it (smallest
+    (penalty, pattern) kept; the earlier row keeps its phi, so the output stays sorted).
+    Returns the output length, or -1 if out is too short."""
+    i = 0
+    k = 0
+    n = 0
+    cap = out.shape[0]
+    while i < ncur or k < nbase:
+        if n >= cap:
+            return -1                       # the caller grows the buffers and retries
+        if k >= nbase or (i < ncur and cur[i].phi <= base[k].phi + dphi):
+            out[n] = cur[i]
+            i += 1
+        else:
+            out[n].t0 = base[k].t0 + c0
+            out[n].t1 = base[k].t1 + c1
+            out[n].t2 = base[k].t2 + c2
+            out[n].pen = base[k].pen + dpen
+            out[n].pat = base[k].pat | dpat
+            out[n].phi = base[k].phi + dphi
+            k += 1
+        e = out[n]
+        lim = e.phi - win
+        o = n - 1
+        dup = False
+        while o >= 0 and out[o].phi >= lim:
+            if _same_key(out[o], e, inv_q):
+                d = e.pen - out[o].pen
+                if d < -tol_pen or (d <= tol_pen and e.pat < out[o].pat):
+                    out[o].t0 = e.t0
+                    out[o].t1 = e.t1
+                    out[o].t2 = e.t2
+                    out[o].pen = e.pen
+                    out[o].pat = e.pat
+                dup = True
+                break
+            o -= 1
+        if not dup:
+            n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _enumerate_merged(g_col, g_m, g_cum_pen, g_cum_pat, bias, quantum, tol_pen,
+                      ra, rb, rc, tau, pen, pat):
+    """Every distinct torque b + sum_g j_g g_col[g] (0 <= j_g <= g_m[g]) with the smallest
+    (penalty, pattern) of the multiplicity vectors giving it (group g, j members on: penalty
+    g_cum_pen[g, j], bits g_cum_pat[g, j]). Torques are equal when equal on the quantum
+    grid. Writes the n candidates to tau/pen/pat[:n]; returns (number of multiplicity
+    vectors, n), n = -1 if the buffers are too short. Work buffers ra, rb, rc (ROW) and
+    tau/pen/pat need n rows (the list of distinct partial sums never shrinks)."""
     G = g_col.shape[0]
+    a0, a1, a2 = PHI_DIR
+    asum = abs(a0) + abs(a1) + abs(a2)
+    span = abs(a0 * bias[0]) + abs(a1 * bias[1]) + abs(a2 * bias[2])
     M = 1
     for g in range(G):
         M *= g_m[g] + 1
-    tau = np.empty((M, 3))
-    pen = np.empty(M)
-    pat = np.empty(M, dtype=np.int64)
-    tau[0, 0] = bias[0]
-    tau[0, 1] = bias[1]
-    tau[0, 2] = bias[2]
-    pen[0] = 0.0
-    pat[0] = 0
-    n = 1
+        span += g_m[g] * (abs(a0 * g_col[g, 0]) + abs(a1 * g_col[g, 1]) + abs(a2 * g_col[g, 2]))
+    # equal keys: |tau_i - tau'_i| < quantum, so |phi - phi'| < quantum * asum per row, plus
+    # one such error per group for the kept phi of merged rows, plus rounding of phi sums
+    win = 4.0 * (G + 2) * quantum * asum + 1e-12 * (1.0 + span) * (G + 2)
+    inv_q = 1.0 / quantum
+    ra[0].t0 = bias[0]
+    ra[0].t1 = bias[1]
+    ra[0].t2 = bias[2]
+    ra[0].pen = 0.0
+    ra[0].pat = 0
+    ra[0].phi = a0 * bias[0] + a1 * bias[1] + a2 * bias[2]
+    bufs = (ra, rb, rc)
+    ib = 0                                  # buffer of the distinct torques so far
+    nbase = 1
     for g in range(G):
+        ic = ib                             # adding j = 1, 2, ... members: cur, then out
+        ncur = nbase
+        o1 = (ib + 1) % 3
+        o2 = (ib + 2) % 3
+        io = o1
         for j in range(1, g_m[g] + 1):
             c0 = j * g_col[g, 0]
             c1 = j * g_col[g, 1]
             c2 = j * g_col[g, 2]
-            off = j * n
-            for r in range(n):
-                tau[off + r, 0] = tau[r, 0] + c0
-                tau[off + r, 1] = tau[r, 1] + c1
-                tau[off + r, 2] = tau[r, 2] + c2
-                pen[off + r] = pen[r] + g_cum_pen[g, j]
-                pat[off + r] = pat[r] | g_cum_pat[g, j]
-        n *= g_m[g] + 1
-    return tau, pen, pat
+            dphi = a0 * c0 + a1 * c1 + a2 * c2
+            ncur = _merge_shifted(bufs[ic], ncur, bufs[ib], nbase, c0, c1, c2, g_cum_pen[g, j],
+                                  g_cum_pat[g, j], dphi, bufs[io], inv_q, tol_pen, win)
+            if ncur < 0:
+                return M, -1
+            ic = io
+            io = o2 if io == o1 else o1
+        ib = ic
+        nbase = ncur
+    base = bufs[ib]
+    if nbase > tau.shape[0]:
+        return M, -1
+    for r in range(nbase):
+        tau[r, 0] = base[r].t0
+        tau[r, 1] = base[r].t1
+        tau[r, 2] = base[r].t2
+        pen[r] = base[r].pen
+        pat[r] = base[r].pat
+    return M, nbase
 
 
-@njit(cache=True)
-def _merge_identical(tau, pen, pat, quantum, tol_pen):
-    """Merge torque vectors equal on the quantum grid, keeping the smallest (penalty,
-    pattern); open-addressing hash table, output in order of first appearance."""
-    M = tau.shape[0]
-    size = 1
-    while size < 2 * M:
-        size *= 2
-    mask = size - 1
-    inv_q = 1.0 / quantum
-    slot_of = -np.ones(size, dtype=np.int32)     # hash slot -> output index
-    keys = np.empty((M, 3), dtype=np.int64)
-    out_tau = np.empty((M, 3))
-    out_pen = np.empty(M)
-    out_pat = np.empty(M, dtype=np.int64)
-    n = 0
-    for r in range(M):
-        k0 = np.int64(np.floor(tau[r, 0] * inv_q + 0.5))
-        k1 = np.int64(np.floor(tau[r, 1] * inv_q + 0.5))
-        k2 = np.int64(np.floor(tau[r, 2] * inv_q + 0.5))
-        h = np.uint64(k0) * np.uint64(0x9E3779B97F4A7C15)      # splitmix64-style mixing
-        h = (h ^ np.uint64(k1)) * np.uint64(0xBF58476D1CE4E5B9)
-        h = (h ^ np.uint64(k2)) * np.uint64(0x94D049BB133111EB)
-        h = h ^ (h >> np.uint64(31))
-        s = np.int64(h & np.uint64(mask))
-        while True:
-            o = slot_of[s]
-            if o < 0:
-                slot_of[s] = n
-                keys[n, 0] = k0
-                keys[n, 1] = k1
-                keys[n, 2] = k2
-                out_tau[n, 0] = tau[r, 0]
-                out_tau[n, 1] = tau[r, 1]
-                out_tau[n, 2] = tau[r, 2]
-                out_pen[n] = pen[r]
-                out_pat[n] = pat[r]
-                n += 1
-                break
-            if keys[o, 0] == k0 and keys[o, 1] == k1 and keys[o, 2] == k2:
-                d = pen[r] - out_pen[o]
-                if d < -tol_pen or (d <= tol_pen and pat[r] < out_pat[o]):
-                    out_tau[o, 0] = tau[r, 0]
-                    out_tau[o, 1] = tau[r, 1]
-                    out_tau[o, 2] = tau[r, 2]
-                    out_pen[o] = pen[r]
-                    out_pat[o] = pat[r]
-                break
-            s = (s + 1) & mask  # linear probing
-    return out_tau[:n].copy(), out_pen[:n].copy(), out_pat[:n].copy()
+@njit(cache=True, nogil=True)
+def _bucket_sort(ka, ia, lo, hi, kmin, kmax, kb, ib, count):
+    """Stable ascending sort of rows lo:hi of (key ka, payload ia) into kb/ib[lo:hi]: one
+    counting pass on the bucket floor((k - kmin) * scale), which is monotone in k, so only
+    rows of one bucket can be out of order; an insertion sort finishes exactly (a merge sort
+    if the buckets turn out crowded)."""
+    m = hi - lo
+    if m <= 0:
+        return
+    nb = 2
+    while nb < m and nb < SORT_BUCKETS_MAX:
+        nb *= 2
+    top = nb - 1
+    scale = top / (kmax - kmin) if kmax > kmin else 0.0
+    if not np.isfinite(scale):
+        scale = 0.0
+    for d in range(nb + 1):
+        count[d] = 0
+    for i in range(lo, hi):
+        count[min(np.int64((ka[i] - kmin) * scale), top) + 1] += 1
+    for d in range(nb):
+        count[d + 1] += count[d]
+    for i in range(lo, hi):
+        b = min(np.int64((ka[i] - kmin) * scale), top)
+        j = lo + count[b]
+        count[b] += 1
+        kb[j] = ka[i]
+        ib[j] = ia[i]
+    budget = 8 * m + 64                     # element moves before giving up on insertion
+    for q in range(lo + 1, hi):             # stable insertion sort (strict >)
+        kq = kb[q]
+        if kb[q - 1] <= kq:
+            continue
+        iq = ib[q]
+        p = q
+        while p > lo and kb[p - 1] > kq:
+            kb[p] = kb[p - 1]
+            ib[p] = ib[p - 1]
+            p -= 1
+        kb[p] = kq
+        ib[p] = iq
+        budget -= q - p
+        if budget < 0:                      # crowded buckets: merge sort the rest
+            order = np.argsort(ka[lo:hi], kind="mergesort")
+            for t in range(m):
+                kb[lo + t] = ka[lo + order[t]]
+                ib[lo + t] = ia[lo + order[t]]
+            return
 
 
-@njit(cache=True)
-def _radix_argsort(key):
-    """Stable ascending argsort of finite float64 keys: LSD radix sort, 11-bit digits on
-    the order-preserving unsigned image of the IEEE bits (numba's generic quicksort is
-    several times slower on these sizes)."""
-    n = key.shape[0]
-    bits = key.view(np.uint64)
-    sign = np.uint64(1) << np.uint64(63)
-    ukey = np.empty(n, dtype=np.uint64)
-    for i in range(n):
-        b = bits[i]
-        ukey[i] = ~b if (b & sign) else (b | sign)
-    idx = np.arange(n)
-    tmp = np.empty(n, dtype=np.int64)
-    count = np.empty(2049, dtype=np.int64)
-    mask = np.uint64(2047)
-    for shift in range(0, 64, 11):
-        sh = np.uint64(shift)
-        count[:] = 0
-        for i in range(n):
-            count[np.int64((ukey[idx[i]] >> sh) & mask) + 1] += 1
-        if count.max() == n:
-            continue                      # every key has this digit: the pass is a no-op
-        for d in range(2048):
-            count[d + 1] += count[d]
-        for i in range(n):
-            dgt = np.int64((ukey[idx[i]] >> sh) & mask)
-            tmp[count[dgt]] = idx[i]
-            count[dgt] += 1
-        idx, tmp = tmp, idx
-    return idx
-
-
-@njit(cache=True)
-def _octant_tables(tau, pen, w, tol_box):
-    """Per octant o (bit i set: tau_d,i < 0, s_i = -1): the candidates that can lie in that
-    octant's sign box (s_i tau_i >= -tol_box on every axis), sorted by descending score
-    sum_i w_i s_i tau_i - pen. Octant o occupies rows start[o]:start[o+1] of
-    X (x = s * tau), S (score), P (penalty) and R (index into the unsorted candidates).
-    A candidate with no (numerically) zero component belongs to exactly one octant."""
-    n = tau.shape[0]
-    member = np.zeros((8, n), dtype=np.bool_)
+@njit(cache=True, nogil=True)
+def _octant_members(tau, n, tol_box, octm):
+    """Octant membership of candidates 0:n: a candidate belongs to octant o (bit i set:
+    tau_d,i < 0, s_i = -1) if it can lie in that octant's sign box, s_i tau_i >= -tol_box
+    on every axis; one with no (numerically) zero component belongs to exactly one.
+    Writes octm[r] (its octant, or -1 if several) and returns start (9,): octant o gets
+    rows start[o]:start[o+1] of the tables."""
     start = np.zeros(9, dtype=np.int64)
+    for r in range(n):
+        t0, t1, t2 = tau[r, 0], tau[r, 1], tau[r, 2]
+        if abs(t0) > tol_box and abs(t1) > tol_box and abs(t2) > tol_box:
+            o = np.int64(t0 < 0.0) | (np.int64(t1 < 0.0) << 1) | (np.int64(t2 < 0.0) << 2)
+            octm[r] = o
+            start[o + 1] += 1
+        else:                               # on or near a coordinate plane: several octants
+            octm[r] = -1
+            for o in range(8):
+                a0 = -t0 >= -tol_box if (o & 1) else t0 >= -tol_box
+                a1 = -t1 >= -tol_box if (o & 2) else t1 >= -tol_box
+                a2 = -t2 >= -tol_box if (o & 4) else t2 >= -tol_box
+                if a0 and a1 and a2:
+                    start[o + 1] += 1
+    for o in range(8):
+        start[o + 1] += start[o]
+    return start
+
+
+@njit(cache=True, nogil=True)
+def _octant_fill(tau, pen, pat, n, w, tol_box, octm, start, ka, ia, kb, ib, count,
+                 tau_out, pen_out, pat_out, X, S, P, R, bstart, bmin):
+    """The tables of one configuration from its n distinct candidates (tau, pen, pat) and
+    their octant membership (_octant_members): candidates copied to tau/pen/pat_out, and
+    per octant o, rows start[o]:start[o+1] of X (x = s * tau), S (score), P (penalty) and
+    R (index into the candidates) sorted by descending score sum_i w_i s_i tau_i - pen
+    (stable: ties keep candidate order); bmin[bstart[o] + b] is the component-wise minimum
+    of x over block b (BLOCK rows) of octant o. Work buffers: ka, kb (float64) and ia, ib
+    (int64) of >= start[8] rows, count (int64) of SORT_BUCKETS_MAX + 1. The outputs are
+    allocated by the caller (numpy memory is recycled, fresh pages cost more than the
+    sort)."""
+    for r in range(n):
+        tau_out[r, 0] = tau[r, 0]
+        tau_out[r, 1] = tau[r, 1]
+        tau_out[r, 2] = tau[r, 2]
+        pen_out[r] = pen[r]
+        pat_out[r] = pat[r]
+    pos = start[:8].copy()
+    kmin = np.full(8, np.inf)
+    kmax = np.full(8, -np.inf)
+    for r in range(n):                      # key = -score, per octant in candidate order
+        t0, t1, t2 = tau[r, 0], tau[r, 1], tau[r, 2]
+        o1 = octm[r]
+        if o1 >= 0:
+            o = np.int64(o1)                # signs by arithmetic: no unpredictable branches
+            s0 = 1.0 - 2.0 * (o & 1)
+            s1 = 1.0 - (o & 2)
+            s2 = 1.0 - 0.5 * (o & 4)
+            k = pen[r] - (w[0] * s0 * t0 + w[1] * s1 * t1 + w[2] * s2 * t2)
+            j = pos[o]
+            pos[o] = j + 1
+            ka[j] = k
+            ia[j] = r
+            kmin[o] = min(kmin[o], k)
+            kmax[o] = max(kmax[o], k)
+            continue
+        for o in range(8):
+            a0 = -t0 >= -tol_box if (o & 1) else t0 >= -tol_box
+            a1 = -t1 >= -tol_box if (o & 2) else t1 >= -tol_box
+            a2 = -t2 >= -tol_box if (o & 4) else t2 >= -tol_box
+            if a0 and a1 and a2:
+                k = pen[r] - (w[0] * (-1.0 if (o & 1) else 1.0) * t0 + w[1] * (-1.0 if (o & 2) else 1.0) * t1
+                              + w[2] * (-1.0 if (o & 4) else 1.0) * t2)
+                j = pos[o]
+                pos[o] = j + 1
+                ka[j] = k
+                ia[j] = r
+                kmin[o] = min(kmin[o], k)
+                kmax[o] = max(kmax[o], k)
+    for o in range(8):
+        _bucket_sort(ka, ia, start[o], start[o + 1], kmin[o], kmax[o], kb, ib, count)
     for o in range(8):
         s0 = -1.0 if (o & 1) else 1.0
         s1 = -1.0 if (o & 2) else 1.0
         s2 = -1.0 if (o & 4) else 1.0
-        cnt = 0
-        for r in range(n):
-            if s0 * tau[r, 0] >= -tol_box and s1 * tau[r, 1] >= -tol_box and s2 * tau[r, 2] >= -tol_box:
-                member[o, r] = True
-                cnt += 1
-        start[o + 1] = start[o] + cnt
-    total = start[8]
-    X = np.empty((total, 3))
-    S = np.empty(total)
-    P = np.empty(total)
-    R = np.empty(total, dtype=np.int64)
-    for o in range(8):
-        s0 = -1.0 if (o & 1) else 1.0
-        s1 = -1.0 if (o & 2) else 1.0
-        s2 = -1.0 if (o & 4) else 1.0
-        m = start[o + 1] - start[o]
-        rows = np.empty(m, dtype=np.int64)
-        neg_score = np.empty(m)
-        q = 0
-        for r in range(n):
-            if member[o, r]:
-                rows[q] = r
-                neg_score[q] = pen[r] - (w[0] * s0 * tau[r, 0] + w[1] * s1 * tau[r, 1]
-                                         + w[2] * s2 * tau[r, 2])
-                q += 1
-        order = _radix_argsort(neg_score)
-        for q in range(m):
-            r = rows[order[q]]
-            j = start[o] + q
-            X[j, 0] = s0 * tau[r, 0]
-            X[j, 1] = s1 * tau[r, 1]
-            X[j, 2] = s2 * tau[r, 2]
-            S[j] = -neg_score[order[q]]
+        m0 = m1 = m2 = np.inf
+        blk = bstart[o]
+        for j in range(start[o], start[o + 1]):
+            r = ib[j]
+            x0 = s0 * tau[r, 0]
+            x1 = s1 * tau[r, 1]
+            x2 = s2 * tau[r, 2]
+            X[j, 0] = x0
+            X[j, 1] = x1
+            X[j, 2] = x2
+            S[j] = -kb[j]
             P[j] = pen[r]
             R[j] = r
-    # blocks of BLOCK consecutive rows per octant with their component-wise minimum of x
+            # blocks of BLOCK consecutive rows with their component-wise minimum of x
+            m0 = min(m0, x0)
+            m1 = min(m1, x1)
+            m2 = min(m2, x2)
+            if (j - start[o]) % BLOCK == BLOCK - 1 or j == start[o + 1] - 1:
+                bmin[blk, 0] = m0
+                bmin[blk, 1] = m1
+                bmin[blk, 2] = m2
+                blk += 1
+                m0 = m1 = m2 = np.inf
+
+
+class _Workspace:
+    """Work buffers of the table build, kept between builds (grown on demand), so a rebuild
+    touches memory that is already mapped. One per building thread."""
+
+    def __init__(self) -> None:
+        self.rows = 0
+        self.octrows = 0
+        self.count = np.zeros(SORT_BUCKETS_MAX + 1, dtype=np.int64)
+        self.grow(1024)
+
+    def grow(self, rows: int) -> None:
+        """Room for ``rows`` distinct candidates (and 5/4 as many octant rows)."""
+        if rows <= self.rows:
+            return
+        rows = max(rows, 2 * self.rows)
+        self.ra = np.zeros(rows, dtype=ROW)
+        self.rb = np.zeros(rows, dtype=ROW)
+        self.rc = np.zeros(rows, dtype=ROW)
+        self.tau = np.zeros((rows, N_AXES))
+        self.pen = np.zeros(rows)
+        self.pat = np.zeros(rows, dtype=np.int64)
+        self.octm = np.zeros(rows, dtype=np.int8)
+        self.rows = rows
+        self.grow_octants(rows + rows // 4)
+
+    def grow_octants(self, rows: int) -> None:
+        """Room for ``rows`` octant rows (sort keys and payloads)."""
+        if rows <= self.octrows:
+            return
+        rows = max(rows, 2 * self.octrows)
+        self.ka = np.zeros(rows)
+        self.kb = np.zeros(rows)
+        self.ia = np.zeros(rows, dtype=np.int64)
+        self.ib = np.zeros(rows, dtype=np.int64)
+        self.octrows = rows
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.ra, self.rb, self.rc, self.tau, self.pen, self.pat,
+                                      self.octm, self.ka, self.kb, self.ia, self.ib, self.count))
+
+
+class _Tables:
+    """Candidate tables of one configuration: the health model they were built for
+    (usable, cols, bias), the objective (w, per-jet penalty c) and the octant tables."""
+    __slots__ = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "scratch",
+                 "bias", "usable", "cols", "w", "n_raw", "build_s")
+
+    def __init__(self, tau, pen, pat, start, X, S, P, R, bstart, bmin, usable, cols, bias, w,
+                 n_raw, build_s):
+        self.tau, self.pen, self.pat = tau, pen, pat
+        self.start, self.X, self.S, self.P, self.R = start, X, S, P, R
+        self.bstart, self.bmin = bstart, bmin
+        self.scratch = np.empty(len(pen))     # objective buffer of the exhaustive scans
+        self.usable, self.cols, self.bias, self.w = usable, cols, bias, w
+        self.n_raw = n_raw                    # multiplicity vectors enumerated
+        self.build_s = build_s                # build time [s]
+
+    @property
+    def nbytes(self) -> int:
+        return sum(getattr(self, k).nbytes for k in ("tau", "pen", "pat", "start", "X", "S", "P",
+                                                      "R", "bstart", "bmin", "scratch"))
+
+
+def _build_tables(usable, cols, bias, c, w, ws: _Workspace) -> _Tables:
+    """Groups of identical effective columns -> distinct torques -> octant tables. The
+    heavy work is in nogil kernels over the workspace ``ws`` (one per building thread)."""
+    t0 = time.perf_counter()
+    usable = np.ascontiguousarray(usable, dtype=np.bool_)
+    cols = np.ascontiguousarray(cols, dtype=np.float64)
+    bias = np.ascontiguousarray(bias, dtype=np.float64)
+    w = np.ascontiguousarray(w, dtype=np.float64)
+    g_col, g_m, g_cum_pen, g_cum_pat = _group_columns(
+        cols, usable, np.ascontiguousarray(c, dtype=np.float64), KEY_QUANTUM_NM)
+    while True:
+        n_raw, n = _enumerate_merged(g_col, g_m, g_cum_pen, g_cum_pat, bias, KEY_QUANTUM_NM,
+                                     TOL_PEN, ws.ra, ws.rb, ws.rc, ws.tau, ws.pen, ws.pat)
+        if n >= 0:
+            break
+        ws.grow(min(n_raw, 4 * ws.rows))       # never more than n_raw distinct torques
+    start = _octant_members(ws.tau, n, TOL_BOX_NM, ws.octm)
+    total = int(start[8])
+    ws.grow_octants(total)
     bstart = np.zeros(9, dtype=np.int64)
-    for o in range(8):
-        bstart[o + 1] = bstart[o] + (start[o + 1] - start[o] + BLOCK - 1) // BLOCK
-    bmin = np.empty((bstart[8], 3))
-    for o in range(8):
-        for blk in range(bstart[o], bstart[o + 1]):
-            j0 = start[o] + (blk - bstart[o]) * BLOCK
-            j1 = min(j0 + BLOCK, start[o + 1])
-            for i in range(3):
-                m = np.inf
-                for j in range(j0, j1):
-                    if X[j, i] < m:
-                        m = X[j, i]
-                bmin[blk, i] = m
-    return start, X, S, P, R, bstart, bmin
+    bstart[1:] = np.cumsum((np.diff(start) + BLOCK - 1) // BLOCK)
+    tau, pen, pat = np.empty((n, N_AXES)), np.empty(n), np.empty(n, dtype=np.int64)
+    X, S, P, R = np.empty((total, N_AXES)), np.empty(total), np.empty(total), np.empty(total, dtype=np.int64)
+    bmin = np.empty((int(bstart[8]), N_AXES))
+    _octant_fill(ws.tau, ws.pen, ws.pat, n, w, TOL_BOX_NM, ws.octm, start, ws.ka, ws.ia, ws.kb,
+                 ws.ib, ws.count, tau, pen, pat, X, S, P, R, bstart, bmin)
+    return _Tables(tau, pen, pat, start, X, S, P, R, bstart, bmin, usable.copy(), cols.copy(),
+                   bias.copy(), w.copy(), n_raw, time.perf_counter() - t0)
 
 
 # ---------------------------------------------------------------- the query
@@ -321,16 +579,34 @@ def _in_box(X, j, hi0, hi1, hi2):
 
 
 @njit(cache=True)
+def _write_answer(r, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out):
+    tau_out[0] = cand_tau[r, 0] + delta[0]
+    tau_out[1] = cand_tau[r, 1] + delta[1]
+    tau_out[2] = cand_tau[r, 2] + delta[2]
+    obj_out[0] = (w[0] * abs(d0 - tau_out[0]) + w[1] * abs(d1 - tau_out[1])
+                  + w[2] * abs(d2 - tau_out[2]) + cand_pen[r])
+    pat = cand_pat[r]
+    for k in range(u_out.shape[0]):
+        u_out[k] = (pat >> k) & 1
+
+
+@njit(cache=True)
+def _reject(u_out, obj_out):
+    for k in range(u_out.shape[0]):
+        u_out[k] = 0
+    obj_out[0] = np.nan
+    return 2
+
+
+@njit(cache=True)
 def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch,
-                  tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
-    """One allocation. Writes u_out (n jets), tau_out (3,), obj_out[0]; returns
-    STATUS_OK / STATUS_DEGRADED / STATUS_REJECTED. No allocation."""
+                  forbid, tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
+    """One allocation over the candidates whose pattern has no bit of ``forbid`` (0: all).
+    Writes u_out (n jets), tau_out (3,), obj_out[0]; returns STATUS_OK / STATUS_DEGRADED /
+    STATUS_REJECTED. No allocation."""
     d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
     if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
-        for k in range(u_out.shape[0]):
-            u_out[k] = 0
-        obj_out[0] = np.nan
-        return 2
+        return _reject(u_out, obj_out)
     o = 0
     if d0 < 0.0:
         o |= 1
@@ -344,14 +620,14 @@ def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen,
     tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
     first, stop = start[o], start[o + 1]
     best = -1
-    # first candidate inside the sign box = max score; skip blocks whose component-wise
-    # minimum already leaves the box
+    # first allowed candidate inside the sign box = max score; skip blocks whose
+    # component-wise minimum already leaves the box
     for blk in range(bstart[o], bstart[o + 1]):
         if (bmin[blk, 0] > hi0) | (bmin[blk, 1] > hi1) | (bmin[blk, 2] > hi2):
             continue
         j0 = first + (blk - bstart[o]) * BLOCK
         for j in range(j0, min(j0 + BLOCK, stop)):
-            if _in_box(X, j, hi0, hi1, hi2):
+            if _in_box(X, j, hi0, hi1, hi2) and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0):
                 best = j
                 break
         if best >= 0:
@@ -365,10 +641,12 @@ def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen,
             end += 1
         min_pen = P[best]
         for j in range(best + 1, end):    # score ties: smallest penalty ...
-            if P[j] < min_pen and _in_box(X, j, hi0, hi1, hi2):
+            if (P[j] < min_pen and _in_box(X, j, hi0, hi1, hi2)
+                    and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0)):
                 min_pen = P[j]
         for j in range(best, end):        # ... then smallest bit pattern
-            if P[j] <= min_pen + tol_pen and _in_box(X, j, hi0, hi1, hi2):
+            if (P[j] <= min_pen + tol_pen and _in_box(X, j, hi0, hi1, hi2)
+                    and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0)):
                 r = R[j]
                 if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
                     chosen = r
@@ -377,6 +655,9 @@ def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen,
         m = cand_pen.shape[0]
         best_obj = np.inf
         for r in range(m):
+            if forbid != 0 and (cand_pat[r] & forbid) != 0:
+                scratch[r] = np.inf
+                continue
             v = (w[0] * abs(d0 - cand_tau[r, 0]) + w[1] * abs(d1 - cand_tau[r, 1])
                  + w[2] * abs(d2 - cand_tau[r, 2]) + cand_pen[r])
             scratch[r] = v
@@ -391,77 +672,187 @@ def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen,
             if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
                 if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
                     chosen = r
-    r = chosen
-    tau_out[0] = cand_tau[r, 0]
-    tau_out[1] = cand_tau[r, 1]
-    tau_out[2] = cand_tau[r, 2]
-    obj_out[0] = (w[0] * abs(d0 - cand_tau[r, 0]) + w[1] * abs(d1 - cand_tau[r, 1])
-                  + w[2] * abs(d2 - cand_tau[r, 2]) + cand_pen[r])
-    pat = cand_pat[r]
-    for k in range(u_out.shape[0]):
-        u_out[k] = (pat >> k) & 1
+    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, ZERO3, u_out, tau_out, obj_out)
     return status
 
 
-class _Tables:
-    """Candidate tables of one health configuration."""
-    __slots__ = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "scratch",
-                 "bias", "n_raw")
+@njit(cache=True)
+def _solve_shifted_kernel(tau_d, w, cand_tau, cand_pen, cand_pat, scratch, forbid, delta,
+                          tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
+    """One allocation over the candidates with no bit of ``forbid``, whose torque is
+    cand_tau + delta (a bias the tables were not built with): exhaustive scan with the
+    sign box, else without it (degraded). Same tie-break and outputs as _solve_kernel."""
+    d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
+    if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
+        return _reject(u_out, obj_out)
+    lo0, hi0 = (-tol_box, d0 + tol_box) if d0 >= 0.0 else (d0 - tol_box, tol_box)
+    lo1, hi1 = (-tol_box, d1 + tol_box) if d1 >= 0.0 else (d1 - tol_box, tol_box)
+    lo2, hi2 = (-tol_box, d2 + tol_box) if d2 >= 0.0 else (d2 - tol_box, tol_box)
+    tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
+    m = cand_pen.shape[0]
+    status = 0
+    for attempt in range(2):              # 0: inside the sign box; 1: anywhere (degraded)
+        best_obj = np.inf
+        for r in range(m):
+            scratch[r] = np.inf
+            if (cand_pat[r] & forbid) != 0:
+                continue
+            t0 = cand_tau[r, 0] + delta[0]
+            t1 = cand_tau[r, 1] + delta[1]
+            t2 = cand_tau[r, 2] + delta[2]
+            if attempt == 0 and not ((lo0 <= t0) & (t0 <= hi0) & (lo1 <= t1) & (t1 <= hi1)
+                                     & (lo2 <= t2) & (t2 <= hi2)):
+                continue
+            v = w[0] * abs(d0 - t0) + w[1] * abs(d1 - t1) + w[2] * abs(d2 - t2) + cand_pen[r]
+            scratch[r] = v
+            if v < best_obj:
+                best_obj = v
+        if best_obj < np.inf:
+            break
+        status = 1
+    lim = best_obj + tol
+    min_pen = np.inf
+    for r in range(m):
+        if scratch[r] <= lim and cand_pen[r] < min_pen:
+            min_pen = cand_pen[r]
+    chosen = -1
+    for r in range(m):
+        if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
+            if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
+                chosen = r
+    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out)
+    return status
 
-    def __init__(self, tau, pen, pat, start, X, S, P, R, bstart, bmin, bias, n_raw):
-        self.tau, self.pen, self.pat = tau, pen, pat
-        self.start, self.X, self.S, self.P, self.R = start, X, S, P, R
-        self.bstart, self.bmin = bstart, bmin
-        self.scratch = np.empty(len(pen))     # objective buffer of the degraded scan
-        self.bias = bias
-        self.n_raw = n_raw                    # combinations enumerated before merging
 
+class _Rebuilder:
+    """Builds tables on a background daemon thread (the numba kernels release the GIL, so
+    the control thread keeps running). Jobs: the newest reconfiguration request first, then
+    the pre-build queue. Results wait in ``done`` (dict, key -> _Tables) until the
+    allocator takes them; the control thread never waits on this object's lock."""
 
-def _build_tables(usable, cols, bias, c, w) -> _Tables:
-    """Groups of identical effective columns -> enumeration -> merge -> octant sort."""
-    idx = np.flatnonzero(usable)
-    groups: dict[tuple, list[int]] = {}
-    for k in idx:
-        key = tuple(np.round(cols[:, k] / KEY_QUANTUM_NM).astype(np.int64))
-        if all(v == 0 for v in key):
-            continue                      # a zero column (eta = 0) never helps: keep it off
-        groups.setdefault(key, []).append(int(k))
-    G = len(groups)
-    m_max = max((len(v) for v in groups.values()), default=0)
-    g_col = np.zeros((G, N_AXES))
-    g_m = np.zeros(G, dtype=np.int64)
-    g_cum_pen = np.zeros((G, m_max + 1))
-    g_cum_pat = np.zeros((G, m_max + 1), dtype=np.int64)
-    for g, members in enumerate(groups.values()):
-        # j members on: the j cheapest, lowest-numbered first (smallest pattern on ties)
-        members = sorted(members, key=lambda k: (c[k], k))
-        g_col[g] = cols[:, members[0]]
-        g_m[g] = len(members)
-        for j, k in enumerate(members, start=1):
-            g_cum_pen[g, j] = g_cum_pen[g, j - 1] + c[k]
-            g_cum_pat[g, j] = g_cum_pat[g, j - 1] | (1 << k)
-    tau_all, pen_all, pat_all = _enumerate_groups(g_col, g_m, g_cum_pen, g_cum_pat,
-                                                  np.ascontiguousarray(bias, dtype=float))
-    tau, pen, pat = _merge_identical(tau_all, pen_all, pat_all, KEY_QUANTUM_NM, TOL_PEN)
-    start, X, S, P, R, bstart, bmin = _octant_tables(tau, pen, np.ascontiguousarray(w, dtype=float), TOL_BOX_NM)
-    return _Tables(tau, pen, pat, start, X, S, P, R, bstart, bmin, np.array(bias, dtype=float),
-                   len(pen_all))
+    def __init__(self) -> None:
+        self._cv = threading.Condition()
+        self._request = None                  # (key, usable, cols, bias, c, w): newest wins
+        self._queue: deque = deque()          # pre-builds, same tuples
+        self._busy = False
+        self._stop = False
+        self._ws = _Workspace()
+        self.done: dict = {}
+        self.builds = 0
+        self._thread = threading.Thread(target=self._run, name="allocator-rebuild", daemon=True)
+        self._thread.start()
+
+    def submit(self, job) -> None:
+        with self._cv:
+            self._request = job
+            self._cv.notify()
+
+    def queue(self, jobs) -> None:
+        with self._cv:
+            self._queue.extend(jobs)
+            self._cv.notify()
+
+    def cancel_queue(self) -> None:
+        with self._cv:
+            self._queue.clear()
+            self._request = None
+
+    def idle(self) -> bool:
+        return not self._busy and self._request is None and not self._queue
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        with self._cv:
+            return self._cv.wait_for(self.idle, timeout_s)
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        with self._cv:
+            self._stop = True
+            self._request = None
+            self._queue.clear()
+            self._cv.notify_all()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def _run(self) -> None:
+        try:            # a lower priority than the control thread (Linux: per thread)
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
+        except (AttributeError, OSError):
+            pass
+        while True:
+            with self._cv:
+                while not self._stop and self._request is None and not self._queue:
+                    self._cv.wait()
+                if self._stop:
+                    return
+                if self._request is not None:
+                    job, self._request = self._request, None
+                else:
+                    job = self._queue.popleft()
+                self._busy = True
+            key, usable, cols, bias, c, w = job
+            try:
+                tables = _build_tables(usable, cols, bias, c, w, self._ws)
+            except Exception as e:  # noqa: BLE001 - handed to the allocator, never lost
+                tables = e
+            with self._cv:
+                self.done[key] = tables
+                self.builds += 1
+                self._busy = False
+                self._cv.notify_all()
 
 
 # ---------------------------------------------------------------- the allocator
 class Allocator:
     """Exact fault-tolerant discrete allocator. ``solve`` is allocation-free and bounded
-    (a scan of at most the ~13,000 distinct achievable torques)."""
+    (a scan of at most the distinct achievable torques, ~13,000 for the nominal jets).
+
+    Reconfiguration (``set_health``, ``set_params``, ``set_fault_tolerance``) fetches the
+    new configuration's tables from a cache or builds them:
+
+    - ``async_rebuild=False`` (default; batch, lockstep SIL): the build runs in the call
+      (a few ms), so every answer is the exact optimum of the current model and a lockstep
+      run equals the batch run bit for bit.
+    - ``async_rebuild=True`` (real time): the build runs on a background thread and the call
+      returns at once. Until the first ``solve`` after the build completes
+      (``reconfig_pending`` is True, ``interim`` True for the answers meanwhile), ``solve``
+      answers with the previous tables under a SAFE interim model: every jet whose treatment
+      changed (newly failed, inhibited, stuck, degraded with another eta, or back from
+      stuck) is kept off, and the stuck-on bias is the new one (``_solve_shifted_kernel``
+      when it differs). The interim answer never fires a jet the new health forbids, its
+      tau_B and objective are those of the new model for the returned u, and it is the
+      exact optimum (spec tie-break, sign box, degraded fallback) over the previous
+      configuration's candidates that avoid the changed jets. It is NOT necessarily the
+      optimum of the new model: combinations that need a changed jet, or a twin of a changed
+      jet (the previous tables keep one representative pattern per torque), are missing, and
+      after ``set_params`` the previous weights and penalties apply until the switch.
+      ``prebuild_single_faults`` (default: on when async) builds, in the background at
+      start-up and after every parameter change, the tables of every single jet failed off
+      from the nominal health, so the most likely first fault switches at once.
+    """
 
     PARAMS = PARAMS
 
     def __init__(self, torque_matrix_Nm: np.ndarray, thrust_N: np.ndarray,
-                 params: dict[str, float]) -> None:
+                 params: dict[str, float], *, async_rebuild: bool = False,
+                 prebuild_single_faults: bool | None = None) -> None:
         T, thrust, _, _ = _validate_problem(torque_matrix_Nm, thrust_N, np.ones(3), 0.0)
         self._T = T
         self._thrust = thrust
         self.n_jets = T.shape[1]
+        self.async_rebuild = bool(async_rebuild)
+        self.prebuild_single_faults = (self.async_rebuild if prebuild_single_faults is None
+                                       else bool(prebuild_single_faults))
+        self._ws = _Workspace()
+        self._rebuilder: _Rebuilder | None = None
+        self._finalizer = None
         self._cache: OrderedDict = OrderedDict()
+        self._prebuilt: dict = {}                  # single faults, never evicted
+        self._prebuild_keys: set = set()
+        self._gen = 0                              # parameter generation (part of table keys)
         self._health = JetHealth(self.n_jets)
         self.u = np.zeros(self.n_jets, dtype=np.uint8)     # reused output
         self.tau_B = np.zeros(N_AXES)                         # modelled achieved torque [N m]
@@ -469,17 +860,41 @@ class Allocator:
         self.objective = float("nan")
         self.degraded = False
         self.rejected = False
-        self.rebuild_time_s = 0.0
-        self.tables_from_cache = False
+        self.rebuild_time_s = 0.0          # build time of the tables adopted last [s]
+        self.tables_from_cache = False     # the last reconfiguration found its tables ready
+        self.reconfig_pending = False      # async: solving with the interim model
+        self.interim = False               # the last answer came from the interim model
+        self.tables_version = 0            # +1 at every switch of tables
+        self.reconfig_latency_s = 0.0      # request -> switch of the last reconfiguration [s]
+        self._active_key = None
+        self._target_key = None
+        self._target_job = None
+        self._t_request = 0.0
+        self._forbid = 0
+        self._delta = np.zeros(N_AXES)
+        self._shifted = False
+        self._tables: _Tables | None = None
+        async_now, self.async_rebuild = self.async_rebuild, False   # first tables: built here
         self.set_params(params)
         # warm-up: compile/load the kernels and run every branch once
         self.solve(np.array([100.0, -50.0, 0.0]))
         self.solve(np.array([np.nan, 0.0, 0.0]))
+        t = self._tables
+        _solve_shifted_kernel(np.array([1.0, -2.0, 3.0]), t.w, t.tau, t.pen, t.pat, t.scratch,
+                              np.int64(1), np.ones(N_AXES), TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                              self.u, self.tau_B, self._obj)
+        self.solve(np.array([100.0, -50.0, 0.0]))
         self.rejected = False
+        self.async_rebuild = async_now
+        if self.async_rebuild:
+            self._rebuilder = _Rebuilder()
+            self._finalizer = weakref.finalize(self, self._rebuilder.close, 1.0)
+            self._queue_prebuilds()
 
     # -- configuration (not in the cycle's hot path)
     def set_params(self, params: dict[str, float]) -> None:
-        """Validate the allocator.* parameters and rebuild the tables."""
+        """Validate the allocator.* parameters; the tables of every configuration are
+        rebuilt with them (async: the previous tables and objective serve meanwhile)."""
         vals = {}
         for p in self.PARAMS:
             if p.name not in params:
@@ -489,12 +904,17 @@ class Allocator:
                            vals["allocator.w_yaw"]])
         self.penalty_per_N = vals["allocator.penalty_per_N"]
         self.fault_tolerance = bool(vals["allocator.fault_tolerance"])
+        self._gen += 1
         self._cache.clear()
+        self._prebuilt.clear()
+        if self._rebuilder is not None:
+            self._rebuilder.cancel_queue()
+            self._queue_prebuilds()
         self._activate()
 
     def set_health(self, health: JetHealth) -> None:
-        """Adopt a new health picture: fetch its tables from the cache or rebuild them
-        (see rebuild_time_s). Health is stored but not used while fault tolerance is off."""
+        """Adopt a new health picture (see the class docstring for sync/async). Health is
+        stored but not used while fault tolerance is off."""
         if not isinstance(health, JetHealth) or len(health.state) != self.n_jets:
             raise ValueError(f"health: expected a JetHealth of {self.n_jets} jets")
         self._health = health.copy()
@@ -504,45 +924,185 @@ class Allocator:
         self.fault_tolerance = bool(on)
         self._activate()
 
-    def _activate(self) -> None:
-        health = self._health if self.fault_tolerance else JetHealth(self.n_jets)
-        key = health.key()          # fault tolerance off shares the all-nominal tables
-        tables = self._cache.get(key)
-        self.tables_from_cache = tables is not None
-        if tables is None:
-            t0 = time.perf_counter()
-            usable, cols, bias, c = effective_model(self._T, self._thrust, health,
-                                                    self.penalty_per_N)
-            tables = _build_tables(usable, cols, bias, c, self.w)
-            self.rebuild_time_s = time.perf_counter() - t0
-            self._cache[key] = tables
-            while len(self._cache) > CACHE_MAX_CONFIGS:
-                self._cache.popitem(last=False)
-        else:
-            self._cache.move_to_end(key)
-        self._tables = tables
+    def poll(self) -> bool:
+        """Async: switch to finished tables now (``solve`` does this itself); True if
+        the switch happened."""
+        return self.reconfig_pending and self._try_switch()
+
+    def wait_idle(self, timeout_s: float = 5.0) -> bool:
+        """Async (tests, ground tools; never in the cycle): wait until the background
+        builder has nothing left to do. True if idle in time. Sync mode: True."""
+        return self._rebuilder is None or self._rebuilder.wait_idle(timeout_s)
+
+    def close(self) -> None:
+        """Stop the background builder (async); the allocator keeps solving with the
+        tables it has (a pending reconfiguration is then built synchronously)."""
+        if self._rebuilder is not None:
+            self._finalizer()
+            self._rebuilder = None
+        self.async_rebuild = False
+        if self.reconfig_pending:
+            self._activate()
+
+    def __enter__(self) -> "Allocator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def builder_alive(self) -> bool:
+        return self._rebuilder is not None and self._rebuilder.alive
 
     @property
     def n_candidates(self) -> int:
         """Distinct achievable torque vectors of the active configuration."""
         return len(self._tables.pen)
 
+    @property
+    def tables_nbytes(self) -> dict[str, int]:
+        """Memory held by tables [bytes]: active, LRU cache, pre-built, work buffers."""
+        ws = self._ws.nbytes + (self._rebuilder._ws.nbytes if self._rebuilder is not None else 0)
+        return {"active": self._tables.nbytes,
+                "cache": sum(t.nbytes for t in self._cache.values()),
+                "prebuilt": sum(t.nbytes for t in self._prebuilt.values()),
+                "workspace": ws}
+
+    def _model_key(self):
+        health = self._health if self.fault_tolerance else JetHealth(self.n_jets)
+        return health, (self._gen, health.key())   # fault tolerance off: the nominal tables
+
+    def _job(self, key, health):
+        usable, cols, bias, c = effective_model(self._T, self._thrust, health, self.penalty_per_N)
+        return (key, usable, cols, bias, c, self.w.copy())
+
+    def _queue_prebuilds(self) -> None:
+        if not self.prebuild_single_faults or self._rebuilder is None:
+            return
+        jobs = []
+        for k in range(self.n_jets):
+            h = JetHealth(self.n_jets)
+            h.set(k + 1, FAILED_OFF)
+            jobs.append(self._job((self._gen, h.key()), h))
+        self._prebuild_keys = {job[0] for job in jobs}
+        self._rebuilder.queue(jobs)
+
+    def _collect(self) -> None:
+        """Move finished background builds of this parameter generation into the stores."""
+        if self._rebuilder is None:
+            return
+        done = self._rebuilder.done
+        for key in list(done):
+            t = done.pop(key, None)
+            if t is None or isinstance(t, Exception) or key[0] != self._gen:
+                continue
+            if key in self._prebuild_keys:
+                self._prebuilt[key] = t
+            else:
+                self._remember(key, t)
+
+    def _lookup(self, key):
+        t = self._cache.get(key)
+        if t is not None:
+            self._cache.move_to_end(key)
+            return t
+        return self._prebuilt.get(key)
+
+    def _remember(self, key, tables) -> None:
+        if key in self._prebuilt:
+            return
+        self._cache[key] = tables
+        self._cache.move_to_end(key)
+        while len(self._cache) > CACHE_MAX_CONFIGS:
+            self._cache.popitem(last=False)
+
+    def _adopt(self, key, tables, from_cache: bool) -> None:
+        self._tables = tables
+        self._active_key = key
+        self._target_key = None
+        self._target_job = None
+        self.reconfig_pending = False
+        self._forbid = 0
+        self._shifted = False
+        self.tables_from_cache = from_cache
+        if not from_cache:
+            self.rebuild_time_s = tables.build_s
+        self.tables_version += 1
+        self.reconfig_latency_s = time.perf_counter() - self._t_request
+
+    def _activate(self) -> None:
+        self._t_request = time.perf_counter()
+        health, key = self._model_key()
+        if key == self._active_key:
+            self._target_key = None
+            self.reconfig_pending = False
+            self._forbid = 0
+            self._shifted = False
+            self.tables_from_cache = True
+            return
+        self._collect()
+        tables = self._lookup(key)
+        if tables is not None:
+            self._adopt(key, tables, True)
+            return
+        job = self._job(key, health)
+        if not self.async_rebuild or self._tables is None:
+            tables = _build_tables(*job[1:], self._ws)
+            self._remember(key, tables)
+            self._adopt(key, tables, False)
+            return
+        # async: interim model on the active tables, the build in the background
+        _, usable, cols, bias, _, _ = job
+        t = self._tables
+        same = t.usable & usable & np.all(t.cols == cols, axis=0)
+        changed = np.flatnonzero(t.usable & ~same)     # in the old patterns, now different
+        self._forbid = int(sum(1 << int(k) for k in changed))
+        self._delta = bias - t.bias                     # stuck-on bias the tables lack
+        self._shifted = bool(np.any(self._delta != 0.0))
+        self._target_key = key
+        self._target_job = job
+        self.reconfig_pending = True
+        self._rebuilder.submit(job)
+
+    def _try_switch(self) -> bool:
+        t = self._rebuilder.done.pop(self._target_key, None) if self._rebuilder is not None else None
+        if t is None:
+            return False
+        if isinstance(t, Exception):       # never expected; build it here rather than lose it
+            t = _build_tables(*self._target_job[1:], self._ws)
+        key = self._target_key
+        self._remember(key, t)
+        self._adopt(key, t, False)
+        return True
+
     # -- the cycle
     def solve(self, tau_d: np.ndarray) -> np.ndarray:
         """u (uint8, n jets; the same array every call) for demand tau_d [N m] in body
-        axes. Sets tau_B, objective, degraded, rejected. A non-finite demand is rejected
-        (u = 0, tau_B = stuck bias, objective NaN); a demand that is not 3 numbers raises
-        ValueError."""
+        axes. Sets tau_B, objective, degraded, rejected, interim. A non-finite demand is
+        rejected (u = 0, tau_B = stuck bias, objective NaN); a demand that is not 3 numbers
+        raises ValueError."""
         if (type(tau_d) is not np.ndarray or tau_d.dtype != np.float64
                 or tau_d.shape != (N_AXES,) or not tau_d.flags.c_contiguous):
             tau_d = _as_demand(tau_d)
+        if self.reconfig_pending:
+            self._try_switch()
         t = self._tables
-        status = _solve_kernel(tau_d, self.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
-                               t.tau, t.pen, t.pat, t.scratch,
-                               TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                               self.u, self.tau_B, self._obj)
+        self.interim = self.reconfig_pending
+        if not self._shifted or not self.reconfig_pending:
+            status = _solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
+                                   t.tau, t.pen, t.pat, t.scratch,
+                                   self._forbid, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                   self.u, self.tau_B, self._obj)
+        else:
+            status = _solve_shifted_kernel(tau_d, t.w, t.tau, t.pen, t.pat, t.scratch,
+                                           self._forbid, self._delta,
+                                           TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                           self.u, self.tau_B, self._obj)
         if status == STATUS_REJECTED:
-            self.tau_B[:] = t.bias
+            if self.interim:
+                np.add(t.bias, self._delta, out=self.tau_B)
+            else:
+                self.tau_B[:] = t.bias
             self.objective = float("nan")
             self.degraded = False
             self.rejected = True

@@ -7,7 +7,9 @@ one process (the batch rate), and the engine's overhead per run.
 - start-up: cluster creation and worker warm-up, reported separately;
 - overhead per run: wall time per run on one worker minus the run's own time measured in
   the worker (submission, scheduling, transfer, recording), and the same with near-empty
-  runs (0.1 s of flight).
+  runs (0.1 s of flight);
+- CPU share: CPU time over wall time of the runs inside the workers. On a machine shared
+  with other jobs it falls below 1 and caps the 2-worker speed-up (2 x share / share_1).
 
     python -m ellipsled.bench.montecarlo [--quick] [--out runs/bench_montecarlo.json]
 """
@@ -47,18 +49,23 @@ def _campaign(camp, out: Path, runs: int, duration_s: float, scheduler: str) -> 
     rows = ResultStore(out / "results.parquet").rows()
     assert res.recorded == runs and len(rows) == runs
     in_task = np.array([r["run_wall_s"] for r in rows])
+    cpu = np.array([r["run_cpu_s"] for r in rows])
     return {"runs": runs, "wall_s": wall, "runs_per_min": 60.0 * runs / wall,
-            "run_s_mean_in_worker": float(in_task.mean()), "failed": sum(r["status"] != "ok" for r in rows)}
+            "run_s_mean_in_worker": float(in_task.mean()),
+            "cpu_share_in_worker": float(cpu.sum() / in_task.sum()),   # 1: a core of its own; 0.5: shared
+            "cpu_s_per_run": float(cpu.mean()),
+            "failed": sum(r["status"] != "ok" for r in rows)}
 
 
 def _single_process(camp, base, runs: int, duration_s: float) -> dict:
     from ellipsled.montecarlo.engine import _warm_up, execute_run, make_task
     _warm_up(base)
     tasks = [make_task(camp, base, i, camp.master_seed, duration_s) for i in range(runs)]
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     rows = [execute_run(t) for t in tasks]
-    wall = time.perf_counter() - t0
-    return {"runs": runs, "wall_s": wall, "runs_per_min": 60.0 * runs / wall,
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"runs": runs, "wall_s": wall, "runs_per_min": 60.0 * runs / wall, "cpu_share": cpu / wall,
+            "cpu_s_per_run": cpu / runs,
             "failed": sum(r["status"] != "ok" for r in rows)}
 
 
@@ -101,6 +108,8 @@ def run(quick: bool) -> dict:
         out["speedup_2_vs_1_workers"] = out["workers_2"]["runs_per_min"] / w1["runs_per_min"]
         out["workers_1_vs_single_process"] = w1["runs_per_min"] / out["single_process_batch"]["runs_per_min"]
         out["target_speedup"] = 1.7
+        # what 2 workers would give with a core each: the same CPU per run means no engine loss
+        out["speedup_2_vs_1_if_cores_free"] = 2 * w1["cpu_s_per_run"] / out["workers_2"]["cpu_s_per_run"]
         out["cpu_count"] = os.cpu_count()
         out["load_average_1min_at_end"] = os.getloadavg()[0]
         return out

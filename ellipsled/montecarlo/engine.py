@@ -45,7 +45,7 @@ FORMAT = 1
 # summary.json figures that measure the machine, not the flight: not reproducible run to run.
 TIMING_COLUMNS = frozenset({"wall_s", "realtime_factor", "cycle_slips", "events", "allocator.p50_us",
                             "allocator.p99_us", "allocator.max_us"})
-RECORD_ONLY_COLUMNS = frozenset({"worker", "host", "pid", "run_wall_s", "success", "failed_criteria",
+RECORD_ONLY_COLUMNS = frozenset({"worker", "host", "pid", "run_wall_s", "run_cpu_s", "success", "failed_criteria",
                                  "traceback"})
 
 
@@ -80,7 +80,7 @@ def _warm_up(scn: Scenario) -> None:
 def execute_run(task: RunTask) -> dict:
     """One row: fly the dispersed scenario; never raises for the run's own errors."""
     from ellipsled.batch import run
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     row = {"run_id": task.run_id, "seed": task.seed, "status": "ok", "success": None,
            "failed_criteria": None, "error": None}
     row.update(dispersion_columns(task.disp))
@@ -100,6 +100,7 @@ def execute_run(task: RunTask) -> dict:
     row["host"] = socket.gethostname()
     row["pid"] = os.getpid()
     row["run_wall_s"] = time.perf_counter() - t0
+    row["run_cpu_s"] = time.process_time() - c0    # < run_wall_s: the core was shared
     return row
 
 

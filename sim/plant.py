@@ -310,6 +310,34 @@ def _sense(x, aux, frac, sig, gyro_bias, blocks_g, blocks_a, blocks_n, blocks_c,
         out_c[j] = frac[j] + sig[4] * blocks_c[i, j]
 
 
+# The SENSORS record as the kernels see it: [k, t_ns] int64, then the five 3-vectors
+# (omega, sigma, r, v, accel) and the chamber pressures as one run of float64.
+_S_F0 = records.SENSORS.fields["omega_BN_B"][1]
+_S_NF = 15 + N_JETS
+assert (records.SENSORS.fields["k"][1] == 0 and records.SENSORS.fields["t_ns"][1] == 8
+        and all(records.SENSORS.fields[f][1] == _S_F0 + 24 * i
+                for i, f in enumerate(("omega_BN_B", "sigma_BN", "r_N", "v_N", "accel_B")))
+        and records.SENSORS.fields["chamber"][1] == _S_F0 + 120
+        and records.SENSORS.itemsize == _S_F0 + 8 * _S_NF), "SENSORS layout changed: update sim/plant.py"
+
+
+@njit(cache=True)
+def _step_and_sense(x, u, gain, bias, T, Fj, has_force, tau_ext, p, n_sub, dt, thrust_N, frac, tau_jets, F_B,
+                    tau_tot, ws, C, aux, book, dt_control, sig, gyro_bias, blocks_g, blocks_a, blocks_n, blocks_c,
+                    i, nav_noise, sf, si, k_next, dt_ns):
+    """_step_kernel, then (unless u was refused) _sense into the SENSORS floats sf with
+    [k, t_ns] = [k_next, k_next dt_ns] into si: one call per control period."""
+    st = _step_kernel(x, u, gain, bias, T, Fj, has_force, tau_ext, p, n_sub, dt, thrust_N, frac, tau_jets, F_B,
+                      tau_tot, ws, C, aux, book, dt_control)
+    if st == STEP_BAD_U:
+        return st
+    _sense(x, aux, frac, sig, gyro_bias, blocks_g, blocks_a, blocks_n, blocks_c, i, nav_noise,
+           sf[0:3], sf[3:6], sf[6:9], sf[9:12], sf[12:15], sf[15:15 + frac.shape[0]])
+    si[0] = k_next
+    si[1] = k_next * dt_ns
+    return st
+
+
 # ---- the truth vector: the float part of interfaces.records.TRUTH, in its order ----
 TRUTH_SCALARS = ("t_s", "h_m", "V_rel_mps", "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa",
                  "rho_kgpm3", "alpha_rad", "beta_rad", "bank_rad", "decel_g", "propellant_kg")
@@ -533,6 +561,9 @@ class Plant:
         self.sensors = records.new(records.SENSORS)
         s = self.sensors
         self._out = (s["omega_BN_B"], s["sigma_BN"], s["r_N"], s["v_N"], s["accel_B"], s["chamber"])
+        self._sf = np.ndarray((_S_NF,), np.float64, buffer=s, offset=_S_F0)   # views for the one-call step
+        self._si = np.ndarray((2,), np.int64, buffer=s, offset=0)
+        self._tau_ext_zero = True
 
         # initial state: trim attitude at the scenario's bank; omega = omega_WN so that
         # alpha, beta and bank stay put at t = 0
@@ -568,22 +599,32 @@ class Plant:
             raise ValueError(f"u must have shape ({N_JETS},), got {u.shape}")
         if tau_ext_B is None:
             tau = self._zero3
+            if not self._tau_ext_zero:
+                self._tau_ext[:] = 0.0
+                self._tau_ext_zero = True
         else:
             tau = np.asarray(tau_ext_B, dtype=float)
             if tau.shape != (3,) or not np.all(np.isfinite(tau)):
                 raise ValueError(f"tau_ext_B must be 3 finite numbers, got {tau_ext_B!r}")
-        self._tau_ext[:] = tau
-        st = _step_kernel(self.x, u, self._gain, self._bias, self._T, self._Fj, self._has_force, tau,
-                          self.p, self.n_sub, self.dt_sub_s, self._thrust, self._frac, self._tau_jets,
-                          self._F_B, self._tau_tot, self._ws, self._C, self.aux, self._book, self.dt_control_s)
+            self._tau_ext[:] = tau
+            self._tau_ext_zero = False
+        nz = self._noise
+        if nz.i >= _BLOCK:
+            nz.refill()
+        # the sensor frame for k+1 does not depend on a fault applied at k+1: sampled in the same call
+        st = _step_and_sense(self.x, u, self._gain, self._bias, self._T, self._Fj, self._has_force, tau,
+                             self.p, self.n_sub, self.dt_sub_s, self._thrust, self._frac, self._tau_jets,
+                             self._F_B, self._tau_tot, self._ws, self._C, self.aux, self._book, self.dt_control_s,
+                             self._sig, self._gyro_bias, nz.g, nz.a, nz.n, nz.c, nz.i, self._nav_noise,
+                             self._sf, self._si, self.k + 1, self.dt_control_ns)
         if st == STEP_BAD_U:
             raise ValueError("u must hold only 0 or 1")
+        nz.i += 1
         if st == STEP_NON_FINITE:
             self._status = STEP_NON_FINITE
         self.k += 1
         if self._next_fault < len(self._schedule) and self._schedule[self._next_fault][0] <= self.k:
             self._apply_scheduled()
-        self._sample()
         return self.sensors
 
     def _sample(self) -> None:

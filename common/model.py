@@ -17,9 +17,13 @@ INERTIA_KEYS = ("I11", "I22", "I33", "I12", "I13", "I23")
 FAULT_KINDS = ("off", "stuck", "degraded", "clear")
 
 
+_INERTIA_IDX = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])
+
+
 def inertia_matrix(h: np.ndarray) -> np.ndarray:
-    """Inertia tensor from h = [I11 I22 I33 I12 I13 I23] (spec 20-fsw.md ordering)."""
-    return np.array([[h[0], h[3], h[4]], [h[3], h[1], h[5]], [h[4], h[5], h[2]]])
+    """Inertia tensor from h = [I11 I22 I33 I12 I13 I23] (spec 20-fsw.md ordering); a new
+    array of h's dtype."""
+    return np.asarray(h)[_INERTIA_IDX]
 
 
 def inertia_vector(I: np.ndarray) -> np.ndarray:

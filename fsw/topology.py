@@ -29,12 +29,21 @@ class Topology:
                                                history=history)
         self.u: np.ndarray = fsw.driver.last_command
         self.got_frame = False
+        self._frame = None
+        if frame_source is not None:
+            # real time: fetching the newest frame (and waiting briefly for the one due) is its
+            # own task, so the control task's compute time is the FSW's alone
+            self.executive.add(1, "input", self._input)
         self.executive.add(1, "control", self._control)
         self.executive.add(2, "fdir_slow", lambda c: fsw.slow_step())
         self.executive.add(3, "housekeeping", lambda c: fsw.housekeeping())
 
+    def _input(self, cyc: Cycle) -> None:
+        self._frame = self.frame_source()
+
     def _control(self, cyc: Cycle) -> None:
-        frame = cyc.frame if cyc.frame is not None else (self.frame_source() if self.frame_source else None)
+        frame = cyc.frame if cyc.frame is not None else self._frame
+        self._frame = None
         self.got_frame = frame is not None
         if frame is None:
             self.u = self.fsw.no_frame(self.fsw.t_s + self.fsw.dt_s)
@@ -60,5 +69,21 @@ class Topology:
 
     @property
     def last_compute_ns(self) -> int:
+        """Compute time of the last cycle, without the input task's wait for its frame."""
         st = self.executive.stats
-        return int(st.compute_ns[(st.n - 1) % st.capacity]) if st is not None and st.n else 0
+        if st is None or not st.n:
+            return 0
+        i = (st.n - 1) % st.capacity
+        total = int(st.compute_ns[i])
+        if self.frame_source is not None:
+            wait = int(st.task_ns[i, self.executive._names.index("input")])
+            total -= max(wait, 0)
+        return total
+
+    def task_percentiles(self) -> dict[str, dict[str, float]]:
+        """p50/p99 [us] of each task over the executive's recent history."""
+        st = self.executive.stats
+        if st is None:
+            return {}
+        return {name: {q: (v if q == "runs" else v / 1e3) for q, v in st.task_percentiles(name).items()}
+                for _, name in self.executive.tasks()}

@@ -185,7 +185,12 @@ class FswNode:
         from fsw.groundlink import GroundLink
         from interfaces.mavlink.signing import SigningKey
         key = SigningKey.from_file(path)
-        gl = GroundLink(self.fsw, key, gcs=self.args.gcs, bind=self.args.mavlink_bind, inject=self.inject)
+        try:
+            gl = GroundLink(self.fsw, key, gcs=self.args.gcs, bind=self.args.mavlink_bind, inject=self.inject)
+        except OSError as e:   # e.g. the port is taken by another run: fly on without a ground link
+            say(ROLE, f"MAVLink ground link off: cannot bind {self.args.mavlink_bind}: {e}")
+            self.events.emit(0.0, Severity.ERROR, "link", "mavlink_bind", "GROUND LINK OFF: PORT IN USE")
+            return None
         say(ROLE, f"MAVLink ground link on {self.args.mavlink_bind}, ground station {self.args.gcs}")
         return gl
 
@@ -260,7 +265,7 @@ class FswNode:
             "jitter_p50_us": float(np.percentile(jit, 50)) if len(jit) else None,
             "jitter_p99_us": float(np.percentile(jit, 99)) if len(jit) else None,
             "jitter_max_us": float(np.max(jit)) if len(jit) else None,
-            "executive": ex, "params": self.fsw.params, "sensor_rejects": dict(self.dec_sensors.rejects),
+            "executive": ex, "tasks_us": self.topo.task_percentiles(), "params": self.fsw.params, "sensor_rejects": dict(self.dec_sensors.rejects),
             "monitor_counts": dict(self.fsw.monitor.counts),
             "event_log": [{"t_s": e.t_s, "severity": e.severity.name, "source": e.source, "code": e.code,
                            "text": e.text} for e in self.events.history],

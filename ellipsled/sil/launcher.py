@@ -48,6 +48,8 @@ def add_arguments(p) -> None:
     p.add_argument("--console", action="store_true", help="open the ground console beside the SIL")
     p.add_argument("--signing-key", default=None,
                    help="MAVLink signing key file; default: a fresh key for this run in a private temp folder")
+    p.add_argument("--mavlink-bind", default="udp:127.0.0.1:14555", help="the vehicle's MAVLink address")
+    p.add_argument("--gcs", default="udp:127.0.0.1:14550", help="where the vehicle sends its telemetry")
     p.add_argument("--zenoh-config", default=None, metavar="FILE", help="Zenoh JSON5 configuration for every node")
     p.add_argument("--endpoint", default=None, help="the plant's listen endpoint (default tcp/127.0.0.1:<free>)")
     p.add_argument("--prefix", default=DEFAULT_PREFIX)
@@ -136,7 +138,8 @@ class Launcher:
             self.spawn("viz", ["viz", "--connect", endpoint, "--connect", fsw_endpoint, "--rerun", a.rerun, "--out", str(self.out),
                                "--name", "run"] + common, quiet=True)
         self.spawn("fsw", ["fsw"] + scen + mode + common + ["--connect", endpoint, "--listen", fsw_endpoint,
-                                                           "--out", str(self.out), "--signing-key", key]
+                                                           "--out", str(self.out), "--signing-key", key,
+                                                           "--mavlink-bind", a.mavlink_bind, "--gcs", a.gcs]
                    + (["--rt", "--cpu", "1"] if a.rt else []), quiet)
         self.spawn("sim", ["sim"] + scen + mode + common + ["--listen", endpoint, "--out", str(self.out),
                                                            "--speed", str(a.speed), "--fsw-timeout", str(a.fsw_timeout)]

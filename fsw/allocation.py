@@ -45,7 +45,6 @@ applies the ground inhibit mask.
 """
 from __future__ import annotations
 
-import os
 import threading
 import time
 import weakref
@@ -737,6 +736,8 @@ class _Rebuilder:
         self._busy = False
         self._stop = False
         self._ws = _Workspace()
+        self._gate = threading.Event()        # cleared: jobs wait (deterministic tests)
+        self._gate.set()
         self.done: dict = {}
         self.builds = 0
         self._thread = threading.Thread(target=self._run, name="allocator-rebuild", daemon=True)
@@ -757,6 +758,13 @@ class _Rebuilder:
             self._queue.clear()
             self._request = None
 
+    def hold(self) -> None:
+        """Jobs not yet started wait until release() (tests: a deterministic interim)."""
+        self._gate.clear()
+
+    def release(self) -> None:
+        self._gate.set()
+
     def idle(self) -> bool:
         return not self._busy and self._request is None and not self._queue
 
@@ -770,6 +778,7 @@ class _Rebuilder:
             self._request = None
             self._queue.clear()
             self._cv.notify_all()
+        self._gate.set()
         if self._thread is not threading.current_thread():
             self._thread.join(timeout_s)
 
@@ -778,10 +787,8 @@ class _Rebuilder:
         return self._thread.is_alive()
 
     def _run(self) -> None:
-        try:            # a lower priority than the control thread (Linux: per thread)
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
-        except (AttributeError, OSError):
-            pass
+        # same OS priority as the caller on purpose: a deprioritised thread can be preempted
+        # while it briefly holds the GIL between kernels, stalling the control thread
         while True:
             with self._cv:
                 while not self._stop and self._request is None and not self._queue:
@@ -793,6 +800,9 @@ class _Rebuilder:
                 else:
                     job = self._queue.popleft()
                 self._busy = True
+            self._gate.wait()
+            if self._stop:
+                return
             key, usable, cols, bias, c, w = job
             try:
                 tables = _build_tables(usable, cols, bias, c, w, self._ws)
@@ -925,9 +935,11 @@ class Allocator:
         self._activate()
 
     def poll(self) -> bool:
-        """Async: switch to finished tables now (``solve`` does this itself); True if
-        the switch happened."""
-        return self.reconfig_pending and self._try_switch()
+        """Async: switch to finished tables now (``solve`` does this itself) and file
+        finished pre-builds; True if the switch happened."""
+        switched = self.reconfig_pending and self._try_switch()
+        self._collect()
+        return switched
 
     def wait_idle(self, timeout_s: float = 5.0) -> bool:
         """Async (tests, ground tools; never in the cycle): wait until the background
@@ -962,6 +974,7 @@ class Allocator:
     @property
     def tables_nbytes(self) -> dict[str, int]:
         """Memory held by tables [bytes]: active, LRU cache, pre-built, work buffers."""
+        self._collect()
         ws = self._ws.nbytes + (self._rebuilder._ws.nbytes if self._rebuilder is not None else 0)
         return {"active": self._tables.nbytes,
                 "cache": sum(t.nbytes for t in self._cache.values()),

@@ -1,0 +1,216 @@
+"""Reconfiguration never stalls the loop (spec 20-fsw.md "Reconfiguration"): table rebuild
+time, the synchronous default (lockstep = batch), and the asynchronous mode, whose interim
+answers never fire a jet the new health forbids, are exact over the interim model (checked
+by brute force over the previous candidates), and switch to answers equal to the
+synchronous allocator's. Timing figures are in the benchmark; bounds here are sanity only."""
+import gc
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from common.model import load_vehicle
+from ellipsled.bench.allocator import cases, demands, params_for
+from fsw.allocation import (TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, Allocator, effective_model,
+                            solve_enumeration_many)
+from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
+from fsw.params import load_params
+
+VEH = load_vehicle("ellipsled")
+T, THRUST = VEH.torque_matrix_Nm, VEH.thrust_N
+PARAMS = load_params(Allocator.PARAMS)
+
+
+def _health(failed=(), stuck=(), degraded=(), inhibited=()):
+    h = JetHealth()
+    for j in failed:
+        h.set(j, FAILED_OFF)
+    for j in stuck:
+        h.set(j, STUCK_ON)
+    for j, eta in degraded:
+        h.set(j, DEGRADED, eta)
+    for j in inhibited:
+        h.inhibited[j - 1] = True
+    return h
+
+
+def _brute_interim(tabs, forbid, delta, w, d):
+    """The interim problem by brute force over the previous candidates (independent of the
+    kernels): allowed = no forbidden bit; torque = candidate + delta; spec objective, sign
+    box, degraded fallback, tie-break (objective, penalty, pattern)."""
+    ok = (tabs.pat & forbid) == 0
+    tau = tabs.tau + delta
+    obj = np.abs(d - tau) @ w + tabs.pen
+    lo = np.where(d >= 0, 0.0, d) - TOL_BOX_NM
+    hi = np.where(d >= 0, d, 0.0) + TOL_BOX_NM
+    box = ok & np.all((tau >= lo) & (tau <= hi), axis=1)
+    pool = box if box.any() else ok
+    tol = TOL_TIE + TIE_REL * float(np.sum(w * np.abs(d)))
+    best = obj[pool].min()
+    tied = pool & (obj <= best + tol)
+    min_pen = tabs.pen[tied].min()
+    cand = np.flatnonzero(tied & (tabs.pen <= min_pen + TOL_PEN))
+    r = cand[np.argmin(tabs.pat[cand])]
+    return tabs.pat[r], obj[r], not box.any()
+
+
+def test_rebuild_time_of_every_benchmark_configuration_is_sane():
+    al = Allocator(T, THRUST, PARAMS)
+    worst = 0.0
+    for case in cases():
+        al.set_params(params_for(case))
+        al.set_health(case.health)
+        assert not al.reconfig_pending
+        worst = max(worst, al.rebuild_time_s)
+    assert 0.0 < worst < 0.25          # generous: ~2 ms on a quiet machine (benchmark)
+
+
+def test_default_is_synchronous_and_two_runs_are_identical():
+    runs = []
+    for _ in range(2):
+        al = Allocator(T, THRUST, PARAMS)
+        assert al.async_rebuild is False and not al.builder_alive
+        out = []
+        for ci, case in enumerate(cases()[:6]):
+            al.set_health(case.health)
+            assert not al.reconfig_pending and not al.interim
+            for d in demands(T, THRUST, case, 30, seed=ci):
+                out.append((al.solve(d).copy(), al.objective, al.degraded, al.tau_B.copy()))
+        runs.append(out)
+    for a, b in zip(*runs):
+        assert np.array_equal(a[0], b[0]) and a[1:3] == b[1:3] and np.array_equal(a[3], b[3])
+
+
+TRANSITIONS = [
+    ("failed-off", JetHealth(), _health(failed=(1, 2, 17, 18))),
+    ("inhibited", JetHealth(), _health(inhibited=(4, 10))),
+    ("degraded", JetHealth(), _health(degraded=((3, .5), (7, .5), (14, .5), (15, .5)))),
+    ("stuck-on", JetHealth(), _health(stuck=(2, 3, 4, 5, 8, 9, 10))),
+    ("degraded-escalates-to-stuck", _health(degraded=((13, .6),)), _health(stuck=(13,))),
+    ("stuck-cleared", _health(stuck=(5,), failed=(11,)), _health(failed=(11,))),
+]
+
+
+@pytest.mark.parametrize("name,before,after", TRANSITIONS, ids=[t[0] for t in TRANSITIONS])
+def test_async_interim_is_safe_exact_over_its_model_then_switches_to_the_sync_answer(name, before, after):
+    sync = Allocator(T, THRUST, PARAMS)
+    sync.set_health(after)
+    al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
+    try:
+        al.set_health(before)
+        assert al.wait_idle(10.0)
+        al.solve(np.zeros(3))
+        assert not al.reconfig_pending
+        old = al._tables
+        al._rebuilder.hold()                      # the build waits: a deterministic interim
+        al.set_health(after)
+        assert al.reconfig_pending
+        usable, cols, b, ck = effective_model(T, THRUST, after, al.penalty_per_N)
+        case = cases()[0]
+        D = demands(T, THRUST, case, 150, seed=77)
+        _, obj_opt, deg_opt = solve_enumeration_many(T, THRUST, after, al.w, al.penalty_per_N, D)
+        for i, d in enumerate(D):
+            u = al.solve(d)
+            ctx = f"{name} demand {i} {d!r}"
+            assert al.interim and al.reconfig_pending, ctx
+            assert not np.any(u[~usable]), ctx              # never a failed/inhibited/stuck jet
+            tau = b + cols @ u                               # tau_B is the new model's torque
+            np.testing.assert_allclose(al.tau_B, tau, atol=1e-9, err_msg=ctx)
+            assert al.objective == pytest.approx(float(np.abs(d - tau) @ al.w + ck @ u), abs=1e-7)
+            if not al.degraded or deg_opt[i]:              # same problem: a subset's optimum
+                assert al.objective >= obj_opt[i] - 1e-7, ctx
+            assert deg_opt[i] <= al.degraded, ctx            # feasible for us => for the optimum
+            pat, obj_b, deg_b = _brute_interim(old, al._forbid, al._delta, al.w, d)
+            assert int(sum(int(x) << k for k, x in enumerate(u))) == pat, ctx
+            assert al.objective == pytest.approx(obj_b, abs=1e-7) and al.degraded == deg_b, ctx
+            if not al.degraded:
+                lo = np.where(d >= 0, 0.0, d) - TOL_BOX_NM
+                hi = np.where(d >= 0, d, 0.0) + TOL_BOX_NM
+                assert np.all((tau >= lo) & (tau <= hi)), ctx
+        al._rebuilder.release()
+        assert al.wait_idle(10.0)
+        v0 = al.tables_version
+        for d in D:                                  # the first solve switches
+            u = al.solve(d)
+            assert not al.interim
+            assert np.array_equal(u, sync.solve(d)) and al.objective == sync.objective
+            assert al.degraded == sync.degraded and np.array_equal(al.tau_B, sync.tau_B)
+        assert al.tables_version == v0 + 1 and not al.tables_from_cache
+    finally:
+        al.close()
+    assert not al.builder_alive
+
+
+def test_async_solve_keeps_answering_while_real_rebuilds_run():
+    rng = np.random.default_rng(5)
+    al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
+    worst = 0.0
+    n_interim = 0
+    try:
+        for _ in range(6):                 # four jets degraded at distinct etas: ~40,000 torques
+            h = JetHealth()
+            for j in rng.choice(18, 4, replace=False):
+                h.set(int(j) + 1, DEGRADED, float(rng.uniform(0.3, 0.9)))
+            bad = ~h.usable()
+            al.set_health(h)
+            t_end = time.perf_counter() + 5.0
+            while al.reconfig_pending and time.perf_counter() < t_end:
+                t0 = time.perf_counter()
+                u = al.solve(rng.normal(0.0, 300.0, 3))
+                worst = max(worst, time.perf_counter() - t0)
+                n_interim += al.interim
+                assert not np.any(u[bad])
+            assert not al.reconfig_pending          # the switch happened
+    finally:
+        al.close()
+    assert n_interim >= 1                           # the loop ran while tables were built
+    assert worst < 0.020                            # generous: never a control period (bench: < 1 ms)
+
+
+def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():
+    al = Allocator(T, THRUST, PARAMS, async_rebuild=True)
+    try:
+        assert al.wait_idle(20.0)
+        assert al.tables_nbytes["prebuilt"] > 0
+        for jet in (1, 9, 18):
+            al.set_health(_health(failed=(jet,)))
+            assert not al.reconfig_pending and al.tables_from_cache
+            assert not al.solve(np.array([300.0, -200.0, 100.0]))[jet - 1]
+        mb = al.tables_nbytes["prebuilt"] / 2**20
+        assert mb < 40.0                            # 18 configurations of ~10,000 torques
+        # a parameter change: previous tables and objective until the switch, then exact
+        al._rebuilder.hold()
+        new = {**PARAMS, "allocator.w_yaw": 2.0}
+        al.set_params(new)
+        assert al.reconfig_pending
+        al.solve(np.array([10.0, 20.0, 30.0]))
+        assert al.interim
+        al._rebuilder.release()
+        assert al.wait_idle(20.0)
+        sync = Allocator(T, THRUST, new)
+        sync.set_health(_health(failed=(18,)))
+        d = np.array([-250.0, 40.0, 333.0])
+        assert np.array_equal(al.solve(d), sync.solve(d)) and al.objective == sync.objective
+        al.set_health(_health(failed=(2,)))          # pre-built again with the new parameters
+        assert not al.reconfig_pending and al.tables_from_cache
+    finally:
+        al.close()
+
+
+def test_builder_thread_ends_on_close_and_on_garbage_collection():
+    def builders():
+        return [t for t in threading.enumerate() if t.name == "allocator-rebuild"]
+    n0 = len(builders())
+    al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
+    assert al.builder_alive and len(builders()) == n0 + 1
+    al.set_health(_health(failed=(3, 4)))
+    al.close()                                       # a pending reconfiguration completes
+    assert not al.builder_alive and not al.reconfig_pending
+    assert not al.solve(np.array([50.0, 50.0, 50.0]))[[2, 3]].any()
+    al2 = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
+    thread = al2._rebuilder._thread
+    del al2
+    gc.collect()
+    thread.join(5.0)
+    assert not thread.is_alive() and len(builders()) == n0

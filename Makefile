@@ -19,7 +19,7 @@ $(STAMP): requirements.lock pyproject.toml
 	@touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/ellipsled run nominal --out runs/latest
+	$(BIN)/ellipsled run case1 --out runs/latest
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -43,6 +43,15 @@ def test_default_campaign_carries_the_spec_dispersions(camp):
     assert (d.n_failed_off, d.n_stuck_on, d.n_degraded) == ((1, 4), (0, 2), (0, 3))
     assert d.degraded_eta == (0.3, 0.9) and d.fault_t_s == (2.0, 300.0) and d.fdir_delay_s == (0.0, 2.0)
     assert camp.success.max_cycle_slips == 0 and camp.break_runs == ()
+    assert camp.max_duration_s == 1000.0
+
+
+def test_campaign_time_cap_replaces_the_base_scenarios(tmp_path, camp):
+    out = tmp_path / "mc"
+    assert load_scenario(camp.scenario).max_duration_s == 700.0
+    assert prepare_out(out, camp, 1, None).max_duration_s == 1000.0
+    from ellipsled.montecarlo.engine import read_meta
+    assert read_meta(out)["campaign"]["max_duration_s"] == 1000.0
 
 
 @pytest.mark.parametrize("old,new,field", [

@@ -69,6 +69,7 @@ class Campaign:
     description: str
     file: str
     scenario: str              # base scenario (name in data/scenarios or path)
+    max_duration_s: float | None   # replaces the base scenario's time cap (dispersed entries last longer)
     runs: int
     master_seed: int
     dispersions: Dispersions
@@ -129,6 +130,7 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
     camp = Campaign(
         name=c.str("name"), description=c.str("description", default=""), file=str(path),
         scenario=c.str("scenario"),
+        max_duration_s=c.num("max_duration_s", default=None, lo=0, lo_open=True),
         runs=c.num("runs", lo=1, integer=True),
         master_seed=c.num("master_seed", lo=0, hi=2**63 - 1, integer=True),
         dispersions=disp, success=crit, break_runs=tuple(sorted(set(br))),
@@ -136,6 +138,12 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
     for t in (c, f, d, s, tst, root):
         t.reject_unknown()
     return camp
+
+
+def campaign_base(camp_record: dict, snapshot: Scenario) -> Scenario:
+    """The base scenario every run starts from: the snapshot with the campaign's time cap."""
+    cap = camp_record.get("max_duration_s")
+    return snapshot if cap is None else snapshot.with_(max_duration_s=float(cap))
 
 
 def run_rng(master_seed: int, run_id: int) -> tuple[int, np.random.Generator]:

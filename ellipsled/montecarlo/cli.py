@@ -100,13 +100,13 @@ def scenario_for_run(campaign_dir: str | Path, run_id: int) -> CampaignRun:
     """Rebuild run ``run_id`` of a campaign folder from its record: the recorded seed and
     dispersions applied to the campaign's snapshot of its base scenario."""
     from common.model import load_scenario
-    from .campaign import apply_dispersion, dispersion_from_columns
+    from .campaign import apply_dispersion, campaign_base, dispersion_from_columns
     from .engine import RESULTS_DIR, SCENARIO_FILE, read_meta
     from .store import ResultStore
     d = Path(campaign_dir)
     meta = read_meta(d)
     rec = ResultStore(d / RESULTS_DIR).row(run_id)
-    base = load_scenario(d / SCENARIO_FILE)
+    base = campaign_base(meta["campaign"], load_scenario(d / SCENARIO_FILE))
     scn = apply_dispersion(base, dispersion_from_columns(rec), rec["seed"], f"{meta['campaign']['name']}-{run_id}")
     return CampaignRun(scn, int(rec["seed"]), meta["duration_s"], rec)
 

@@ -34,7 +34,7 @@ from typing import Callable
 from common.config import resolve
 from common.model import Scenario, load_scenario
 
-from .campaign import Campaign, Criteria, apply_dispersion, dispersion_columns, draw_run, load_campaign
+from .campaign import Campaign, Criteria, apply_dispersion, campaign_base, dispersion_columns, draw_run, load_campaign
 from .store import ResultStore, flatten
 
 META_FILE = "campaign.json"
@@ -136,7 +136,7 @@ def prepare_out(out: Path, camp: Campaign, master_seed: int, duration_s: float |
         tmp = out / f".{META_FILE}.tmp"
         tmp.write_text(json.dumps(meta, indent=2) + "\n")
         os.replace(tmp, path)
-    return load_scenario(out / SCENARIO_FILE)
+    return campaign_base(meta["campaign"], load_scenario(out / SCENARIO_FILE))
 
 
 def read_meta(out: Path) -> dict:

@@ -164,7 +164,7 @@ def test_ctrl_c_stops_cleanly_and_resume_finishes_without_duplicates(campaign_fi
             parts = list((out / "results.parquet").glob("part-*.parquet"))
             if parts:
                 break
-            time.sleep(0.1)
+            time.sleep(0.05)
         assert parts, "no result written within 60 s"
         procs = psutil.Process(p.pid).children(recursive=True) + [psutil.Process(p.pid)]
         os.killpg(p.pid, signal.SIGINT)                          # a terminal Ctrl-C: the whole group

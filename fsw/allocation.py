@@ -143,6 +143,8 @@ def _validate_problem(T, thrust, w, penalty_per_N):
 #    insertion sort on the float score (buckets hold ~1 row; a crowded one is merge sorted).
 PHI_DIR = (1.0, 0.7548776662466927, 0.5698402909980532)   # generic direction for phi = a . tau
 SORT_BUCKETS_MAX = 1 << 17  # buckets of the octant tables' one-pass bucket sort
+WORKSPACE_ROWS = 49152     # initial work buffers: >= the nominal 46,656 combinations, so the
+                           # paper's configurations (<= 39,936 distinct torques) never grow them
 ROW = np.dtype([("t0", np.float64), ("t1", np.float64), ("t2", np.float64),
                 ("pen", np.float64), ("pat", np.int64), ("phi", np.float64)])   # one candidate
 
@@ -479,11 +481,11 @@ class _Workspace:
     """Work buffers of the table build, kept between builds (grown on demand), so a rebuild
     touches memory that is already mapped. One per building thread."""
 
-    def __init__(self) -> None:
+    def __init__(self, rows: int = WORKSPACE_ROWS) -> None:
         self.rows = 0
         self.octrows = 0
         self.count = np.zeros(SORT_BUCKETS_MAX + 1, dtype=np.int64)
-        self.grow(1024)
+        self.grow(rows)
 
     def grow(self, rows: int) -> None:
         """Room for ``rows`` distinct candidates (and 5/4 as many octant rows)."""
@@ -497,6 +499,8 @@ class _Workspace:
         self.pen = np.zeros(rows)
         self.pat = np.zeros(rows, dtype=np.int64)
         self.octm = np.zeros(rows, dtype=np.int8)
+        for a in (self.ra, self.rb, self.rc, self.tau, self.pen, self.pat, self.octm, self.count):
+            a.fill(0)                         # map the pages now, not inside a timed build
         self.rows = rows
         self.grow_octants(rows + rows // 4)
 
@@ -509,6 +513,8 @@ class _Workspace:
         self.kb = np.zeros(rows)
         self.ia = np.zeros(rows, dtype=np.int64)
         self.ib = np.zeros(rows, dtype=np.int64)
+        for a in (self.ka, self.kb, self.ia, self.ib):
+            a.fill(0)
         self.octrows = rows
 
     @property

@@ -83,6 +83,8 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
           params: dict) -> dict:
     """summary.json: figures of merit from the history, FDIR judged against the faults the
     plant actually applied. The same function serves batch and SIL."""
+    t_end = float(h["t_s"][-1]) if h.n else 0.0
+    faults_applied = [f for f in faults_applied if f[0] <= t_end]   # a run cut short never saw later faults
     injected = {}
     for t, jet, kind in faults_applied:
         injected.setdefault(jet, (t, kind))
@@ -175,6 +177,9 @@ def write_outputs(summary: dict, h: History, out: Path, plots: bool = True) -> N
 def main(args) -> int:
     summary, h, fsw = run(args.scenario, seed=args.seed, ft_off=args.ft_off, duration_s=args.duration)
     write_outputs(summary, h, Path(args.out), plots=not args.no_plots)
+    if getattr(args, "rrd", False):
+        from gse.viz import record_history
+        print(f"wrote {record_history(h, fsw.events.history, Path(args.out) / 'run.rrd')}")
     print(format_summary(summary))
     print(f"wrote {Path(args.out) / 'summary.json'}")
     return 0 if summary["completed"] else 1

@@ -27,14 +27,28 @@ def _add_plant(sub):
 
 def _add_batch(sub):
     p = sub.add_parser("batch", help="fly a scenario: plant and FSW in one process, lockstep")
-    p.add_argument("scenario", help="scenario name (data/scenarios) or .toml path")
+    p.add_argument("scenario", nargs="?", default=None, help="scenario name (data/scenarios) or .toml path")
     p.add_argument("--out", required=True, help="output folder (summary.json, history.npz, PNG plots)")
+    p.add_argument("--from-campaign", metavar="DIR", default=None,
+                   help="re-fly one run of a Monte Carlo campaign folder from its record")
+    p.add_argument("--run", type=int, default=None, metavar="ID", help="run_id within --from-campaign")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--ft-off", action="store_true", help="fault tolerance off (paper figure 5)")
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--rrd", action="store_true", help="also write DIR/run.rrd, the Rerun recording of the run")
 
     def run(a):
+        if a.from_campaign is not None:
+            if a.scenario is not None:
+                p.error("give a scenario or --from-campaign DIR --run ID, not both")
+            from ellipsled.montecarlo import apply_campaign_run
+            try:
+                apply_campaign_run(a)      # sets a.scenario (a Scenario), a.seed, a.duration
+            except ValueError as e:
+                p.error(str(e))
+        elif a.scenario is None:
+            p.error("a scenario is required (or --from-campaign DIR --run ID)")
         from ellipsled.batch import main as batch_main
         return batch_main(a)
     p.set_defaults(func=run)
@@ -83,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
     from gse.cli import add_gse_parser
     add_gse_parser(sub)
     _add_sil(sub)
+    from ellipsled.montecarlo import add_montecarlo_parser
+    add_montecarlo_parser(sub)
+    from ellipsled.bench.suite import add_bench_parser
+    add_bench_parser(sub)
     a = ap.parse_args(argv)
     try:
         return int(a.func(a) or 0)

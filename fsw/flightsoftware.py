@@ -24,11 +24,18 @@ from .jetdriver import JetDriver
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation
-from .params import load_params
+from .params import Param, load_params
 from . import executive
 
+GUIDANCE_PARAMS = [
+    Param("guidance.authority_margin", 0.0, 1.0, "",
+          "after a reconfiguration, the reference's bank acceleration is kept within this fraction of "
+          "the one-way roll acceleration the remaining jets can give (0 = never re-shape)"),
+]
+
+
 def all_params() -> list[Param]:
-    return (SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + executive.PARAMS)
+    return (GUIDANCE_PARAMS + SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + executive.PARAMS)
 
 
 class FlightSoftware:
@@ -91,6 +98,7 @@ class FlightSoftware:
             self.reconfig_times.append(t_s)
             self.events.emit(t_s, Severity.NOTICE, "allocator", "reconfigured",
                              f"ALLOCATOR RECONFIGURED ({self.allocator.rebuild_time_s * 1e3:.1f} ms)")
+            self.fit_reference_to_authority(t_s)
         nav = self.nav.update(t_s, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
                               frame["accel_B"])
         self.guidance.update(nav)
@@ -117,6 +125,36 @@ class FlightSoftware:
                              "ALLOCATION DEGRADED (infeasible)", rate_limited=True)
         self._have_prev = True
         return self.driver.command(u_alloc, self.modes.jets_enabled)
+
+    def roll_authority_Nm(self) -> tuple[float, float]:
+        """(positive, negative) roll torque [N m] the allocator can give now with pitch and
+        yaw held as well as it can: its answers to a pure-roll demand each way."""
+        probe = np.zeros(3)
+        out = []
+        for sign in (1.0, -1.0):
+            probe[0] = sign * 1e5
+            self.allocator.solve(probe)
+            out.append(max(0.0, sign * float(self.allocator.tau_B[0])))
+        return out[0], out[1]
+
+    def fit_reference_to_authority(self, t_s: float) -> None:
+        """Guidance that knows its actuators: after a reconfiguration, transitions not yet
+        started keep their bank acceleration within ``guidance.authority_margin`` of the
+        weaker roll direction (stuck or failed jets can leave one way much weaker); the
+        scenario's limit stays the ceiling, so healthy jets change nothing."""
+        m = self.params["guidance.authority_margin"]
+        if m <= 0.0:
+            return
+        pos, neg = self.roll_authority_Nm()
+        a = self.scenario.vehicle.aero.alpha_trim_rad
+        v = np.array([np.cos(a), 0.0, np.sin(a)])          # velocity direction in body axes at trim
+        I_v = float(v @ self.control.inertia_hat() @ v)
+        accel = m * min(pos, neg) * np.cos(a) / I_v
+        limit = max(min(self.scenario.bank_accel_limit_radps2, accel), 1e-4)
+        prof = self.guidance.profile
+        if prof.replan(t_s, prof.rate_limit_radps, limit):
+            self.events.emit(t_s, Severity.NOTICE, "guidance", "reference_reshaped",
+                             f"REFERENCE ACCEL LIMIT {np.degrees(limit):.2f} DEG/S2")
 
     def no_frame(self, t_s: float) -> np.ndarray:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards

@@ -67,22 +67,48 @@ class BankProfile:
         self.accel_limit_radps2 = float(accel_limit_radps2)
         self.phi0_rad = steps[0][1]
         # segments: (t_start, duration, phi_from, delta, phi_to)
-        starts, segs = [], []
-        lag = 0.0
-        t_free, phi = 0.0, steps[0][1]
-        for t, b in steps[1:]:
+        self._starts, self._segs = [], []
+        self.lag_s = 0.0   # largest delay of a transition start behind its step time
+        self._plan(0.0)
+
+    def _plan(self, t_keep: float) -> None:
+        """(Re)build the transitions: those that started before ``t_keep`` are kept as they
+        are; every later step gets a transition shaped by the current limits. Transition j
+        always belongs to the j-th step whose target differs from the previous target."""
+        kept = [seg for seg in self._segs if seg[0] < t_keep]
+        starts, segs = [seg[0] for seg in kept], list(kept)
+        lag = self.lag_s if kept else 0.0
+        t_free = kept[-1][0] + kept[-1][1] if kept else 0.0
+        phi, j = self.schedule[0][1], 0
+        for t, b in self.schedule[1:]:
             d = b - phi
             if d == 0.0:
                 continue
+            if j < len(kept):         # already flown or flying: keep it
+                j += 1
+                phi = b
+                continue
             T = max(_S1_MAX * abs(d) / self.rate_limit_radps, math.sqrt(_S2_MAX * abs(d) / self.accel_limit_radps2))
-            t0 = max(t, t_free)
+            t0 = max(t, t_free, t_keep if kept or t_keep > 0 else 0.0)
             lag = max(lag, t0 - t)
             starts.append(t0)
             segs.append((t0, T, phi, d, b))
             t_free, phi = t0 + T, b
         self._starts = starts
         self._segs = segs
-        self.lag_s = lag   # largest delay of a transition start behind its step time
+        self.lag_s = lag
+
+    def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float) -> bool:
+        """New limits for every transition that has not started by ``t_now`` (the running
+        one, if any, finishes as planned, so the reference stays C2). True if anything changed."""
+        for name, v in (("rate_limit_radps", rate_limit_radps), ("accel_limit_radps2", accel_limit_radps2)):
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"BankProfile.replan: {name} must be a finite number > 0, got {v!r}")
+        if (rate_limit_radps, accel_limit_radps2) == (self.rate_limit_radps, self.accel_limit_radps2):
+            return False
+        self.rate_limit_radps, self.accel_limit_radps2 = float(rate_limit_radps), float(accel_limit_radps2)
+        self._plan(t_now)
+        return True
 
     def transitions(self) -> list[tuple[float, float, float, float]]:
         """(t_start, duration, phi_from, phi_to) of each transition."""

@@ -43,7 +43,10 @@ class FlightSoftware:
     the nominal vehicle and planet models, the guidance schedule, and parameter overrides."""
 
     def __init__(self, scenario: Scenario, events: EventLog | None = None, start_mode: Mode = Mode.ENTRY,
-                 armed: bool = True, param_overrides: dict | None = None):
+                 armed: bool = True, param_overrides: dict | None = None, realtime: bool = False):
+        """``realtime``: the allocator rebuilds its tables in the background after a health
+        change (the loop never waits for it); lockstep and batch stay synchronous, so they
+        are deterministic."""
         self.scenario = scenario
         veh, planet = scenario.vehicle, scenario.planet
         self.dt_s = scenario.dt_control_s
@@ -59,7 +62,7 @@ class FlightSoftware:
                                              scenario.bank_accel_limit_radps2),
                                  veh.aero.alpha_trim_rad, planet.omega_radps)
         self.control = SamiController(self.params, veh, self.dt_s)
-        self.allocator = Allocator(veh.torque_matrix_Nm, veh.thrust_N, self.params)
+        self.allocator = Allocator(veh.torque_matrix_Nm, veh.thrust_N, self.params, async_rebuild=realtime)
         self.fdir = Fdir(self.params, self.dt_s, self.events)
         self.driver = JetDriver(veh.thrust_N, veh.isp_s, planet.g0_mps2, self.dt_s, self.events)
         self.modes = ModeManager(self.events)
@@ -70,6 +73,7 @@ class FlightSoftware:
             self.modes.request(0.0, start_mode, "start")
         self.driver.arm(0.0, armed)
         self.allocator.set_health(self.fdir.health_active)
+        self._tables_version = self.allocator.tables_version
 
         self.k = -1
         self.t_s = 0.0
@@ -96,8 +100,6 @@ class FlightSoftware:
         if self.fdir.update(t_s, self.driver.last_command, frame["chamber"]):
             self.allocator.set_health(self.fdir.health_active)
             self.reconfig_times.append(t_s)
-            self.events.emit(t_s, Severity.NOTICE, "allocator", "reconfigured",
-                             f"ALLOCATOR RECONFIGURED ({self.allocator.rebuild_time_s * 1e3:.1f} ms)")
             self.fit_reference_to_authority(t_s)
         nav = self.nav.update(t_s, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
                               frame["accel_B"])
@@ -120,6 +122,10 @@ class FlightSoftware:
         u_alloc = self.allocator.solve(self.u_cal_B)
         self.alloc_ns = time.perf_counter_ns() - t0
         self.tau_alloc_B[:] = self.allocator.tau_B
+        if self.allocator.tables_version != self._tables_version:      # new tables in use
+            self._tables_version = self.allocator.tables_version
+            self.events.emit(t_s, Severity.NOTICE, "allocator", "reconfigured",
+                             f"ALLOCATOR RECONFIGURED ({self.allocator.rebuild_time_s * 1e3:.1f} ms)")
         if self.allocator.degraded:
             self.events.emit(t_s, Severity.WARNING, "allocator", "alloc_degraded",
                              "ALLOCATION DEGRADED (infeasible)", rate_limited=True)
@@ -203,6 +209,10 @@ class FlightSoftware:
         """RG3: nothing periodic beyond telemetry yet (the ground link adds its heartbeat here)."""
 
     # ---------------------------------------------------------------- commands
+    def close(self) -> None:
+        """Stop background work (the allocator's table builder)."""
+        self.allocator.close()
+
     def health_changed(self) -> None:
         """Hand the allocator the health FDIR now holds (after an override, clear or inhibit)."""
         self.allocator.set_health(self.fdir.health_active)

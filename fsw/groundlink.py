@@ -105,6 +105,7 @@ PARAM_ID_TABLE_BEGIN
   | fdir.sigma_tol             | F_SIGMA_TOL        |
   | fdir.stale_n               | F_STALE_N          |
   | fdir.v_max_mps             | F_V_MAX_MPS        |
+  | guidance.authority_margin  | G_AUTHORITY_MARG   |
 PARAM_ID_TABLE_END
 
 A refused PARAM_SET is answered with the unchanged value and a STATUSTEXT (WARNING)
@@ -150,7 +151,8 @@ NAMED_VALUE_LEN = 10
 DEFAULT_GCS = "udp:127.0.0.1:14550"
 DEFAULT_BIND = "udp:127.0.0.1:14555"
 
-PARAM_PREFIX = {"control": "C_", "allocator": "A_", "fdir": "F_", "driver": "D_", "executive": "X_"}
+PARAM_PREFIX = {"control": "C_", "allocator": "A_", "fdir": "F_", "driver": "D_", "executive": "X_",
+                "guidance": "G_"}
 
 # Telemetry streams and their default rates [Hz]; 0 disables a stream. The achieved rate
 # is at most the rate at which tick() is called.

@@ -54,7 +54,7 @@ class FswNode:
         self.stop = Stop()
         self.scn = prepare(args.scenario, args.ft_off, args.duration)
         self.events = EventLog()
-        self.fsw = FlightSoftware(self.scn, self.events)
+        self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime")
         self.session, self.K = open_node(ROLE, args)
         self.sub_sensors = transport.subscriber(self.session, self.K.sensors,
                                                 newest_only=args.mode == "realtime")
@@ -275,6 +275,7 @@ class FswNode:
         (out / "fsw.json").write_text(json.dumps(rep, indent=2, default=str) + "\n")
 
     def close(self) -> None:
+        self.fsw.close()
         if self.link is not None:
             self.link.close()
         transport.close(self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,

@@ -499,4 +499,5 @@ def main(argv: list[str] | None = None) -> int:
     sub = ap.add_subparsers(dest="cmd")
     add_bench_parser(sub)
     args = ["bench", *(sys.argv[1:] if argv is None else argv)]
-    return int(ap.parse_args(args).func(ap.parse_args(args)) or 0)
+    a = ap.parse_args(args)
+    return int(a.func(a) or 0)

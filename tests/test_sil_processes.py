@@ -111,13 +111,30 @@ def test_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
         sorted(d["jet"] for d in s_sil["fdir"]["detections"]) == [1, 2, 17, 18]
 
 
+def _hogs(n: int) -> list[subprocess.Popen]:
+    """n CPU hogs: stress-ng when installed, else plain Python busy loops."""
+    import shutil
+    if shutil.which("stress-ng"):
+        return [subprocess.Popen(["stress-ng", "--cpu", str(n), "--timeout", "120s", "--quiet"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)]
+    return [subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True) for _ in range(n)]
+
+
 @pytest.mark.timing
-def test_realtime_sil_holds_its_deadlines(tmp_path):
-    """20 s of real time at 50 Hz on this 2-core machine: no cycle slip, a command for
-    (nearly) every step, jitter inside a generous bound (the figures go to the benchmark)."""
+@pytest.mark.parametrize("load", ["idle", "two_cpu_hogs"])
+def test_realtime_sil_holds_its_deadlines(tmp_path, load):
+    """The whole SIL (plant, FSW, Rerun bridge) for 20 s of real time at 50 Hz on this
+    2-core machine, idle and with two CPU hogs: no cycle slip, a command for nearly every
+    step, jitter inside a generous bound (the exact figures go to `ellipsled bench`)."""
     out = tmp_path / "rt"
-    r = subprocess.run(PY + ["run", "case1", "--realtime", "--rt", "--duration", "20", "--out", str(out),
-                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    hogs = _hogs(2) if load != "idle" else []
+    try:
+        r = subprocess.run(PY + ["run", "case1", "--realtime", "--rt", "--duration", "20", "--out", str(out),
+                                 "--rerun", "file", "--no-plots"], capture_output=True, text=True, timeout=300)
+    finally:
+        for h in hogs:
+            os.killpg(h.pid, signal.SIGKILL)
+            h.wait(10)
     assert r.returncode == 0, r.stdout + r.stderr
     sil = _json(out / "sil.json")
     s = _json(out / "summary.json")
@@ -127,6 +144,7 @@ def test_realtime_sil_holds_its_deadlines(tmp_path):
     assert sil["latency_samples"] >= 0.95 * 1000, sil
     assert sil["latency_p99_us"] < 20000, sil
     assert s["bank_err_max_after_fault_deg"] < 5.0
+    assert (out / "run.rrd").stat().st_size > 0           # the bridge kept up and wrote its recording
 
 
 def test_plant_killed_fsw_holds_jets_off_and_recovers(tmp_path, procs):
@@ -210,12 +228,15 @@ def test_garbage_replays_and_a_second_publisher_on_every_key(tmp_path, procs):
     e_sim = transport.loopback(transport.free_port())
     e_fsw = transport.loopback(transport.free_port())
     procs.start("sim", _node("sim", "case1", "lockstep", tmp_path / "sim", listen=[e_sim],
-                             extra=["--duration", "120"]))
+                             extra=["--duration", "400"]))
     procs.start("fsw", _node("fsw", "case1", "lockstep", tmp_path / "fsw", listen=[e_fsw], connect=[e_sim]))
     K = keys(PREFIX)
     s = transport.open_session("attacker", None, [e_sim, e_fsw])
     try:
-        pubs = {k: transport.publisher(s, k) for k in (K.sensors, K.jets, K.faults, K.truth, K.state, K.events)}
+        import zenoh
+        # a flooding attacker drops what the network will not take (never blocks on a full peer)
+        pubs = {k: s.declare_publisher(k, congestion_control=zenoh.CongestionControl.DROP)
+                for k in (K.sensors, K.jets, K.faults, K.truth, K.state, K.events)}
         sub = transport.subscriber(s, K.jets)
         rng = np.random.default_rng(7)
         intruder = Codec.for_schema("JETS")        # another publisher id on the jets key
@@ -223,7 +244,8 @@ def test_garbage_replays_and_a_second_publisher_on_every_key(tmp_path, procs):
         captured = None
         sent = 0
         t_end = time.monotonic() + 90
-        while captured is None and time.monotonic() < t_end:    # the FSW owns the jets key first
+        while captured is None and time.monotonic() < t_end and procs.p["sim"].poll() is None:
+            # the FSW owns the jets key first
             smp = transport.recv(sub, 0.1)
             if smp is not None:
                 captured = smp.payload.to_bytes()
@@ -245,7 +267,7 @@ def test_garbage_replays_and_a_second_publisher_on_every_key(tmp_path, procs):
     assert procs.stop("fsw") == 0
     sim = _json(tmp_path / "sim" / "sim.json")
     fsw = _json(tmp_path / "fsw" / "fsw.json")
-    assert sim["end_reason"] == "duration" and sim["t_end_s"] == pytest.approx(120.0)
+    assert sim["end_reason"] == "duration" and sim["t_end_s"] == pytest.approx(400.0)
     rj = sim["rejects"]
     assert rj.get("size", 0) + rj.get("magic", 0) + rj.get("crc", 0) > 0
     assert rj.get("second_publisher", 0) > 0

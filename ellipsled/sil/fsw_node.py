@@ -52,6 +52,11 @@ class FswNode:
     def __init__(self, args):
         self.args = args
         self.stop = Stop()
+        self.rt_report = None
+        if args.rt:   # before the Zenoh session: its I/O threads inherit the class, priority and CPU
+            from fsw import rt
+            self.rt_report = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
+            say(ROLE, f"real-time: {self.rt_report}")
         self.scn = prepare(args.scenario, args.ft_off, args.duration)
         self.events = EventLog()
         self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime")
@@ -239,10 +244,6 @@ class FswNode:
 
     def run(self) -> int:
         a = self.args
-        if a.rt:
-            rep = rt.apply(cpus=[a.cpu] if a.cpu is not None else None, priority=a.rt_priority)
-            say(ROLE, f"real-time: {rep}")
-            self.rt_report = rep
         rt.gc_out_of_cycle()
         say(ROLE, f"{self.scn.name}, {a.mode}; waiting for the plant")
         if not transport.wait_for_alive(self.session, self.K.alive_sim, a.wait_peers):
@@ -269,7 +270,7 @@ class FswNode:
             "monitor_counts": dict(self.fsw.monitor.counts),
             "event_log": [{"t_s": e.t_s, "severity": e.severity.name, "source": e.source, "code": e.code,
                            "text": e.text} for e in self.events.history],
-            "rt": getattr(self, "rt_report", None),
+            "rt": self.rt_report,
             "ground_link": (dict(self.link.stats) if self.link is not None and hasattr(self.link, "stats") else None),
         })
         (out / "fsw.json").write_text(json.dumps(rep, indent=2, default=str) + "\n")

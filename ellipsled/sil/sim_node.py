@@ -43,6 +43,11 @@ class SimNode:
     def __init__(self, args):
         self.args = args
         self.stop = Stop()
+        self.rt_report = None
+        if args.rt:   # before the Zenoh session: its I/O threads inherit the class, priority and CPU
+            from fsw import rt
+            self.rt_report = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
+            say(ROLE, f"real-time: {self.rt_report}")
         self.scn = prepare(args.scenario, args.ft_off, args.duration)
         self.seed = self.scn.seed if args.seed is None else args.seed
         self.plant = Plant(self.scn, self.seed)
@@ -211,10 +216,6 @@ class SimNode:
     # ------------------------------------------------------------------ main
     def run(self) -> int:
         a = self.args
-        if a.rt:
-            from fsw import rt
-            rep = rt.apply(cpus=[a.cpu] if a.cpu is not None else None, priority=a.rt_priority)
-            say(ROLE, f"real-time: {rep}")
         say(ROLE, f"{self.scn.name} seed {self.seed}, {a.mode}; waiting for the FSW")
         if not (transport.wait_for_alive(self.session, self.K.alive_fsw, a.wait_peers)
                 and transport.wait_for_subscriber(self.pub_sensors, a.wait_peers)

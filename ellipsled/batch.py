@@ -17,6 +17,7 @@ from fsw.events import EventLog
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
 from fsw.topology import Topology
+from interfaces import records
 from sim.plant import Plant
 
 from .history import History, record_fsw, record_truth
@@ -143,6 +144,7 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
     h = History(int(math.ceil(scn.max_duration_s / scn.dt_control_s)) + 2)
     samples = []
     frame = plant.sensors
+    trec = records.new(records.TRUTH)     # refilled in place every step
     wall0 = time.perf_counter()
     while True:
         topo.tick(frame)
@@ -150,7 +152,7 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
         if verify_every and plant.k % verify_every == 0:
             samples.append(alloc_sample(fsw))
         i = h.row()
-        record_truth(h, i, plant.truth())
+        record_truth(h, i, plant.fill_truth(trec))
         record_fsw(h, i, fsw, u, topo.last_compute_ns)
         done, reason = plant.done()
         if done:

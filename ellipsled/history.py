@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from interfaces.records import TRUTH
+
 N_JETS = 18
 
 # name -> trailing shape; all float64 except where noted in _DTYPES
@@ -34,7 +36,15 @@ class History:
     def __init__(self, n_max: int):
         self.n = 0
         self.n_max = n_max
-        self.a = {k: np.zeros((n_max,) + shp, dtype=_DTYPES.get(k, np.float64)) for k, shp in FIELDS.items()}
+        self.a = {k: np.zeros((n_max,) + shp, dtype=_DTYPES.get(k, np.float64)) for k, shp in FIELDS.items()
+                  if k not in TRUTH_FIELDS}
+        self._truth_rows(np.zeros(n_max, dtype=TRUTH))
+
+    def _truth_rows(self, rows: np.ndarray) -> None:
+        """The truth half lives in one TRUTH-record array; a[name] are views of its fields."""
+        self.truth_rows = rows
+        for k in TRUTH_FIELDS:
+            self.a[k] = rows[k]
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.a[name][: self.n]
@@ -43,7 +53,9 @@ class History:
         """Index of a new row (grows by doubling if a run outlives its estimate)."""
         if self.n >= self.n_max:
             for k, v in self.a.items():
-                self.a[k] = np.concatenate((v, np.zeros_like(v)))
+                if k not in TRUTH_FIELDS:
+                    self.a[k] = np.concatenate((v, np.zeros_like(v)))
+            self._truth_rows(np.concatenate((self.truth_rows, np.zeros_like(self.truth_rows))))
             self.n_max *= 2
         i = self.n
         self.n += 1
@@ -66,6 +78,9 @@ class History:
 
 def record_truth(h: History, i: int, truth: dict) -> None:
     """The plant's half of row i (from sim.plant.Plant.truth() or a TRUTH record)."""
+    if type(truth) is np.ndarray and truth.dtype == TRUTH:
+        h.truth_rows[i] = truth
+        return
     a = h.a
     for k in TRUTH_FIELDS:
         a[k][i] = truth[k]

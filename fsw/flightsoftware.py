@@ -86,23 +86,27 @@ class FlightSoftware:
         self.reconfig_times: list[float] = []
         self.cycles = 0
         self.bank_err_rad = 0.0
+        self._frame_views: tuple = (None,)
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
         """One control cycle on a SENSORS record; returns the jet command (uint8, 18)."""
         self.cycles += 1
-        t_s = frame["t_ns"] * 1e-9
+        t_s = float(frame["t_ns"]) * 1e-9     # a Python float (a 0-d field times 1e-9 is a NumPy scalar)
         ok = self.monitor.check(t_s, frame)
         if not ok or self.monitor.stale:
             return self._hold_off(t_s)
-        self.k = int(frame["k"])
+        fv = self._frame_views
+        if fv[0] is not frame:     # field views of the record, made once per record object
+            fv = self._frame_views = (frame, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
+                                      frame["accel_B"], frame["chamber"])
+        self.k = self.monitor.last_k
         self.t_s = t_s
-        if self.fdir.update(t_s, self.driver.last_command, frame["chamber"]):
+        if self.fdir.update(t_s, self.driver.last_command, fv[6]):
             self.allocator.set_health(self.fdir.health_active)
             self.reconfig_times.append(t_s)
             self.fit_reference_to_authority(t_s)
-        nav = self.nav.update(t_s, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
-                              frame["accel_B"])
+        nav = self.nav.update(t_s, fv[1], fv[2], fv[3], fv[4], fv[5])
         self.guidance.update(nav)
         self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
         if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,

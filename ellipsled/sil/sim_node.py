@@ -112,10 +112,8 @@ class SimNode:
         return t
 
     def record_and_publish_truth(self) -> None:
-        truth = self.plant.truth()
-        record_truth(self.history, self.history.row(), truth)
-        for name, val in truth.items():
-            self.truth_rec[name] = val
+        self.plant.fill_truth(self.truth_rec)
+        record_truth(self.history, self.history.row(), self.truth_rec)
         self.pub_truth.put(self.enc_truth.encode(self.truth_rec, self.plant.k, now_ns()))
 
     def _take_command(self, rec) -> int:

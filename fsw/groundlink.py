@@ -457,7 +457,9 @@ class GroundLink:
         self.commands[result] = self.commands.get(result, 0) + 1
         ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent())
-        self._send(ack, extra=addr)
+        # to the requester only: another ground station waiting on the same command id
+        # must not take this answer for its own
+        self._send(ack, only=addr)
 
     def _reconfigure(self) -> None:
         """FDIR's active health changed by a ground command: the allocator adopts it now."""
@@ -609,9 +611,9 @@ class GroundLink:
             dest.append(extra)
         return dest
 
-    def _send(self, msg, extra=None) -> None:
+    def _send(self, msg, extra=None, only=None) -> None:
         frame = self.link.pack(msg)
-        for addr in self._destinations(extra):
+        for addr in ((only,) if only is not None else self._destinations(extra)):
             try:
                 self.sock.sendto(frame, addr)
                 self.stats["tx_frames"] += 1

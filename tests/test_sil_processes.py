@@ -224,15 +224,12 @@ def test_fsw_killed_lockstep_plant_ends_with_a_clear_message(tmp_path, procs):
 ATTACKER = r"""
 import sys, time
 import numpy as np
-import zenoh
 from interfaces import records, transport
 from interfaces.codec import Codec
 from interfaces.keys import keys
 K = keys(sys.argv[1])
 s = transport.open_session("attacker", None, sys.argv[2:])
-# a flooding attacker drops what the network will not take
-pubs = {k: s.declare_publisher(k, congestion_control=zenoh.CongestionControl.DROP)
-        for k in (K.sensors, K.jets, K.faults, K.truth, K.state, K.events)}
+pubs = {k: transport.publisher(s, k) for k in (K.sensors, K.jets, K.faults, K.truth, K.state, K.events)}
 sub = transport.subscriber(s, K.jets)
 captured = None
 while captured is None:                        # the FSW owns the jets key first

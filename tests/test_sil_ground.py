@@ -1,10 +1,10 @@
 """The ground segment against a real SIL: the nominal scenario flown in real time as
-processes, case 1's failures injected from the ground at about 2.5 s (the scripted CLI and
-the same request path the console uses), each acknowledged, FDIR's STATUSTEXT seen for each
-jet, and the run ends within the case-1 bound."""
+processes; at about 2.5 s case 1's failures are injected from the ground console (Textual,
+driven headlessly) and the scripted CLI, each acknowledged; FDIR's STATUSTEXT is seen for
+each jet, and the run ends within the case-1 bound."""
 from __future__ import annotations
 
-import os
+import asyncio
 import signal
 import subprocess
 import sys
@@ -12,10 +12,9 @@ import time
 
 import pytest
 
-from gse.cli import execute
-from gse.client import GroundClient, make_request
+from gse.client import GroundClient
+from gse.console import GroundConsole
 from gse.tlog import read_records
-from interfaces import transport
 from interfaces.mavlink.signing import SigningKey
 
 pytestmark = pytest.mark.slow
@@ -43,34 +42,57 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
                            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     client = GroundClient(key, listen=f"udp:127.0.0.1:{gcs}", vehicle=f"udp:127.0.0.1:{vehicle}",
                           tlog=str(tmp_path / "ground.tlog"))
+    log_text = lambda: (tmp_path / "run.log").read_text()  # noqa: E731
+
+    async def console_session():
+        """The operator's console (Textual, headless pilot) during the real-time run."""
+        app = GroundConsole(client, timeout_s=1.0, retries=3, poll_s=0.05, refresh_s=0.3)
+        async with app.run_test(size=(140, 45)) as pilot:
+            async def until(cond, timeout_s, what):
+                t_end = time.monotonic() + timeout_s
+                while not cond():
+                    assert run.poll() is None or what == "end", f"{what}:\n{log_text()}"
+                    assert time.monotonic() < t_end, f"timed out waiting for {what}; acks {app.ack_lines}"
+                    await pilot.pause(0.05)
+
+            async def type_line(line):
+                await pilot.press(":")
+                for ch in line:
+                    await pilot.press("space" if ch == " " else ch)
+                await pilot.press("enter")
+                await pilot.press("escape")
+
+            await until(lambda: "first jet command" in log_text(), 90, "the SIL to fly")
+            t_fly = time.monotonic()
+            await until(lambda: time.monotonic() > t_fly + 2.5, 10, "t = 2.5 s")
+            top = str(app.query_one("#top").render())
+            assert "ENTRY" in top and "ARMED" in top, top
+            for jet in (1, 2, 17):                       # typed by the operator
+                await type_line(f"inject {jet} off")
+                await until(lambda: f"inject jet {jet} off: ACCEPTED" in app.ack_lines, 10, f"ACK jet {jet}")
+            # the fourth through the scripted CLI, while the console keeps running
+            cli = await asyncio.to_thread(subprocess.run, PY + [
+                "gse", "inject", "--jet", "18", "--kind", "off", "--vehicle", f"udp:127.0.0.1:{vehicle}",
+                "--signing-key", str(key_file)], capture_output=True, text=True, timeout=60)
+            assert cli.returncode == 0 and "ACCEPTED" in cli.stdout, cli.stdout + cli.stderr
+            # an invalid request is refused, never silently accepted
+            await type_line("inject 5 degraded 0.5")          # valid: eta in (0, 1)
+            await until(lambda: any("jet 5 degraded" in x and "ACCEPTED" in x for x in app.ack_lines), 10,
+                        "ACK degraded jet 5")
+            n_before = len(app.ack_lines)
+            app.submit("inject 5 degraded 1.5")               # eta out of range: refused before sending
+            await pilot.pause(0.2)
+            assert len(app.ack_lines) > n_before and "ACCEPTED" not in app.ack_lines[-1], app.ack_lines
+            # ... and the vehicle denies it when a station sends it anyway (MAV_RESULT_DENIED = 2)
+            assert client.command(420, 101, 4, 5, 1.5, timeout_s=1.0, retries=2) == 2
+            # FDIR reports each jet (a failed-off jet shows once it is commanded on)
+            want = {f"JET {j} FAILED OFF" for j in (1, 2, 17, 18)}
+            await until(lambda: want <= {e.text for e in client.state.events}, 30, "FDIR STATUSTEXTs")
+            await until(lambda: run.poll() is not None, 120, "end")
+
     try:
-        deadline = time.monotonic() + 90
-        while "first jet command" not in (tmp_path / "run.log").read_text():
-            assert run.poll() is None and time.monotonic() < deadline, (tmp_path / "run.log").read_text()
-            client.poll(0.05)
-        t_fly = time.monotonic()
-        while time.monotonic() < t_fly + 2.5:
-            client.poll(0.02)
-        assert client.state.last_heartbeat_t is not None, "the vehicle's heartbeat must reach the ground"
-        # three jets through the console's request path, the fourth through the scripted CLI
-        for jet in (1, 2, 17):
-            assert execute(client, make_request("inject", str(jet), "off"), timeout_s=1.0, retries=3) == 0
-        cli = subprocess.run(PY + ["gse", "inject", "--jet", "18", "--kind", "off", "--vehicle",
-                                   f"udp:127.0.0.1:{vehicle}", "--signing-key", str(key_file)],
-                             capture_output=True, text=True, timeout=60)
-        assert cli.returncode == 0, cli.stdout + cli.stderr
-        assert "ACCEPTED" in cli.stdout
-        # invalid requests are refused, never silently accepted
-        assert execute(client, make_request("inject", "5", "degraded", "1.5"), timeout_s=1.0, retries=1) != 0
-        # FDIR reports each jet (the jets must be commanded on to show a failed-off fault)
-        want = {f"JET {j} FAILED OFF" for j in (1, 2, 17, 18)}
-        seen = set()
-        deadline = time.monotonic() + 20
-        while not want <= seen and time.monotonic() < deadline:
-            client.poll(0.05)
-            seen |= {e.text for e in client.state.events}
-        assert want <= seen, seen
-        assert run.wait(120) == 0, (tmp_path / "run.log").read_text()
+        asyncio.run(console_session())
+        assert run.wait(30) == 0, log_text()
     finally:
         client.close()
         if run.poll() is None:
@@ -84,8 +106,11 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
     import json
     s = json.loads((out / "summary.json").read_text())
     assert s["completed"]
-    assert sorted(d["jet"] for d in s["fdir"]["detections"]) == [1, 2, 17, 18]
-    assert s["fdir"]["false_alarms"] == 0
+    dets = {d["jet"]: d["kind"] for d in s["fdir"]["detections"]}
+    assert {j: dets.get(j) for j in (1, 2, 17, 18)} == {1: "failed_off", 2: "failed_off", 17: "failed_off",
+                                                          18: "failed_off"}
+    assert dets.get(5) == "degraded"                    # the degraded injection, found by FDIR too
+    assert s["fdir"]["false_alarms"] == 0, s["fdir"]
     assert s["bank_err_max_after_fault_deg"] <= 5.0
     # the ground's telemetry log holds both directions
     recs = list(read_records(str(tmp_path / "ground.tlog")))

@@ -107,6 +107,8 @@ def test_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
         if key not in timing:
             assert s_sil[key] == val, key
     assert s_sil["allocator"]["solves"] == s_bat["allocator"]["solves"]
+    # lockstep: the frame comes with the tick; no input task waiting for frames (it cost 3 ms a step)
+    assert "input" not in _json(out / "fsw.json")["tasks_us"]
     assert [d["jet"] for d in s_sil["fdir"]["detections"]] == [2, 17, 18, 1] or \
         sorted(d["jet"] for d in s_sil["fdir"]["detections"]) == [1, 2, 17, 18]
 

@@ -90,7 +90,9 @@ class FswNode:
         self.ticks = 0
         clock = LockstepClock() if args.mode == "lockstep" else RealTimeClock(
             int(round(self.scn.dt_control_s * 1e9)), spin_ns=int(self.fsw.params["executive.spin_us"] * 1e3))
-        self.topo = Topology(self.fsw, clock, frame_source=self._newest_frame)
+        # lockstep: the frame comes with each tick; real time: the input task fetches the newest
+        self.topo = Topology(self.fsw, clock,
+                             frame_source=self._newest_frame if args.mode == "realtime" else None)
         self.topo.add(1, "publish", self._publish)
         self.topo.add(2, "events", self._publish_events)
         self.link = self._ground_link()

@@ -144,9 +144,9 @@ def open_sinks(mode: str, out_dir: Path | str | None, *, name: str = "run",
             server = rr.GrpcServerSink(LOOPBACK, port, server_memory_limit=server_memory_limit)
             out.grpc_uri = server.uri
             sinks.append(server)
+        # set_sinks sends the default blueprint to every sink (once: a second send would store
+        # a second blueprint in the recording)
         rec.set_sinks(*sinks, default_blueprint=default_blueprint() if blueprint else None)
-        if blueprint:
-            rec.send_blueprint(default_blueprint(), make_active=False, make_default=True)
         rec.send_recording_name(name)
         if "web" in kinds:
             wport = web_port or _free_port()

@@ -54,6 +54,18 @@ class Stop:
         return self.requested
 
 
+def apply_rt(role: str, args) -> dict | None:
+    """Real-time hygiene for a node when --rt is given: SCHED_FIFO, CPU affinity, mlockall.
+    Call it before the Zenoh session opens, so that its I/O threads inherit the scheduling
+    class, priority and CPU. Returns fsw.rt's report (None without --rt)."""
+    if not args.rt:
+        return None
+    from fsw import rt
+    rep = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
+    say(role, f"real-time: {rep}")
+    return rep
+
+
 def open_node(role: str, args):
     """(session, keys) for a node, from its options."""
     session = transport.open_session(role, args.listen, args.connect, args.zenoh_config)

@@ -30,7 +30,7 @@ from fsw.topology import Topology  # noqa: E402
 from interfaces import records, transport  # noqa: E402
 from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 
-from .common import Stop, add_common_arguments, now_ns, open_node, say  # noqa: E402
+from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, say  # noqa: E402
 
 ROLE = "fsw"
 
@@ -52,11 +52,7 @@ class FswNode:
     def __init__(self, args):
         self.args = args
         self.stop = Stop()
-        self.rt_report = None
-        if args.rt:   # before the Zenoh session: its I/O threads inherit the class, priority and CPU
-            from fsw import rt
-            self.rt_report = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
-            say(ROLE, f"real-time: {self.rt_report}")
+        self.rt_report = apply_rt(ROLE, args)   # before the Zenoh session opens
         self.scn = prepare(args.scenario, args.ft_off, args.duration)
         self.events = EventLog()
         self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime")

@@ -23,7 +23,7 @@ from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard
 from sim.plant import Plant
 
-from .common import Stop, add_common_arguments, now_ns, open_node, say
+from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, say
 
 ROLE = "sim"
 
@@ -43,11 +43,7 @@ class SimNode:
     def __init__(self, args):
         self.args = args
         self.stop = Stop()
-        self.rt_report = None
-        if args.rt:   # before the Zenoh session: its I/O threads inherit the class, priority and CPU
-            from fsw import rt
-            self.rt_report = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
-            say(ROLE, f"real-time: {self.rt_report}")
+        self.rt_report = apply_rt(ROLE, args)   # before the Zenoh session opens
         self.scn = prepare(args.scenario, args.ft_off, args.duration)
         self.seed = self.scn.seed if args.seed is None else args.seed
         self.plant = Plant(self.scn, self.seed)
@@ -116,6 +112,17 @@ class SimNode:
         record_truth(self.history, self.history.row(), self.truth_rec)
         self.pub_truth.put(self.enc_truth.encode(self.truth_rec, self.plant.k, now_ns()))
 
+    def finish_step(self) -> bool:
+        """Record and publish the truth of step k; then either end the run (True) or
+        integrate [t_k, t_k+1) with the command now held."""
+        self.record_and_publish_truth()
+        done, reason = self.plant.done()
+        if done:
+            self.end_reason = reason
+            return True
+        self.plant.step(self.u)
+        return False
+
     def _take_command(self, rec) -> int:
         self.u[:] = rec["u"]
         return int(rec["k"])
@@ -150,12 +157,8 @@ class SimNode:
             self.publish_sensors()
             if not self.wait_command(self.plant.k):
                 return
-            self.record_and_publish_truth()
-            done, reason = self.plant.done()
-            if done:
-                self.end_reason = reason
+            if self.finish_step():
                 return
-            self.plant.step(self.u)
         self.end_reason = self.end_reason or "stopped"
 
     # ------------------------------------------------------------------ real time
@@ -203,12 +206,8 @@ class SimNode:
             elif holding:
                 holding = False
                 say(ROLE, f"t={self.plant.t_s:.2f}s jet commands back: resuming")
-            self.record_and_publish_truth()
-            done, reason = self.plant.done()
-            if done:
-                self.end_reason = reason
+            if self.finish_step():
                 return
-            self.plant.step(self.u)
         self.end_reason = self.end_reason or "stopped"
 
     # ------------------------------------------------------------------ main

@@ -116,12 +116,24 @@ def sigma_to_quat(sigma: np.ndarray) -> np.ndarray:
     return np.concatenate(([(1.0 - s2) / (1.0 + s2)], 2.0 * sigma / (1.0 + s2)))
 
 
+@njit(cache=True)
+def nearest_set_into(sigma_ref: np.ndarray, sigma: np.ndarray) -> None:
+    """Replace sigma_ref (in place) by its shadow set when that is closer to sigma, so that
+    sigma - sigma_ref never jumps. Callable from compiled kernels and from Python."""
+    s2 = sigma_ref[0] ** 2 + sigma_ref[1] ** 2 + sigma_ref[2] ** 2
+    if s2 > 1e-300:
+        d0 = 0.0
+        d1 = 0.0
+        for i in range(3):
+            d0 += (sigma[i] - sigma_ref[i]) ** 2
+            d1 += (sigma[i] + sigma_ref[i] / s2) ** 2
+        if d1 < d0:
+            for i in range(3):
+                sigma_ref[i] = -sigma_ref[i] / s2
+
+
 def nearest_set(sigma_ref: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """The MRP set (sigma_ref or its shadow) closest to sigma, so sigma - sigma_ref never jumps."""
-    s2 = float(sigma_ref @ sigma_ref)
-    if s2 < 1e-300:
-        return sigma_ref
-    alt = -sigma_ref / s2
-    d0 = sigma - sigma_ref
-    d1 = sigma - alt
-    return alt if float(d1 @ d1) < float(d0 @ d0) else sigma_ref
+    out = np.array(sigma_ref, dtype=float)
+    nearest_set_into(out, np.asarray(sigma, dtype=float))
+    return out

@@ -23,6 +23,7 @@ import scipy.linalg
 from numba import njit
 
 from common.model import Vehicle, inertia_matrix, inertia_vector
+from common.mrp import nearest_set_into
 from fsw.guidance import _B_mul, _Bdot_mul, reference_derivatives
 from fsw.params import Param
 
@@ -184,16 +185,7 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
     sr = np.empty(3)
     for i in range(3):
         sr[i] = sigma_RN[i]
-    r2 = sr[0] ** 2 + sr[1] ** 2 + sr[2] ** 2
-    if r2 > 1e-300:
-        d0 = 0.0
-        d1 = 0.0
-        for i in range(3):
-            d0 += (sig[i] - sr[i]) ** 2
-            d1 += (sig[i] + sr[i] / r2) ** 2
-        if d1 < d0:
-            for i in range(3):
-                sr[i] = -sr[i] / r2
+    nearest_set_into(sr, sig)
     sr_d = np.empty(3)
     sr_dd = np.empty(3)
     reference_derivatives(sr, omega_RN_R, domega_RN_R, sr_d, sr_dd)

@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from common.model import load_planet
+from common.mrp import nearest_set_into
 
 # Minimum-jerk (quintic) blend s(x) = 10x^3 - 15x^4 + 6x^5 on x in [0, 1]:
 # max s' = 15/8 at x = 1/2; max |s''| = 10/sqrt(3) at x = 1/2 -+ sqrt(3)/6.
@@ -268,17 +269,7 @@ def _guidance_kernel(phi, phid, phidd, alpha, omega_planet, mu, r_N, v_N, vrel_N
             C_RN[i, j] = C_RW[i, 0] * C_WN[0, j] + C_RW[i, 1] * C_WN[1, j] + C_RW[i, 2] * C_WN[2, j]
     sr = out[0:3]
     _mrp_from_dcm(C_RN, sr)
-    # nearest shadow set to sigma_BN so that eps = sigma - sigma_r never jumps
-    s2 = sr[0] ** 2 + sr[1] ** 2 + sr[2] ** 2
-    if s2 > 1e-300:
-        d0 = 0.0
-        d1 = 0.0
-        for i in range(3):
-            d0 += (sigma_BN[i] - sr[i]) ** 2
-            d1 += (sigma_BN[i] + sr[i] / s2) ** 2
-        if d1 < d0:
-            for i in range(3):
-                sr[i] = -sr[i] / s2
+    nearest_set_into(sr, sigma_BN)      # eps = sigma - sigma_r never jumps
     # omega_RN = omega_WN + phidot w1; its N-derivative (omegadot_WN neglected) in W comps:
     # phiddot w1 + phidot (omega_WN x w1) = [phiddot, phidot wW3, -phidot wW2]
     w_W = np.array([wW[0] + phid, wW[1], wW[2]])

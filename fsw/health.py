@@ -20,6 +20,20 @@ class JetHealth:
         self.eta = np.ones(n)
         self.inhibited = np.zeros(n, dtype=bool)
 
+    @classmethod
+    def of(cls, failed=(), stuck=(), degraded=(), inhibited=()) -> "JetHealth":
+        """A configuration from 1-based jet lists; ``degraded`` holds (jet, eta) pairs."""
+        h = cls()
+        for j in failed:
+            h.set(j, FAILED_OFF)
+        for j in stuck:
+            h.set(j, STUCK_ON)
+        for j, eta in degraded:
+            h.set(j, DEGRADED, eta)
+        for j in inhibited:
+            h.inhibited[j - 1] = True
+        return h
+
     def copy(self) -> "JetHealth":
         h = JetHealth(len(self.state))
         h.state[:] = self.state

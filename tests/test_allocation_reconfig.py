@@ -14,7 +14,7 @@ from common.model import load_vehicle
 from ellipsled.bench.allocator import cases, demands, params_for
 from fsw.allocation import (TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, Allocator, effective_model,
                             solve_enumeration_many)
-from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
+from fsw.health import DEGRADED, JetHealth
 from fsw.params import load_params
 
 VEH = load_vehicle("ellipsled")
@@ -22,17 +22,6 @@ T, THRUST = VEH.torque_matrix_Nm, VEH.thrust_N
 PARAMS = load_params(Allocator.PARAMS)
 
 
-def _health(failed=(), stuck=(), degraded=(), inhibited=()):
-    h = JetHealth()
-    for j in failed:
-        h.set(j, FAILED_OFF)
-    for j in stuck:
-        h.set(j, STUCK_ON)
-    for j, eta in degraded:
-        h.set(j, DEGRADED, eta)
-    for j in inhibited:
-        h.inhibited[j - 1] = True
-    return h
 
 
 def _brute_interim(tabs, forbid, delta, w, d):
@@ -83,12 +72,12 @@ def test_default_is_synchronous_and_two_runs_are_identical():
 
 
 TRANSITIONS = [
-    ("failed-off", JetHealth(), _health(failed=(1, 2, 17, 18))),
-    ("inhibited", JetHealth(), _health(inhibited=(4, 10))),
-    ("degraded", JetHealth(), _health(degraded=((3, .5), (7, .5), (14, .5), (15, .5)))),
-    ("stuck-on", JetHealth(), _health(stuck=(2, 3, 4, 5, 8, 9, 10))),
-    ("degraded-escalates-to-stuck", _health(degraded=((13, .6),)), _health(stuck=(13,))),
-    ("stuck-cleared", _health(stuck=(5,), failed=(11,)), _health(failed=(11,))),
+    ("failed-off", JetHealth(), JetHealth.of(failed=(1, 2, 17, 18))),
+    ("inhibited", JetHealth(), JetHealth.of(inhibited=(4, 10))),
+    ("degraded", JetHealth(), JetHealth.of(degraded=((3, .5), (7, .5), (14, .5), (15, .5)))),
+    ("stuck-on", JetHealth(), JetHealth.of(stuck=(2, 3, 4, 5, 8, 9, 10))),
+    ("degraded-escalates-to-stuck", JetHealth.of(degraded=((13, .6),)), JetHealth.of(stuck=(13,))),
+    ("stuck-cleared", JetHealth.of(stuck=(5,), failed=(11,)), JetHealth.of(failed=(11,))),
 ]
 
 
@@ -174,7 +163,7 @@ def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():
         assert al.wait_idle(20.0)
         assert al.tables_nbytes["prebuilt"] > 0
         for jet in (1, 9, 18):
-            al.set_health(_health(failed=(jet,)))
+            al.set_health(JetHealth.of(failed=(jet,)))
             assert not al.reconfig_pending and al.tables_from_cache
             assert not al.solve(np.array([300.0, -200.0, 100.0]))[jet - 1]
         mb = al.tables_nbytes["prebuilt"] / 2**20
@@ -189,10 +178,10 @@ def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():
         al._rebuilder.release()
         assert al.wait_idle(20.0)
         sync = Allocator(T, THRUST, new)
-        sync.set_health(_health(failed=(18,)))
+        sync.set_health(JetHealth.of(failed=(18,)))
         d = np.array([-250.0, 40.0, 333.0])
         assert np.array_equal(al.solve(d), sync.solve(d)) and al.objective == sync.objective
-        al.set_health(_health(failed=(2,)))          # pre-built again with the new parameters
+        al.set_health(JetHealth.of(failed=(2,)))          # pre-built again with the new parameters
         assert not al.reconfig_pending and al.tables_from_cache
     finally:
         al.close()
@@ -204,7 +193,7 @@ def test_builder_thread_ends_on_close_and_on_garbage_collection():
     n0 = len(builders())
     al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
     assert al.builder_alive and len(builders()) == n0 + 1
-    al.set_health(_health(failed=(3, 4)))
+    al.set_health(JetHealth.of(failed=(3, 4)))
     al.close()                                       # a pending reconfiguration completes
     assert not al.builder_alive and not al.reconfig_pending
     assert not al.solve(np.array([50.0, 50.0, 50.0]))[[2, 3]].any()

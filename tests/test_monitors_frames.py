@@ -12,8 +12,8 @@ DT = 0.02
 R_MARS = 3396.2e3
 
 
-def frame(k_step, **fields):
-    f = new(SENSORS)
+def fill(f, k_step):
+    """A credible frame of step k_step, written into the record f."""
     f["k"] = k_step
     f["t_ns"] = int(k_step * DT * 1e9)
     f["omega_BN_B"][:] = [0.01, -0.02, 0.005]
@@ -22,6 +22,11 @@ def frame(k_step, **fields):
     f["v_N"][:] = [-1500.0, 7000.0, 0.0]
     f["accel_B"][:] = [-3.0, 0.0, 1.0]
     f["chamber"][:] = 0.01
+    return f
+
+
+def frame(k_step, **fields):
+    f = fill(new(SENSORS), k_step)
     for name, v in fields.items():
         f[name][...] = v
     return f

@@ -8,21 +8,7 @@ import numpy as np
 from fsw.events import EventLog
 from fsw.monitors import SensorMonitor
 from interfaces.records import SENSORS, new
-
-DT = 0.02
-R_MARS = 3396.2e3
-
-
-def fill(f, k_step):
-    f["k"] = k_step
-    f["t_ns"] = int(k_step * DT * 1e9)
-    f["omega_BN_B"][:] = [0.01, -0.02, 0.005]
-    f["sigma_BN"][:] = [0.1, 0.2, -0.3]
-    f["r_N"][:] = [R_MARS + 125e3, 0.0, 0.0]
-    f["v_N"][:] = [-1500.0, 7000.0, 0.0]
-    f["accel_B"][:] = [-3.0, 0.0, 1.0]
-    f["chamber"][:] = 0.01
-    return f
+from tests.test_monitors_frames import DT, R_MARS, fill
 
 
 def test_one_record_refilled_each_period_is_checked_afresh():

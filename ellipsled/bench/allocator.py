@@ -36,18 +36,6 @@ class Case:
     fault_tolerance: bool = True
 
 
-def _health(failed=(), stuck=(), degraded=(), inhibited=()) -> JetHealth:
-    """degraded: (jet, eta) pairs; jets 1-based."""
-    h = JetHealth()
-    for j in failed:
-        h.set(j, FAILED_OFF)
-    for j in stuck:
-        h.set(j, STUCK_ON)
-    for j, eta in degraded:
-        h.set(j, DEGRADED, eta)
-    for j in inhibited:
-        h.inhibited[j - 1] = True
-    return h
 
 
 def cases() -> list[Case]:
@@ -55,29 +43,29 @@ def cases() -> list[Case]:
     1-3 sets, single and mixed faults, identical columns split by degradation, and
     objective variants (weights, zero penalty = maximal ties, a zero weight)."""
     out = [
-        Case("nominal", _health()),
-        Case("case1-failed-1-2-17-18", _health(failed=(1, 2, 17, 18))),
-        Case("case2-stuck-2-3-4-5-8-9-10", _health(stuck=(2, 3, 4, 5, 8, 9, 10))),
-        Case("case3-degraded-3-7-14-15", _health(degraded=((3, .5), (7, .5), (14, .5), (15, .5)))),
-        Case("failed-1", _health(failed=(1,))),
-        Case("failed-13", _health(failed=(13,))),
-        Case("failed-1-6", _health(failed=(1, 2, 3, 4, 5, 6))),
-        Case("stuck-1", _health(stuck=(1,))),
-        Case("stuck-13", _health(stuck=(13,))),
-        Case("stuck-13-16", _health(stuck=(13, 16))),
-        Case("stuck-1-7", _health(stuck=(1, 7))),
-        Case("degraded-2-0.3", _health(degraded=((2, .3),))),
-        Case("degraded-13-0.7", _health(degraded=((13, .7),))),
-        Case("degraded-1-7-0.5-identical", _health(degraded=((1, .5), (7, .5)))),
-        Case("inhibited-4-10", _health(inhibited=(4, 10))),
-        Case("mixed-f1-s8-d14-i6", _health(failed=(1,), stuck=(8,), degraded=((14, .5),), inhibited=(6,))),
-        Case("mixed-f13-14-s15", _health(failed=(13, 14), stuck=(15,))),
-        Case("mixed-s5-d11-0.4-f18", _health(stuck=(5,), degraded=((11, .4),), failed=(18,))),
-        Case("nominal-weights-1-2-0.5", _health(), w=(1.0, 2.0, 0.5), penalty_per_N=0.05),
-        Case("nominal-zero-penalty", _health(), penalty_per_N=0.0),
-        Case("case1-zero-yaw-weight", _health(failed=(1, 2, 17, 18)), w=(1.0, 1.0, 0.0)),
-        Case("case2-heavy-penalty", _health(stuck=(2, 3, 4, 5, 8, 9, 10)), penalty_per_N=1.0),
-        Case("ft-off-with-case1-health", _health(failed=(1, 2, 17, 18)), fault_tolerance=False),
+        Case("nominal", JetHealth.of()),
+        Case("case1-failed-1-2-17-18", JetHealth.of(failed=(1, 2, 17, 18))),
+        Case("case2-stuck-2-3-4-5-8-9-10", JetHealth.of(stuck=(2, 3, 4, 5, 8, 9, 10))),
+        Case("case3-degraded-3-7-14-15", JetHealth.of(degraded=((3, .5), (7, .5), (14, .5), (15, .5)))),
+        Case("failed-1", JetHealth.of(failed=(1,))),
+        Case("failed-13", JetHealth.of(failed=(13,))),
+        Case("failed-1-6", JetHealth.of(failed=(1, 2, 3, 4, 5, 6))),
+        Case("stuck-1", JetHealth.of(stuck=(1,))),
+        Case("stuck-13", JetHealth.of(stuck=(13,))),
+        Case("stuck-13-16", JetHealth.of(stuck=(13, 16))),
+        Case("stuck-1-7", JetHealth.of(stuck=(1, 7))),
+        Case("degraded-2-0.3", JetHealth.of(degraded=((2, .3),))),
+        Case("degraded-13-0.7", JetHealth.of(degraded=((13, .7),))),
+        Case("degraded-1-7-0.5-identical", JetHealth.of(degraded=((1, .5), (7, .5)))),
+        Case("inhibited-4-10", JetHealth.of(inhibited=(4, 10))),
+        Case("mixed-f1-s8-d14-i6", JetHealth.of(failed=(1,), stuck=(8,), degraded=((14, .5),), inhibited=(6,))),
+        Case("mixed-f13-14-s15", JetHealth.of(failed=(13, 14), stuck=(15,))),
+        Case("mixed-s5-d11-0.4-f18", JetHealth.of(stuck=(5,), degraded=((11, .4),), failed=(18,))),
+        Case("nominal-weights-1-2-0.5", JetHealth.of(), w=(1.0, 2.0, 0.5), penalty_per_N=0.05),
+        Case("nominal-zero-penalty", JetHealth.of(), penalty_per_N=0.0),
+        Case("case1-zero-yaw-weight", JetHealth.of(failed=(1, 2, 17, 18)), w=(1.0, 1.0, 0.0)),
+        Case("case2-heavy-penalty", JetHealth.of(stuck=(2, 3, 4, 5, 8, 9, 10)), penalty_per_N=1.0),
+        Case("ft-off-with-case1-health", JetHealth.of(failed=(1, 2, 17, 18)), fault_tolerance=False),
     ]
     rng = np.random.default_rng(20110807)
     for i in range(3):                      # seeded random mixed faults

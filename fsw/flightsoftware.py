@@ -87,6 +87,10 @@ class FlightSoftware:
         self.cycles = 0
         self.bank_err_rad = 0.0
         self._frame_views: tuple = (None,)
+        self._zero_u = np.zeros(18, dtype=np.uint8)   # jets off
+        self._zero3 = np.zeros(3)
+        self._residual_ready = False                   # RG2 has one earlier sample to difference
+        self._residual_dt = 0.0
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
@@ -120,7 +124,7 @@ class FlightSoftware:
             self.control.freeze = True
             u_cal = self.control.safe_torque(nav)
         else:
-            u_cal = self._zero3()
+            u_cal = self._zero3
         self.u_cal_B[:] = u_cal
         t0 = time.perf_counter_ns()
         u_alloc = self.allocator.solve(self.u_cal_B)
@@ -174,24 +178,14 @@ class FlightSoftware:
         self.monitor.tick(t_s, got_frame=False)
         if self.monitor.stale:
             return self._hold_off(t_s)
-        return self.driver.command(self._zero_u(), False)
+        return self.driver.command(self._zero_u, False)
 
     def _hold_off(self, t_s: float) -> np.ndarray:
         """Jets off, nothing learnt: a rejected frame or stale sensors."""
         self._have_prev = False
         self.u_cal_B[:] = 0.0
         self.tau_alloc_B[:] = 0.0
-        return self.driver.command(self._zero_u(), False)
-
-    def _zero_u(self) -> np.ndarray:
-        if not hasattr(self, "_zu"):
-            self._zu = np.zeros(18, dtype=np.uint8)
-        return self._zu
-
-    def _zero3(self) -> np.ndarray:
-        if not hasattr(self, "_z3"):
-            self._z3 = np.zeros(3)
-        return self._z3
+        return self.driver.command(self._zero_u, False)
 
     # ---------------------------------------------------------------- RG2 / RG3
     def slow_step(self) -> None:
@@ -205,9 +199,6 @@ class FlightSoftware:
         self._tau_cmd_prev[:] = self.tau_alloc_B
         self._residual_dt = self.dt_s * self.params["executive.rg2_divisor"]
         self._residual_ready = True
-
-    _residual_ready = False
-    _residual_dt = 0.0
 
     def housekeeping(self) -> None:
         """RG3: nothing periodic beyond telemetry yet (the ground link adds its heartbeat here)."""

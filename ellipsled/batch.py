@@ -83,9 +83,7 @@ def verify_allocations(scn: Scenario, params: dict, samples: list[dict]) -> tupl
 def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faults_applied: list,
           params: dict) -> dict:
     """summary.json: figures of merit from the history, FDIR judged against the faults the
-    plant actually applied. The same function serves batch and SIL."""
-    t_end = float(h["t_s"][-1]) if h.n else 0.0
-    faults_applied = [f for f in faults_applied if f[0] <= t_end]   # a run cut short never saw later faults
+    plant actually applied (its ``fault_log``). The same function serves batch and SIL."""
     injected = {}
     for t, jet, kind in faults_applied:
         injected.setdefault(jet, (t, kind))
@@ -122,12 +120,6 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
                      schedule_t=[t for t, _ in scn.bank_schedule], extra=extra)
 
 
-def scheduled_faults(scn: Scenario) -> list[tuple[float, int, str]]:
-    """The scenario's fault schedule as (t_s at the step boundary it applies, jet, kind)."""
-    dt = scn.dt_control_s
-    return [(math.ceil(f.t_s / dt - 1e-9) * dt, j, f.kind) for f in scn.faults for j in f.jets]
-
-
 def end_reason_of(reason: str, duration_s: float | None) -> str:
     return "duration" if duration_s is not None and reason == "timeout" else reason
 
@@ -160,7 +152,7 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
         frame = plant.step(u)
     wall = time.perf_counter() - wall0
     rep = fsw_report(fsw, topo.executive.slips, samples)
-    summary = judge(h, scn, seed, end_reason_of(reason, duration_s), rep, scheduled_faults(scn), fsw.params)
+    summary = judge(h, scn, seed, end_reason_of(reason, duration_s), rep, plant.fault_log, fsw.params)
     summary["wall_s"] = wall
     summary["realtime_factor"] = (float(h["t_s"][-1]) / wall) if wall > 0 else None
     return summary, h, fsw

@@ -500,7 +500,8 @@ class Plant:
     record, refilled in place), x (the state array: r_N, v_N, sigma_BN, omega_BN_B; read
     it, write it only through set_state), aux (derived outputs at t_k, indices A_*),
     fault_state (int8[18], NOMINAL/FAILED_OFF/STUCK_ON/DEGRADED), fault_eta (float[18]),
-    inertia_truth_kgm2, p (truth parameter vector, indices P_*), propellant_kg.
+    inertia_truth_kgm2, p (truth parameter vector, indices P_*), propellant_kg, fault_log
+    ((t_s, jet, kind) of every fault applied, scheduled or by call, in order).
     Methods: step(u, tau_ext_B=None), set_fault(jet, kind, eta), schedule_fault(t_s, jet,
     kind, eta), set_state(...), done(), truth(), fill_truth(rec=None).
     """
@@ -532,6 +533,7 @@ class Plant:
         self._gain = np.ones(N_JETS)
         self._bias = np.zeros(N_JETS)
         self._schedule: list[tuple[int, int, str, float]] = []   # (k_apply, jet, kind, eta), sorted
+        self.fault_log: list[tuple[float, int, str]] = []         # (t_s, jet, kind) of every fault applied
         self._next_fault = 0
         for f in scenario.faults:
             for j in f.jets:
@@ -661,6 +663,7 @@ class Plant:
         kind 'off' | 'stuck' | 'degraded' (0 < eta < 1) | 'clear'."""
         _check_fault(jet, kind, eta)
         idx = range(N_JETS) if jet == 0 else (int(jet) - 1,)
+        self.fault_log.extend((self.t_s, j + 1, kind) for j in idx)
         for j in idx:
             if kind == "off":
                 self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = FAILED_OFF, 1.0, 0.0, 0.0

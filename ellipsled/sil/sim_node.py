@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ellipsled.batch import end_reason_of, prepare, scheduled_faults
+from ellipsled.batch import end_reason_of, prepare
 from ellipsled.history import History, record_truth
 from fsw.executive import sleep_until_ns
 from interfaces import records, transport
@@ -61,7 +61,6 @@ class SimNode:
         self.truth_rec = records.new(records.TRUTH)
         self.u = np.zeros(records.N_JETS, dtype=np.uint8)
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
-        self.faults_applied = list(scheduled_faults(self.scn))
         self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
                        "faults_applied": 0}
         self.rejects: dict[str, int] = {}
@@ -96,8 +95,6 @@ class SimNode:
                 say(ROLE, f"fault request refused: {e}")
                 continue
             self.counts["faults_applied"] += 1
-            jets = range(1, records.N_JETS + 1) if jet == 0 else (jet,)
-            self.faults_applied += [(self.plant.t_s, j, kind) for j in jets]
             say(ROLE, f"t={self.plant.t_s:.2f}s fault applied: jet {jet or 'all'} {kind}"
                       + (f" eta={eta:g}" if kind == "degraded" else ""))
 
@@ -243,7 +240,7 @@ class SimNode:
             "end_reason": end_reason_of(self.end_reason, self.args.duration), "message": self.message,
             "t_end_s": self.plant.t_s, "steps": self.history.n, "wall_s": wall,
             "realtime_factor": (self.plant.t_s / wall) if wall else None,
-            "faults_applied": self.faults_applied, "counts": self.counts, "rejects": self.rejects,
+            "faults_applied": self.plant.fault_log, "counts": self.counts, "rejects": self.rejects,
             "latency_p50_us": float(np.percentile(lat, 50)) if len(lat) else None,
             "latency_p99_us": float(np.percentile(lat, 99)) if len(lat) else None,
             "latency_max_us": float(np.max(lat)) if len(lat) else None,

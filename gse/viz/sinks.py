@@ -15,6 +15,13 @@ Memory is bounded: live data only goes to the gRPC server hosted in this process
 keeps at most ``server_memory_limit`` (oldest data dropped first) whether or not any
 viewer is connected. A client sink (``GrpcSink``) to an unreachable viewer would buffer
 without limit, so none is used.
+
+The live .rrd is streamed without a footer: an SDK ``FileSink`` that writes one keeps the
+footer's manifest entry of every chunk in memory until the file is closed (about 1.9 kB
+per chunk; a full entry at 50 Hz sends ~15,500 chunks, so +28 MB growing linearly), with
+no API to bound it. ``Sinks.close`` then adds the footer with ``rerun rrd optimize`` (a
+separate process, after the run; it also compacts the chunks, ~40 MB -> ~17 MB for a full
+entry). If that fails the streamed file is kept: valid, readable, without a footer.
 """
 from __future__ import annotations
 
@@ -35,8 +42,9 @@ from gse.viz.blueprint import default_blueprint
 
 MODES = ("viewer", "web", "file", "none", "auto")
 LOOPBACK = "127.0.0.1"
-SERVER_MEMORY_LIMIT = "256MiB"   # a full entry at 50 Hz is ~30 MB of data
+SERVER_MEMORY_LIMIT = "256MiB"   # a full entry at 50 Hz is ~40 MB of chunks
 VIEWER_MEMORY_LIMIT = "25%"
+FINALISE_TIMEOUT_S = 60.0        # `rerun rrd optimize` of a full entry takes ~1.2 s here
 
 
 def rerun_exe() -> str:
@@ -92,16 +100,25 @@ class Sinks:
     web_url: str | None = None
     procs: list[subprocess.Popen] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
+    say: Callable[[str], None] | None = None
 
     def close(self, timeout_s: float = 5.0) -> None:
         """Flush the recording, finalise the file, stop the processes started here."""
         if self.rec is not None:
             try:
                 self.rec.flush(timeout_sec=timeout_s)
-                self.rec.disconnect()       # finalises the file (footer), stops the server
+                self.rec.disconnect()       # closes the file, stops the server
             except Exception:
                 pass
             self.rec = None
+            if self.rrd_path is not None:
+                ok, why = add_rrd_footer(self.rrd_path)
+                if not ok:
+                    m = (f"rerun: {self.rrd_path} kept without a footer ({why}); "
+                         f"add one with `{rerun_exe()} rrd optimize`")
+                    self.messages.append(m)
+                    if self.say is not None:
+                        self.say(m)
         for p in self.procs:
             if p.poll() is None:
                 p.send_signal(signal.SIGINT)
@@ -111,6 +128,27 @@ class Sinks:
                     p.kill()
                     p.wait(timeout=timeout_s)
         self.procs = []
+
+
+def add_rrd_footer(path: Path, timeout_s: float = FINALISE_TIMEOUT_S) -> tuple[bool, str]:
+    """Rewrite the footer-less .rrd ``path`` in place with a footer (``rerun rrd optimize``,
+    live-viewer chunk sizes). Returns (done, reason if not); on failure ``path`` is untouched."""
+    path = Path(path)
+    if not path.exists():
+        return False, "file missing"
+    tmp = path.with_name(f".{path.stem}.footer.rrd")
+    try:
+        r = subprocess.run([rerun_exe(), "rrd", "optimize", "--profile", "live", str(path), "-o", str(tmp)],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=timeout_s)
+        if r.returncode != 0 or not tmp.exists():
+            lines = (r.stderr or "").strip().splitlines()
+            return False, f"rerun rrd optimize exit {r.returncode}: {lines[-1] if lines else ''}"
+        os.replace(tmp, path)
+        return True, ""
+    except (OSError, subprocess.SubprocessError) as e:
+        return False, f"rerun rrd optimize: {e}"
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def open_sinks(mode: str, out_dir: Path | str | None, *, name: str = "run",
@@ -127,7 +165,7 @@ def open_sinks(mode: str, out_dir: Path | str | None, *, name: str = "run",
     say = say or (lambda s: print(s, file=sys.stderr))
     display = has_display() if display is None else display
     kinds = parse_mode(mode, display)
-    out = Sinks(rec=None, kinds=kinds)
+    out = Sinks(rec=None, kinds=kinds, say=say)
     if not kinds:
         return out
     rec = rr.RecordingStream(app_id, recording_id=uuid.uuid4())
@@ -138,7 +176,7 @@ def open_sinks(mode: str, out_dir: Path | str | None, *, name: str = "run",
                 raise ValueError("rerun mode: a file sink needs an output folder (out_dir)")
             Path(out_dir).mkdir(parents=True, exist_ok=True)
             out.rrd_path = Path(out_dir) / f"{name}.rrd"
-            sinks.append(rr.FileSink(out.rrd_path))
+            sinks.append(rr.FileSink(out.rrd_path, write_footer=False))   # flat memory: module doc
         if kinds & {"viewer", "web"}:
             port = grpc_port or _free_port()
             server = rr.GrpcServerSink(LOOPBACK, port, server_memory_limit=server_memory_limit)
@@ -162,7 +200,8 @@ def open_sinks(mode: str, out_dir: Path | str | None, *, name: str = "run",
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
             out.messages.append(f"rerun: native viewer connected to {out.grpc_uri}")
         if out.rrd_path is not None:
-            out.messages.append(f"rerun: recording to {out.rrd_path}")
+            out.messages.append(f"rerun: recording to {out.rrd_path} (streamed without a footer, "
+                                f"added when the bridge closes)")
             if not display:
                 out.messages.append(
                     f"rerun: no display; open it later with `{rerun_exe()} {out.rrd_path}` on a machine "

@@ -4,6 +4,11 @@
   logged step (truth + FSW row), reported as the share of one core at 50 Hz
   (cpu_pct = cpu_per_step x 50 x 100), and RSS growth over the run. Sinks: an .rrd file
   and the loopback gRPC server (no viewer connected, its memory limit applies).
+- Memory is judged flat when RSS grows by at most ``MEM_FLAT_MB_PER_10K_STEPS`` per 10,000
+  steps over the second half of the run (the first half includes allocator warm-up). RSS is
+  sampled every ``RSS_SAMPLE_STEPS`` so the shape (linear or saturating) is in the report.
+  With the SDK's footer-writing FileSink the file run grew ~12.7 MB per 10,000 steps
+  (+28.6 MB over a full entry), linearly: gse/viz/sinks.py says why and what changed.
 - Baseline in the same run: one ``rr.log`` per signal per frame (the ~40 scalar signals)
   vs the batched ``send_columns`` path, per frame.
 """
@@ -23,6 +28,22 @@ from gse.viz.sinks import open_sinks
 
 RATE_HZ = 50.0
 FULL_ENTRY_STEPS = 22_500
+QUICK_STEPS = 10_000             # long enough that a leak of a few MB per entry shows
+RSS_SAMPLE_STEPS = 2_500
+MEM_FLAT_MB_PER_10K_STEPS = 1.0  # <= 2.25 MB over a full entry's 22,500 steps
+
+
+def memory_verdict(rss_MB: list[tuple[int, float]]) -> dict:
+    """Growth over the second half of ``rss_MB`` ((step, RSS [MB]) samples, first at 0)
+    and whether it is flat (slope <= MEM_FLAT_MB_PER_10K_STEPS)."""
+    n = rss_MB[-1][0]
+    mid = min(rss_MB, key=lambda p: abs(p[0] - n / 2))
+    grow = rss_MB[-1][1] - mid[1]
+    slope = grow / max(n - mid[0], 1) * 10_000
+    return {"rss_growth_MB": rss_MB[-1][1] - rss_MB[0][1], "rss_growth_second_half_MB": grow,
+            "rss_slope_second_half_MB_per_10k_steps": slope,
+            "memory_flat": bool(slope <= MEM_FLAT_MB_PER_10K_STEPS),
+            "memory_flat_max_MB_per_10k_steps": MEM_FLAT_MB_PER_10K_STEPS}
 
 
 def _rows(n: int, rng: np.random.Generator) -> tuple[list[dict], list[dict]]:
@@ -54,17 +75,17 @@ def _logger_run(n_steps: int, mode: str, out_dir: Path, rng) -> dict:
         log.log_truth(k, k / RATE_HZ, truth[k % 256])
         log.log_fsw(k, k / RATE_HZ, fsw[k % 256])
     log.flush()
-    rss0 = proc.memory_info().rss
-    rss_mid = None
+    rss_MB = [(0, proc.memory_info().rss / 2**20)]
     c0, w0 = proc.cpu_times(), time.perf_counter()
-    for k in range(100, 100 + n_steps):
+    for i in range(1, n_steps + 1):
+        k = 99 + i
         log.log_truth(k, k / RATE_HZ, truth[k % 256])
         log.log_fsw(k, k / RATE_HZ, fsw[k % 256])
-        if k == 100 + n_steps // 2:
-            rss_mid = proc.memory_info().rss
+        if (i % RSS_SAMPLE_STEPS == 0 and i < n_steps) or i == n_steps // 2:
+            rss_MB.append((i, proc.memory_info().rss / 2**20))
     log.close()
     c1, w1 = proc.cpu_times(), time.perf_counter()
-    rss1 = proc.memory_info().rss
+    rss_MB.append((n_steps, proc.memory_info().rss / 2**20))   # after the SDK flush
     sinks.close()
     # process CPU (SDK background threads included)
     cpu_s = (c1.user - c0.user) + (c1.system - c0.system)
@@ -74,8 +95,8 @@ def _logger_run(n_steps: int, mode: str, out_dir: Path, rng) -> dict:
         "cpu_s": cpu_s, "wall_s": w1 - w0,
         "cpu_us_per_step": per_step * 1e6,
         "cpu_pct_at_50Hz": per_step * RATE_HZ * 100.0,
-        "rss_growth_MB": (rss1 - rss0) / 2**20,
-        "rss_growth_second_half_MB": (rss1 - rss_mid) / 2**20 if rss_mid else None,
+        **memory_verdict(rss_MB),
+        "rss_MB_by_step": [(i, round(m - rss_MB[0][1], 2)) for i, m in rss_MB],   # growth since step 0
         "send_columns_calls": log.stats["send_columns"],
         "send_columns_per_step": log.stats["send_columns"] / n_steps,
         "rrd_MB": (sinks.rrd_path.stat().st_size / 2**20) if sinks.rrd_path and sinks.rrd_path.exists() else None,
@@ -124,7 +145,7 @@ def _batched_frames(n_frames: int, out_dir: Path, rng) -> dict:
 
 def run(quick: bool) -> dict:
     rng = np.random.default_rng(7)
-    n_steps = 3000 if quick else FULL_ENTRY_STEPS
+    n_steps = QUICK_STEPS if quick else FULL_ENTRY_STEPS
     n_base = 1000 if quick else 3000
     with tempfile.TemporaryDirectory() as d:
         out = Path(d)

@@ -20,6 +20,7 @@ import ctypes.util
 import gc
 import os
 import sys
+import threading
 from typing import Callable
 
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
@@ -154,6 +155,39 @@ def apply(cpus: list[int] | None = None, priority: int | None = None,
         fifo, prio = False, None
     return {"affinity": affinity, "sched_fifo": fifo, "priority": prio, "mlockall": mlocked,
             "timer_slack_ns": get_timer_slack_ns(), "messages": messages}
+
+
+def other_threads(cpus: list[int] | None, priority: int | None) -> dict:
+    """Give every thread of this process but the calling one the CPU set ``cpus`` and
+    SCHED_FIFO ``priority`` (None: leave that setting). For threads that libraries started
+    before ``apply`` ran (Zenoh's and its Python binding's runtimes start some at import,
+    and those do not inherit later changes). Returns {threads: [(tid, name, priority,
+    cpus)], messages} read back from the kernel."""
+    me = threading.get_native_id()
+    threads, messages = [], []
+    try:
+        tids = sorted(int(t) for t in os.listdir("/proc/self/task"))
+    except OSError as e:
+        return {"threads": [], "messages": [f"threads not listed: {e}"]}
+    for tid in tids:
+        if tid == me:
+            continue
+        try:
+            with open(f"/proc/self/task/{tid}/comm") as f:
+                name = f.read().strip()
+        except OSError:
+            continue                        # ended meanwhile
+        try:
+            if cpus is not None:
+                os.sched_setaffinity(tid, set(int(c) for c in cpus))
+            if priority is not None:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(int(priority)))
+            fifo = os.sched_getscheduler(tid) == os.SCHED_FIFO
+            threads.append((tid, name, os.sched_getparam(tid).sched_priority if fifo else None,
+                            sorted(os.sched_getaffinity(tid))))
+        except (OSError, ValueError) as e:
+            messages.append(f"thread {tid} ({name}): {type(e).__name__}: {e}")
+    return {"threads": threads, "messages": messages}
 
 
 def restore() -> None:

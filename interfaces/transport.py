@@ -29,7 +29,7 @@ CONNECT_TIMEOUT_MS = 200
 
 
 def default_config(role: str, listen: list[str] | None, connect: list[str] | None,
-                   lowlatency: bool = False) -> dict:
+                   lowlatency: bool = True) -> dict:
     """The embedded configuration as a dict (zenoh's JSON5 schema)."""
     cfg = {
         "mode": "peer",
@@ -47,7 +47,7 @@ def default_config(role: str, listen: list[str] | None, connect: list[str] | Non
 
 
 def open_session(role: str, listen: list[str] | None, connect: list[str] | None,
-                 config_file: str | None = None, *, lowlatency: bool = False) -> zenoh.Session:
+                 config_file: str | None = None, *, lowlatency: bool = True) -> zenoh.Session:
     """Open this process's Zenoh session.
 
     role: "sim", "fsw", "bridge", "console", ... (session metadata, for diagnostics).

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
@@ -33,7 +34,8 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--prefix", default=DEFAULT_PREFIX, help="key-expression prefix of this run/vehicle")
     p.add_argument("--out", default=None, help="folder for this process's records")
     p.add_argument("--rt", action="store_true", help="real-time hygiene: SCHED_FIFO, affinity, mlockall")
-    p.add_argument("--rt-priority", type=int, default=80)
+    p.add_argument("--rt-priority", type=int, default=80,
+                   help="SCHED_FIFO priority of the main loop; Zenoh's I/O threads run one above it")
     p.add_argument("--cpu", type=int, default=None, help="pin to this CPU")
 
 
@@ -57,18 +59,36 @@ class Stop:
 def apply_rt(role: str, args) -> dict | None:
     """Real-time hygiene for a node when --rt is given: SCHED_FIFO, CPU affinity, mlockall.
     Call it before the Zenoh session opens, so that its I/O threads inherit the scheduling
-    class, priority and CPU. Returns fsw.rt's report (None without --rt)."""
+    class and CPU; they get priority --rt-priority + 1 and ``open_node`` then lowers the
+    main thread to --rt-priority: an arriving sample preempts the main loop's spin-wait
+    on the shared CPU instead of waiting behind it. Returns fsw.rt's report (None without
+    --rt)."""
     if not args.rt:
         return None
     from fsw import rt
-    rep = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
+    io_priority = min(int(args.rt_priority) + 1, os.sched_get_priority_max(os.SCHED_FIFO))
+    rep = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=io_priority)
+    rep["io_priority"] = rep["priority"]
     say(role, f"real-time: {rep}")
     return rep
 
 
-def open_node(role: str, args):
-    """(session, keys) for a node, from its options."""
+def open_node(role: str, args, rt_report: dict | None = None):
+    """(session, keys) for a node, from its options. With a real-time report from
+    ``apply_rt``, the main thread drops to --rt-priority once Zenoh's threads exist."""
     session = transport.open_session(role, args.listen, args.connect, args.zenoh_config)
+    if rt_report is not None and rt_report.get("sched_fifo"):
+        from fsw import rt
+        # every other thread (Zenoh's I/O, runtimes started at import) to the I/O priority
+        # and this node's CPU; then the main thread one below
+        others = rt.other_threads([args.cpu] if args.cpu is not None else None, rt_report["io_priority"])
+        rt_report["threads"] = [f"{name}:{prio}" for _, name, prio, _ in others["threads"]]
+        rt_report["messages"] += others["messages"]
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(args.rt_priority)))
+            rt_report["priority"] = os.sched_getparam(0).sched_priority
+        except (OSError, ValueError) as e:
+            rt_report["messages"].append(f"main-thread priority not lowered: {type(e).__name__}: {e}")
     return session, keys(args.prefix)
 
 

@@ -37,7 +37,7 @@ ROLE = "fsw"
 
 def add_arguments(p) -> None:
     add_common_arguments(p)
-    p.add_argument("--rt-offset-us", type=float, default=300.0,
+    p.add_argument("--rt-offset-us", type=float, default=50.0,
                    help="real time: release this long after the plant publishes a step")
     p.add_argument("--frame-wait-us", type=float, default=3000.0,
                    help="real time: at a release, wait this long at most for the frame due")
@@ -56,7 +56,8 @@ class FswNode:
         self.scn = prepare(args.scenario, args.ft_off, args.duration)
         self.events = EventLog()
         self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime")
-        self.session, self.K = open_node(ROLE, args)
+        self.session, self.K = open_node(ROLE, args, self.rt_report)
+        self.spin = bool(self.rt_report and self.rt_report.get("sched_fifo"))
         self.sub_sensors = transport.subscriber(self.session, self.K.sensors,
                                                 newest_only=args.mode == "realtime")
         self.pub_jets = transport.publisher(self.session, self.K.jets)
@@ -83,6 +84,9 @@ class FswNode:
         self.last_frame_wall = 0.0
         self.next_k = 0
         self.jitter_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)   # every tick, whole run
+        # real time: how long after the plant published it each frame reached this loop
+        self.frame_age_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
+        self.n_frames = 0
         self.ticks = 0
         clock = LockstepClock() if args.mode == "lockstep" else RealTimeClock(
             int(round(self.scn.dt_control_s * 1e9)), spin_ns=int(self.fsw.params["executive.spin_us"] * 1e3))
@@ -111,6 +115,9 @@ class FswNode:
             self.events.emit(self.fsw.t_s, Severity.NOTICE, "link", "new_sensor_source", "NEW SENSOR SOURCE")
         self.source_id = pid
         self.last_frame_wall = time.monotonic()
+        if self.n_frames < len(self.frame_age_ns):
+            self.frame_age_ns[self.n_frames] = now_ns() - self.dec_sensors.last_t_pub_ns
+            self.n_frames += 1
         return True
 
     def _newest_frame(self):
@@ -125,7 +132,8 @@ class FswNode:
                     break
             if now_ns() >= deadline:
                 break
-            time.sleep(20e-6)
+            if not self.spin:       # with --rt, Zenoh's threads preempt this spin (one priority up)
+                time.sleep(20e-6)
         if not got:
             return None
         self.next_k = int(self.frame["k"]) + 1
@@ -259,11 +267,14 @@ class FswNode:
         rep = fsw_report(self.fsw, self.topo.executive.slips, self.samples)
         ex = self.topo.executive.telemetry()
         jit = self.jitter_ns[: self.ticks] / 1e3
+        age = self.frame_age_ns[: self.n_frames] / 1e3
         rep.update({
             "mode": self.args.mode, "ticks": self.ticks,
             "jitter_p50_us": float(np.percentile(jit, 50)) if len(jit) else None,
             "jitter_p99_us": float(np.percentile(jit, 99)) if len(jit) else None,
             "jitter_max_us": float(np.max(jit)) if len(jit) else None,
+            "frame_age_p50_us": float(np.percentile(age, 50)) if len(age) else None,
+            "frame_age_p99_us": float(np.percentile(age, 99)) if len(age) else None,
             "executive": ex, "tasks_us": self.topo.task_percentiles(), "params": self.fsw.params, "sensor_rejects": dict(self.dec_sensors.rejects),
             "monitor_counts": dict(self.fsw.monitor.counts),
             "event_log": [{"t_s": e.t_s, "severity": e.severity.name, "source": e.source, "code": e.code,

@@ -10,6 +10,7 @@ after a timeout). The run writes the same summary.json as the batch runner, plus
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import shutil
@@ -53,8 +54,13 @@ def add_arguments(p) -> None:
     p.add_argument("--zenoh-config", default=None, metavar="FILE", help="Zenoh JSON5 configuration for every node")
     p.add_argument("--endpoint", default=None, help="the plant's listen endpoint (default tcp/127.0.0.1:<free>)")
     p.add_argument("--prefix", default=DEFAULT_PREFIX)
-    p.add_argument("--rt", action="store_true", help="SCHED_FIFO/affinity/mlockall for sim (CPU 0) and fsw (CPU 1)")
+    p.add_argument("--rt", action=argparse.BooleanOptionalAction, default=None,
+                   help="real-time hygiene, SCHED_FIFO/affinity/mlockall for sim (CPU 0) and fsw (CPU 1) "
+                        "when permitted (default: on with --realtime, off in lockstep)")
     p.add_argument("--fsw-timeout", type=float, default=10.0)
+    p.add_argument("--rt-offset-us", type=float, default=None,
+                   help="real time: the FSW releases this long after the plant publishes a step "
+                        "(default: ellipsled fsw's)")
     p.add_argument("--no-plots", action="store_true")
 
 
@@ -123,6 +129,7 @@ class Launcher:
 
     def _run(self) -> int:
         a = self.args
+        self.rt = a.rt if a.rt is not None else a.mode == "realtime"
         # peers route nothing for each other (no router, no gossip): every viewer connects to
         # both data sources, the plant and the FSW, each listening on its own loopback port
         endpoint = a.endpoint or transport.loopback(transport.free_port())
@@ -140,10 +147,11 @@ class Launcher:
         self.spawn("fsw", ["fsw"] + scen + mode + common + ["--connect", endpoint, "--listen", fsw_endpoint,
                                                            "--out", str(self.out), "--signing-key", key,
                                                            "--mavlink-bind", a.mavlink_bind, "--gcs", a.gcs]
-                   + (["--rt", "--cpu", "1"] if a.rt else []), quiet)
+                   + (["--rt", "--cpu", "1"] if self.rt else [])
+                   + (["--rt-offset-us", f"{a.rt_offset_us:g}"] if a.rt_offset_us is not None else []), quiet)
         self.spawn("sim", ["sim"] + scen + mode + common + ["--listen", endpoint, "--out", str(self.out),
                                                            "--speed", str(a.speed), "--fsw-timeout", str(a.fsw_timeout)]
-                   + (["--wait-bridge"] if viz else []) + (["--rt", "--cpu", "0"] if a.rt else []), quiet)
+                   + (["--wait-bridge"] if viz else []) + (["--rt", "--cpu", "0"] if self.rt else []), quiet)
         say(ROLE, f"SIL {a.mode}: plant on {endpoint}; pids " +
             ", ".join(f"{r} {p.pid}" for r, p in self.children.items()))
         if not a.signing_key and self.tmpdir:

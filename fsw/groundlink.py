@@ -105,7 +105,7 @@ PARAM_ID_TABLE_BEGIN
   | fdir.sigma_tol             | F_SIGMA_TOL        |
   | fdir.stale_n               | F_STALE_N          |
   | fdir.v_max_mps             | F_V_MAX_MPS        |
-  | guidance.authority_margin  | G_AUTHORITY_MARG   |
+  | guidance.authority_factor  | G_AUTHORITY_FACT   |
 PARAM_ID_TABLE_END
 
 A refused PARAM_SET is answered with the unchanged value and a STATUSTEXT (WARNING)

@@ -47,8 +47,8 @@ def test_replan_rejects_bad_limits():
         _profile().replan(1.0, 0.1, float("nan"))
 
 
-def _fsw(jets, state, margin):
-    f = FlightSoftware(SC, param_overrides={"guidance": {"authority_margin": margin}})
+def _fsw(jets, state, factor):
+    f = FlightSoftware(SC, param_overrides={"guidance": {"authority_factor": factor}})
     for j in jets:
         f.fdir.health_active.set(j, state)
     f.health_changed()
@@ -81,6 +81,25 @@ def test_reference_reshaped_only_when_the_jets_cannot_follow():
     f2.fit_reference_to_authority(3.0)
     assert f2.guidance.profile.accel_limit_radps2 < 0.3 * SC.bank_accel_limit_radps2
     assert any(e.code == "reference_reshaped" for e in f2.events.history)
-    f0 = _fsw([2, 3, 4, 5, 8, 9, 10], STUCK_ON, 0.0)    # margin 0: the feature is off
+    f0 = _fsw([2, 3, 4, 5, 8, 9, 10], STUCK_ON, 0.0)    # factor 0: the feature is off
     f0.fit_reference_to_authority(3.0)
     assert f0.guidance.profile.accel_limit_radps2 == SC.bank_accel_limit_radps2
+
+
+def test_default_factor_reshapes_case2_and_leaves_case1_alone():
+    """data/fsw/default.toml's factor (3.5): case 2's 8.9 N m one way -> 3.5 x 0.19 deg/s^2;
+    case 1 (70 N m one way) keeps the scenario's 1 deg/s^2."""
+    dflt = FlightSoftware(SC).params["guidance.authority_factor"]
+    assert dflt == pytest.approx(3.5)
+    f2 = FlightSoftware(SC)
+    for j in (2, 3, 4, 5, 8, 9, 10):
+        f2.fdir.health_active.set(j, STUCK_ON)
+    f2.health_changed()
+    f2.fit_reference_to_authority(3.0)
+    assert np.degrees(f2.guidance.profile.accel_limit_radps2) == pytest.approx(0.67, abs=0.02)
+    f1 = FlightSoftware(SC)
+    for j in (1, 2, 17, 18):
+        f1.fdir.health_active.set(j, FAILED_OFF)
+    f1.health_changed()
+    f1.fit_reference_to_authority(3.0)
+    assert f1.guidance.profile.accel_limit_radps2 == SC.bank_accel_limit_radps2

@@ -1,0 +1,68 @@
+"""The paper's cases flown end to end in batch (spec 30-scenarios.md; issue: flight-software
+core acceptance): every fault case completes to parachute conditions with the bank error
+after the fault within the paper's 5 degrees, FDIR names exactly the injected jets with
+the right kind, the nominal run has no false alarm, case 4 reconfigures at 4.0 s, and
+fault tolerance off costs measurably more than case 1. Truth is the plant's own fault log
+and the 5-degree bound of the paper, not the FSW's opinion of itself."""
+from __future__ import annotations
+
+import pytest
+
+from common.model import load_scenario
+from ellipsled import batch
+
+BOUND_DEG = 5.0
+KIND = {"off": "failed_off", "stuck": "stuck_on", "degraded": "degraded"}
+
+
+@pytest.fixture(scope="module")
+def runs():
+    out = {}
+    for name in ("nominal", "case1", "case2", "case3", "case4"):
+        out[name] = batch.run(name)[0]
+    out["case1-ft-off"] = batch.run("case1", ft_off=True)[0]
+    return out
+
+
+@pytest.mark.parametrize("case", ["case1", "case2", "case3", "case4"])
+def test_fault_case_completes_within_the_papers_bound(runs, case):
+    s = runs[case]
+    assert s["completed"] and s["end_reason"] == "mach", (s["end_reason"], s["t_end_s"])
+    assert s["bank_err_max_after_fault_deg"] <= BOUND_DEG
+    assert s["cycle_slips"] == 0
+
+
+@pytest.mark.parametrize("case", ["case1", "case2", "case3", "case4"])
+def test_fdir_finds_exactly_the_injected_jets(runs, case):
+    """Injected = the scenario file's fault schedule (what the plant applies)."""
+    s = runs[case]
+    injected = {(j, KIND[f.kind]) for f in load_scenario(case).faults for j in f.jets}
+    found = {(d["jet"], d["kind"]) for d in s["fdir"]["detections"]}
+    assert found == injected
+    assert len(s["fdir"]["detections"]) == len(injected)           # each once
+    assert s["fdir"]["false_alarms"] == 0 and not s["fdir"]["missed"]
+    assert all(2.5 <= d["t_s"] <= 5.0 for d in s["fdir"]["detections"])
+
+
+def test_nominal_has_no_false_alarm(runs):
+    s = runs["nominal"]
+    assert s["completed"] and s["fdir"]["detections"] == [] and s["fdir"]["false_alarms"] == 0
+
+
+def test_case4_reconfigures_at_four_seconds(runs):
+    """The paper's 4.0 s assumes instant detection: here the 1.5 s delay starts at the
+    detector's first finding (0.1-0.2 s of persistence after the 2.5 s fault)."""
+    s = runs["case4"]
+    first = min(d["t_s"] for d in s["fdir"]["detections"])
+    assert s["reconfig_t_s"] == pytest.approx(first + 1.5, abs=0.021)
+    assert s["reconfig_t_s"] == pytest.approx(4.0, abs=0.2)
+    assert runs["case1"]["reconfig_t_s"] < 3.5            # no added delay in case 1
+
+
+def test_fault_tolerance_off_is_measurably_worse(runs):
+    on, off = runs["case1"], runs["case1-ft-off"]
+    assert off["completed"]
+    assert off["propellant_kg"] > 2.0 * on["propellant_kg"]
+    assert off["jet_pulses"] > 2.0 * on["jet_pulses"]
+    assert off["alpha_dev_max_deg"] > 2.0 * on["alpha_dev_max_deg"]
+    assert off["beta_dev_max_deg"] > 2.0 * on["beta_dev_max_deg"]

@@ -115,10 +115,11 @@ class RealTimeClock:
         """With the final spin of ``executive.spin_us`` (fsw/params.py load_params(PARAMS))."""
         return cls(period_ns, spin_ns=int(round(params["executive.spin_us"] * 1e3)), **kw)
 
-    def start(self, t0_ns: int | None = None) -> None:
-        """Release 0 at ``t0_ns`` (default: one period from now)."""
+    def start(self, t0_ns: int | None = None, k0: int = 0) -> None:
+        """Release k at ``t0_ns`` + k·period (default t0: one period from now); the first
+        release is k0 (joining a running plant at its step k0 counts no missed release)."""
         self.t0_ns = self.now_ns() + self.period_ns if t0_ns is None else int(t0_ns)
-        self._k = -1
+        self._k = int(k0) - 1
 
     def release(self, k_hint: int | None = None) -> tuple[int, int]:
         if self.t0_ns is None:

@@ -55,8 +55,13 @@ class Topology:
         kernel is loaded before the first real cycle (the first call of each numba kernel
         costs tens of ms). The flying instance's state is untouched."""
         spare = FlightSoftware(self.fsw.scenario, param_overrides=None)
-        spare.control_step(frame)
-        spare.slow_step()
+        nxt = frame.copy()          # a second, consecutive frame: the second slow step then
+        nxt["k"] = frame["k"] + 1   # runs the residual check's kernels too
+        nxt["t_ns"] = frame["t_ns"] + int(round(spare.dt_s * 1e9))
+        for f in (frame, nxt):
+            spare.control_step(f)
+            spare.slow_step()
+        spare.close()
 
     def add(self, group: int, name: str, fn: Callable[[Cycle], object]) -> None:
         self.executive.add(group, name, fn)

@@ -123,6 +123,25 @@ def test_overrun_beyond_a_period_skips_missed_releases_and_keeps_the_phase():
     assert [e.code for e in events.history] == ["cycle_slip", "release_missed"]
 
 
+def test_joining_a_running_plant_at_step_k0_misses_nothing_and_keeps_the_phase():
+    """The SIL FSW locks onto the plant at its step k0 (after warming up): release k0 is at
+    t0 + k0 p, nothing is counted missed, and RG2 still runs on plant steps divisible by 5."""
+    ft = FakeTime()
+    period = 20 * MS
+    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=ft.sleep_until)
+    ex = Executive(period, clock, (1, 5))
+    ran = []
+    ex.add(1, "control", lambda c: ran.append(c.k))
+    ex.add(2, "slow", lambda c: ran.append(("slow", c.k)))
+    k0 = 7
+    clock.start(ft.t - k0 * period + 50_000, k0=k0)     # frame k0 published just now
+    for _ in range(4):
+        ex.tick()
+    assert [r for r in ran if not isinstance(r, tuple)] == [7, 8, 9, 10]
+    assert ("slow", 10) in ran and ex.missed_releases == 0 and clock.missed == 0
+    assert ft.sleeps[0] == ft.t - 3 * period          # release 7 at t0 + 7 p
+
+
 def test_slip_events_are_rate_limited_but_every_slip_is_counted():
     ft = FakeTime()
     period = 20 * MS

@@ -218,6 +218,13 @@ class FswNode:
         if self.fsw.k % 1000 == 0:
             self.samples.append(alloc_sample(self.fsw))
 
+    def _warm_up(self) -> None:
+        """Before the first cycle: every kernel loaded (topology) and the ground link's
+        first telemetry burst sent (its first encodes cost milliseconds)."""
+        self.topo.warm_up(self.frame)
+        if self.link is not None:
+            self.link.tick(self.frame)
+
     def run_lockstep(self) -> None:
         warm = False
         while not self.stop:
@@ -225,13 +232,15 @@ class FswNode:
             if s is None or not self._accept(s):
                 continue
             if not warm:
-                self.topo.warm_up(self.frame)
+                self._warm_up()
                 warm = True
             self.topo.tick(self.frame)
             self._record()
 
     def run_realtime(self) -> None:
-        # phase-lock to the plant: wait for its first frame, release rt-offset after each publication
+        # warm up on the plant's first frame, then phase-lock to a frame that arrives after
+        # the warm-up (locking to the first one would start tens of ms behind): release
+        # rt-offset after each publication
         first = None
         while not self.stop and first is None:
             s = transport.recv(self.sub_sensors, 0.1)
@@ -239,11 +248,21 @@ class FswNode:
                 first = int(self.frame["k"])
         if first is None:
             return
-        self.topo.warm_up(self.frame)
+        self._warm_up()
+        transport.latest(self.sub_sensors)              # frames that came during the warm-up
+        lock = None
+        while not self.stop and lock is None:
+            s = transport.recv(self.sub_sensors, 0.1)
+            if s is not None and self._accept(s):
+                lock = int(self.frame["k"])
+        if lock is None:
+            return
         period = self.topo.executive.period_ns
-        t_pub0 = self.dec_sensors.last_t_pub_ns
-        self.topo.executive.clock.start(t_pub0 - first * period + int(self.args.rt_offset_us * 1e3))
-        self.next_k = first
+        t_pub = self.dec_sensors.last_t_pub_ns
+        # tick k of the executive is the plant's step k; the first is this frame's
+        self.topo.executive.clock.start(t_pub - lock * period + int(self.args.rt_offset_us * 1e3), k0=lock)
+        self.next_k = lock
+        self.n_frames = 0                               # frame ages from here on
         while not self.stop:
             self.topo.tick()
             self._record()

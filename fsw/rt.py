@@ -157,13 +157,15 @@ def apply(cpus: list[int] | None = None, priority: int | None = None,
             "timer_slack_ns": get_timer_slack_ns(), "messages": messages}
 
 
-def other_threads(cpus: list[int] | None, priority: int | None) -> dict:
+def other_threads(cpus: list[int] | None, priority: int | None, python_priority: int | None = None) -> dict:
     """Give every thread of this process but the calling one the CPU set ``cpus`` and
-    SCHED_FIFO ``priority`` (None: leave that setting). For threads that libraries started
-    before ``apply`` ran (Zenoh's and its Python binding's runtimes start some at import,
-    and those do not inherit later changes). Returns {threads: [(tid, name, priority,
-    cpus)], messages} read back from the kernel."""
+    SCHED_FIFO ``priority`` (None: leave that setting); Python threads (they take the GIL)
+    get ``python_priority`` instead when given. For threads that libraries started before
+    ``apply`` ran (Zenoh's and its Python binding's runtimes start some at import, and
+    those do not inherit later changes). Returns {threads: [(tid, name, priority, cpus)],
+    messages} read back from the kernel."""
     me = threading.get_native_id()
+    pythons = {t.native_id for t in threading.enumerate()}
     threads, messages = [], []
     try:
         tids = sorted(int(t) for t in os.listdir("/proc/self/task"))
@@ -180,8 +182,9 @@ def other_threads(cpus: list[int] | None, priority: int | None) -> dict:
         try:
             if cpus is not None:
                 os.sched_setaffinity(tid, set(int(c) for c in cpus))
-            if priority is not None:
-                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(int(priority)))
+            prio = python_priority if tid in pythons and python_priority is not None else priority
+            if prio is not None:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(int(prio)))
             fifo = os.sched_getscheduler(tid) == os.SCHED_FIFO
             threads.append((tid, name, os.sched_getparam(tid).sched_priority if fifo else None,
                             sorted(os.sched_getaffinity(tid))))

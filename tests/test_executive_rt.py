@@ -101,3 +101,42 @@ def test_timer_slack_is_set_and_read_back_for_a_normal_thread():
         assert rt.set_timer_slack(1000) and rt.get_timer_slack_ns() == 1000
     finally:
         rt.set_timer_slack(before)
+
+
+THREADS_CHILD = r"""
+import json, os, threading, time
+from fsw import rt
+import zenoh                                   # its runtime starts native threads at import/open
+from interfaces import transport
+ev = threading.Event()
+py = threading.Thread(target=ev.wait, name="py-worker", daemon=True)
+py.start()
+ses = transport.open_session("sim", None, None)
+rep = rt.other_threads([0], 12, python_priority=11)
+def kernel(tid):
+    st = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
+    aff = [l for l in open(f"/proc/self/task/{tid}/status") if l.startswith("Cpus_allowed_list")][0]
+    return int(st[40 - 2]), int(st[39 - 2]), aff.split(":")[1].strip()
+me = threading.get_native_id()
+out = {str(tid): [name, prio, kernel(tid)] for tid, name, prio, _ in rep["threads"]}
+print(json.dumps({"py": py.native_id, "me": me, "main": kernel(me), "threads": out, "messages": rep["messages"]}))
+ev.set()
+ses.close()
+"""
+
+
+@pytest.mark.skipif(not _can_rt(), reason="needs root (CAP_SYS_NICE)")
+def test_other_threads_get_io_priority_and_python_threads_their_own():
+    """SIL nodes put Zenoh's native threads one FIFO priority above the main loop and our
+    Python threads (they take the GIL) at the loop's; checked in /proc for every thread."""
+    out = subprocess.run([sys.executable, "-c", THREADS_CHILD], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert r["messages"] == []
+    assert str(r["me"]) not in r["threads"] and r["main"][0] == 0       # caller untouched (SCHED_OTHER)
+    native = {t: v for t, v in r["threads"].items() if int(t) != r["py"]}
+    assert len(native) >= 2                                              # Zenoh's runtime threads
+    for tid, (name, prio, (policy, kprio, cpus)) in r["threads"].items():
+        want = 11 if int(tid) == r["py"] else 12
+        assert prio == want == kprio and policy == 1 and cpus == "0", (name, prio, kprio, policy, cpus)

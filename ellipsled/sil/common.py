@@ -80,8 +80,10 @@ def open_node(role: str, args, rt_report: dict | None = None):
     if rt_report is not None and rt_report.get("sched_fifo"):
         from fsw import rt
         # every other thread (Zenoh's I/O, runtimes started at import) to the I/O priority
-        # and this node's CPU; then the main thread one below
-        others = rt.other_threads([args.cpu] if args.cpu is not None else None, rt_report["io_priority"])
+        # and this node's CPU, our own Python threads (they take the GIL) and then the main
+        # thread one below
+        others = rt.other_threads([args.cpu] if args.cpu is not None else None, rt_report["io_priority"],
+                                  python_priority=int(args.rt_priority))
         rt_report["threads"] = [f"{name}:{prio}" for _, name, prio, _ in others["threads"]]
         rt_report["messages"] += others["messages"]
         try:

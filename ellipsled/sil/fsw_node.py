@@ -37,8 +37,10 @@ ROLE = "fsw"
 
 def add_arguments(p) -> None:
     add_common_arguments(p)
-    p.add_argument("--rt-offset-us", type=float, default=50.0,
-                   help="real time: release this long after the plant publishes a step")
+    p.add_argument("--rt-offset-us", type=float, default=-100.0,
+                   help="real time: release this long after the plant publishes a step (negative: "
+                        "before; the input task then waits for the frame, whose arrival, handled by "
+                        "Zenoh's threads one priority up, cannot delay the release)")
     p.add_argument("--frame-wait-us", type=float, default=3000.0,
                    help="real time: at a release, wait this long at most for the frame due")
     p.add_argument("--gcs", default="udp:127.0.0.1:14550", help="ground station address (MAVLink)")

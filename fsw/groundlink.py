@@ -371,6 +371,24 @@ class GroundLink:
             log.exception("ground link tick failed")
         self.tick_ns_max = max(self.tick_ns_max, time.perf_counter_ns() - t0)
 
+    def warm_up(self, spare_fsw, sensors=None) -> None:
+        """Encode (pack) every telemetry message once from ``spare_fsw`` — a throwaway
+        FlightSoftware that has flown a cycle — and send nothing: the first encode of each
+        message type costs milliseconds, which would otherwise land in the first real-time
+        cycles. Schedules, counters and the link's sequence numbers are left as they were."""
+        saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq)
+        self.fsw = spare_fsw
+        self._send = lambda msg, extra=None, only=None: self.link.pack(msg)
+        try:
+            self.send_due(sensors)
+            self._send(self._param_value_msg(next(iter(self.param_of_name))))
+            self._send(mav.MAVLink_statustext_message(int(Severity.INFO), b"warm-up"))
+        except Exception:                       # a warm-up failure must not stop the FSW
+            log.exception("ground link warm-up failed")
+        finally:
+            self.fsw, self._next_due, self._event_index, self.link.signer.seq = saved
+            del self._send                      # back to the method
+
     def poll(self) -> int:
         """Receive at most ``max_rx_per_tick`` datagrams without blocking; returns how many."""
         n = 0

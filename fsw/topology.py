@@ -50,10 +50,11 @@ class Topology:
         else:
             self.u = self.fsw.control_step(frame)
 
-    def warm_up(self, frame) -> None:
+    def warm_up(self, frame) -> FlightSoftware:
         """Run one control cycle of a throwaway FlightSoftware on ``frame`` so every compiled
         kernel is loaded before the first real cycle (the first call of each numba kernel
-        costs tens of ms). The flying instance's state is untouched."""
+        costs tens of ms). The flying instance's state is untouched. Returns the spare (it
+        has flown: a source for warming up telemetry encoders)."""
         spare = FlightSoftware(self.fsw.scenario, param_overrides=None)
         nxt = frame.copy()          # a second, consecutive frame: the second slow step then
         nxt["k"] = frame["k"] + 1   # runs the residual check's kernels too
@@ -62,6 +63,7 @@ class Topology:
             spare.control_step(f)
             spare.slow_step()
         spare.close()
+        return spare
 
     def add(self, group: int, name: str, fn: Callable[[Cycle], object]) -> None:
         self.executive.add(group, name, fn)

@@ -144,3 +144,27 @@ def test_stock_pymavlink_common_client_sees_vehicle_attitude_and_statustext(tmp_
             gl.close()
     finally:
         conn.close()
+
+
+def test_warm_up_encodes_every_stream_and_sends_nothing(rig):
+    """The SIL FSW warms the link's encoders on a throwaway FSW before its first real-time
+    cycle: no frame leaves, the sequence number, stream schedules and event cursor are as
+    before, and the first real tick then sends every stream as usual."""
+    from fsw.flightsoftware import FlightSoftware
+    spare = FlightSoftware(rig.scn)
+    spare.control_step(rig.frame)
+    seq, due = rig.gl.link.signer.seq, dict(rig.gl._next_due)
+    tx = rig.gl.stats["tx_frames"]
+    calls = []
+    orig = rig.gl.link.pack
+    rig.gl.link.pack = lambda msg, **kw: (calls.append(msg.get_type()), orig(msg, **kw))[1]
+    rig.gl.warm_up(spare, rig.frame)
+    rig.gl.link.pack = orig
+    spare.close()
+    assert rig.gl.stats["tx_frames"] == tx and rig.gl.link.signer.seq == seq
+    assert rig.gl._next_due == due and rig.gl._event_index == 0 and rig.gl.fsw is rig.fsw
+    assert {"HEARTBEAT", "ATTITUDE", "ELLIPSLED_ENTRY_STATE", "ELLIPSLED_JET_STATUS", "PARAM_VALUE",
+            "STATUSTEXT"} <= set(calls)
+    rig.fly(1)
+    rig.exchange(lambda: "ATTITUDE" in rig.gcs.state.latest, 2.0)
+    assert rig.gl.stats["tx_frames"] > tx and "HEARTBEAT" in rig.gcs.state.latest

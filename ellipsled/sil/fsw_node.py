@@ -221,11 +221,11 @@ class FswNode:
             self.samples.append(alloc_sample(self.fsw))
 
     def _warm_up(self) -> None:
-        """Before the first cycle: every kernel loaded (topology) and the ground link's
-        first telemetry burst sent (its first encodes cost milliseconds)."""
-        self.topo.warm_up(self.frame)
+        """Before the first cycle: every kernel loaded (topology) and every ground-link
+        message type encoded once (first encodes cost milliseconds)."""
+        spare = self.topo.warm_up(self.frame)
         if self.link is not None:
-            self.link.tick(self.frame)
+            self.link.warm_up(spare, self.frame)
 
     def run_lockstep(self) -> None:
         warm = False
@@ -261,9 +261,10 @@ class FswNode:
             return
         period = self.topo.executive.period_ns
         t_pub = self.dec_sensors.last_t_pub_ns
-        # tick k of the executive is the plant's step k; the first is this frame's
-        self.topo.executive.clock.start(t_pub - lock * period + int(self.args.rt_offset_us * 1e3), k0=lock)
-        self.next_k = lock
+        # tick k of the executive is the plant's step k; the first is the step after this
+        # frame's (this one is already a few hundred us old)
+        self.topo.executive.clock.start(t_pub - lock * period + int(self.args.rt_offset_us * 1e3), k0=lock + 1)
+        self.next_k = lock + 1
         self.n_frames = 0                               # frame ages from here on
         while not self.stop:
             self.topo.tick()

@@ -365,6 +365,15 @@ class Signer:
         return self._mav.signing.link_id
 
     @property
+    def seq(self) -> int:
+        """Sequence number of the next frame (0..255)."""
+        return self._mav.seq
+
+    @seq.setter
+    def seq(self, value: int) -> None:
+        self._mav.seq = int(value) % 256
+
+    @property
     def last_timestamp(self) -> int:
         """Timestamp the next frame will at least carry, minus one."""
         return self._mav.signing.timestamp - 1

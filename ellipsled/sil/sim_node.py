@@ -67,7 +67,9 @@ class SimNode:
         self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
                        "faults_applied": 0}
         self.rejects: dict[str, int] = {}
-        self.latency_ns: list[int] = []
+        # one latency per step at most: preallocated, nothing grows during the run
+        self.latency_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
+        self.n_latency = 0
         self.end_reason = ""
         self.message = ""
 
@@ -194,7 +196,9 @@ class SimNode:
                     say(ROLE, f"t={self.plant.t_s:.2f}s first jet command")
                 last_cmd_k = self._take_command(rec)
                 if kc == k:
-                    self.latency_ns.append(now_ns() - t_pub)
+                    if self.n_latency < len(self.latency_ns):
+                        self.latency_ns[self.n_latency] = now_ns() - t_pub
+                        self.n_latency += 1
                     got = True
                     break
             if not got:
@@ -237,7 +241,7 @@ class SimNode:
         out = Path(self.args.out)
         out.mkdir(parents=True, exist_ok=True)
         self.history.save(out / "sim_history.npz")
-        lat = np.array(self.latency_ns, dtype=float) / 1e3
+        lat = self.latency_ns[: self.n_latency] / 1e3
         wall = getattr(self, "wall_s", None)
         info = {
             "scenario": self.scn.name, "seed": self.seed, "mode": self.args.mode,

@@ -29,7 +29,7 @@ CONNECT_TIMEOUT_MS = 200
 
 
 def default_config(role: str, listen: list[str] | None, connect: list[str] | None,
-                   lowlatency: bool = True) -> dict:
+                   lowlatency: bool = False) -> dict:
     """The embedded configuration as a dict (zenoh's JSON5 schema)."""
     cfg = {
         "mode": "peer",
@@ -41,13 +41,17 @@ def default_config(role: str, listen: list[str] | None, connect: list[str] | Non
                     "exit_on_failure": False, "retry": dict(CONNECT_RETRY)},
     }
     if lowlatency:
-        # saves ~30 us per hop; both ends must agree; excludes QoS (spec 40-interfaces.md)
+        # saves ~30 us per hop; both ends must agree; excludes QoS (spec 40-interfaces.md).
+        # Off by default: measured here (zenoh 1.x), a low-latency publisher whose subscriber
+        # is frozen (SIGSTOP, a debugger) blocks in put() for good once the socket buffer is
+        # full, whatever its congestion control; the default transport drops (DROP) or gives
+        # up after ~5 s (BLOCK).
         cfg["transport"] = {"unicast": {"lowlatency": True, "qos": {"enabled": False}}}
     return cfg
 
 
 def open_session(role: str, listen: list[str] | None, connect: list[str] | None,
-                 config_file: str | None = None, *, lowlatency: bool = True) -> zenoh.Session:
+                 config_file: str | None = None, *, lowlatency: bool = False) -> zenoh.Session:
     """Open this process's Zenoh session.
 
     role: "sim", "fsw", "bridge", "console", ... (session metadata, for diagnostics).
@@ -87,11 +91,15 @@ def free_port(host: str = "127.0.0.1") -> int:
         return s.getsockname()[1]
 
 
-def publisher(session: zenoh.Session, key: str, *, express: bool = True) -> zenoh.Publisher:
-    """A reliable, blocking-congestion publisher at real-time priority. ``express`` sends
-    each sample at once instead of batching (lower latency for one small frame per cycle)."""
-    return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
-                                     priority=zenoh.Priority.REAL_TIME, express=express)
+def publisher(session: zenoh.Session, key: str, *, express: bool = True,
+              drop: bool = False) -> zenoh.Publisher:
+    """A reliable publisher at real-time priority. ``express`` sends each sample at once
+    instead of batching (lower latency for one small frame per cycle). ``drop``: when the
+    subscriber cannot keep up (a frozen viewer, a stopped peer) samples are dropped and
+    put() returns at once; otherwise put() waits for room (loss-free: lockstep, commands)."""
+    cc = zenoh.CongestionControl.DROP if drop else zenoh.CongestionControl.BLOCK
+    return session.declare_publisher(key, congestion_control=cc, priority=zenoh.Priority.REAL_TIME,
+                                     express=express)
 
 
 def subscriber(session: zenoh.Session, key: str, *, newest_only: bool = False,

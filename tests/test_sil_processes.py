@@ -256,6 +256,7 @@ K = keys(sys.argv[1])
 s = transport.open_session("attacker", None, sys.argv[2:])
 pubs = {k: transport.publisher(s, k) for k in (K.sensors, K.jets, K.faults, K.truth, K.state, K.events)}
 sub = transport.subscriber(s, K.jets)
+print("ready", flush=True)
 captured = None
 while captured is None:                        # the FSW owns the jets key first
     smp = transport.recv(sub, 0.1)
@@ -286,13 +287,20 @@ def test_garbage_replays_and_a_second_publisher_on_every_key(tmp_path, procs):
     completes, every bad payload is rejected and counted, nothing crashes."""
     e_sim = transport.loopback(transport.free_port())
     e_fsw = transport.loopback(transport.free_port())
-    procs.start("sim", _node("sim", "case1", "lockstep", tmp_path / "sim", listen=[e_sim],
-                             extra=["--duration", "400"]))
-    procs.start("fsw", _node("fsw", "case1", "lockstep", tmp_path / "fsw", listen=[e_fsw], connect=[e_sim]))
+    # the attacker is up (session, publishers, subscriber) before the run starts, so that
+    # it attacks the whole run: a lockstep run of 400 s takes only a few seconds here
     log = open(tmp_path / "attacker.log", "w")
     attacker = subprocess.Popen([sys.executable, "-c", ATTACKER, PREFIX, e_sim, e_fsw], stdout=log,
                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     procs.p["attacker"] = attacker
+    deadline = time.monotonic() + 60.0
+    while "ready" not in (tmp_path / "attacker.log").read_text() and attacker.poll() is None \
+            and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert "ready" in (tmp_path / "attacker.log").read_text(), (tmp_path / "attacker.log").read_text()
+    procs.start("sim", _node("sim", "case1", "lockstep", tmp_path / "sim", listen=[e_sim],
+                             extra=["--duration", "400"]))
+    procs.start("fsw", _node("fsw", "case1", "lockstep", tmp_path / "fsw", listen=[e_fsw], connect=[e_sim]))
     try:
         assert procs.wait("sim", 180) == 0, procs.log("sim")
     finally:

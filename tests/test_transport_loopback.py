@@ -194,3 +194,43 @@ def test_default_config_is_peer_without_scouting_and_config_file_wins(tmp_path):
         T.open_session("", None, None)
     with pytest.raises(ValueError):
         T.open_session("sim", "tcp/127.0.0.1:1", None)
+
+
+FROZEN_SUB = r"""
+import sys, time
+from interfaces import transport as T
+s = T.open_session("bridge", None, [sys.argv[1]])
+sub = T.subscriber(s, "ellipsled/frozen/state", capacity=16)
+print("ready", flush=True)
+time.sleep(600)
+"""
+
+
+def test_a_frozen_subscriber_never_stalls_a_dropping_publisher():
+    """Real-time publishers (drop=True) must not let a stopped viewer or peer (SIGSTOP, a
+    debugger) stall the loop: ~24 MB put at a frozen subscriber, every put returns at once.
+    (With Zenoh's low-latency transport the same puts block for good once the socket
+    buffer is full, DROP or not, which is why that transport is opt-in.)"""
+    port = T.free_port()
+    s = T.open_session("fsw", [T.loopback(port)], None)
+    child = subprocess.Popen([sys.executable, "-c", FROZEN_SUB, T.loopback(port)], cwd=ROOT,
+                             stdout=subprocess.PIPE, text=True)
+    pub = None
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        pub = T.publisher(s, "ellipsled/frozen/state", express=False, drop=True)
+        assert T.wait_for_subscriber(pub, 15.0)
+        os.kill(child.pid, signal.SIGSTOP)
+        payload = bytes(600)
+        t0 = time.monotonic()
+        worst = 0.0
+        for _ in range(40_000):
+            a = time.monotonic()
+            pub.put(payload)
+            worst = max(worst, time.monotonic() - a)
+        total = time.monotonic() - t0
+        assert worst < 0.5 and total < 20.0, (worst, total)
+    finally:
+        child.kill()                              # SIGKILL works on a stopped process
+        child.wait(10)
+        T.close(pub, s)

@@ -35,12 +35,13 @@ def run_command_available() -> tuple[bool, str]:
     return True, ""
 
 
-def sil_run(mode: str, scenario: str, duration_s: float | None, timeout_s: float) -> dict:
+def sil_run(mode: str, scenario: str, duration_s: float | None, timeout_s: float, extra=()) -> dict:
     """One ``ellipsled run``; returns {summary, sil, wall_s}. Raises RuntimeError with the cause."""
     with tempfile.TemporaryDirectory(prefix="bench-sil-") as d:
         cmd = [sys.executable, "-m", "ellipsled.cli", "run", scenario, f"--{mode}", "--out", d, "--rerun", "none"]
         if duration_s is not None:
             cmd += ["--duration", f"{duration_s:g}"]
+        cmd += list(extra)
         t0 = time.perf_counter()
         try:
             r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
@@ -94,9 +95,9 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
         return {"idle": _nulls(SIL_KEYS[1:], why), "load": _nulls(SIL_KEYS[1:], why)}
     dur = 10.0 if quick else 60.0
 
-    def one() -> dict:
+    def one(extra=()) -> dict:
         try:
-            r = sil_run("realtime", "nominal", dur, timeout_s=dur + 180)
+            r = sil_run("realtime", "nominal", dur, timeout_s=dur + 180, extra=extra)
         except Exception as e:
             return _nulls(SIL_KEYS[1:], f"{type(e).__name__}: {e}")
         sil = r["sil"]
@@ -111,7 +112,9 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
         return out
 
     res = {"figure": "real-time SIL at 50 Hz: sensor-to-actuator latency and release jitter [us]",
-           "idle": one()}
+           "idle": one(),
+           # opt-in: Zenoh's low-latency transport (a frozen subscriber then blocks its publisher)
+           "idle_lowlatency": one(("--zenoh-lowlatency",))}
     tools_ok, tools_why = ensure_tools()
     if not tools_ok:
         res["load"] = _nulls(SIL_KEYS[1:], f"no background load: {tools_why}")

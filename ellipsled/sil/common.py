@@ -31,6 +31,10 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--zenoh-config", default=None, metavar="FILE",
                    help="a Zenoh JSON5 configuration (router, peers, TLS, access control) used instead of "
                         "the embedded loopback peer configuration")
+    p.add_argument("--zenoh-lowlatency", action="store_true",
+                   help="Zenoh's low-latency transport in the embedded configuration (every process of "
+                        "the run must agree): ~30-60 us less per hop, but a publisher whose subscriber "
+                        "is frozen (SIGSTOP, a debugger) then blocks for good once the socket fills")
     p.add_argument("--prefix", default=DEFAULT_PREFIX, help="key-expression prefix of this run/vehicle")
     p.add_argument("--out", default=None, help="folder for this process's records")
     p.add_argument("--rt", action="store_true", help="real-time hygiene: SCHED_FIFO, affinity, mlockall")
@@ -69,14 +73,16 @@ def apply_rt(role: str, args) -> dict | None:
     io_priority = min(int(args.rt_priority) + 1, os.sched_get_priority_max(os.SCHED_FIFO))
     rep = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=io_priority)
     rep["io_priority"] = rep["priority"]
-    say(role, f"real-time: {rep}")
+    if not rep["sched_fifo"]:
+        say(role, f"real-time: {rep}")          # else open_node says it, with the final priorities
     return rep
 
 
 def open_node(role: str, args, rt_report: dict | None = None):
     """(session, keys) for a node, from its options. With a real-time report from
     ``apply_rt``, the main thread drops to --rt-priority once Zenoh's threads exist."""
-    session = transport.open_session(role, args.listen, args.connect, args.zenoh_config)
+    session = transport.open_session(role, args.listen, args.connect, args.zenoh_config,
+                                     lowlatency=bool(getattr(args, "zenoh_lowlatency", False)))
     if rt_report is not None and rt_report.get("sched_fifo"):
         from fsw import rt
         # every other thread (Zenoh's I/O, runtimes started at import) to the I/O priority
@@ -91,6 +97,9 @@ def open_node(role: str, args, rt_report: dict | None = None):
             rt_report["priority"] = os.sched_getparam(0).sched_priority
         except (OSError, ValueError) as e:
             rt_report["messages"].append(f"main-thread priority not lowered: {type(e).__name__}: {e}")
+        say(role, f"real-time: loop SCHED_FIFO {rt_report['priority']}, I/O threads {rt_report['io_priority']}, "
+                  f"CPUs {rt_report['affinity']}, mlockall {rt_report['mlockall']}"
+                  + (f"; {'; '.join(rt_report['messages'])}" if rt_report["messages"] else ""))
     return session, keys(args.prefix)
 
 

@@ -62,9 +62,12 @@ class FswNode:
         self.spin = bool(self.rt_report and self.rt_report.get("sched_fifo"))
         self.sub_sensors = transport.subscriber(self.session, self.K.sensors,
                                                 newest_only=args.mode == "realtime")
-        self.pub_jets = transport.publisher(self.session, self.K.jets)
-        self.pub_state = transport.publisher(self.session, self.K.state, express=False)
-        self.pub_events = transport.publisher(self.session, self.K.events, express=False)
+        # real time: a frozen plant or viewer must never stall the loop (samples dropped when
+        # the peer cannot take them); lockstep: loss-free, the run waits
+        rt_drop = args.mode == "realtime"
+        self.pub_jets = transport.publisher(self.session, self.K.jets, drop=rt_drop)
+        self.pub_state = transport.publisher(self.session, self.K.state, express=False, drop=rt_drop)
+        self.pub_events = transport.publisher(self.session, self.K.events, express=False, drop=rt_drop)
         self.pub_faults = transport.publisher(self.session, self.K.faults)
         self.token = transport.declare_alive(self.session, self.K, ROLE)
         # a restarted plant takes over the sensor key after 1 s of silence, not before
@@ -239,24 +242,23 @@ class FswNode:
             self.topo.tick(self.frame)
             self._record()
 
+    def _next_good_frame(self) -> int | None:
+        """Wait (interruptibly) for the next frame that decodes; its step, or None on stop."""
+        while not self.stop:
+            s = transport.recv(self.sub_sensors, 0.1)
+            if s is not None and self._accept(s):
+                return int(self.frame["k"])
+        return None
+
     def run_realtime(self) -> None:
         # warm up on the plant's first frame, then phase-lock to a frame that arrives after
         # the warm-up (locking to the first one would start tens of ms behind): release
         # rt-offset after each publication
-        first = None
-        while not self.stop and first is None:
-            s = transport.recv(self.sub_sensors, 0.1)
-            if s is not None and self._accept(s):
-                first = int(self.frame["k"])
-        if first is None:
+        if self._next_good_frame() is None:
             return
         self._warm_up()
         transport.latest(self.sub_sensors)              # frames that came during the warm-up
-        lock = None
-        while not self.stop and lock is None:
-            s = transport.recv(self.sub_sensors, 0.1)
-            if s is not None and self._accept(s):
-                lock = int(self.frame["k"])
+        lock = self._next_good_frame()
         if lock is None:
             return
         period = self.topo.executive.period_ns

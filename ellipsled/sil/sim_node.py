@@ -51,8 +51,11 @@ class SimNode:
         # with --rt Zenoh's threads run one priority above this loop: spin-wait for the
         # command (a few hundred us a period) instead of 20-us sleeps
         self.spin_s = 0.003 if self.rt_report and self.rt_report.get("sched_fifo") else 0.0
-        self.pub_sensors = transport.publisher(self.session, self.K.sensors)
-        self.pub_truth = transport.publisher(self.session, self.K.truth)
+        # real time: a frozen FSW or viewer must never stall the plant's clock (samples dropped
+        # when the peer cannot take them); lockstep: loss-free, the run waits
+        rt_drop = args.mode == "realtime"
+        self.pub_sensors = transport.publisher(self.session, self.K.sensors, drop=rt_drop)
+        self.pub_truth = transport.publisher(self.session, self.K.truth, drop=rt_drop)
         self.sub_jets = transport.subscriber(self.session, self.K.jets, newest_only=args.mode == "realtime")
         self.sub_faults = transport.subscriber(self.session, self.K.faults)
         self.token = transport.declare_alive(self.session, self.K, ROLE)

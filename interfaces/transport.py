@@ -29,7 +29,7 @@ CONNECT_TIMEOUT_MS = 200
 
 
 def default_config(role: str, listen: list[str] | None, connect: list[str] | None,
-                   lowlatency: bool = False) -> dict:
+                   lowlatency: bool = True) -> dict:
     """The embedded configuration as a dict (zenoh's JSON5 schema)."""
     cfg = {
         "mode": "peer",
@@ -41,17 +41,18 @@ def default_config(role: str, listen: list[str] | None, connect: list[str] | Non
                     "exit_on_failure": False, "retry": dict(CONNECT_RETRY)},
     }
     if lowlatency:
-        # saves ~30 us per hop; both ends must agree; excludes QoS (spec 40-interfaces.md).
-        # Off by default: measured here (zenoh 1.x), a low-latency publisher whose subscriber
-        # is frozen (SIGSTOP, a debugger) blocks in put() for good once the socket buffer is
-        # full, whatever its congestion control; the default transport drops (DROP) or gives
-        # up after ~5 s (BLOCK).
+        # saves ~30-60 us per hop here; both ends must agree; excludes QoS (spec
+        # 40-interfaces.md). Measured (zenoh 1.x): a low-latency publisher whose subscriber is
+        # frozen (SIGSTOP, a debugger) blocks in put() for good once the socket buffers
+        # (~3.5 MB on loopback) are full, whatever its congestion control; Zenoh's lease
+        # (10 s) drops a frozen peer first when less than ~350 kB/s goes to it, as in the
+        # real-time SIL (< 50 kB/s per key). tests/test_transport_loopback.py holds both.
         cfg["transport"] = {"unicast": {"lowlatency": True, "qos": {"enabled": False}}}
     return cfg
 
 
 def open_session(role: str, listen: list[str] | None, connect: list[str] | None,
-                 config_file: str | None = None, *, lowlatency: bool = False) -> zenoh.Session:
+                 config_file: str | None = None, *, lowlatency: bool = True) -> zenoh.Session:
     """Open this process's Zenoh session.
 
     role: "sim", "fsw", "bridge", "console", ... (session metadata, for diagnostics).

@@ -113,8 +113,8 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
 
     res = {"figure": "real-time SIL at 50 Hz: sensor-to-actuator latency and release jitter [us]",
            "idle": one(),
-           # opt-in: Zenoh's low-latency transport (a frozen subscriber then blocks its publisher)
-           "idle_lowlatency": one(("--zenoh-lowlatency",))}
+           # the standard transport instead of the default low-latency one
+           "idle_standard_transport": one(("--no-zenoh-lowlatency",))}
     tools_ok, tools_why = ensure_tools()
     if not tools_ok:
         res["load"] = _nulls(SIL_KEYS[1:], f"no background load: {tools_why}")

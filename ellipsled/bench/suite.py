@@ -390,11 +390,11 @@ def rows(res: dict) -> list[tuple[str, str, str, str, str, str]]:
             f"{_fmt(s.get('latency_p50_us'))} / {_fmt(s.get('latency_p99_us'))}",
             f"UDP round trip p99 {_fmt(udp)}", f"{_fmt(_ratio(s.get('latency_p99_us'), udp))}x (p99)",
             "p99 <= 1000 us", _le(s.get("latency_p99_us"), 1000.0))
-    s = _g(res, "sil_realtime", "idle_lowlatency") or {}
+    s = _g(res, "sil_realtime", "idle_standard_transport") or {}
     if s:
-        add("sensor-to-actuator latency idle, opt-in --zenoh-lowlatency p50 / p99 [us]",
+        add("sensor-to-actuator latency idle, --no-zenoh-lowlatency p50 / p99 [us]",
             f"{_fmt(s.get('latency_p50_us'))} / {_fmt(s.get('latency_p99_us'))}",
-            f"default transport p99 {_fmt(_g(res, 'sil_realtime', 'idle', 'latency_p99_us'))}",
+            f"low-latency transport p99 {_fmt(_g(res, 'sil_realtime', 'idle', 'latency_p99_us'))}",
             f"{_fmt(_ratio(s.get('latency_p99_us'), _g(res, 'sil_realtime', 'idle', 'latency_p99_us')))}x (p99)",
             "", NO_TARGET)
     lat = res.get("latency") or {}

@@ -31,10 +31,9 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--zenoh-config", default=None, metavar="FILE",
                    help="a Zenoh JSON5 configuration (router, peers, TLS, access control) used instead of "
                         "the embedded loopback peer configuration")
-    p.add_argument("--zenoh-lowlatency", action="store_true",
-                   help="Zenoh's low-latency transport in the embedded configuration (every process of "
-                        "the run must agree): ~30-60 us less per hop, but a publisher whose subscriber "
-                        "is frozen (SIGSTOP, a debugger) then blocks for good once the socket fills")
+    p.add_argument("--zenoh-lowlatency", action=argparse.BooleanOptionalAction, default=True,
+                   help="Zenoh's low-latency transport in the embedded configuration (default on; every "
+                        "process of the run must agree): ~30-60 us less per hop")
     p.add_argument("--prefix", default=DEFAULT_PREFIX, help="key-expression prefix of this run/vehicle")
     p.add_argument("--out", default=None, help="folder for this process's records")
     p.add_argument("--rt", action="store_true", help="real-time hygiene: SCHED_FIFO, affinity, mlockall")
@@ -82,7 +81,7 @@ def open_node(role: str, args, rt_report: dict | None = None):
     """(session, keys) for a node, from its options. With a real-time report from
     ``apply_rt``, the main thread drops to --rt-priority once Zenoh's threads exist."""
     session = transport.open_session(role, args.listen, args.connect, args.zenoh_config,
-                                     lowlatency=bool(getattr(args, "zenoh_lowlatency", False)))
+                                     lowlatency=bool(getattr(args, "zenoh_lowlatency", True)))
     if rt_report is not None and rt_report.get("sched_fifo"):
         from fsw import rt
         # every other thread (Zenoh's I/O, runtimes started at import) to the I/O priority

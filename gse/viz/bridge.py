@@ -125,8 +125,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connect", action="append", default=None, help="zenoh endpoint to connect to (repeatable)")
     p.add_argument("--listen", action="append", default=None, help="zenoh endpoint to listen on (repeatable)")
     p.add_argument("--zenoh-config", default=None, help="zenoh JSON5 configuration file")
-    p.add_argument("--zenoh-lowlatency", action="store_true",
-                   help="Zenoh's low-latency transport (must match the run's processes)")
+    p.add_argument("--zenoh-lowlatency", action=argparse.BooleanOptionalAction, default=True,
+                   help="Zenoh's low-latency transport (default on; must match the run's processes)")
     p.add_argument("--rerun", default="auto", help="viewer | web | file | none | auto, or '+'-joined")
     p.add_argument("--out", default="out/viz", help="folder of the .rrd")
     p.add_argument("--name", default="run", help="recording / file name")

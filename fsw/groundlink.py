@@ -303,6 +303,7 @@ class GroundLink:
         self.peers: dict[tuple[str, int], float] = {}                     # addr -> last signed rx
         self._next_due = {name: 0.0 for name in self.rates_hz}
         self._event_index = 0                          # the start-up events go out too
+        self._pack_only = False                        # warm_up packs without sending
         self._loop_timing: dict[int, tuple] = {}
         self._alloc_ns: deque[int] = deque(maxlen=512)
         self._alloc_degraded = 0
@@ -378,7 +379,7 @@ class GroundLink:
         cycles. Schedules, counters and the link's sequence numbers are left as they were."""
         saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq)
         self.fsw = spare_fsw
-        self._send = lambda msg, extra=None, only=None: self.link.pack(msg)
+        self._pack_only = True
         try:
             self.send_due(sensors)
             self._send(self._param_value_msg(next(iter(self.param_of_name))))
@@ -387,7 +388,7 @@ class GroundLink:
             log.exception("ground link warm-up failed")
         finally:
             self.fsw, self._next_due, self._event_index, self.link.signer.seq = saved
-            del self._send                      # back to the method
+            self._pack_only = False
 
     def poll(self) -> int:
         """Receive at most ``max_rx_per_tick`` datagrams without blocking; returns how many."""
@@ -631,6 +632,8 @@ class GroundLink:
 
     def _send(self, msg, extra=None, only=None) -> None:
         frame = self.link.pack(msg)
+        if self._pack_only:                     # warm_up: encode, send nothing
+            return
         for addr in ((only,) if only is not None else self._destinations(extra)):
             try:
                 self.sock.sendto(frame, addr)

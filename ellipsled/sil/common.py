@@ -60,42 +60,40 @@ class Stop:
 
 
 def apply_rt(role: str, args) -> dict | None:
-    """Real-time hygiene for a node when --rt is given: SCHED_FIFO, CPU affinity, mlockall.
-    Call it before the Zenoh session opens, so that its I/O threads inherit the scheduling
-    class and CPU; they get priority --rt-priority + 1 and ``open_node`` then lowers the
-    main thread to --rt-priority: an arriving sample preempts the main loop's spin-wait
-    on the shared CPU instead of waiting behind it. Returns fsw.rt's report (None without
-    --rt)."""
+    """Real-time hygiene for a node when --rt is given: SCHED_FIFO --rt-priority, CPU
+    affinity, mlockall (fsw.rt.apply). Call it before anything starts threads; ``open_node``
+    then raises every other thread to one priority above the loop. Returns fsw.rt's report
+    (None without --rt)."""
     if not args.rt:
         return None
     from fsw import rt
-    io_priority = min(int(args.rt_priority) + 1, os.sched_get_priority_max(os.SCHED_FIFO))
-    rep = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=io_priority)
-    rep["io_priority"] = rep["priority"]
+    rep = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
+    rep["io_priority"] = min(int(args.rt_priority) + 1, os.sched_get_priority_max(os.SCHED_FIFO)) \
+        if rep["sched_fifo"] else None
     if not rep["sched_fifo"]:
-        say(role, f"real-time: {rep}")          # else open_node says it, with the final priorities
+        say(role, f"real-time: {rep}")          # else open_node says it, with the threads
     return rep
 
 
+def rt_in_force(rt_report: dict | None) -> bool:
+    """Whether ``apply_rt`` got SCHED_FIFO (then loops may spin: see ``open_node``)."""
+    return bool(rt_report and rt_report.get("sched_fifo"))
+
+
 def open_node(role: str, args, rt_report: dict | None = None):
-    """(session, keys) for a node, from its options. With a real-time report from
-    ``apply_rt``, the main thread drops to --rt-priority once Zenoh's threads exist."""
+    """(session, keys) for a node, from its options. With SCHED_FIFO in force (``apply_rt``),
+    every other thread of the process — Zenoh's I/O threads, the runtime threads its binding
+    starts at import — goes to this node's CPU one priority above the loop, so an arriving
+    sample preempts the loop's spin-wait instead of queueing behind it; our own Python
+    threads (they take the GIL) stay at the loop's priority."""
     session = transport.open_session(role, args.listen, args.connect, args.zenoh_config,
                                      lowlatency=bool(getattr(args, "zenoh_lowlatency", True)))
-    if rt_report is not None and rt_report.get("sched_fifo"):
+    if rt_in_force(rt_report):
         from fsw import rt
-        # every other thread (Zenoh's I/O, runtimes started at import) to the I/O priority
-        # and this node's CPU, our own Python threads (they take the GIL) and then the main
-        # thread one below
         others = rt.other_threads([args.cpu] if args.cpu is not None else None, rt_report["io_priority"],
                                   python_priority=int(args.rt_priority))
         rt_report["threads"] = [f"{name}:{prio}" for _, name, prio, _ in others["threads"]]
         rt_report["messages"] += others["messages"]
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(args.rt_priority)))
-            rt_report["priority"] = os.sched_getparam(0).sched_priority
-        except (OSError, ValueError) as e:
-            rt_report["messages"].append(f"main-thread priority not lowered: {type(e).__name__}: {e}")
         say(role, f"real-time: loop SCHED_FIFO {rt_report['priority']}, I/O threads {rt_report['io_priority']}, "
                   f"CPUs {rt_report['affinity']}, mlockall {rt_report['mlockall']}"
                   + (f"; {'; '.join(rt_report['messages'])}" if rt_report["messages"] else ""))

@@ -30,7 +30,7 @@ from fsw.topology import Topology  # noqa: E402
 from interfaces import records, transport  # noqa: E402
 from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 
-from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, say  # noqa: E402
+from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
 
 ROLE = "fsw"
 
@@ -59,7 +59,7 @@ class FswNode:
         self.events = EventLog()
         self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime")
         self.session, self.K = open_node(ROLE, args, self.rt_report)
-        self.spin = bool(self.rt_report and self.rt_report.get("sched_fifo"))
+        self.spin = rt_in_force(self.rt_report)
         self.sub_sensors = transport.subscriber(self.session, self.K.sensors,
                                                 newest_only=args.mode == "realtime")
         # real time: a frozen plant or viewer must never stall the loop (samples dropped when

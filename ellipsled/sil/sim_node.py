@@ -23,7 +23,7 @@ from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard
 from sim.plant import Plant
 
-from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, say
+from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say
 
 ROLE = "sim"
 
@@ -48,9 +48,9 @@ class SimNode:
         self.seed = self.scn.seed if args.seed is None else args.seed
         self.plant = Plant(self.scn, self.seed)
         self.session, self.K = open_node(ROLE, args, self.rt_report)
-        # with --rt Zenoh's threads run one priority above this loop: spin-wait for the
+        # with SCHED_FIFO Zenoh's threads run one priority above this loop: spin-wait for the
         # command (a few hundred us a period) instead of 20-us sleeps
-        self.spin_s = 0.003 if self.rt_report and self.rt_report.get("sched_fifo") else 0.0
+        self.spin_s = 0.003 if rt_in_force(self.rt_report) else 0.0
         # real time: a frozen FSW or viewer must never stall the plant's clock (samples dropped
         # when the peer cannot take them); lockstep: loss-free, the run waits
         rt_drop = args.mode == "realtime"

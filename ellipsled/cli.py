@@ -97,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
     from gse.cli import add_gse_parser
     add_gse_parser(sub)
     _add_sil(sub)
+    from ellipsled.net.pki import add_pki_parser
+    from ellipsled.net.router import add_router_parser
+    add_router_parser(sub)
+    add_pki_parser(sub)
     from ellipsled.montecarlo import add_montecarlo_parser
     add_montecarlo_parser(sub)
     from ellipsled.bench.suite import add_bench_parser

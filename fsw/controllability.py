@@ -1,0 +1,229 @@
+"""What the jets can still do: a duty-cycle linear program over the jets FDIR holds usable.
+
+Averaged over many control cycles an on/off jet acts as its duty cycle d_j in [0, 1], so the
+torques the jets can hold on average form the polytope {b + sum_j eta_j T_j d_j}: failed and
+inhibited jets are absent, degraded jets scale their column by eta_j, stuck-on jets are fixed
+at d = 1 and form the bias b. Three questions are asked of it, each a small LP (HiGHS):
+
+1. Trim. The smallest aerodynamic trim offset theta = (delta_alpha, beta) [rad] such that
+   the jets and the aerodynamic moment cancel the bias on average:
+       min s   s.t.  C d + A theta = -b,  |theta_i| <= s,  0 <= d <= 1,
+   A [N m/rad] the static moment per radian of alpha offset and of sideslip
+   (M = qbar S l (C_lbeta beta, C_malpha dalpha, C_nbeta beta), spec 20-fsw.md eqs 4-6).
+   s = 0 when the jets alone cancel b; no solution (the bias outside what the jets and the
+   aerodynamics can cancel) means no trim exists at this dynamic pressure.
+2. Bank authority, each way. The largest average angular acceleration a about the velocity
+   vector v (the bank axis) with the acceleration about the two axes normal to v held at zero
+   on average (I omega_dot = tau with omega_dot = a v; the gyroscopic omega x I omega is second
+   order at bank rates of a few deg/s and is neglected):
+       C d + A theta - I v a = -b,  0 <= d <= 1.
+   The trim theta is one offset held through a manoeuvre either way (a constant aerodynamic
+   moment, not a control), chosen to maximise the weaker way (max t, a+ >= t, -a- >= t), within
+   ``trim_max_deg`` once the jets alone cannot cancel the bias and zero otherwise (the guidance
+   flies beta_r = 0); each way's own maximum is then solved with that trim held.
+3. The verdict: controllable when a trim exists within ``trim_max_deg`` and both authorities
+   are above zero and reach ``authority_min_radps2`` (``schedule_accel_need_radps2``: what the
+   bank schedule still needs); else the reason.
+
+Inputs are plain arrays, so the FSW (its nominal inertia estimate, its own density and
+derivatives, its FDIR health) and the Monte Carlo (the plant's true inertia, aerodynamics and
+fault list) ask the same program.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .guidance import _S2_MAX
+from .health import STUCK_ON, JetHealth
+
+# HiGHS feasibility tolerance on the torque rows [N m]: far below one jet's torque
+_TOL_NM = 1e-7
+
+
+@dataclass(frozen=True)
+class Controllability:
+    """The LP's answer (angles in degrees, accelerations in rad/s^2)."""
+    authority_pos_radps2: float    # bank acceleration available, positive way
+    authority_neg_radps2: float    # ... negative way (a magnitude, >= 0)
+    bias_B_Nm: tuple               # net stuck-on torque b in body axes [N m]
+    residual_Nm: float             # |A theta*|: the part of b the jets cannot cancel, left to the aerodynamics
+    trim_alpha_deg: float          # trim offset theta* (inf when no trim exists)
+    trim_beta_deg: float
+    trim_needed_deg: float         # max(|dalpha|, |beta|) of the smallest trim (inf when none exists)
+    qbar_pa: float                 # dynamic pressure the trim was computed at
+    controllable: bool
+    reason: str                    # "" when controllable
+    solve_s: float                 # wall time of the LPs
+
+    @property
+    def bias_Nm(self) -> float:
+        return float(np.linalg.norm(self.bias_B_Nm))
+
+    def text(self) -> str:
+        """One line for an event: "BANK AUTH +X/-Y DEG/S2 BIAS Z NM TRIM W DEG"."""
+        tr = "inf" if not math.isfinite(self.trim_needed_deg) else f"{self.trim_needed_deg:.1f}"
+        return (f"BANK AUTH +{math.degrees(self.authority_pos_radps2):.2f}/-"
+                f"{math.degrees(self.authority_neg_radps2):.2f} DEG/S2 BIAS {self.bias_Nm:.0f} NM TRIM {tr} DEG")
+
+
+def schedule_accel_need_radps2(schedule, t_from_s: float) -> float:
+    """The bank acceleration [rad/s^2] a minimum-jerk reference needs to fly every step of the
+    schedule ((t_s, bank_rad) pairs) not yet finished at ``t_from_s`` before the next step is due
+    (the last step: within the interval before it): max_k (10/sqrt 3) |dphi_k| / gap_k^2
+    (guidance.BankProfile's transition). 0 when no step remains. A perfect controller needs no
+    more than this; the guidance keeps a margin on top (flightsoftware.FlightSoftware)."""
+    t = [float(x[0]) for x in schedule]
+    phi = [float(x[1]) for x in schedule]
+    need = 0.0
+    for k in range(1, len(t)):
+        gap = (t[k + 1] - t[k]) if k + 1 < len(t) else (t[k] - t[k - 1])
+        if t[k] + gap > t_from_s and phi[k] != phi[k - 1]:
+            need = max(need, _S2_MAX * abs(phi[k] - phi[k - 1]) / gap ** 2)
+    return need
+
+
+def aero_moment_per_rad(qbar_pa: float, S_ref_m2: float, l_ref_m: float, C_lbeta: float, C_malpha: float,
+                        C_nbeta: float) -> np.ndarray:
+    """A (3x2) [N m/rad]: body moment per radian of alpha offset (column 0) and of sideslip
+    (column 1), the static part of the paper's eqs 4-6."""
+    q = qbar_pa * S_ref_m2 * l_ref_m
+    return np.array([[0.0, q * C_lbeta], [q * C_malpha, 0.0], [0.0, q * C_nbeta]])
+
+
+def velocity_dir_B(alpha_rad: float, beta_rad: float = 0.0) -> np.ndarray:
+    """Unit velocity direction in body axes for C_BW = R2(alpha) R3(-beta) (common/frames.py)."""
+    ca, sa, cb, sb = math.cos(alpha_rad), math.sin(alpha_rad), math.cos(beta_rad), math.sin(beta_rad)
+    return np.array([ca * cb, sb, sa * cb])
+
+
+def _lp(cost, M, row_lo, row_hi, lo, hi):
+    """min cost.x s.t. row_lo <= M x <= row_hi, lo <= x <= hi; x, or None when infeasible."""
+    import highspy
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("threads", 1)
+    h.setOptionValue("primal_feasibility_tolerance", _TOL_NM)
+    lp = highspy.HighsLp()
+    n = M.shape[1]
+    lp.num_col_ = n
+    lp.num_row_ = M.shape[0]
+    lp.col_cost_ = np.asarray(cost, float)
+    lp.col_lower_ = np.asarray(lo, float)
+    lp.col_upper_ = np.asarray(hi, float)
+    lp.row_lower_ = np.asarray(row_lo, float)
+    lp.row_upper_ = np.asarray(row_hi, float)
+    start, index, value = [0], [], []
+    for j in range(n):
+        nz = np.flatnonzero(M[:, j])
+        index.extend(nz.tolist())
+        value.extend(M[nz, j].tolist())
+        start.append(len(index))
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = np.array(start, dtype=np.int32)
+    lp.a_matrix_.index_ = np.array(index, dtype=np.int32)
+    lp.a_matrix_.value_ = np.array(value, dtype=float)
+    h.passModel(lp)
+    h.run()
+    status = h.getModelStatus()
+    if status == highspy.HighsModelStatus.kInfeasible:
+        return None
+    if status != highspy.HighsModelStatus.kOptimal:
+        raise RuntimeError(f"HiGHS: unexpected status {h.modelStatusToString(status)}")
+    return np.asarray(h.getSolution().col_value)
+
+
+def jet_columns(T_Nm: np.ndarray, health: JetHealth) -> tuple[np.ndarray, np.ndarray]:
+    """(C, b): the usable jets' average-torque columns eta_j T_j (3 x p) and the stuck-on bias (3)."""
+    T = np.asarray(T_Nm, float)
+    usable = health.usable()
+    C = T[:, usable] * health.effective_eta()[usable]
+    b = T[:, health.state == STUCK_ON].sum(axis=1)
+    return C, b
+
+
+def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: np.ndarray, A_aero: np.ndarray,
+                    trim_max_deg: float, authority_min_radps2: float, qbar_pa: float = float("nan")
+                    ) -> Controllability:
+    """The duty-cycle LP (module docstring) for one jet health and flight condition.
+
+    ``T_Nm`` (3 x n) torque matrix, ``I_B`` (3x3) inertia [kg m^2], ``v_B`` velocity direction
+    in body axes, ``A_aero`` (3x2) from ``aero_moment_per_rad`` (zeros: jets only);
+    ``qbar_pa`` is only recorded."""
+    t0 = time.perf_counter()
+    C, b = jet_columns(T_Nm, health)
+    p = C.shape[1]
+    A = np.asarray(A_aero, float)
+    v = np.asarray(v_B, float)
+    v = v / np.linalg.norm(v)
+    Iv = np.asarray(I_B, float) @ v
+    inf = math.inf
+    # 1. the smallest trim: x = [d (p), dalpha, beta, s]; rows C d + A theta = -b
+    if not np.any(b):
+        theta, s_star = np.zeros(2), 0.0
+    else:
+        M = np.zeros((3 + 4, p + 3))
+        M[:3, :p], M[:3, p:p + 2] = C, A
+        for k, (i, sg) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):   # +-theta_i - s <= 0
+            M[3 + k, p + i] = sg
+            M[3 + k, p + 2] = -1.0
+        cost = np.zeros(p + 3)
+        cost[p + 2] = 1.0
+        lo = np.concatenate([np.zeros(p), [-inf, -inf, 0.0]])
+        hi = np.concatenate([np.ones(p), [inf, inf, inf]])
+        x = _lp(cost, M, np.concatenate([-b, np.full(4, -inf)]), np.concatenate([-b, np.zeros(4)]), lo, hi)
+        if x is None:
+            theta, s_star = np.full(2, inf), inf
+        else:
+            theta, s_star = x[p:p + 2], float(x[p + 2])
+    residual = float(np.linalg.norm(A @ theta)) if math.isfinite(s_star) else inf
+    trim_deg = math.degrees(s_star) if math.isfinite(s_star) else inf
+    # 2. one trim theta held through a manoeuvre either way, chosen to maximise the weaker way:
+    #    x = [d+ (p), d- (p), dalpha, beta, a+, a-, t]; max t, a+ >= t, -a- >= t. The trim may use
+    #    the whole allowed offset once the jets alone cannot cancel the bias (else none: beta_r = 0)
+    auth = [0.0, 0.0]
+    if math.isfinite(s_star):
+        box = (max(s_star, math.radians(trim_max_deg)) * (1.0 + 1e-9) + 1e-12) if s_star > 0.0 else 0.0
+        M = np.zeros((8, 2 * p + 5))
+        M[0:3, 0:p], M[3:6, p:2 * p] = C, C
+        M[0:3, 2 * p:2 * p + 2] = M[3:6, 2 * p:2 * p + 2] = A
+        M[0:3, 2 * p + 2] = -Iv
+        M[3:6, 2 * p + 3] = -Iv
+        M[6, 2 * p + 2], M[6, 2 * p + 4] = 1.0, -1.0
+        M[7, 2 * p + 3], M[7, 2 * p + 4] = -1.0, -1.0
+        cost = np.zeros(2 * p + 5)
+        cost[-1] = -1.0
+        lo = np.concatenate([np.zeros(2 * p), [-box, -box, -inf, -inf, -inf]])
+        hi = np.concatenate([np.ones(2 * p), [box, box, inf, inf, inf]])
+        rhs = np.concatenate([-b, -b])
+        x = _lp(cost, M, np.concatenate([rhs, [0.0, 0.0]]), np.concatenate([rhs, [inf, inf]]), lo, hi)
+        if x is not None:
+            theta = x[2 * p:2 * p + 2]
+            # 3. each way's own maximum with that trim held: x = [d, a]
+            M = np.hstack([C, -Iv[:, None]])
+            rhs = -b - A @ theta
+            lo, hi = np.concatenate([np.zeros(p), [-inf]]), np.concatenate([np.ones(p), [inf]])
+            for k, sg in enumerate((1.0, -1.0)):
+                cost = np.zeros(p + 1)
+                cost[-1] = -sg
+                x = _lp(cost, M, rhs, rhs, lo, hi)
+                auth[k] = max(0.0, sg * float(x[-1])) if x is not None else 0.0
+    if not math.isfinite(s_star):
+        reason = (f"stuck-on bias {np.linalg.norm(b):.0f} N m beyond what the jets and the aerodynamics "
+                  f"can cancel at qbar {qbar_pa:.0f} Pa")
+    elif trim_deg > trim_max_deg:
+        reason = f"trim offset {trim_deg:.1f} deg needed to absorb {residual:.0f} N m (limit {trim_max_deg:g} deg)"
+    elif min(auth) < authority_min_radps2 or min(auth) <= 0.0:
+        way = "+" if auth[0] < auth[1] else "-"
+        reason = (f"bank authority {way}{math.degrees(min(auth)):.2f} deg/s2 below "
+                  f"{math.degrees(authority_min_radps2):.2f} deg/s2")
+    else:
+        reason = ""
+    return Controllability(
+        authority_pos_radps2=auth[0], authority_neg_radps2=auth[1], bias_B_Nm=tuple(float(x) for x in b),
+        residual_Nm=residual, trim_alpha_deg=math.degrees(theta[0]) if math.isfinite(s_star) else inf,
+        trim_beta_deg=math.degrees(theta[1]) if math.isfinite(s_star) else inf, trim_needed_deg=trim_deg,
+        qbar_pa=float(qbar_pa), controllable=not reason, reason=reason, solve_s=time.perf_counter() - t0)

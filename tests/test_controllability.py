@@ -1,0 +1,136 @@
+"""The duty-cycle LP (fsw/controllability.py) against independent truth.
+
+Truth: the torques the jets hold on average are the convex hull of the torques of every on/off
+pattern of the usable jets (duty cycles in [0, 1]^p are the hull of {0, 1}^p), enumerated here
+and wrapped by qhull (scipy ConvexHull); the bank authority is where the line {I v a - b} leaves
+that hull, from the facet equations alone. The trim is checked by a grid over (dalpha, beta)
+with the same hull membership test. No HiGHS on the truth side.
+"""
+import itertools
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import ConvexHull
+
+from common.model import load_vehicle
+from fsw.controllability import (aero_moment_per_rad, controllability, jet_columns, schedule_accel_need_radps2,
+                                 velocity_dir_B)
+from fsw.health import JetHealth
+
+VEH = load_vehicle("ellipsled")
+T = np.asarray(VEH.torque_matrix_Nm, float)
+I_NOM = np.asarray(VEH.inertia_kgm2, float)
+V_B = velocity_dir_B(VEH.aero.alpha_trim_rad)
+NO_AERO = np.zeros((3, 2))
+
+CONFIGS = {
+    "nominal": JetHealth(),
+    "case1 (1 2 17 18 off)": JetHealth.of(failed=[1, 2, 17, 18]),
+    "case2 (7 stuck on)": JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]),
+    "case3 (4 at 50 %)": JetHealth.of(degraded=[(3, .5), (7, .5), (14, .5), (15, .5)]),
+    "mixed, inhibited": JetHealth.of(failed=[7, 16, 18], degraded=[(1, .4), (3, .8), (8, .6)], inhibited=[12]),
+    "stuck 95 N cancelled": JetHealth.of(failed=[2], stuck=[4, 12], degraded=[(13, .7), (18, .3)]),
+}
+
+
+def _hull(health):
+    C, b = jet_columns(T, health)
+    pts = np.array([C @ np.array(u) for u in itertools.product((0.0, 1.0), repeat=C.shape[1])])
+    return ConvexHull(pts), b
+
+
+def _inside(hull, x, tol=1e-6):
+    return bool(np.all(hull.equations[:, :3] @ x + hull.equations[:, 3] <= tol))
+
+
+def _authority_truth(hull, b, Iv):
+    """max / min a with I v a - b in the hull: facets n.x + c <= 0 along x = Iv a - b."""
+    n, c = hull.equations[:, :3], hull.equations[:, 3]
+    k = n @ Iv
+    r = -c + n @ b          # n.Iv a <= r
+    a_max = np.min(r[k > 1e-12] / k[k > 1e-12])
+    a_min = np.max(r[k < -1e-12] / k[k < -1e-12])
+    return a_max, a_min
+
+
+@pytest.mark.parametrize("name", list(CONFIGS))
+def test_bank_authority_equals_the_hull_of_every_jet_pattern(name):
+    h = CONFIGS[name]
+    I = I_NOM * np.array([[1.2, 1.3, 1.3], [1.3, .85, 1.3], [1.3, 1.3, 1.3]])   # a dispersed truth inertia
+    hull, b = _hull(h)
+    assert _inside(hull, -b), "these configurations have jets that cancel their stuck-on bias"
+    a_max, a_min = _authority_truth(hull, b, I @ V_B)
+    r = controllability(T, h, I, V_B, NO_AERO, trim_max_deg=5.0, authority_min_radps2=0.0)
+    assert r.trim_needed_deg == 0.0
+    assert r.authority_pos_radps2 == pytest.approx(max(a_max, 0.0), rel=1e-6, abs=1e-9)
+    assert r.authority_neg_radps2 == pytest.approx(max(-a_min, 0.0), rel=1e-6, abs=1e-9)
+    assert r.bias_Nm == pytest.approx(np.linalg.norm(b))
+    assert r.controllable == (min(a_max, -a_min) > 0)
+
+
+def test_nominal_jets_turn_about_the_velocity_vector_by_a_few_deg_per_s2_each_way():
+    r = controllability(T, JetHealth(), I_NOM, V_B, NO_AERO, 5.0, 0.0)
+    assert 3.0 < math.degrees(r.authority_pos_radps2) < 5.0
+    assert r.authority_pos_radps2 == pytest.approx(r.authority_neg_radps2, rel=0.01)   # near-symmetric layout
+    assert r.controllable and r.reason == ""
+
+
+def test_a_bias_the_jets_cannot_cancel_needs_the_smallest_trim_a_grid_finds():
+    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    hull, b = _hull(h)
+    assert not _inside(hull, -b)
+    A = aero_moment_per_rad(800.0, VEH.S_ref_m2, VEH.l_ref_m, VEH.aero.C_lbeta, VEH.aero.C_malpha, VEH.aero.C_nbeta)
+    r = controllability(T, h, I_NOM, V_B, A, trim_max_deg=5.0, authority_min_radps2=0.0, qbar_pa=800.0)
+    assert 0.0 < r.trim_needed_deg < 30.0
+    # grid truth: the smallest max(|dalpha|, |beta|) for which -b - A theta is in the hull,
+    # a 0.1-deg grid over +-30 deg, then a 0.002-deg grid around its best point
+    def best_on(da, be):
+        th = np.radians(np.stack(np.meshgrid(da, be), -1).reshape(-1, 2))
+        x = -b[None, :] - th @ A.T
+        ok = np.all(x @ hull.equations[:, :3].T + hull.equations[:, 3] <= 1e-6, axis=1)
+        s = np.max(np.abs(np.degrees(th)), axis=1)
+        i = np.argmin(np.where(ok, s, np.inf))
+        return s[i] if ok[i] else math.inf, np.degrees(th[i])
+    coarse, (da0, be0) = best_on(np.arange(-30, 30.05, 0.1), np.arange(-30, 30.05, 0.1))
+    assert math.isfinite(coarse)
+    best, _ = best_on(np.arange(da0 - 0.2, da0 + 0.2, 0.002), np.arange(be0 - 0.2, be0 + 0.2, 0.002))
+    assert r.trim_needed_deg == pytest.approx(best, abs=0.003)
+    assert r.trim_needed_deg <= coarse + 1e-9
+    # the same bias at a quarter of the dynamic pressure needs about four times the trim (small angles)
+    r4 = controllability(T, h, I_NOM, V_B, A / 4.0, 5.0, 0.0, qbar_pa=200.0)
+    assert r4.trim_needed_deg == pytest.approx(4.0 * r.trim_needed_deg, rel=1e-6)
+    assert not r4.controllable and "trim offset" in r4.reason
+
+
+def test_without_dynamic_pressure_an_uncancelled_bias_has_no_trim_and_is_reported():
+    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    r = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 0.0, qbar_pa=0.0)
+    assert math.isinf(r.trim_needed_deg) and not r.controllable
+    assert "beyond what the jets and the aerodynamics can cancel" in r.reason
+    assert r.authority_pos_radps2 == 0.0 and r.authority_neg_radps2 == 0.0
+
+
+def test_authority_below_what_the_schedule_needs_is_not_controllable():
+    h = JetHealth.of(failed=[1, 13, 16], degraded=[(6, .3), (7, .3)])
+    r = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 0.0)
+    weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
+    r2 = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 1.01 * weak)
+    assert r.controllable and not r2.controllable and "bank authority" in r2.reason
+
+
+def test_schedule_need_is_the_quintic_peak_acceleration_of_the_hardest_step_left():
+    sched = [(0.0, math.radians(85)), (60.0, math.radians(-85)), (130.0, math.radians(60)), (200.0, math.radians(-60))]
+    s2 = 10.0 / math.sqrt(3.0)
+    assert schedule_accel_need_radps2(sched, 0.0) == pytest.approx(s2 * math.radians(170) / 70.0 ** 2)
+    assert schedule_accel_need_radps2(sched, 131.0) == pytest.approx(s2 * math.radians(145) / 70.0 ** 2)
+    assert schedule_accel_need_radps2(sched, 250.0) == pytest.approx(s2 * math.radians(120) / 70.0 ** 2)
+    assert schedule_accel_need_radps2(sched, 271.0) == 0.0
+
+
+def test_the_lp_is_cheap_enough_for_every_reconfiguration():
+    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    A = aero_moment_per_rad(800.0, VEH.S_ref_m2, VEH.l_ref_m, VEH.aero.C_lbeta, VEH.aero.C_malpha, VEH.aero.C_nbeta)
+    controllability(T, h, I_NOM, V_B, A, 5.0, 0.0)
+    times = [controllability(T, h, I_NOM, V_B, A, 5.0, 0.0).solve_s for _ in range(5)]
+    assert min(times) < 0.1       # generous sanity bound on a shared host; the figure is in the README

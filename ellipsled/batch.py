@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.model import Scenario, load_scenario
+from common.model import Scenario, inertia_vector, load_scenario
 from fsw.events import EventLog
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
@@ -80,10 +80,21 @@ def verify_allocations(scn: Scenario, params: dict, samples: list[dict]) -> tupl
     return (gap if n else None), n
 
 
+def adaptive_truth(scn: Scenario) -> np.ndarray:
+    """The true values of SAMI's parameters [h (6) kg m^2; d (3)]: the truth inertia, and the
+    aerodynamic factors the FSW's nominal moments are off by (density lumped with each
+    coefficient, as the FSW's nominal atmosphere does)."""
+    tr = scn.truth
+    h = inertia_vector(scn.vehicle.inertia_kgm2) * tr.inertia_scale
+    d = tr.density_scale * np.array([tr.C_lbeta_scale, tr.C_malpha_scale, tr.C_nbeta_scale])
+    return np.concatenate((h, d))
+
+
 def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faults_applied: list,
-          params: dict) -> dict:
+          params: dict, ref: History | None = None) -> dict:
     """summary.json: figures of merit from the history, FDIR judged against the faults the
-    plant actually applied (its ``fault_log``). The same function serves batch and SIL."""
+    plant actually applied (its ``fault_log``). The same function serves batch and SIL.
+    ``ref``: the fault-free twin (reference.fault_free_history) for the fault-attributable figures."""
     injected = {}
     for t, jet, kind in faults_applied:
         injected.setdefault(jet, (t, kind))
@@ -117,16 +128,30 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
                      fault_t_s=min((t for t, _, _ in faults_applied), default=None),
                      reconfig_t_s=rep["reconfig_times_s"][0] if rep["reconfig_times_s"] else None,
                      alpha_trim_rad=scn.vehicle.aero.alpha_trim_rad,
-                     schedule_t=[t for t, _ in scn.bank_schedule], extra=extra)
+                     schedule_t=[t for t, _ in scn.bank_schedule], extra=extra, ref=ref,
+                     theta_truth=adaptive_truth(scn))
 
 
 def end_reason_of(reason: str, duration_s: float | None) -> str:
     return "duration" if duration_s is not None and reason == "timeout" else reason
 
 
+def fault_free_reference(h: History, scn: Scenario, seed: int, faults_applied: list,
+                         cache_dir: str | Path | None = None) -> History:
+    """The run's fault-free twin: the run itself when no fault was applied, else flown (or
+    taken from the cache, see ellipsled/reference.py)."""
+    if not faults_applied:
+        return h
+    from .reference import fault_free_history
+    return fault_free_history(scn, seed, cache_dir)
+
+
 def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False, duration_s: float | None = None,
-        verify_every: int = 1000) -> tuple[dict, History, FlightSoftware]:
-    """Fly one scenario; returns (summary, history, fsw)."""
+        verify_every: int = 1000, reference: bool = True,
+        reference_cache: str | Path | None = None) -> tuple[dict, History, FlightSoftware]:
+    """Fly one scenario; returns (summary, history, fsw). ``reference``: also fly (or take
+    from ``reference_cache``, default the user cache) the fault-free twin for the
+    fault-attributable figures."""
     scn = prepare(scenario, ft_off, duration_s)
     seed = scn.seed if seed is None else seed
     plant = Plant(scn, seed)
@@ -152,7 +177,8 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
         frame = plant.step(u)
     wall = time.perf_counter() - wall0
     rep = fsw_report(fsw, topo.executive.slips, samples)
-    summary = judge(h, scn, seed, end_reason_of(reason, duration_s), rep, plant.fault_log, fsw.params)
+    ref = fault_free_reference(h, scn, seed, plant.fault_log, reference_cache) if reference else None
+    summary = judge(h, scn, seed, end_reason_of(reason, duration_s), rep, plant.fault_log, fsw.params, ref)
     summary["wall_s"] = wall
     summary["realtime_factor"] = (float(h["t_s"][-1]) / wall) if wall > 0 else None
     return summary, h, fsw
@@ -187,11 +213,13 @@ def format_summary(s: dict) -> str:
     return "\n".join([
         f"{s['scenario']} (seed {s['seed']}): {'completed' if s['completed'] else 'NOT completed'} "
         f"({s['end_reason']}) at t = {s['t_end_s']:.1f} s" + (f", {rt:.0f}x real time" if rt else ""),
-        f"  bank error: max after fault {f(s['bank_err_max_after_fault_deg'])} deg, RMS {f(s['bank_err_rms_deg'])} deg,"
-        f" settle after reconfiguration {f(s['settle_time_after_reconfig_s'])} s",
+        f"  bank error: max after fault {f(s['bank_err_max_after_fault_deg'])} deg, due to the faults"
+        f" {f(s.get('bank_err_fault_attrib_max_deg'))} deg, after t = 10 s {f(s['bank_err_max_after_transient_deg'])} deg,"
+        f" RMS {f(s['bank_err_rms_deg'])} deg, settle after reconfiguration {f(s['settle_time_after_reconfig_s'])} s",
         f"  alpha dev max {f(s['alpha_dev_max_deg'])} deg, beta dev max {f(s['beta_dev_max_deg'])} deg",
-        f"  propellant {s['propellant_kg']:.2f} kg, {s['jet_pulses']} pulses, effort cmd {s['control_effort_cmd']:.3g}"
-        f" applied {s['control_effort_applied']:.3g}",
+        f"  propellant {s['propellant_kg']:.2f} kg, {s['jet_pulses']} pulses, effort applied"
+        f" {s['control_effort_applied']:.3g} (commanded {s['control_effort_cmd']:.3g},"
+        f" undeliverable {f(s['control_effort_undeliverable_share'], '{:.0%}')})",
         f"  allocator: {a['solves']} solves, p50 {f(a['p50_us'], '{:.1f}')} us, p99 {f(a['p99_us'], '{:.1f}')} us,"
         f" degraded {a['degraded']}, optimality gap {f(a['optimality_gap_max'], '{:.2g}')} ({a['optimality_checked']} checked)",
         f"  FDIR: {len(s['fdir']['detections'])} detections, {s['fdir']['false_alarms']} false alarms,"

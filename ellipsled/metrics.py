@@ -13,6 +13,9 @@ from .history import History
 
 SETTLE_BAND_DEG = 1.0     # |e_phi| below this counts as settled
 SETTLE_HOLD_S = 2.0       # ... and must stay below it this long
+FINE_BAND_DEG = 0.2       # the tighter band a fault-tolerance claim is judged by (spec 30-scenarios.md)
+TRANSIENT_S = 10.0        # the initial bank error's decay is over by then (bank_err_max_after_transient_deg)
+THETA_NAMES = ("I11", "I22", "I33", "I12", "I13", "I23", "d_roll", "d_pitch", "d_yaw")
 
 
 def wrap_deg(x: np.ndarray) -> np.ndarray:
@@ -23,14 +26,14 @@ def bank_error_deg(h: History) -> np.ndarray:
     return wrap_deg(np.degrees(h["bank_rad"] - h["bank_ref_rad"]))
 
 
-def settle_time(t: np.ndarray, err_deg: np.ndarray, t0: float) -> float | None:
+def settle_time(t: np.ndarray, err_deg: np.ndarray, t0: float, band_deg: float = SETTLE_BAND_DEG) -> float | None:
     """Seconds after t0 until |err| enters the band and stays there SETTLE_HOLD_S."""
     idx = np.nonzero(t >= t0)[0]
     if len(idx) == 0:
         return None
     dt = t[1] - t[0] if len(t) > 1 else 0.02
     hold = max(1, int(round(SETTLE_HOLD_S / dt)))
-    inside = np.abs(err_deg[idx]) < SETTLE_BAND_DEG
+    inside = np.abs(err_deg[idx]) < band_deg
     run = 0
     for j, ok in enumerate(inside):
         run = run + 1 if ok else 0
@@ -39,14 +42,43 @@ def settle_time(t: np.ndarray, err_deg: np.ndarray, t0: float) -> float | None:
     return None
 
 
-def reversal_errors(h: History, schedule_t: list[float], window_s: float = 40.0) -> list[dict]:
-    """Max |e_phi| in the window after each scheduled bank step (the reversals)."""
+def fault_attributable_error_deg(case: History, ref: History) -> tuple[np.ndarray, np.ndarray]:
+    """(t [s], e_case - e_ref [deg]) on the control steps both runs flew, aligned on the
+    step index k: the part of the bank error the faults caused, e_ref being the same
+    scenario, seed and reference flown without faults (spec 30-scenarios.md)."""
+    kc, kr = case["k"], ref["k"]
+    common = np.intersect1d(kc, kr)
+    ic, ir = np.searchsorted(kc, common), np.searchsorted(kr, common)
+    d = wrap_deg(bank_error_deg(case)[ic] - bank_error_deg(ref)[ir])
+    return case["t_s"][ic], d
+
+
+def fault_attributable_max_deg(case: History, ref: History, t_fault_s: float) -> float | None:
+    """max over t >= t_fault of |e_case(t) - e_ref(t)| [deg]; None if no common step follows the fault."""
+    t, d = fault_attributable_error_deg(case, ref)
+    m = t >= t_fault_s - 1e-9
+    return float(np.max(np.abs(d[m]))) if np.any(m) else None
+
+
+def _window_max(t: np.ndarray, y: np.ndarray, t0: float, t1: float) -> float | None:
+    m = (t >= t0) & (t < t1)
+    return round(float(np.max(np.abs(y[m]))), 2) if np.any(m) else None
+
+
+def reversal_errors(h: History, schedule_t: list[float], window_s: float = 40.0,
+                    ref: History | None = None) -> list[dict]:
+    """Max |e_phi| in the window after each scheduled bank step (the reversals), at 0.01 deg
+    resolution; with ``ref`` (the fault-free twin) also the fault-attributable max there."""
     t, e = h["t_s"], bank_error_deg(h)
+    ta, da = fault_attributable_error_deg(h, ref) if ref is not None else (None, None)
     out = []
     for ts in schedule_t[1:]:
-        m = (t >= ts) & (t < ts + window_s)
-        if np.any(m):
-            out.append({"t_s": ts, "bank_err_max_deg": float(np.max(np.abs(e[m])))})
+        m = _window_max(t, e, ts, ts + window_s)
+        if m is not None:
+            r = {"t_s": ts, "bank_err_max_deg": m}
+            if ref is not None:
+                r["bank_err_fault_attrib_max_deg"] = _window_max(ta, da, ts, ts + window_s)
+            out.append(r)
     return out
 
 
@@ -56,23 +88,60 @@ def _integral(t: np.ndarray, y2: np.ndarray) -> float:
     return float(np.sum(y2[:-1] * np.diff(t)))   # zero-order hold over each period
 
 
+def effort(h: History) -> dict:
+    """Control effort: applied ∫τᵀτ dt (the jets' torque on the truth: the figure of merit),
+    commanded ∫u_calᵀu_cal dt beside it, and the undeliverable share ∫|u_cal - τ_alloc|² dt /
+    ∫|u_cal|² dt: the part of the demand the allocator could not give with the jets it had."""
+    t, u = h["t_s"], h["u_cal_B"]
+    cmd = _integral(t, np.sum(u ** 2, axis=1))
+    applied = _integral(t, np.sum(h["tau_jets_B"] ** 2, axis=1))
+    miss = _integral(t, np.sum((u - h["tau_alloc_B"]) ** 2, axis=1))
+    return {"control_effort_applied": applied, "control_effort_cmd": cmd,
+            "control_effort_undeliverable_share": (miss / cmd) if cmd > 0 else None}
+
+
+def adaptive_vs_truth(th: np.ndarray, truth: np.ndarray | None) -> dict:
+    """Final estimate vs truth per element, relative error, and drift (relative change over
+    the last 20 % of the run) per element."""
+    n = len(th)
+    if n == 0:
+        return {}
+    i0 = int(0.8 * n)
+    base = np.where(np.abs(th[i0]) > 1e-12, np.abs(th[i0]), 1.0)
+    drift = np.abs(th[-1] - th[i0]) / base
+    out = {"names": list(THETA_NAMES), "final": th[-1].tolist(), "drift_last20pct": drift.tolist()}
+    if truth is not None:
+        tr = np.asarray(truth, dtype=float)
+        scale = np.where(np.abs(tr) > 1e-12, np.abs(tr), 1.0)
+        out["truth"] = tr.tolist()
+        out["rel_err"] = ((th[-1] - tr) / scale).tolist()
+    return out
+
+
 def summarize(h: History, *, scenario: str, seed: int, end_reason: str, completed: bool,
               fault_t_s: float | None, reconfig_t_s: float | None, alpha_trim_rad: float,
-              schedule_t: list[float], extra: dict) -> dict:
+              schedule_t: list[float], extra: dict, ref: History | None = None,
+              theta_truth: np.ndarray | None = None) -> dict:
     """The summary.json dictionary. ``extra`` carries what only the FSW knows
-    (allocator statistics, FDIR detections, propellant, pulses, cycle slips)."""
+    (allocator statistics, FDIR detections, propellant, pulses, cycle slips). ``ref`` is the
+    same scenario and seed flown without faults (None: fault-attributable figures not computed);
+    ``theta_truth`` the true values of the adaptive parameters."""
     t = h["t_s"]
     e = bank_error_deg(h)
     t_fault = fault_t_s if fault_t_s is not None else 2.5   # the paper's fault time, for nominal runs too
     after = t >= t_fault
     th = h["theta_hat"]
     n = len(t)
-    drift = None
-    if n > 10:
-        i0 = int(0.8 * n)
-        ref = np.where(np.abs(th[i0]) > 1e-12, np.abs(th[i0]), 1.0)
-        drift = float(np.max(np.abs(th[-1] - th[i0]) / ref))
-    settle = settle_time(t, e, reconfig_t_s if reconfig_t_s is not None else t_fault)
+    adaptive = adaptive_vs_truth(th, theta_truth)
+    drift = float(max(adaptive["drift_last20pct"])) if n > 10 else None
+    t_recfg = reconfig_t_s if reconfig_t_s is not None else t_fault
+    settle = settle_time(t, e, t_recfg)
+    late = t >= TRANSIENT_S
+    attrib = settle_attrib = None
+    if ref is not None:
+        attrib = fault_attributable_max_deg(h, ref, t_fault)
+        ta, da = fault_attributable_error_deg(h, ref)
+        settle_attrib = settle_time(ta, da, t_recfg, FINE_BAND_DEG)
     s = {
         "scenario": scenario,
         "seed": seed,
@@ -81,17 +150,22 @@ def summarize(h: History, *, scenario: str, seed: int, end_reason: str, complete
         "t_end_s": float(t[-1]) if n else 0.0,
         "bank_err_max_after_fault_deg": float(np.max(np.abs(e[after]))) if np.any(after) else None,
         "bank_err_rms_deg": float(np.sqrt(np.mean(e ** 2))) if n else None,
+        "bank_err_fault_attrib_max_deg": attrib,
+        "bank_err_max_after_transient_deg": float(np.max(np.abs(e[late]))) if np.any(late) else None,
+        "bank_err_rms_after_transient_deg": float(np.sqrt(np.mean(e[late] ** 2))) if np.any(late) else None,
         "settle_time_after_reconfig_s": settle,
+        "settle_time_0p2deg_s": settle_time(t, e, t_recfg, FINE_BAND_DEG),
+        "settle_time_fault_attrib_0p2deg_s": settle_attrib,
         "fault_t_s": fault_t_s,
         "reconfig_t_s": reconfig_t_s,
         "alpha_dev_max_deg": float(np.max(np.abs(np.degrees(h["alpha_rad"] - alpha_trim_rad)))) if n else None,
         "beta_dev_max_deg": float(np.max(np.abs(np.degrees(h["beta_rad"])))) if n else None,
         "omega_err_max_degps": None,
-        "control_effort_cmd": _integral(t, np.sum(h["u_cal_B"] ** 2, axis=1)),
-        "control_effort_applied": _integral(t, np.sum(h["tau_jets_B"] ** 2, axis=1)),
-        "reversals": reversal_errors(h, schedule_t),
+        **effort(h),
+        "reversals": reversal_errors(h, schedule_t, ref=ref),
         "adaptive_param_drift_last20pct": drift,
         "theta_hat_final": th[-1].tolist() if n else None,
+        "adaptive": adaptive,
         "h_end_m": float(h["h_m"][-1]) if n else None,
         "mach_end": float(h["mach"][-1]) if n else None,
         "qbar_max_pa": float(np.max(h["qbar_pa"])) if n else None,

@@ -10,10 +10,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .history import History  # noqa: E402
-from .metrics import bank_error_deg  # noqa: E402
+from .metrics import THETA_NAMES, bank_error_deg  # noqa: E402
 
 AXES = ("roll", "pitch", "yaw")
-THETA_NAMES = ("I11", "I22", "I33", "I12", "I13", "I23", "d1", "d2", "d3")
 
 
 def _save(fig, path: Path) -> str:

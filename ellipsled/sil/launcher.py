@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ellipsled.batch import format_summary, judge, prepare
+from ellipsled.batch import fault_free_reference, format_summary, judge, prepare
 from ellipsled.history import History, merge
 from interfaces import transport
 
@@ -195,7 +195,8 @@ class Launcher:
         scn = prepare(a.scenario, a.ft_off, a.duration)
         seed = scn.seed if a.seed is None else a.seed
         faults = [tuple(x) for x in sim_info["faults_applied"]]
-        summary = judge(h, scn, seed, sim_info["end_reason"], fsw_info, faults, fsw_info["params"])
+        ref = fault_free_reference(h, scn, seed, faults)
+        summary = judge(h, scn, seed, sim_info["end_reason"], fsw_info, faults, fsw_info["params"], ref)
         summary["mode"] = f"sil-{a.mode}"
         summary["wall_s"] = sim_info["wall_s"]
         summary["realtime_factor"] = sim_info["realtime_factor"]

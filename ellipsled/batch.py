@@ -26,16 +26,53 @@ from .metrics import summarize
 KIND_OF_FAULT = {"off": "failed_off", "stuck": "stuck_on", "degraded": "degraded"}
 
 
-def prepare(scenario: Scenario | str, ft_off: bool = False, duration_s: float | None = None) -> Scenario:
-    """The scenario with the run's command-line changes applied."""
+IDENTIFICATION = ("detect", "oracle")     # fdir.mode: the product's FDIR, or the test mode's fault log
+
+
+def _with_fsw(scn: Scenario, section: str, key: str, value, suffix: str) -> Scenario:
+    fsw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in scn.fsw.items()}
+    fsw.setdefault(section, {})[key] = value
+    return scn.with_(fsw=fsw, name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
+
+
+def prepare(scenario: Scenario | str, ft_off: bool = False, duration_s: float | None = None,
+            identification: str | None = None, initial_error: bool = True) -> Scenario:
+    """The scenario with the run's command-line changes applied: fault tolerance off,
+    duration, identification mode (None: the scenario's), and ``initial_error=False``: the
+    bank starts on the reference (no initial bank error)."""
     scn = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
     if ft_off:
-        fsw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in scn.fsw.items()}
-        fsw.setdefault("allocator", {})["fault_tolerance"] = 0
-        scn = scn.with_(fsw=fsw, name=scn.name if scn.name.endswith("-ft-off") else f"{scn.name}-ft-off")
+        scn = _with_fsw(scn, "allocator", "fault_tolerance", 0, "-ft-off")
+    if identification is not None:
+        if identification not in IDENTIFICATION:
+            raise ValueError(f"identification: must be one of {', '.join(IDENTIFICATION)}, got {identification!r}")
+        scn = _with_fsw(scn, "fdir", "mode", identification, "-oracle" if identification == "oracle" else "")
+    if not initial_error:
+        suffix = "-no-init-err"
+        scn = scn.with_(bank0_rad=scn.bank_schedule[0][1],
+                        name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
     if duration_s is not None:
         scn = scn.with_(max_duration_s=float(duration_s))
     return scn
+
+
+def add_variant_arguments(p) -> None:
+    """Command-line options of a run's variant, shared by batch, the SIL launcher and its nodes."""
+    p.add_argument("--identification", choices=IDENTIFICATION, default=None,
+                   help="detect: FDIR identifies faults (default); oracle: TEST MODE, the plant's fault log "
+                        "reaches FDIR at the fault time (the paper's assumption)")
+    p.add_argument("--no-initial-error", action="store_true",
+                   help="the bank starts on the reference (the paper's set-up has a 5 deg initial error)")
+
+
+def variant_argv(a) -> list[str]:
+    return ((["--identification", a.identification] if a.identification else [])
+            + (["--no-initial-error"] if a.no_initial_error else []))
+
+
+def prepare_args(a) -> Scenario:
+    """prepare() from parsed command-line arguments."""
+    return prepare(a.scenario, a.ft_off, a.duration, a.identification, not a.no_initial_error)
 
 
 def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
@@ -123,6 +160,9 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
         "cycle_slips": rep["cycle_slips"],
         "events": rep["events"],
     }
+    extra["identification"] = params.get("fdir.mode", "detect")
+    if extra["identification"] == "oracle":
+        extra["test_mode"] = "oracle identification: the plant's fault log given to FDIR at the fault time"
     completed = end_reason in ("mach", "altitude", "duration")
     return summarize(h, scenario=scn.name, seed=seed, end_reason=end_reason, completed=completed,
                      fault_t_s=min((t for t, _, _ in faults_applied), default=None),
@@ -130,6 +170,15 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
                      alpha_trim_rad=scn.vehicle.aero.alpha_trim_rad,
                      schedule_t=[t for t, _ in scn.bank_schedule], extra=extra, ref=ref,
                      theta_truth=adaptive_truth(scn))
+
+
+def tell_faults(fsw: FlightSoftware, fault_log: list, start: int, eta_of) -> int:
+    """Oracle identification (a test mode): hand FDIR the plant's fault-log entries from
+    ``start`` on, each at the time the plant applied it; returns the new count told.
+    ``eta_of[jet - 1]``: the thrust factor the plant gave a degraded jet."""
+    for t, jet, kind in fault_log[start:]:
+        fsw.fdir.identified(float(t), int(jet), KIND_OF_FAULT.get(kind, "healthy"), float(eta_of[jet - 1]))
+    return len(fault_log)
 
 
 def end_reason_of(reason: str, duration_s: float | None) -> str:
@@ -147,12 +196,12 @@ def fault_free_reference(h: History, scn: Scenario, seed: int, faults_applied: l
 
 
 def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False, duration_s: float | None = None,
-        verify_every: int = 1000, reference: bool = True,
-        reference_cache: str | Path | None = None) -> tuple[dict, History, FlightSoftware]:
+        verify_every: int = 1000, reference: bool = True, reference_cache: str | Path | None = None,
+        identification: str | None = None, initial_error: bool = True) -> tuple[dict, History, FlightSoftware]:
     """Fly one scenario; returns (summary, history, fsw). ``reference``: also fly (or take
     from ``reference_cache``, default the user cache) the fault-free twin for the
-    fault-attributable figures."""
-    scn = prepare(scenario, ft_off, duration_s)
+    fault-attributable figures. ``identification`` and ``initial_error``: see prepare()."""
+    scn = prepare(scenario, ft_off, duration_s, identification, initial_error)
     seed = scn.seed if seed is None else seed
     plant = Plant(scn, seed)
     fsw = FlightSoftware(scn, EventLog())
@@ -162,8 +211,11 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
     samples = []
     frame = plant.sensors
     trec = records.new(records.TRUTH)     # refilled in place every step
+    told = 0                              # oracle mode: fault-log entries handed to FDIR so far
     wall0 = time.perf_counter()
     while True:
+        if fsw.fdir.oracle and len(plant.fault_log) > told:
+            told = tell_faults(fsw, plant.fault_log, told, plant.fault_eta)
         topo.tick(frame)
         u = topo.u
         if verify_every and plant.k % verify_every == 0:
@@ -195,7 +247,7 @@ def write_outputs(summary: dict, h: History, out: Path, plots: bool = True) -> N
 
 
 def main(args) -> int:
-    summary, h, fsw = run(args.scenario, seed=args.seed, ft_off=args.ft_off, duration_s=args.duration)
+    summary, h, fsw = run(prepare_args(args), seed=args.seed)
     write_outputs(summary, h, Path(args.out), plots=not args.no_plots)
     if getattr(args, "rrd", False):
         from gse.viz import record_history
@@ -212,7 +264,8 @@ def format_summary(s: dict) -> str:
     rt = s.get("realtime_factor")
     return "\n".join([
         f"{s['scenario']} (seed {s['seed']}): {'completed' if s['completed'] else 'NOT completed'} "
-        f"({s['end_reason']}) at t = {s['t_end_s']:.1f} s" + (f", {rt:.0f}x real time" if rt else ""),
+        f"({s['end_reason']}) at t = {s['t_end_s']:.1f} s" + (f", {rt:.0f}x real time" if rt else "")
+        + (f"  [TEST MODE: {s['test_mode']}]" if s.get("test_mode") else ""),
         f"  bank error: max after fault {f(s['bank_err_max_after_fault_deg'])} deg, due to the faults"
         f" {f(s.get('bank_err_fault_attrib_max_deg'))} deg, after t = 10 s {f(s['bank_err_max_after_transient_deg'])} deg,"
         f" RMS {f(s['bank_err_rms_deg'])} deg, settle after reconfiguration {f(s['settle_time_after_reconfig_s'])} s",

@@ -75,6 +75,9 @@ JET_MONITOR_PARAMS = [
     Param("fdir.res_rel", 0.0, 10.0, "-", "residual threshold, part relative to |tau_cmd|+|tau_aero_est|"),
     Param("fdir.res_persist_s", 0.0, 60.0, "s", "residual above threshold this long -> unexplained torque"),
     Param("fdir.res_tau_s", 0.0, 10.0, "s", "residual low-pass time constant (0 = unfiltered)"),
+    Param("fdir.mode", 0, 0, "", "detect: the jet monitor identifies faults; oracle: TEST MODE, the plant's "
+          "fault log is the identification (paper's assumption), jet monitor off", ground_settable=False,
+          choices=("detect", "oracle")),
 ]
 
 
@@ -204,6 +207,9 @@ class Fdir:
         self.p = _check_params(params, JET_MONITOR_PARAMS)
         self._check_consistency(self.p)
         self._load_thresholds()
+        self.oracle = self.p["fdir.mode"] == "oracle"
+        if self.oracle:
+            events.emit(0.0, Severity.WARNING, "fdir", "fdir_oracle", "TEST MODE: FDIR ORACLE IDENTIFICATION")
 
         self.health_isolated = JetHealth(n_jets)
         self.health_active = JetHealth(n_jets)
@@ -290,8 +296,11 @@ class Fdir:
             u = self._u8
         if chamber.dtype != np.float64:
             chamber = chamber.astype(np.float64)
-        n_new, n_bad = _jet_monitor(u, chamber, self.health_isolated.state, self._cnt, self._sum_dg,
-                                    self._thr, self._persist_n, self._new_kind, self._eta_new)
+        if self.oracle:       # identification comes from identified() alone
+            n_new = n_bad = 0
+        else:
+            n_new, n_bad = _jet_monitor(u, chamber, self.health_isolated.state, self._cnt, self._sum_dg,
+                                        self._thr, self._persist_n, self._new_kind, self._eta_new)
         if n_bad:
             self._report_nonfinite(t_s, n_bad)
         if n_new:
@@ -299,6 +308,25 @@ class Fdir:
         if t_s + _T_EPS_S >= self._next_apply:
             return self._apply_due(t_s)
         return False
+
+    def identified(self, t_s: float, jet: int, kind: str, eta: float = 1.0) -> None:
+        """Oracle mode (a test mode): the fault of ``jet`` is known as of ``t_s`` (the time the
+        plant applied it), declared as the jet monitor would and applied ``delay_s`` later.
+        kind: failed_off | stuck_on | degraded (0 < eta < 1) | healthy (a cleared fault)."""
+        if not self.oracle:
+            raise ValueError("fdir.identified: only in fdir.mode = oracle")
+        jet = self._check_jet(jet)
+        if kind == "healthy":
+            self.health_isolated.set(jet, NOMINAL)
+            self._t_apply[jet - 1] = t_s + self.delay_s
+            self._next_apply = min(self._next_apply, t_s + self.delay_s)
+            return
+        if kind not in KINDS:
+            raise ValueError(f"kind: must be one of failed_off, stuck_on, degraded, healthy; got {kind!r}")
+        self._new_kind[:] = 0
+        self._new_kind[jet - 1] = KINDS[kind]
+        self._eta_new[jet - 1] = float(eta) if kind == "degraded" else (0.0 if kind == "failed_off" else 1.0)
+        self._declare(t_s)
 
     def _report_nonfinite(self, t_s: float, n_bad: int) -> None:
         self.nonfinite_count += n_bad

@@ -20,9 +20,14 @@ class Param:
     doc: str = ""
     integer: bool = False
     ground_settable: bool = True
+    choices: tuple[str, ...] = ()   # a word parameter (lo/hi unused): its value is one of these
 
-    def check(self, value) -> float:
+    def check(self, value) -> float | str:
         """The validated value, or ValueError with a reason a user can act on."""
+        if self.choices:
+            if value not in self.choices:
+                raise ValueError(f"{self.name}: must be one of {', '.join(self.choices)}, got {value!r}")
+            return value
         if isinstance(value, bool):
             value = float(value)
         if not isinstance(value, (int, float)):

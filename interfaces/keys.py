@@ -13,6 +13,7 @@ ROOT = "ellipsled"
 SENSORS = "sim/sensors"     # sim -> fsw
 JETS = "fsw/jets"           # fsw -> sim
 FAULTS = "sim/faults"       # fsw or test harness -> sim
+FAULT_LOG = "sim/fault_log" # sim -> fsw in oracle identification (a test mode): every fault the plant applied
 TRUTH = "sim/truth"         # sim -> viewers
 STATE = "fsw/state"         # fsw -> viewers
 EVENTS = "fsw/events"       # fsw -> viewers, ground
@@ -30,6 +31,7 @@ class Keys:
     sensors: str
     jets: str
     faults: str
+    fault_log: str
     truth: str
     state: str
     events: str
@@ -68,6 +70,7 @@ def keys(prefix_or_vehicle: str) -> Keys:
         sensors=f"{prefix}/{SENSORS}",
         jets=f"{prefix}/{JETS}",
         faults=f"{prefix}/{FAULTS}",
+        fault_log=f"{prefix}/{FAULT_LOG}",
         truth=f"{prefix}/{TRUTH}",
         state=f"{prefix}/{STATE}",
         events=f"{prefix}/{EVENTS}",

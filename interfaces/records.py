@@ -74,6 +74,18 @@ FAULT = np.dtype([
     ("_pad", "u1", (2,)),          # keeps the record a multiple of 8 bytes
 ])
 
+# sim -> fsw, oracle identification only (a test mode: the paper's perfect identification):
+# one fault the plant applied (sim/plant.py fault_log), published before the sensor frame
+# of the step it acts from. kind: FAULT_KINDS; jet 1..18.
+FAULT_APPLIED = np.dtype([
+    ("k", "<i8"),                  # step from which the fault acts
+    ("t_ns", "<i8"),               # simulated time at which the plant applied it [ns]
+    ("eta", "<f8"),                # thrust factor of a degraded jet, 1 otherwise [-]
+    ("jet", "u1"),                 # 1..18
+    ("kind", "u1"),                # one of FAULT_KINDS
+    ("_pad", "u1", (6,)),          # keeps the record a multiple of 8 bytes
+])
+
 # fsw -> viewers, ground: one event (fsw/events.py Event), fixed width. Strings are
 # UTF-8, NUL-padded; text <= 50 bytes fits one MAVLink STATUSTEXT.
 EVENT = np.dtype([

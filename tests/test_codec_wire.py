@@ -279,7 +279,7 @@ def test_registry_is_unique_and_adding_a_schema_is_one_call():
     ids = [s.schema_id for s in C.REGISTRY.values()]
     assert len(ids) == len(set(ids))
     assert {s.key_suffix for s in C.REGISTRY.values()} <= {
-        keys.SENSORS, keys.JETS, keys.FAULTS, keys.TRUTH, keys.STATE, keys.EVENTS}
+        keys.SENSORS, keys.JETS, keys.FAULTS, keys.FAULT_LOG, keys.TRUTH, keys.STATE, keys.EVENTS}
     with pytest.raises(ValueError):
         C.register("SENSORS", 77, records.SENSORS, 1, "x/y")
     with pytest.raises(ValueError):

@@ -83,3 +83,12 @@ def test_twin_key_depends_on_what_decides_the_flight_only():
     assert reference.twin_key(c1, 2) != key                                      # seed
     assert reference.twin_key(c1.with_(bank0_rad=math.radians(85.0)), 1) != key  # initial state
     assert reference.twin_key(load_scenario("case4"), 1) != key                  # FSW parameters (delay)
+
+
+def test_no_initial_error_variant_starts_on_the_reference():
+    s, h, _ = batch.run("case1", duration_s=12.0, initial_error=False, reference=False)
+    e = np.degrees(h["bank_rad"] - h["bank_ref_rad"])
+    assert s["scenario"] == "case1-no-init-err"
+    assert abs(e[0]) < 0.01                       # the paper's set-up starts 5 deg off
+    s5, h5, _ = batch.run("case1", duration_s=12.0, reference=False)
+    assert np.degrees(h5["bank_rad"][0] - h5["bank_ref_rad"][0]) == pytest.approx(5.0, abs=0.01)

@@ -28,7 +28,7 @@ def test_bad_prefixes_are_refused(bad):
 
 def test_every_key_is_a_canonical_zenoh_key_and_the_wildcard_covers_the_tokens():
     k = K.keys("v1")
-    topics = [k.sensors, k.jets, k.faults, k.truth, k.state, k.events]
+    topics = [k.sensors, k.jets, k.faults, k.fault_log, k.truth, k.state, k.events]
     for key in topics + [k.alive(r) for r in K.ROLES]:
         assert str(zenoh.KeyExpr(key)) == key
     anyk = zenoh.KeyExpr(k.alive_any)

@@ -21,7 +21,7 @@ from fsw import rt
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.frames import wrap_pi  # noqa: E402
-from ellipsled.batch import alloc_sample, fsw_report, prepare  # noqa: E402
+from ellipsled.batch import KIND_OF_FAULT, alloc_sample, fsw_report, prepare_args  # noqa: E402
 from ellipsled.history import History, record_fsw  # noqa: E402
 from fsw.events import EventLog, Severity  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock, sleep_until_ns  # noqa: E402
@@ -55,7 +55,7 @@ class FswNode:
         self.args = args
         self.stop = Stop()
         self.rt_report = apply_rt(ROLE, args)   # before the Zenoh session opens
-        self.scn = prepare(args.scenario, args.ft_off, args.duration)
+        self.scn = prepare_args(args)
         self.events = EventLog()
         self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime")
         self.session, self.K = open_node(ROLE, args, self.rt_report)
@@ -69,6 +69,9 @@ class FswNode:
         self.pub_state = transport.publisher(self.session, self.K.state, express=False, drop=rt_drop)
         self.pub_events = transport.publisher(self.session, self.K.events, express=False, drop=rt_drop)
         self.pub_faults = transport.publisher(self.session, self.K.faults)
+        # oracle identification (a test mode): the plant's fault log is FDIR's identification
+        self.sub_fault_log = transport.subscriber(self.session, self.K.fault_log) if self.fsw.fdir.oracle else None
+        self.dec_fault_log = Codec.for_schema("FAULT_APPLIED", on_reject=self._rejected)
         self.token = transport.declare_alive(self.session, self.K, ROLE)
         # a restarted plant takes over the sensor key after 1 s of silence, not before
         self.dec_sensors = Codec.for_schema("SENSORS", guard=SequenceGuard(takeover_after_s=1.0),
@@ -124,6 +127,21 @@ class FswNode:
             self.frame_age_ns[self.n_frames] = now_ns() - self.dec_sensors.last_t_pub_ns
             self.n_frames += 1
         return True
+
+    def _take_fault_log(self) -> None:
+        """Oracle mode: hand FDIR every fault-log entry that has arrived, each at its fault time."""
+        while True:
+            s = self.sub_fault_log.try_recv()
+            if s is None:
+                return
+            rec = self.dec_fault_log.decode(s.payload.to_bytes())
+            if rec is None:
+                continue
+            kind = KIND_OF_FAULT.get(records.FAULT_NAMES.get(int(rec["kind"]), ""), "healthy")
+            try:
+                self.fsw.fdir.identified(int(rec["t_ns"]) * 1e-9, int(rec["jet"]), kind, float(rec["eta"]))
+            except ValueError as e:      # a bad record is refused, never passed on
+                self._rejected("fault_log", str(e))
 
     def _newest_frame(self):
         """Real time: the newest fresh frame (waiting briefly for the one due), or None."""
@@ -239,6 +257,8 @@ class FswNode:
             if not warm:
                 self._warm_up()
                 warm = True
+            if self.sub_fault_log is not None:
+                self._take_fault_log()
             self.topo.tick(self.frame)
             self._record()
 
@@ -269,6 +289,8 @@ class FswNode:
         self.next_k = lock + 1
         self.n_frames = 0                               # frame ages from here on
         while not self.stop:
+            if self.sub_fault_log is not None:
+                self._take_fault_log()
             self.topo.tick()
             self._record()
 
@@ -313,7 +335,7 @@ class FswNode:
         if self.link is not None:
             self.link.close()
         transport.close(self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
-                        self.pub_faults, self.session)
+                        self.pub_faults, self.sub_fault_log, self.session)
 
 
 def main(args) -> int:

@@ -21,7 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from ellipsled.batch import fault_free_reference, format_summary, judge, prepare
+from ellipsled.batch import (add_variant_arguments, fault_free_reference, format_summary, judge, prepare_args,
+                             variant_argv)
 from ellipsled.history import History, merge
 from interfaces import transport
 
@@ -40,6 +41,7 @@ def add_arguments(p) -> None:
                       help="the plant on its own clock at --speed, the FSW on absolute deadlines")
     p.set_defaults(mode="lockstep")
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
+    add_variant_arguments(p)
     p.add_argument("--out", default="runs/sil", help="output folder")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--ft-off", action="store_true")
@@ -140,7 +142,8 @@ class Launcher:
         common = ["--prefix", a.prefix] + (["--zenoh-config", a.zenoh_config] if a.zenoh_config else []) \
             + ([] if a.zenoh_lowlatency else ["--no-zenoh-lowlatency"])
         scen = [a.scenario] + (["--seed", str(a.seed)] if a.seed is not None else []) \
-            + (["--ft-off"] if a.ft_off else []) + (["--duration", str(a.duration)] if a.duration is not None else [])
+            + (["--ft-off"] if a.ft_off else []) + (["--duration", str(a.duration)] if a.duration is not None else []) \
+            + variant_argv(a)
         mode = ["--realtime" if a.mode == "realtime" else "--lockstep"]
         quiet = a.console
         key = self._key_file()
@@ -192,7 +195,7 @@ class Launcher:
         except (OSError, ValueError, KeyError) as e:
             say(ROLE, f"no complete records to summarize ({e}); see the logs in {self.out}")
             return 1
-        scn = prepare(a.scenario, a.ft_off, a.duration)
+        scn = prepare_args(a)
         seed = scn.seed if a.seed is None else a.seed
         faults = [tuple(x) for x in sim_info["faults_applied"]]
         ref = fault_free_reference(h, scn, seed, faults)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ellipsled.batch import end_reason_of, prepare
+from ellipsled.batch import end_reason_of, prepare_args
 from ellipsled.history import History, record_truth
 from fsw.executive import sleep_until_ns
 from interfaces import records, transport
@@ -44,7 +44,7 @@ class SimNode:
         self.args = args
         self.stop = Stop()
         self.rt_report = apply_rt(ROLE, args)   # before the Zenoh session opens
-        self.scn = prepare(args.scenario, args.ft_off, args.duration)
+        self.scn = prepare_args(args)
         self.seed = self.scn.seed if args.seed is None else args.seed
         self.plant = Plant(self.scn, self.seed)
         self.session, self.K = open_node(ROLE, args, self.rt_report)
@@ -58,6 +58,11 @@ class SimNode:
         self.pub_truth = transport.publisher(self.session, self.K.truth, drop=rt_drop)
         self.sub_jets = transport.subscriber(self.session, self.K.jets, newest_only=args.mode == "realtime")
         self.sub_faults = transport.subscriber(self.session, self.K.faults)
+        # the fault log, for an FSW in oracle identification (a test mode); loss-free in both modes
+        self.pub_fault_log = transport.publisher(self.session, self.K.fault_log)
+        self.enc_fault_log = Codec.for_schema("FAULT_APPLIED")
+        self.fault_applied = records.new(records.FAULT_APPLIED)
+        self.faults_published = 0
         self.token = transport.declare_alive(self.session, self.K, ROLE)
         self.enc_sensors = Codec.for_schema("SENSORS")
         self.enc_truth = Codec.for_schema("TRUTH")
@@ -105,6 +110,18 @@ class SimNode:
             self.counts["faults_applied"] += 1
             say(ROLE, f"t={self.plant.t_s:.2f}s fault applied: jet {jet or 'all'} {kind}"
                       + (f" eta={eta:g}" if kind == "degraded" else ""))
+
+    def publish_fault_log(self) -> None:
+        """Every fault the plant applied since the last call, before the frame of the step it
+        acts from (the same session and link: it reaches the FSW first)."""
+        log = self.plant.fault_log
+        f = self.fault_applied
+        while self.faults_published < len(log):
+            t, jet, kind = log[self.faults_published]
+            f["k"], f["t_ns"] = self.plant.k, int(round(t * 1e9))
+            f["jet"], f["kind"], f["eta"] = jet, records.FAULT_CODES[kind], float(self.plant.fault_eta[jet - 1])
+            self.pub_fault_log.put(self.enc_fault_log.encode(f, self.faults_published, now_ns()))
+            self.faults_published += 1
 
     # ------------------------------------------------------------------ I/O
     def publish_sensors(self) -> int:
@@ -159,6 +176,7 @@ class SimNode:
     def run_lockstep(self) -> None:
         while not self.stop:
             self.apply_faults()
+            self.publish_fault_log()
             self.publish_sensors()
             if not self.wait_command(self.plant.k):
                 return
@@ -180,6 +198,7 @@ class SimNode:
             if now_ns() > release + period:      # fell a whole period behind: re-phase, count it
                 self.counts["late_commands"] += 1
             self.apply_faults()
+            self.publish_fault_log()
             t_pub = self.publish_sensors()
             deadline = release + period - margin
             got = False
@@ -260,7 +279,8 @@ class SimNode:
         (out / "sim.json").write_text(json.dumps(info, indent=2) + "\n")
 
     def close(self) -> None:
-        transport.close(self.token, self.sub_jets, self.sub_faults, self.pub_sensors, self.pub_truth, self.session)
+        transport.close(self.token, self.sub_jets, self.sub_faults, self.pub_sensors, self.pub_truth,
+                        self.pub_fault_log, self.session)
 
 
 def main(args) -> int:

@@ -21,6 +21,7 @@ from interfaces import records
 from sim.plant import Plant
 
 from .history import History, record_fsw, record_truth
+from .terminal import RunProgress, files_written
 from .metrics import summarize
 
 KIND_OF_FAULT = {"off": "failed_off", "stuck": "stuck_on", "degraded": "degraded"}
@@ -181,6 +182,9 @@ def tell_faults(fsw: FlightSoftware, fault_log: list, start: int, eta_of) -> int
     return len(fault_log)
 
 
+PROGRESS_EVERY = 50       # steps between progress reports (1 s of simulated time at 50 Hz)
+
+
 def end_reason_of(reason: str, duration_s: float | None) -> str:
     return "duration" if duration_s is not None and reason == "timeout" else reason
 
@@ -197,10 +201,12 @@ def fault_free_reference(h: History, scn: Scenario, seed: int, faults_applied: l
 
 def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False, duration_s: float | None = None,
         verify_every: int = 1000, reference: bool = True, reference_cache: str | Path | None = None,
-        identification: str | None = None, initial_error: bool = True) -> tuple[dict, History, FlightSoftware]:
+        identification: str | None = None, initial_error: bool = True,
+        on_progress=None) -> tuple[dict, History, FlightSoftware]:
     """Fly one scenario; returns (summary, history, fsw). ``reference``: also fly (or take
     from ``reference_cache``, default the user cache) the fault-free twin for the
-    fault-attributable figures. ``identification`` and ``initial_error``: see prepare()."""
+    fault-attributable figures. ``identification`` and ``initial_error``: see prepare().
+    ``on_progress(t_s)`` is called every PROGRESS_EVERY steps with the simulated time reached."""
     scn = prepare(scenario, ft_off, duration_s, identification, initial_error)
     seed = scn.seed if seed is None else seed
     plant = Plant(scn, seed)
@@ -220,6 +226,8 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
         u = topo.u
         if verify_every and plant.k % verify_every == 0:
             samples.append(alloc_sample(fsw))
+        if on_progress is not None and plant.k % PROGRESS_EVERY == 0:
+            on_progress(plant.t_s)
         i = h.row()
         record_truth(h, i, plant.fill_truth(trec))
         record_fsw(h, i, fsw, u, topo.last_compute_ns)
@@ -247,13 +255,15 @@ def write_outputs(summary: dict, h: History, out: Path, plots: bool = True) -> N
 
 
 def main(args) -> int:
-    summary, h, fsw = run(prepare_args(args), seed=args.seed)
+    scn = prepare_args(args)
+    with RunProgress(f"{scn.name} batch", scn.max_duration_s) as bar:
+        summary, h, fsw = run(scn, seed=args.seed, on_progress=bar.update)
     write_outputs(summary, h, Path(args.out), plots=not args.no_plots)
     if getattr(args, "rrd", False):
         from gse.viz import record_history
         print(f"wrote {record_history(h, fsw.events.history, Path(args.out) / 'run.rrd')}")
     print(format_summary(summary))
-    print(f"wrote {Path(args.out) / 'summary.json'}")
+    print(files_written(Path(args.out)))
     return 0 if summary["completed"] else 1
 
 

@@ -7,6 +7,11 @@ finishes, or on Ctrl-C / SIGTERM, every child is stopped by its pid (SIGTERM, th
 after a timeout). The run writes the same summary.json as the batch runner, plus sil.json
 (speed, latency, jitter) and the per-process records. Across machines: pass
 --zenoh-config FILE (router or peers, TLS, access control) — configuration, not code.
+
+The terminal shows what a user needs to find: the children's lines (their logs, relayed:
+the viewer's URL, the recording's path, faults applied), the signing key, a progress bar
+of simulated time (when the terminal is one), and at the end the summary and every file
+written with how to open the recording.
 """
 from __future__ import annotations
 
@@ -24,12 +29,15 @@ from pathlib import Path
 from ellipsled.batch import (add_variant_arguments, fault_free_reference, format_summary, judge, prepare_args,
                              variant_argv)
 from ellipsled.history import History, merge
+from ellipsled.terminal import ProgressFile, RunProgress, files_written
 from interfaces import transport
 
 from .common import DEFAULT_PREFIX, say
 
 ROLE = "run"
 STOP_TIMEOUT_S = 5.0
+ROLES = ("viz", "fsw", "sim")
+
 
 
 def add_arguments(p) -> None:
@@ -69,6 +77,33 @@ def add_arguments(p) -> None:
     p.add_argument("--no-plots", action="store_true")
 
 
+class LogRelay:
+    """Follows the children's log files and hands each complete new line to ``emit``."""
+
+    def __init__(self, emit):
+        self.emit = emit
+        self.files = []
+
+    def follow(self, path: Path) -> None:
+        self.files.append([open(path, "rb"), b""])
+
+    def pump(self) -> None:
+        for entry in self.files:
+            data = entry[0].read()
+            if not data:
+                continue
+            *lines, entry[1] = (entry[1] + data).split(b"\n")
+            for line in lines:
+                self.emit(line.decode("utf-8", "replace").rstrip())
+
+    def close(self) -> None:
+        for f, rest in self.files:
+            if rest:
+                self.emit(rest.decode("utf-8", "replace").rstrip())
+            f.close()
+        self.files = []
+
+
 class Launcher:
     def __init__(self, args):
         self.args = args
@@ -78,6 +113,8 @@ class Launcher:
         self.logs = []
         self.stop = False
         self.tmpdir = None
+        self.progress = None
+        self.relay = None
 
     def _on_signal(self, signum, frame):
         self.stop = True
@@ -93,15 +130,21 @@ class Launcher:
         SigningKey.generate().write_file(path)
         return path
 
-    def spawn(self, role: str, argv: list[str], quiet: bool) -> None:
-        cmd = [sys.executable, "-m", "ellipsled.cli"] + argv
-        if quiet:
-            log = open(self.out / f"{role}.log", "w")
-            self.logs.append(log)
-            p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    def say(self, text: str) -> None:
+        if self.progress is not None:
+            self.progress.print(f"[{ROLE}] {text}")
         else:
-            p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
-        self.children[role] = p
+            say(ROLE, text)
+
+    def spawn(self, role: str, argv: list[str]) -> None:
+        """A child with its output in ROLE.log (relayed to the terminal unless the console has it)."""
+        cmd = [sys.executable, "-m", "ellipsled.cli"] + argv
+        path = self.out / f"{role}.log"
+        log = open(path, "w")
+        self.logs.append(log)
+        self.children[role] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        if self.relay is not None:
+            self.relay.follow(path)
 
     def terminate(self, role: str) -> int | None:
         p = self.children.get(role)
@@ -112,7 +155,7 @@ class Launcher:
             try:
                 p.wait(STOP_TIMEOUT_S)
             except subprocess.TimeoutExpired:
-                say(ROLE, f"{role} (pid {p.pid}) did not stop within {STOP_TIMEOUT_S:g} s: killing it")
+                self.say(f"{role} (pid {p.pid}) did not stop within {STOP_TIMEOUT_S:g} s: killing it")
                 p.kill()
                 p.wait(STOP_TIMEOUT_S)
         return p.returncode
@@ -125,6 +168,7 @@ class Launcher:
         finally:
             for role in ("sim", "fsw", "viz"):
                 self.terminate(role)
+            self._end_terminal()
             for log in self.logs:
                 log.close()
             if self.tmpdir:
@@ -145,41 +189,71 @@ class Launcher:
             + (["--ft-off"] if a.ft_off else []) + (["--duration", str(a.duration)] if a.duration is not None else []) \
             + variant_argv(a)
         mode = ["--realtime" if a.mode == "realtime" else "--lockstep"]
-        quiet = a.console
         key = self._key_file()
+        if not a.console:               # the console owns the terminal otherwise
+            self.relay = LogRelay(self.say_child)
+            scn = prepare_args(a)
+            self.progress = RunProgress(f"{scn.name} {a.mode}", scn.max_duration_s)
+        fd, self.progress_path = tempfile.mkstemp(prefix="ellipsled-progress-")
+        os.close(fd)
         viz = a.rerun != "none"
         if viz:
             self.spawn("viz", ["viz", "--connect", endpoint, "--connect", fsw_endpoint, "--rerun", a.rerun, "--out", str(self.out),
-                               "--name", "run"] + common, quiet=True)
+                               "--name", "run"] + common)
         self.spawn("fsw", ["fsw"] + scen + mode + common + ["--connect", endpoint, "--listen", fsw_endpoint,
                                                            "--out", str(self.out), "--signing-key", key,
                                                            "--mavlink-bind", a.mavlink_bind, "--gcs", a.gcs]
                    + (["--rt", "--cpu", "1"] if self.rt else [])
-                   + (["--rt-offset-us", f"{a.rt_offset_us:g}"] if a.rt_offset_us is not None else []), quiet)
+                   + (["--rt-offset-us", f"{a.rt_offset_us:g}"] if a.rt_offset_us is not None else []))
         self.spawn("sim", ["sim"] + scen + mode + common + ["--listen", endpoint, "--out", str(self.out),
-                                                           "--speed", str(a.speed), "--fsw-timeout", str(a.fsw_timeout)]
-                   + (["--wait-bridge"] if viz else []) + (["--rt", "--cpu", "0"] if self.rt else []), quiet)
-        say(ROLE, f"SIL {a.mode}: plant on {endpoint}; pids " +
-            ", ".join(f"{r} {p.pid}" for r, p in self.children.items()))
-        if not a.signing_key and self.tmpdir:
-            say(ROLE, f"ground link signing key for this run: {key} "
-                      f"(e.g. ELLIPSLED_SIGNING_KEY_FILE={key} ellipsled gse inject --jet 17 --kind off)")
+                                                           "--speed", str(a.speed), "--fsw-timeout", str(a.fsw_timeout),
+                                                           "--progress-file", self.progress_path]
+                   + (["--wait-bridge"] if viz else []) + (["--rt", "--cpu", "0"] if self.rt else []))
+        self.say(f"SIL {a.mode}: plant on {endpoint}; pids " +
+                 ", ".join(f"{r} {p.pid}" for r, p in self.children.items()) + f"; logs in {self.out}")
+        self.say(f"ground link: vehicle {a.mavlink_bind}, telemetry to {a.gcs}; signing key {key} "
+                 f"(e.g. ELLIPSLED_SIGNING_KEY_FILE={key} ellipsled gse console)")
         if a.console:
             self._console(key)
         sim = self.children["sim"]
         while not self.stop and sim.poll() is None:
             time.sleep(0.05)
+            self._pump_terminal()
             for role in ("fsw", "viz"):
                 p = self.children.get(role)
                 if p is not None and p.poll() is not None and not getattr(p, "_reported", False):
                     p._reported = True
-                    say(ROLE, f"{role} (pid {p.pid}) exited with {p.returncode}")
+                    self.say(f"{role} (pid {p.pid}) exited with {p.returncode}")
         if self.stop:
-            say(ROLE, "stopping (signal)")
+            self.say("stopping (signal)")
         rc_sim = self.terminate("sim")
         self.terminate("fsw")
         self.terminate("viz")
+        self._end_terminal()
         return self.summarize(rc_sim)
+
+    def say_child(self, line: str) -> None:
+        if self.progress is not None:
+            self.progress.print(line)
+
+    def _pump_terminal(self) -> None:
+        if self.relay is not None:
+            self.relay.pump()
+        if self.progress is not None:
+            t = ProgressFile.read(self.progress_path)
+            if t is not None:
+                self.progress.update(t)
+
+    def _end_terminal(self) -> None:
+        """The children's last lines, then the bar goes (the summary prints below it)."""
+        self._pump_terminal()
+        if self.relay is not None:
+            self.relay.close()
+            self.relay = None
+        if self.progress is not None:
+            self.progress.close()
+        if getattr(self, "progress_path", None):
+            Path(self.progress_path).unlink(missing_ok=True)
 
     def _console(self, key: str) -> None:
         """The ground console in the foreground; the run goes on until the user quits it."""
@@ -193,7 +267,7 @@ class Launcher:
             fsw_info = json.loads((self.out / "fsw.json").read_text())
             h = merge(History.load(self.out / "sim_history.npz"), History.load(self.out / "fsw_history.npz"))
         except (OSError, ValueError, KeyError) as e:
-            say(ROLE, f"no complete records to summarize ({e}); see the logs in {self.out}")
+            self.say(f"no complete records to summarize ({e}); see the logs in {self.out}")
             return 1
         scn = prepare_args(a)
         seed = scn.seed if a.seed is None else a.seed
@@ -223,8 +297,9 @@ class Launcher:
             print(f"  real time: latency p50 {f(sil['latency_p50_us'])} us p99 {f(sil['latency_p99_us'])} us;"
                   f" release jitter p50 {f(sil['jitter_p50_us'])} us p99 {f(sil['jitter_p99_us'])} us"
                   f" max {f(sil['jitter_max_us'])} us; slips {sil['slips']}")
-        print(f"wrote {self.out / 'summary.json'}")
+        print(files_written(self.out))
         return 0 if summary["completed"] else 1
+
 
 
 def main(args) -> int:

@@ -18,6 +18,7 @@ import numpy as np
 
 from ellipsled.batch import end_reason_of, prepare_args
 from ellipsled.history import History, record_truth
+from ellipsled.terminal import ProgressFile
 from fsw.executive import sleep_until_ns
 from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard
@@ -37,6 +38,8 @@ def add_arguments(p) -> None:
     p.add_argument("--wait-bridge", action="store_true", help="also wait for the Rerun bridge before step 0")
     p.add_argument("--miss-periods", type=int, default=3,
                    help="real time: hold jets off after this many periods without a fresh command")
+    p.add_argument("--progress-file", default=None, metavar="PATH",
+                   help="keep the simulated time reached in this file (ellipsled run's progress bar)")
 
 
 class SimNode:
@@ -80,6 +83,7 @@ class SimNode:
         self.n_latency = 0
         self.end_reason = ""
         self.message = ""
+        self.progress = ProgressFile(args.progress_file) if args.progress_file else None
 
     def _rejected(self, reason: str, detail: str) -> None:
         self.rejects[reason] = self.rejects.get(reason, 0) + 1
@@ -138,6 +142,8 @@ class SimNode:
         """Record and publish the truth of step k; then either end the run (True) or
         integrate [t_k, t_k+1) with the command now held."""
         self.record_and_publish_truth()
+        if self.progress is not None:
+            self.progress.write(self.plant.t_s)
         done, reason = self.plant.done()
         if done:
             self.end_reason = reason
@@ -279,6 +285,9 @@ class SimNode:
         (out / "sim.json").write_text(json.dumps(info, indent=2) + "\n")
 
     def close(self) -> None:
+        if self.progress is not None:
+            self.progress.write(self.plant.t_s, force=True)
+            self.progress.close()
         transport.close(self.token, self.sub_jets, self.sub_faults, self.pub_sensors, self.pub_truth,
                         self.pub_fault_log, self.session)
 

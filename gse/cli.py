@@ -51,6 +51,10 @@ def add_gse_parser(subparsers) -> argparse.ArgumentParser:
 
     p = sub.add_parser("console", help="terminal UI: live state, jets, events; commands by key or line")
     _common(p, 14550)
+    p.add_argument("--view-only", action="store_true",
+                   help="watch without the signing key: nothing is sent, telemetry is shown unverified")
+    p.add_argument("--replay", default=None, metavar="FILE.tlog", help="play a recorded .tlog on the same screens")
+    p.add_argument("--speed", type=float, default=1.0, help="replay pace, times the recorded one (default 1)")
     p.set_defaults(func=_run_console)
 
     p = sub.add_parser("inject", help="inject a jet fault in the plant (MAV_CMD_INJECT_FAILURE)")
@@ -96,7 +100,7 @@ def add_gse_parser(subparsers) -> argparse.ArgumentParser:
 # ---------------------------------------------------------------- running
 
 def _client(a, link_id: int) -> GroundClient:
-    key = load_key(a.signing_key)
+    key = None if getattr(a, "view_only", False) else load_key(a.signing_key)
     vehicle = a.vehicle
     if vehicle is None and a.gse_cmd != "console":
         vehicle = DEFAULT_VEHICLE
@@ -189,7 +193,11 @@ def execute(client: GroundClient, req: Request, *, timeout_s: float = 1.0, retri
 
 def _run_console(a) -> int:
     try:
-        client = _client(a, 0)
+        if a.replay is not None:
+            from .replay import TlogReplay
+            client = TlogReplay(a.replay, speed=a.speed)
+        else:
+            client = _client(a, 0)
     except (SigningKeyError, OSError, ValueError) as e:
         print(f"gse console: {e}", file=sys.stderr)
         return EXIT_USAGE

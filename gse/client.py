@@ -12,6 +12,11 @@ Signing: every frame sent is signed with the key (commands and parameter writes 
 each client should use its own ``link_id`` when several share one key and system/component
 id (the console uses 0, the CLI a per-process one), so their timestamp streams stay apart.
 
+Watching without the key (``key=None``: the view-only console, a recorded log): frames
+whose CRC is right are decoded without checking their signature, and nothing is sent; what
+is shown is then unverified, and it authorises nothing. ``listen=None`` opens no socket:
+frames come from ``feed`` (gse/replay.py drives it from a .tlog).
+
 Nothing here blocks except the explicit waiting calls (``wait_*``, ``command``,
 ``param_*``), which poll with ``select`` up to their timeout.
 """
@@ -26,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.framing import FrameSplitter
+from interfaces.mavlink.framing import FrameSplitter, parse_header
 from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
 
 from fsw.groundlink import parse_udp      # one parser of "udp:HOST:PORT" for both ends
@@ -105,27 +110,54 @@ class VehicleState:
     events_total: int = 0
 
 
+class WatchLink:
+    """Receive side for watching without the key: splits datagrams into frames (CRC checked
+    by the splitter) and decodes them; signatures are NOT checked (a signed frame is marked
+    signed because it carries one). Sends nothing."""
+
+    def __init__(self):
+        self.splitter = FrameSplitter()
+        self._decoder = mav.MAVLink(None)
+        self._decoder.robust_parsing = True
+
+    def receive(self, datagram) -> list:
+        out = []
+        for frame in self.splitter.split_datagram(datagram):
+            try:
+                msg = self._decoder.decode(bytearray(frame))
+            except Exception:               # pymavlink raises MAVError and others
+                continue
+            if isinstance(msg, (mav.MAVLink_bad_data, mav.MAVLink_unknown)):
+                continue
+            hdr = parse_header(frame)
+            msg._signed = bool(hdr is not None and hdr.signed)
+            out.append(msg)
+        return out
+
+
 class GroundClient:
     """One ground station end of the link (see the module docstring)."""
 
-    def __init__(self, key: SigningKey, *, listen: str = DEFAULT_LISTEN, vehicle: str | None = None,
+    def __init__(self, key: SigningKey | None, *, listen: str | None = DEFAULT_LISTEN, vehicle: str | None = None,
                  system_id: int = GCS_SYSTEM_ID, component_id: int = GCS_COMPONENT_ID, link_id: int = 0,
                  tlog: str | os.PathLike[str] | None = None, clock=time.time):
-        if not isinstance(key, SigningKey):
-            raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
+        if key is not None and not isinstance(key, SigningKey):
+            raise TypeError("key must be a SigningKey (interfaces.mavlink.signing) or None (watch only)")
         self.clock = clock
-        self.link = SignedLink(key, system_id=system_id, component_id=component_id, link_id=link_id,
-                               on_reject=self._on_reject)
+        self.link = WatchLink() if key is None else SignedLink(
+            key, system_id=system_id, component_id=component_id, link_id=link_id, on_reject=self._on_reject)
+        self.view_only = key is None
         self.vehicle_addr: tuple[str, int] | None = parse_udp(vehicle, "vehicle") if vehicle else None
         self._vehicle_fixed = self.vehicle_addr is not None
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        addr = parse_udp(listen, "listen")
-        try:
-            self.sock.bind(addr)
-        except OSError as e:
-            self.sock.close()
-            raise OSError(f"ground client cannot listen on {listen}: {e.strerror or e}") from None
-        self.sock.setblocking(False)
+        self.sock = None
+        if listen is not None:
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                self.sock.bind(parse_udp(listen, "listen"))
+            except OSError as e:
+                self.sock.close()
+                raise OSError(f"ground client cannot listen on {listen}: {e.strerror or e}") from None
+            self.sock.setblocking(False)
         self.tlog = TlogWriter(tlog) if tlog is not None else None
         self._splitter = FrameSplitter()
         self.state = VehicleState()
@@ -143,7 +175,8 @@ class GroundClient:
         return self.sock.getsockname()
 
     def close(self) -> None:
-        self.sock.close()
+        if self.sock is not None:
+            self.sock.close()
         if self.tlog is not None:
             self.tlog.close()
 
@@ -163,8 +196,9 @@ class GroundClient:
         self.rejections.append(rej)
 
     def send(self, msg) -> bool:
-        """Sign and send one message to the vehicle; False if its address is not known yet."""
-        if self.vehicle_addr is None:
+        """Sign and send one message to the vehicle; False if its address is not known yet
+        (or when watching without the key: nothing is ever sent)."""
+        if self.vehicle_addr is None or self.view_only or self.sock is None:
             return False
         frame = self.link.pack(msg)
         try:
@@ -186,6 +220,9 @@ class GroundClient:
         """Receive every waiting datagram (waiting up to ``timeout_s`` for the first);
         returns the number of messages accepted. Also services pending commands."""
         n = 0
+        if self.sock is None:
+            self.service()
+            return 0
         if timeout_s > 0:
             try:
                 select.select([self.sock], [], [], timeout_s)
@@ -198,26 +235,31 @@ class GroundClient:
                 break
             except OSError:
                 continue
-            data = bytes(self._buf[:size])
-            now = self.clock()
-            self.stats["rx_datagrams"] += 1
-            if self.tlog is not None:
-                for frame in self._splitter.split_datagram(data):
-                    self.tlog.write(frame, now)
-                    self.stats["rx_frames"] += 1
-            for msg in self.link.receive(data):
-                if msg.get_srcSystem() != VEHICLE_SYSTEM_ID:
-                    continue
-                if not msg.get_signed():        # only a vehicle heartbeat may be unsigned
-                    if msg.get_type() != "HEARTBEAT":
-                        continue
-                if not self._vehicle_fixed and self.vehicle_addr != addr and msg.get_signed():
-                    self.vehicle_addr = addr
-                self._rx_times.append(now)
-                self.stats["rx_messages"] += 1
-                self._update(msg, now)
-                n += 1
+            n += self.feed(bytes(self._buf[:size]), addr, self.clock())
         self.service()
+        return n
+
+    def feed(self, data: bytes, addr: tuple[str, int] | None, now: float) -> int:
+        """One datagram from ``addr`` received at ``now`` (Unix s): recorded, verified (with
+        a key), folded into ``state``; returns the number of vehicle messages taken."""
+        n = 0
+        self.stats["rx_datagrams"] += 1
+        if self.tlog is not None:
+            for frame in self._splitter.split_datagram(data):
+                self.tlog.write(frame, now)
+                self.stats["rx_frames"] += 1
+        for msg in self.link.receive(data):
+            if msg.get_srcSystem() != VEHICLE_SYSTEM_ID:
+                continue
+            if not msg.get_signed():        # only a vehicle heartbeat may be unsigned
+                if msg.get_type() != "HEARTBEAT":
+                    continue
+            if not self._vehicle_fixed and addr is not None and self.vehicle_addr != addr and msg.get_signed():
+                self.vehicle_addr = addr
+            self._rx_times.append(now)
+            self.stats["rx_messages"] += 1
+            self._update(msg, now)
+            n += 1
         return n
 
     def _update(self, msg, now: float) -> None:

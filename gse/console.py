@@ -12,6 +12,10 @@ the command line is not focused (Escape leaves it, ":" enters it):
   a arm/disarm toggle   f fault tolerance toggle   1 STANDBY  2 ENTRY  3 SAFE   q quit
 Commands go out without blocking the UI; their ACK (or TIMEOUT after the retries)
 appears in the acknowledgements panel.
+
+The same screens watch without commanding: over a client without the key (``--view-only``:
+telemetry shown unverified, nothing sent) or over a recorded .tlog (``--replay``,
+gse/replay.py); the top line says which, and a command is answered "not sent".
 """
 from __future__ import annotations
 
@@ -23,6 +27,7 @@ from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.widgets import Footer, Input, RichLog, Static
 
 from interfaces.mavlink import dialect as mav
@@ -89,6 +94,9 @@ class GroundConsole(App):
         self.ft_on = True
         self._events_shown = 0
         self._last_hb = 0.0
+        replay = getattr(client, "path", None)
+        self.watch_only = (f"replay of {replay.name}" if replay is not None
+                           else "view only: no signing key" if client.view_only else "")
 
     # ---------------------------------------------------------------- layout
     def compose(self) -> ComposeResult:
@@ -105,7 +113,7 @@ class GroundConsole(App):
         yield Footer()
 
     def on_mount(self) -> None:
-        self.title = "ellipsled ground console"
+        self.title = "ellipsled ground console" + (f" ({self.watch_only})" if self.watch_only else "")
         self.query_one("#events", RichLog).border_title = "events"
         self.query_one("#acks", RichLog).border_title = "acknowledgements"
         self.set_interval(self.poll_s, self._pump)
@@ -114,9 +122,15 @@ class GroundConsole(App):
 
     # ---------------------------------------------------------------- link pump
     def _pump(self) -> None:
+        try:
+            self._pump_link()
+        except NoMatches:           # a timer that fires while the app shuts down
+            pass
+
+    def _pump_link(self) -> None:
         c = self.client
         now = time.monotonic()
-        if now - self._last_hb >= self.heartbeat_s:
+        if now - self._last_hb >= self.heartbeat_s and not self.watch_only:
             c.send_heartbeat()
             self._last_hb = now
         c.poll(0.0)
@@ -151,6 +165,9 @@ class GroundConsole(App):
         self._send(req)
 
     def _send(self, req) -> None:
+        if self.watch_only:
+            self._ack_line(f"{req.label}: not sent ({self.watch_only})")
+            return
         if self.client.vehicle_addr is None:
             self._ack_line(f"{req.label}: no vehicle yet (no telemetry received)")
             return
@@ -194,6 +211,12 @@ class GroundConsole(App):
 
     # ---------------------------------------------------------------- view
     def refresh_view(self) -> None:
+        try:
+            self._refresh_view()
+        except NoMatches:           # a timer that fires while the app shuts down
+            pass
+
+    def _refresh_view(self) -> None:
         c = self.client
         st = c.state
         hb = st.latest.get("HEARTBEAT")
@@ -209,6 +232,13 @@ class GroundConsole(App):
                 (f" {MODE_NAMES.get(hb.custom_mode, hb.custom_mode)} ", "bold"), (f"{status} ", style),
                 f"{armed}  link: hb {age:.1f}s ago  rx {c.rate_hz('rx'):.0f}/s  tx {c.rate_hz('tx'):.1f}/s  "
                 f"rejected {c.rejected}  vehicle {where}")
+        if self.watch_only:
+            label = self.watch_only
+            if hasattr(c, "duration_s"):
+                label += f" x{c.speed:g} {c.clock() - c.records[0][0] * 1e-6:.0f}/{c.duration_s:.0f} s" \
+                         + (" (end)" if c.done else "")
+            top = Text.assemble((f" {label.upper()} ", "bold black on yellow"),
+                                (" telemetry not verified " if c.view_only else ""), top)
         self.query_one("#top", Static).update(top)
         self.query_one("#entry", Static).update(self._entry_table())
         self.query_one("#jets", Static).update(self._jet_table())

@@ -128,23 +128,14 @@ def test_files_written_lists_what_exists_and_how_to_open_the_recording(tmp_path)
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed (apt-get install tmux)")
 def test_batch_shows_a_progress_bar_in_a_real_terminal(tmp_path):
     """A batch run inside tmux (a real pseudo-terminal): the bar shows simulated time and speed."""
-    name = f"ellipsled-bar-{int(time.time() * 1e3) % 10**9}"
+    from tests.test_console_terminal import Tmux
     out = tmp_path / "b"
-    cmd = " ".join(PY + ["batch", "nominal", "--no-plots", "--out", str(out)])
-    subprocess.run(["tmux", "new-session", "-d", "-s", name, "-x", "150", "-y", "30",
-                    f"{cmd}; echo EXIT-$?; sleep 60"], check=True)
+    term = Tmux("ellipsled-bar", PY + ["batch", "nominal", "--no-plots", "--out", str(out)], size=(150, 30))
     try:
-        screen = ""
-        end = time.monotonic() + 240
-        while time.monotonic() < end:
-            screen = subprocess.run(["tmux", "capture-pane", "-p", "-t", name], capture_output=True,
-                                    text=True).stdout
-            if "EXIT-" in screen:
-                break
-            time.sleep(0.5)
+        screen = term.wait_for(lambda s: "EXIT-" in s, 240, "the batch run to end")
         assert "EXIT-0" in screen, screen
         bar = [ln for ln in screen.splitlines() if "nominal batch" in ln]
         assert bar and "/ 700 s" in bar[-1] and "x real time" in bar[-1], screen
         assert f"files in {out}" in screen and "summary.json" in screen
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True)
+        term.kill()

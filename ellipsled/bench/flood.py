@@ -1,0 +1,137 @@
+"""A hostile ground: floods the vehicle's MAVLink port with what a radio can bring.
+
+``python -m ellipsled.bench.flood --target udp:127.0.0.1:14555 --rate 2500 --seconds 12``
+sends, at ``rate`` datagrams per second (paced every millisecond), a seeded mix of:
+
+| kind        | what                                                                      |
+|-------------|---------------------------------------------------------------------------|
+| random      | 1..300 random bytes                                                       |
+| malformed   | a signed COMMAND_LONG frame truncated, or with its length byte or CRC wrong |
+| unsigned    | a well-formed unsigned COMMAND_LONG (disarm) and PARAM_SET                |
+| badsig      | COMMAND_LONG / PARAM_SET signed with another key (current and future time) |
+| replay      | genuine signed frames captured earlier (``--replay FILE``, .tlog records)  |
+| oversized   | a 60,000-byte datagram of back-to-back bad frames and noise               |
+
+Loopback only (the target must be 127.0.0.1). Prints one JSON line at the end: the count
+sent per kind and the achieved rate. Nothing here knows the vehicle's key.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import socket
+import sys
+import time
+
+from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.signing import Signer, SigningKey
+
+# share of each kind in the mix (oversized datagrams are few: each is 60 kB)
+MIX = {"random": 20, "malformed": 20, "unsigned": 15, "badsig": 25, "replay": 18, "oversized": 2}
+OVERSIZED_BYTES = 60_000
+DISARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0)
+SAFE = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_SET_MODE, 0, 2, 0, 0, 0, 0, 0, 0)
+PARAM = mav.MAVLink_param_set_message(1, 1, b"C_LAMBDA_RADPS", 50.0, mav.MAV_PARAM_TYPE_REAL32)
+
+
+class Flood:
+    """Datagram maker; ``next()`` returns (kind, datagram)."""
+
+    def __init__(self, seed: int = 1, replay: list[bytes] | None = None):
+        self.rng = random.Random(seed)
+        self.replay = replay or []
+        self.forger = Signer(SigningKey.generate(), system_id=255, component_id=190, link_id=0)
+        # a forged frame a day ahead: a verify-after-store link would lock the ground out
+        self.future = Signer(SigningKey.generate(), system_id=255, component_id=190, link_id=0,
+                             clock=lambda: time.time() + 86_400.0)
+        self.unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        kinds = [k for k in MIX if k != "replay" or self.replay]
+        self.kinds, self.weights = kinds, [MIX[k] for k in kinds]
+        self._oversized = self._make_oversized()
+
+    def _make_oversized(self) -> bytes:
+        parts, n = [], 0
+        while n < OVERSIZED_BYTES:
+            p = self._malformed() if self.rng.random() < 0.5 else self.rng.randbytes(200)
+            parts.append(p)
+            n += len(p)
+        return b"".join(parts)[:OVERSIZED_BYTES]
+
+    def _malformed(self) -> bytes:
+        f = bytearray(self.forger.pack(self.rng.choice((DISARM, SAFE))))
+        how = self.rng.randrange(3)
+        if how == 0:
+            return bytes(f[:self.rng.randrange(1, len(f))])          # truncated
+        if how == 1:
+            f[1] = self.rng.randrange(256)                            # length corrupted
+        else:
+            f[-15] ^= 0xFF                                            # CRC wrong
+        return bytes(f)
+
+    def next(self) -> tuple[str, bytes]:
+        kind = self.rng.choices(self.kinds, self.weights)[0]
+        if kind == "random":
+            return kind, self.rng.randbytes(self.rng.randrange(1, 301))
+        if kind == "malformed":
+            return kind, self._malformed()
+        if kind == "unsigned":
+            return kind, self.rng.choice((DISARM, PARAM)).pack(self.unsigned)
+        if kind == "badsig":
+            signer = self.future if self.rng.random() < 0.2 else self.forger
+            return kind, signer.pack(self.rng.choice((DISARM, SAFE, PARAM)))
+        if kind == "replay":
+            return kind, self.rng.choice(self.replay)
+        return kind, self._oversized
+
+
+def run(target: tuple[str, int], rate: float, seconds: float, seed: int = 1,
+        replay: list[bytes] | None = None) -> dict:
+    if target[0] != "127.0.0.1":
+        raise ValueError("the flood stays on loopback: target must be 127.0.0.1")
+    fl = Flood(seed, replay)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 << 20)
+    counts = {k: 0 for k in MIX}
+    errors = 0
+    t0 = time.monotonic()
+    sent = 0
+    while True:
+        now = time.monotonic()
+        if now - t0 >= seconds:
+            break
+        due = int((now - t0) * rate) + 1
+        while sent < due:
+            kind, data = fl.next()
+            try:
+                sock.sendto(data, target)
+            except OSError:                  # e.g. ECONNREFUSED from an earlier ICMP: go on
+                errors += 1
+            counts[kind] += 1
+            sent += 1
+        time.sleep(0.001)
+    elapsed = time.monotonic() - t0
+    sock.close()
+    return {"sent": sent, "seconds": elapsed, "rate_per_s": sent / elapsed, "by_kind": counts,
+            "send_errors": errors}
+
+
+def main(argv: list[str] | None = None) -> int:
+    from fsw.groundlink import parse_udp
+    from gse.tlog import read_records
+    ap = argparse.ArgumentParser(prog="python -m ellipsled.bench.flood", description=__doc__.splitlines()[0])
+    ap.add_argument("--target", required=True, help="udp:127.0.0.1:PORT (the vehicle's MAVLink address)")
+    ap.add_argument("--rate", type=float, default=2500.0, help="datagrams per second")
+    ap.add_argument("--seconds", type=float, default=12.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--replay", default=None, metavar="FILE.tlog", help="genuine frames to replay")
+    a = ap.parse_args(argv)
+    replay = [f for _, f in read_records(a.replay)] if a.replay else None
+    print("flooding", flush=True)
+    res = run(parse_udp(a.target, "target"), a.rate, a.seconds, a.seed, replay)
+    print(json.dumps(res), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

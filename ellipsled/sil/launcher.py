@@ -267,7 +267,8 @@ class Launcher:
             fsw_info = json.loads((self.out / "fsw.json").read_text())
             h = merge(History.load(self.out / "sim_history.npz"), History.load(self.out / "fsw_history.npz"))
         except (OSError, ValueError, KeyError) as e:
-            self.say(f"no complete records to summarize ({e}); see the logs in {self.out}")
+            self.say(f"no complete records to summarize ({e}); see the logs")
+            print(files_written(self.out))
             return 1
         scn = prepare_args(a)
         seed = scn.seed if a.seed is None else a.seed

@@ -1,0 +1,138 @@
+"""The vehicle's bounded intake of ground datagrams: what the radio can cost the flight
+software is capped per call, whatever arrives.
+
+``DatagramIntake.poll(handle)`` reads the UDP socket without blocking until it is empty or
+the call's budget is spent — at most ``max_datagrams`` datagrams and ``budget_us`` of
+time — and refuses, before any CRC or signature work, what cannot be a message for the
+vehicle:
+
+| refused                                   | counted as (signing.Reject) |
+|-------------------------------------------|-----------------------------|
+| longer than ``max_datagram_bytes``        | MALFORMED ("oversized")     |
+| not starting with a MAVLink 2 frame       | GARBAGE                     |
+| a single frame cut short                  | TRUNCATED                   |
+| a message id the vehicle does not take    | UNKNOWN_MESSAGE             |
+| unsigned, and not allowed unsigned        | UNSIGNED                    |
+
+A datagram holding exactly one frame (what ground stations send) goes to
+``SignedLink.receive_single``: signature first (one HMAC, which also authenticates the
+CRC bytes), then decoding. A datagram of several frames takes the general path
+(``SignedLink.receive``), bounded by ``max_datagram_bytes``.
+
+What the budget leaves waits in the socket for the next call; the socket's receive buffer
+is sized to about one call's budget (``rcvbuf_bytes``), so the backlog, and the age of a
+command in it, stay bounded: the kernel drops the excess, and the intake reads those
+drops from the kernel's own counter of the socket (SO_MEMINFO, Linux). Nothing here
+blocks or raises on network input.
+"""
+from __future__ import annotations
+
+import socket
+import struct
+import time
+from collections.abc import Callable, Collection
+
+from . import framing
+from .signing import Reject, Rejection, SignedLink
+
+SO_MEMINFO = getattr(socket, "SO_MEMINFO", 55)       # Linux: the socket's memory counters
+SK_MEMINFO_DROPS = 8                                  # ... of which: datagrams dropped
+_MEMINFO = struct.Struct("=9I")
+
+DEFAULT_MAX_DATAGRAMS = 256
+DEFAULT_BUDGET_US = 2000.0
+DEFAULT_MAX_DATAGRAM_BYTES = 4 * framing.MAX_FRAME_LEN        # a few frames; a ground station sends one
+RCVBUF_PER_DATAGRAM = 1024      # the kernel doubles it: ~2 kB of accounting per small datagram
+
+
+class DatagramIntake:
+    def __init__(self, sock: socket.socket, link: SignedLink, *, accept: Collection[int],
+                 max_datagrams: int = DEFAULT_MAX_DATAGRAMS,
+                 budget_us: float = DEFAULT_BUDGET_US, max_datagram_bytes: int = DEFAULT_MAX_DATAGRAM_BYTES,
+                 rcvbuf_bytes: int | None = None, clock_ns: Callable[[], int] = time.perf_counter_ns):
+        if max_datagrams < 1 or not budget_us > 0 or max_datagram_bytes < framing.MAX_FRAME_LEN:
+            raise ValueError("intake: max_datagrams >= 1, budget_us > 0, max_datagram_bytes >= one frame")
+        self.sock = sock
+        self.link = link
+        self.accept = frozenset(int(m) for m in accept)
+        self.allow_unsigned = link.verifier.allow_unsigned
+        self.max_datagrams = int(max_datagrams)
+        self.budget_ns = int(budget_us * 1e3)
+        self.max_datagram_bytes = int(max_datagram_bytes)
+        self.clock_ns = clock_ns
+        self._buf = bytearray(self.max_datagram_bytes)
+        self._view = memoryview(self._buf)
+        want = int(rcvbuf_bytes) if rcvbuf_bytes is not None else self.max_datagrams * RCVBUF_PER_DATAGRAM
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, want)
+        self.rcvbuf_bytes = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self.stats = {"datagrams": 0, "bytes": 0, "refused_early": 0, "kernel_drops": 0,
+                      "budget_hits": 0, "rx_errors": 0}
+        self._drops0 = self._kernel_drops_total()
+        self.kernel_counts = self._drops0 is not None
+        self.last_poll_ns = 0
+
+    def _kernel_drops_total(self) -> int | None:
+        try:
+            return _MEMINFO.unpack(self.sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, _MEMINFO.size))[SK_MEMINFO_DROPS]
+        except (OSError, struct.error):         # not Linux: no drop counter
+            return None
+
+    def _refuse(self, reason: Reject, hdr_sys: int = -1, hdr_comp: int = -1, msgid: int = -1,
+                detail: str = "") -> None:
+        self.stats["refused_early"] += 1
+        self.link.verifier.reject(Rejection(reason, hdr_sys, hdr_comp, msgid, -1, detail))
+
+    def poll(self, handle: Callable[[object, tuple[str, int]], None]) -> int:
+        """Read and pass on what the budget allows; ``handle(msg, addr)`` gets every
+        verified, decoded message. Returns the number of datagrams read."""
+        t0 = self.clock_ns()
+        n = 0
+        st = self.stats
+        buf, view = self._buf, self._view
+        while True:
+            if n >= self.max_datagrams or self.clock_ns() - t0 >= self.budget_ns:
+                st["budget_hits"] += 1
+                break
+            try:
+                # MSG_TRUNC: the datagram's real length, however much of it fits the buffer
+                size, addr = self.sock.recvfrom_into(buf, 0, socket.MSG_TRUNC)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:                  # e.g. an ICMP error reported on a later recv
+                st["rx_errors"] += 1
+                n += 1
+                continue
+            n += 1
+            st["datagrams"] += 1
+            st["bytes"] += size
+            if size > self.max_datagram_bytes:
+                self._refuse(Reject.MALFORMED, detail=f"oversized datagram, {size} bytes")
+                continue
+            if size < framing.HEADER_LEN_V2 + framing.CRC_LEN or buf[0] != framing.MAGIC_V2:
+                self._refuse(Reject.GARBAGE, detail=f"{size} bytes, not MAVLink 2")
+                continue
+            plen, iflags = buf[1], buf[2]
+            frame_len = framing.HEADER_LEN_V2 + plen + framing.CRC_LEN \
+                + (framing.SIGNATURE_LEN if iflags & framing.IFLAG_SIGNED else 0)
+            sysid, compid, msgid = buf[5], buf[6], buf[7] | buf[8] << 8 | buf[9] << 16
+            if frame_len > size:
+                self._refuse(Reject.TRUNCATED, sysid, compid, msgid, f"{size} of {frame_len} bytes")
+                continue
+            if frame_len == size:            # one frame: refuse what cannot be for the vehicle, cheaply
+                if msgid not in self.accept:
+                    self._refuse(Reject.UNKNOWN_MESSAGE, sysid, compid, msgid, "not taken by the vehicle")
+                    continue
+                if not iflags & framing.IFLAG_SIGNED and msgid not in self.allow_unsigned:
+                    self._refuse(Reject.UNSIGNED, sysid, compid, msgid)
+                    continue
+                msgs = self.link.receive_single(view[:size])
+            else:
+                msgs = self.link.receive(view[:size])
+            for msg in msgs:
+                handle(msg, addr)
+        if self.kernel_counts:
+            total = self._kernel_drops_total()
+            if total is not None:
+                st["kernel_drops"] = (total - self._drops0) & 0xFFFFFFFF
+        self.last_poll_ns = self.clock_ns() - t0
+        return n

@@ -1,0 +1,148 @@
+"""The vehicle's bounded datagram intake: what cannot be a message for the vehicle is refused
+before any CRC or signature work (and counted under the link's rejection reasons), genuine
+frames get through, one call never exceeds its datagram and time budget, and datagrams the
+kernel drops on a full queue are counted. Frames are built with the MAVLink signing rules
+(Signer) and pymavlink's own packer, independent of the intake."""
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.intake import DatagramIntake
+from interfaces.mavlink.signing import Reject, SignedLink, Signer, SigningKey
+
+ACCEPT = {mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_PARAM_SET}
+ARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 1, 0, 0, 0, 0, 0, 0)
+
+
+class Bench:
+    def __init__(self, **kw):
+        self.key = SigningKey.generate()
+        self.link = SignedLink(self.key, system_id=1, component_id=1)
+        self.rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.rx.bind(("127.0.0.1", 0))
+        self.rx.setblocking(False)
+        self.tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        kw.setdefault("budget_us", 1e6)          # budgets are tested on their own, below
+        self.intake = DatagramIntake(self.rx, self.link, accept=ACCEPT, **kw)
+        self.got: list = []
+        self.ground = Signer(self.key, system_id=255, component_id=190, link_id=1)
+
+    def send(self, data: bytes) -> None:
+        self.tx.sendto(data, self.rx.getsockname())
+
+    def poll(self) -> int:
+        time.sleep(0.01)                       # loopback delivery
+        return self.intake.poll(lambda msg, addr: self.got.append(msg))
+
+    def close(self):
+        self.rx.close()
+        self.tx.close()
+
+
+@pytest.fixture
+def b():
+    x = Bench()
+    yield x
+    x.close()
+
+
+def test_genuine_single_and_multi_frame_datagrams_get_through(b):
+    b.send(b.ground.pack(ARM))
+    b.send(b.ground.pack(ARM) + b.ground.pack(ARM))
+    assert b.poll() == 2
+    assert [m.get_type() for m in b.got] == ["COMMAND_LONG"] * 3 and all(m.get_signed() for m in b.got)
+    assert b.intake.stats["refused_early"] == 0
+
+
+def test_what_cannot_be_for_the_vehicle_is_refused_before_crc_and_signature(b):
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    forged = Signer(SigningKey.generate(), system_id=255, component_id=190)
+    genuine_telemetry = b.ground.pack(mav.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0))
+    cases = [
+        (bytes(60_000), Reject.MALFORMED),                       # oversized
+        (b"\x00" * 40, Reject.GARBAGE),                          # not MAVLink 2
+        (ARM.pack(mav.MAVLink(None, srcSystem=255, srcComponent=190))[:20], Reject.TRUNCATED),
+        (genuine_telemetry, Reject.UNKNOWN_MESSAGE),             # signed, but not a message the vehicle takes
+        (ARM.pack(unsigned), Reject.UNSIGNED),
+    ]
+    for data, _ in cases:
+        b.send(data)
+    assert b.poll() == len(cases)
+    counts = b.link.counts
+    for _, reason in cases:
+        assert counts[reason] >= 1, reason
+    assert counts[Reject.BAD_CRC] == 0 and counts[Reject.BAD_SIGNATURE] == 0     # no CRC/HMAC work was done
+    assert b.intake.stats["refused_early"] == len(cases) and not b.got
+    # a forged signature is the one check that needs the HMAC: refused, nothing handled
+    b.send(forged.pack(ARM))
+    b.poll()
+    assert counts[Reject.BAD_SIGNATURE] == 1 and not b.got
+    # an unsigned HEARTBEAT is allowed through (it authorises nothing)
+    b.send(mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(unsigned))
+    b.poll()
+    assert [m.get_type() for m in b.got] == ["HEARTBEAT"]
+
+
+def test_one_call_reads_at_most_its_datagram_budget():
+    b = Bench(max_datagrams=50)
+    try:
+        for _ in range(200):
+            b.send(b"\x00" * 30)
+        assert b.poll() == 50 and b.intake.stats["budget_hits"] == 1
+        assert b.poll() == 50                   # the rest waits for the next call
+    finally:
+        b.close()
+
+
+def test_one_call_stops_when_its_time_budget_is_spent():
+    t = [0]
+
+    def clock_ns():
+        t[0] += 300_000                         # each reading of the clock: 0.3 ms later
+        return t[0]
+
+    b = Bench(budget_us=1000.0, clock_ns=clock_ns)
+    try:
+        for _ in range(100):
+            b.send(b"\x00" * 30)
+        n = b.poll()
+        assert 1 <= n <= 4 and b.intake.stats["budget_hits"] == 1
+    finally:
+        b.close()
+
+
+def test_a_full_queue_is_bounded_by_the_receive_buffer_and_its_drops_are_counted():
+    b = Bench(max_datagrams=64)
+    try:
+        assert b.intake.rcvbuf_bytes <= 4 * 64 * 1024          # sized for about one call's budget
+        sent = 3000
+        for _ in range(sent):
+            b.send(b"\x00" * 30)
+        time.sleep(0.05)
+        read = 0
+        while True:
+            n = b.intake.poll(lambda m, a: None)
+            read += n
+            if n == 0:
+                break
+        st = b.intake.stats
+        assert read < sent and st["kernel_drops"] > 0, (read, st)
+        if b.intake.kernel_counts:
+            assert read + st["kernel_drops"] == sent, (read, st)
+    finally:
+        b.close()
+
+
+def test_bad_budgets_are_refused():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    link = SignedLink(SigningKey.generate(), system_id=1, component_id=1)
+    try:
+        for kw in ({"max_datagrams": 0}, {"budget_us": 0.0}, {"max_datagram_bytes": 100}):
+            with pytest.raises(ValueError):
+                DatagramIntake(s, link, accept=ACCEPT, **kw)
+    finally:
+        s.close()

@@ -85,8 +85,9 @@ class Flood:
         return kind, self._oversized
 
 
-def run(target: tuple[str, int], rate: float, seconds: float, seed: int = 1,
-        replay: list[bytes] | None = None) -> dict:
+def send(target: tuple[str, int], rate: float, seconds: float, seed: int = 1,
+         replay: list[bytes] | None = None) -> dict:
+    """Flood ``target`` for ``seconds`` at ``rate`` datagrams/s; what was sent, by kind."""
     if target[0] != "127.0.0.1":
         raise ValueError("the flood stays on loopback: target must be 127.0.0.1")
     fl = Flood(seed, replay)
@@ -116,6 +117,84 @@ def run(target: tuple[str, int], rate: float, seconds: float, seed: int = 1,
             "send_errors": errors}
 
 
+# ------------------------------------------------------------------ benchmark
+RG2_HZ = 10.0
+
+
+def _pct(ns) -> dict:
+    import numpy as np
+    a = np.asarray(ns, dtype=np.float64) * 1e-3
+    return {"p50_us": float(np.percentile(a, 50)), "p99_us": float(np.percentile(a, 99)),
+            "max_us": float(a.max()), "n": int(a.size)}
+
+
+def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
+    """The vehicle's receive work per RG2 tick (10 Hz), in this process: quiet, and under
+    a flood of ``rate`` datagrams/s (the mix above, one genuine signed command among each
+    tick's datagrams), through the bounded intake and through the previous receive path
+    (every datagram split, CRC-checked and verified, up to 64 a tick). Same run, same
+    datagrams."""
+    from interfaces.mavlink.intake import DatagramIntake
+    from interfaces.mavlink.signing import SignedLink
+    ticks = 100 if quick else 400
+    per_tick = int(rate / RG2_HZ)
+    key = SigningKey.generate()
+    ground = Signer(key, system_id=255, component_id=190, link_id=1)
+    accept = {mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_PARAM_SET,
+              mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST, mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ}
+    replay = [ground.pack(DISARM) for _ in range(8)]
+    out = {"rate_per_s": rate, "ticks": ticks, "datagrams_per_tick": per_tick}
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 8 << 20)
+    for name in ("quiet", "flood_intake", "flood_previous"):
+        rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        rx.bind(("127.0.0.1", 0))
+        rx.setblocking(False)
+        link = SignedLink(key, system_id=1, component_id=1)
+        for f in replay:                      # seen once: from now on they are replays
+            link.receive(f)
+        got = []
+
+        def handle(msg, addr):
+            if msg.get_type() == "COMMAND_LONG":
+                got.append(msg)
+        intake = DatagramIntake(rx, link, accept=accept) if name != "flood_previous" else None
+        if intake is None:
+            rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 212992)      # the system default
+        buf = bytearray(65536)
+        view = memoryview(buf)
+        fl = Flood(1, replay)
+        cost, sent_genuine = [], 0
+        for _ in range(ticks):
+            if name != "quiet":
+                at = fl.rng.randrange(per_tick)
+                for i in range(per_tick):
+                    tx.sendto(fl.next()[1] if i != at else ground.pack(ARM), rx.getsockname())
+                sent_genuine += 1
+            time.sleep(0.002)                 # loopback delivery
+            t0 = time.perf_counter_ns()
+            if intake is not None:
+                intake.poll(handle)
+            else:                             # the previous GroundLink.poll: 64 datagrams, each split and verified
+                for _ in range(64):
+                    try:
+                        size, addr = rx.recvfrom_into(buf)
+                    except BlockingIOError:
+                        break
+                    for msg in link.receive(view[:size]):
+                        handle(msg, addr)
+            cost.append(time.perf_counter_ns() - t0)
+        out[name] = {**_pct(cost), "genuine_sent": sent_genuine, "genuine_handled": len(got),
+                     **({"kernel_drops": intake.stats["kernel_drops"], "refused_early": intake.stats["refused_early"],
+                         "rcvbuf_bytes": intake.rcvbuf_bytes} if intake is not None else {})}
+        rx.close()
+    tx.close()
+    return out
+
+
+ARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 1, 0, 0, 0, 0, 0, 0)
+
+
 def main(argv: list[str] | None = None) -> int:
     from fsw.groundlink import parse_udp
     from gse.tlog import read_records
@@ -128,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     replay = [f for _, f in read_records(a.replay)] if a.replay else None
     print("flooding", flush=True)
-    res = run(parse_udp(a.target, "target"), a.rate, a.seconds, a.seed, replay)
+    res = send(parse_udp(a.target, "target"), a.rate, a.seconds, a.seed, replay)
     print(json.dumps(res), flush=True)
     return 0
 

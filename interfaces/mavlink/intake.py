@@ -77,10 +77,13 @@ class DatagramIntake:
         except (OSError, struct.error):         # not Linux: no drop counter
             return None
 
-    def _refuse(self, reason: Reject, hdr_sys: int = -1, hdr_comp: int = -1, msgid: int = -1,
-                detail: str = "") -> None:
-        self.stats["refused_early"] += 1
-        self.link.verifier.reject(Rejection(reason, hdr_sys, hdr_comp, msgid, -1, detail))
+    def _report(self, refused: dict) -> None:
+        """The call's early refusals, one report per reason (what the first one was like):
+        a flood costs one event a reason per call, not one per datagram."""
+        for reason, (count, sysid, compid, msgid, detail) in refused.items():
+            self.stats["refused_early"] += count
+            self.link.verifier.reject(Rejection(reason, sysid, compid, msgid, -1,
+                                                detail + (f" (+{count - 1} more)" if count > 1 else "")), count)
 
     def poll(self, handle: Callable[[object, tuple[str, int]], None]) -> int:
         """Read and pass on what the budget allows; ``handle(msg, addr)`` gets every
@@ -89,6 +92,14 @@ class DatagramIntake:
         n = 0
         st = self.stats
         buf, view = self._buf, self._view
+        refused: dict = {}            # reason -> [count, first sysid, compid, msgid, detail]
+
+        def refuse(reason, sysid=-1, compid=-1, msgid=-1, detail=""):
+            r = refused.get(reason)
+            if r is None:
+                refused[reason] = [1, sysid, compid, msgid, detail]
+            else:
+                r[0] += 1
         while True:
             if n >= self.max_datagrams or self.clock_ns() - t0 >= self.budget_ns:
                 st["budget_hits"] += 1
@@ -106,30 +117,32 @@ class DatagramIntake:
             st["datagrams"] += 1
             st["bytes"] += size
             if size > self.max_datagram_bytes:
-                self._refuse(Reject.MALFORMED, detail=f"oversized datagram, {size} bytes")
+                refuse(Reject.MALFORMED, detail=f"oversized datagram, {size} bytes")
                 continue
             if size < framing.HEADER_LEN_V2 + framing.CRC_LEN or buf[0] != framing.MAGIC_V2:
-                self._refuse(Reject.GARBAGE, detail=f"{size} bytes, not MAVLink 2")
+                refuse(Reject.GARBAGE, detail=f"{size} bytes, not MAVLink 2")
                 continue
             plen, iflags = buf[1], buf[2]
             frame_len = framing.HEADER_LEN_V2 + plen + framing.CRC_LEN \
                 + (framing.SIGNATURE_LEN if iflags & framing.IFLAG_SIGNED else 0)
             sysid, compid, msgid = buf[5], buf[6], buf[7] | buf[8] << 8 | buf[9] << 16
             if frame_len > size:
-                self._refuse(Reject.TRUNCATED, sysid, compid, msgid, f"{size} of {frame_len} bytes")
+                refuse(Reject.TRUNCATED, sysid, compid, msgid, f"{size} of {frame_len} bytes")
                 continue
             if frame_len == size:            # one frame: refuse what cannot be for the vehicle, cheaply
                 if msgid not in self.accept:
-                    self._refuse(Reject.UNKNOWN_MESSAGE, sysid, compid, msgid, "not taken by the vehicle")
+                    refuse(Reject.UNKNOWN_MESSAGE, sysid, compid, msgid, "not taken by the vehicle")
                     continue
                 if not iflags & framing.IFLAG_SIGNED and msgid not in self.allow_unsigned:
-                    self._refuse(Reject.UNSIGNED, sysid, compid, msgid)
+                    refuse(Reject.UNSIGNED, sysid, compid, msgid)
                     continue
                 msgs = self.link.receive_single(view[:size])
             else:
                 msgs = self.link.receive(view[:size])
             for msg in msgs:
                 handle(msg, addr)
+        if refused:
+            self._report(refused)
         if self.kernel_counts:
             total = self._kernel_drops_total()
             if total is not None:

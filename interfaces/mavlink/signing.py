@@ -272,9 +272,10 @@ class SigningVerifier:
     def rejected(self) -> int:
         return sum(self.counts.values())
 
-    def reject(self, rej: Rejection) -> None:
-        """Count a rejection and report it to the hook (a failing hook is logged, not raised)."""
-        self.counts[rej.reason] += 1
+    def reject(self, rej: Rejection, count: int = 1) -> None:
+        """Count a rejection (``count`` alike, reported once) and report it to the hook (a
+        failing hook is logged, not raised)."""
+        self.counts[rej.reason] += count
         if self.on_reject is not None:
             try:
                 self.on_reject(rej)

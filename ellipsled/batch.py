@@ -16,13 +16,15 @@ from common.model import Scenario, inertia_vector, load_scenario
 from fsw.events import EventLog
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
+from fsw.guidance import BankProfile
 from fsw.topology import Topology
 from interfaces import records
 from sim.plant import Plant
 
+from .controllable import truth_controllability
 from .history import History, record_fsw, record_truth
+from .metrics import summarize, wrap_deg
 from .terminal import RunProgress, files_written
-from .metrics import summarize
 
 KIND_OF_FAULT = {"off": "failed_off", "stuck": "stuck_on", "degraded": "degraded"}
 
@@ -149,7 +151,10 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
     gap, checked = verify_allocations(scn, params, rep["alloc_samples"])
     extra = {
         "control_cycle": {"compute_p50_us": pct(cu, 50), "compute_p99_us": pct(cu, 99),
-                          "compute_max_us": float(np.max(cu)) if len(cu) else None},
+                          "compute_max_us": float(np.max(cu)) if len(cu) else None,
+                          # cycles whose compute took longer than the control period: a host figure
+                          # in lockstep (the plant waits), a cycle slip in real time
+                          "compute_overruns": int(np.sum(cu > scn.dt_control_s * 1e6))},
         "allocator": {"solves": int(len(au)), "p50_us": pct(au, 50), "p99_us": pct(au, 99),
                       "max_us": float(np.max(au)) if len(au) else None,
                       "degraded": int(np.sum(h["alloc_degraded"])),
@@ -160,6 +165,9 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
         "jet_pulses_per_jet": rep["jet_pulses_per_jet"],
         "cycle_slips": rep["cycle_slips"],
         "events": rep["events"],
+        "bank_err_sched_max_after_fault_deg": schedule_error_max_deg(h, scn, faults_applied),
+        "controllability": truth_controllability(scn, faults_applied, h["t_s"], h["qbar_pa"],
+                                                 params["guidance.trim_max_deg"]),
     }
     extra["identification"] = params.get("fdir.mode", "detect")
     if extra["identification"] == "oracle":
@@ -180,6 +188,19 @@ def tell_faults(fsw: FlightSoftware, fault_log: list, start: int, eta_of) -> int
     for t, jet, kind in fault_log[start:]:
         fsw.fdir.identified(float(t), int(jet), KIND_OF_FAULT.get(kind, "healthy"), float(eta_of[jet - 1]))
     return len(fault_log)
+
+
+def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> float | None:
+    """max |bank - the scenario's own smoothed schedule| after the fault [deg]: the bank error
+    against the reference before any re-plan (the FSW's re-planned reference may lag it)."""
+    t = h["t_s"]
+    t_f = min((tf for tf, _, _ in faults_applied), default=2.5)
+    m = t >= t_f
+    if not np.any(m):
+        return None
+    prof = BankProfile(scn.bank_schedule, scn.bank_rate_limit_radps, scn.bank_accel_limit_radps2)
+    ref = np.array([prof.evaluate(float(x))[0] for x in t[m]])
+    return float(np.max(np.abs(wrap_deg(np.degrees(h["bank_rad"][m] - ref)))))
 
 
 PROGRESS_EVERY = 50       # steps between progress reports (1 s of simulated time at 50 Hz)

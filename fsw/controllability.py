@@ -64,10 +64,11 @@ class Controllability:
         return float(np.linalg.norm(self.bias_B_Nm))
 
     def text(self) -> str:
-        """One line for an event: "BANK AUTH +X/-Y DEG/S2 BIAS Z NM TRIM W DEG"."""
-        tr = "inf" if not math.isfinite(self.trim_needed_deg) else f"{self.trim_needed_deg:.1f}"
-        return (f"BANK AUTH +{math.degrees(self.authority_pos_radps2):.2f}/-"
-                f"{math.degrees(self.authority_neg_radps2):.2f} DEG/S2 BIAS {self.bias_Nm:.0f} NM TRIM {tr} DEG")
+        """One event line (<= 50 characters, one STATUSTEXT): bank authority +X / -Y deg/s^2,
+        stuck-on bias Z N m, trim needed W deg."""
+        tr = "INF" if not math.isfinite(self.trim_needed_deg) else f"{self.trim_needed_deg:.1f}"
+        return (f"AUTH +{math.degrees(self.authority_pos_radps2):.2f}/-{math.degrees(self.authority_neg_radps2):.2f}"
+                f" DEG/S2 BIAS {self.bias_Nm:.0f}NM TRIM {tr}DEG")
 
 
 def schedule_accel_need_radps2(schedule, t_from_s: float) -> float:

@@ -16,6 +16,8 @@ from common.frames import wrap_pi
 from common.model import Scenario
 from .allocation import Allocator
 from .control import SamiController
+from .controllability import (Controllability, aero_moment_per_rad, controllability,
+                              schedule_accel_need_radps2)
 from .events import EventLog, Severity
 from .fdir import Fdir
 from .guidance import BankProfile, Guidance
@@ -28,9 +30,11 @@ from .params import Param, load_params
 from . import executive
 
 GUIDANCE_PARAMS = [
-    Param("guidance.authority_factor", 0.0, 10.0, "",
-          "after a reconfiguration, the reference's bank acceleration is capped at this multiple of the "
-          "weaker one-way body-roll acceleration of a pure-roll allocator probe (0 = never re-shape)"),
+    Param("guidance.authority_use", 0.05, 1.0, "",
+          "after a reconfiguration the reference's bank acceleration is capped at this fraction of the weaker "
+          "way of the controllability LP's bank authority (the rest is kept for the feedback)"),
+    Param("guidance.trim_max_deg", 0.0, 30.0, "deg",
+          "largest alpha/beta trim offset accepted to absorb a stuck-on bias the jets cannot cancel"),
 ]
 
 
@@ -91,6 +95,10 @@ class FlightSoftware:
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self._residual_dt = 0.0
+        self.realtime = realtime
+        self.controllability: Controllability | None = None   # the LP's answer at the last reconfiguration
+        self._lp_worker: _LpWorker | None = None
+        self._assess_pending = False
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
@@ -109,8 +117,14 @@ class FlightSoftware:
         if self.fdir.update(t_s, self.driver.last_command, fv[6]):
             self.allocator.set_health(self.fdir.health_active)
             self.reconfig_times.append(t_s)
-            self.fit_reference_to_authority(t_s)
+            self._assess_pending = True
         nav = self.nav.update(t_s, fv[1], fv[2], fv[3], fv[4], fv[5])
+        if self._assess_pending:
+            self._assess_pending = False
+            self.assess_controllability(t_s)
+        if self._lp_worker is not None and self._lp_worker.ready():
+            need, r = self._lp_worker.take()
+            self._apply_controllability(t_s, need, r)     # re-planned from now: the reference stays C2
         self.guidance.update(nav)
         self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
         if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,
@@ -140,40 +154,52 @@ class FlightSoftware:
         self._have_prev = True
         return self.driver.command(u_alloc, self.modes.jets_enabled)
 
-    def roll_authority_Nm(self) -> tuple[float, float]:
-        """(positive, negative) roll torque [N m] the allocator can give now with pitch and
-        yaw held as well as it can: its answers to a pure-roll demand each way."""
-        probe = np.zeros(3)
-        out = []
-        for sign in (1.0, -1.0):
-            probe[0] = sign * 1e5
-            self.allocator.solve(probe)
-            out.append(max(0.0, sign * float(self.allocator.tau_B[0])))
-        return out[0], out[1]
-
-    def fit_reference_to_authority(self, t_s: float) -> None:
-        """Guidance that knows its actuators: after a reconfiguration, transitions not yet
-        started keep their bank acceleration within ``guidance.authority_factor`` times the
-        weaker one-way roll acceleration (stuck or failed jets can leave one way much
-        weaker); the scenario's limit stays the ceiling, so healthy jets change nothing.
-
-        The estimate is a pure body-roll probe of the allocator, a lower bound of what
-        turns the vehicle about its velocity (the yaw jets, the 5-degree margin of the
-        bank-error budget and the aerodynamic moments help too), hence a factor above 1.
-        Case 2 (seven jets stuck on: 8.9 N m one way, 0.19 deg/s^2) sets the window,
-        measured 2026-11-22 over seeds 1-3: factor <= 2.5 -> reversals so slow the entry
-        skips out (timeout at 700 s); 3 -> Mach 2 at 629 s, 1.07 deg; 3.5 -> 603 s,
-        1.13 deg; 4 -> 602 s, 1.38-1.41 deg; 5 -> 5.45 deg; >= 6 -> no re-shape, 6.62 deg.
-        """
-        m = self.params["guidance.authority_factor"]
-        if m <= 0.0:
+    def assess_controllability(self, t_s: float) -> None:
+        """The duty-cycle LP (fsw/controllability.py) on the health the allocator now uses, with
+        the FSW's own models: inertia estimate, velocity direction from navigation, the aero
+        moment of its density model, nominal derivatives and current factors d_hat. In real time
+        it runs on a background thread (tens of ms: longer than a control period); its answer is
+        applied by the first cycle after it is ready. Batch and lockstep apply it here."""
+        nav = self.nav.state
+        veh = self.scenario.vehicle
+        a = veh.aero
+        d = self.control.d_hat
+        V = nav.V_rel_mps
+        v_B = nav.C_BN @ nav.vrel_N / V if V > 1.0 else None
+        if v_B is None or not np.all(np.isfinite(v_B)):     # no flight condition yet: the trim direction
+            from .controllability import velocity_dir_B
+            v_B = velocity_dir_B(a.alpha_trim_rad)
+        A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta * d[0], a.C_malpha * d[1],
+                                a.C_nbeta * d[2])
+        need = schedule_accel_need_radps2(self.scenario.bank_schedule, t_s)
+        args = (veh.torque_matrix_Nm, self.allocator_health().copy(), self.control.inertia_hat(), v_B, A,
+                self.params["guidance.trim_max_deg"], need, float(nav.qbar_pa))
+        if not self.realtime:
+            self._apply_controllability(t_s, need, controllability(*args))
             return
-        pos, neg = self.roll_authority_Nm()
-        a = self.scenario.vehicle.aero.alpha_trim_rad
-        v = np.array([np.cos(a), 0.0, np.sin(a)])          # velocity direction in body axes at trim
-        I_v = float(v @ self.control.inertia_hat() @ v)
-        accel = m * min(pos, neg) * np.cos(a) / I_v
-        limit = max(min(self.scenario.bank_accel_limit_radps2, accel), 1e-4)
+        if self._lp_worker is None:
+            self._lp_worker = _LpWorker()
+        self._lp_worker.submit(need, args)
+
+    def _apply_controllability(self, t_s: float, need: float, r: Controllability) -> None:
+        """Event and telemetry of the LP's answer; the guidance re-planned to the weaker way's
+        authority times ``guidance.authority_use`` (the scenario's limit stays the ceiling), never
+        below what the schedule still needs (the reference then keeps the schedule's pace: the
+        tracking, not the reference, shows what the jets cannot do)."""
+        self.controllability = r
+        self.events.emit(t_s, Severity.NOTICE, "guidance", "controllability", r.text())
+        if not r.controllable:
+            self.events.emit(t_s, Severity.WARNING, "guidance", "not_controllable",
+                             f"NOT CONTROLLABLE: {r.reason}"[:50])
+        weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
+        accel = self.params["guidance.authority_use"] * weak
+        if accel < need:
+            self.events.emit(t_s, Severity.WARNING, "guidance", "authority_low",
+                             f"BANK AUTH {np.degrees(weak):.2f} DEG/S2: REF KEPT AT NEED")
+            accel = need
+        if accel <= 0.0:
+            return
+        limit = min(self.scenario.bank_accel_limit_radps2, accel)
         prof = self.guidance.profile
         if prof.replan(t_s, prof.rate_limit_radps, limit):
             self.events.emit(t_s, Severity.NOTICE, "guidance", "reference_reshaped",
@@ -214,12 +240,16 @@ class FlightSoftware:
 
     # ---------------------------------------------------------------- commands
     def close(self) -> None:
-        """Stop background work (the allocator's table builder)."""
+        """Stop background work (the allocator's table builder, the controllability LP)."""
         self.allocator.close()
+        if self._lp_worker is not None:
+            self._lp_worker.close()
 
     def health_changed(self) -> None:
-        """Hand the allocator the health FDIR now holds (after an override, clear or inhibit)."""
+        """Hand the allocator the health FDIR now holds (after an override, clear or inhibit)
+        and ask the LP what the jets can do with it."""
         self.allocator.set_health(self.fdir.health_active)
+        self.assess_controllability(self.t_s)
 
     def set_fault_tolerance(self, on: bool) -> None:
         self.allocator.set_fault_tolerance(on)
@@ -254,3 +284,49 @@ class FlightSoftware:
     @property
     def health(self) -> JetHealth:
         return self.fdir.health_active
+
+
+class _LpWorker:
+    """One background thread for the controllability LP in real time: the newest request
+    wins (a request overtaken by a newer health is dropped); the loop polls ``ready``."""
+
+    def __init__(self):
+        import threading
+        self._cv = threading.Condition()
+        self._job = None
+        self._result = None
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name="controllability", daemon=True)
+        self._thread.start()
+
+    def submit(self, need: float, args: tuple) -> None:
+        with self._cv:
+            self._job = (need, args)
+            self._cv.notify()
+
+    def ready(self) -> bool:
+        return self._result is not None
+
+    def take(self) -> tuple:
+        with self._cv:
+            r, self._result = self._result, None
+        return r
+
+    def _run(self) -> None:
+        while True:
+            with self._cv:
+                while self._job is None and not self._stop:
+                    self._cv.wait()
+                if self._stop:
+                    return
+                (need, args), self._job = self._job, None
+            r = controllability(*args)
+            with self._cv:
+                if self._job is None:          # else a newer health is queued: this answer is stale
+                    self._result = (need, r)
+
+    def close(self) -> None:
+        with self._cv:
+            self._stop = True
+            self._cv.notify()
+        self._thread.join(timeout=5.0)

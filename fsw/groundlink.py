@@ -105,7 +105,8 @@ PARAM_ID_TABLE_BEGIN
   | fdir.sigma_tol             | F_SIGMA_TOL        |
   | fdir.stale_n               | F_STALE_N          |
   | fdir.v_max_mps             | F_V_MAX_MPS        |
-  | guidance.authority_factor  | G_AUTHORITY_FACT   |
+  | guidance.authority_use     | G_AUTHORITY_USE    |
+  | guidance.trim_max_deg      | G_TRIM_MAX_DEG     |
 PARAM_ID_TABLE_END
 
 A refused PARAM_SET is answered with the unchanged value and a STATUSTEXT (WARNING)

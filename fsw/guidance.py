@@ -24,6 +24,44 @@ _S1_MAX = 15.0 / 8.0
 _S2_MAX = 10.0 / math.sqrt(3.0)
 
 
+def _quintic(phi0: float, v0: float, a0: float, phi1: float, T: float) -> tuple:
+    """Coefficients c0..c5 in x = (t - t0)/T of the minimum-jerk quintic from (phi0, v0, a0)
+    to phi1 at rest (rate and acceleration zero at x = 1)."""
+    d, v, a = phi1 - phi0, v0 * T, a0 * T * T
+    return (phi0, v, 0.5 * a, 10.0 * d - 6.0 * v - 1.5 * a, -15.0 * d + 8.0 * v + 1.5 * a,
+            6.0 * d - 3.0 * v - 0.5 * a)
+
+
+def _eval_quintic(c: tuple, T: float, x: float) -> tuple[float, float, float]:
+    c0, c1, c2, c3, c4, c5 = c
+    phi = c0 + x * (c1 + x * (c2 + x * (c3 + x * (c4 + x * c5))))
+    d1 = (c1 + x * (2.0 * c2 + x * (3.0 * c3 + x * (4.0 * c4 + x * 5.0 * c5)))) / T
+    d2 = (2.0 * c2 + x * (6.0 * c3 + x * (12.0 * c4 + x * 20.0 * c5))) / (T * T)
+    return phi, d1, d2
+
+
+_X_SAMPLES = np.linspace(0.0, 1.0, 201)
+
+
+def _continuation(phi0: float, v0: float, a0: float, phi1: float, rate_limit: float, accel_limit: float) -> tuple:
+    """(T, coefficients): the shortest quintic from a moving state to phi1 at rest whose rate
+    and acceleration stay within the limits (or within the state's own, when it already
+    exceeds them: rate and acceleration are continuous). T grows by 2 % steps from the
+    rest-to-rest duration of the same distance."""
+    d = abs(phi1 - phi0)
+    T = max(_S1_MAX * d / rate_limit, math.sqrt(_S2_MAX * d / accel_limit), 1e-3)
+    r_cap, a_cap = max(rate_limit, abs(v0)) * (1 + 1e-9), max(accel_limit, abs(a0)) * (1 + 1e-9)
+    x = _X_SAMPLES
+    for _ in range(400):
+        c = _quintic(phi0, v0, a0, phi1, T)
+        d1 = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / T
+        d2 = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (T * T)
+        if np.max(np.abs(d1)) <= r_cap and np.max(np.abs(d2)) <= a_cap:
+            break
+        T *= 1.02
+    return T, c
+
+
 class BankProfile:
     """Bank-angle reference from a schedule of (t_s, bank_rad) steps.
 
@@ -39,6 +77,11 @@ class BankProfile:
     A step that arrives while a transition is still running is queued: its transition
     starts when the running one ends (so the limits hold exactly and the reference stays
     C2; the price is a lag, reported by ``lag_s``).
+
+    ``replan`` gives new limits to the transitions not yet started and to the one running: that
+    one continues from its current bank, rate and acceleration by a quintic to the same target
+    (still C2), so a transition begun before an actuator failure is not flown on limits the
+    vehicle no longer has.
     """
 
     def __init__(self, schedule: Sequence[tuple[float, float]], rate_limit_radps: float,
@@ -67,25 +110,33 @@ class BankProfile:
         self.rate_limit_radps = float(rate_limit_radps)
         self.accel_limit_radps2 = float(accel_limit_radps2)
         self.phi0_rad = steps[0][1]
-        # segments: (t_start, duration, phi_from, delta, phi_to)
+        # segments: (t_start, duration, quintic coefficients, phi_from, phi_to, transition index)
         self._starts, self._segs = [], []
         self.lag_s = 0.0   # largest delay of a transition start behind its step time
         self._plan(0.0)
 
-    def _plan(self, t_keep: float) -> None:
+    def _plan(self, t_keep: float, continue_running: bool = False) -> None:
         """(Re)build the transitions: those that started before ``t_keep`` are kept as they
-        are; every later step gets a transition shaped by the current limits. Transition j
-        always belongs to the j-th step whose target differs from the previous target."""
+        are (with ``continue_running``, the one still running at ``t_keep`` gets a continuation
+        from its state at ``t_keep``); every later step gets a transition shaped by the current
+        limits. Transition j always belongs to the j-th step whose target differs from the
+        previous target."""
         kept = [seg for seg in self._segs if seg[0] < t_keep]
-        starts, segs = [seg[0] for seg in kept], list(kept)
         lag = self.lag_s if kept else 0.0
+        if continue_running and kept and kept[-1][0] + kept[-1][1] > t_keep:
+            t0, T, c, _, b, j = kept[-1]
+            phi, v, a = _eval_quintic(c, T, (t_keep - t0) / T)
+            Tc, cc = _continuation(phi, v, a, b, self.rate_limit_radps, self.accel_limit_radps2)
+            kept.append((t_keep, Tc, cc, phi, b, j))
+        starts, segs = [seg[0] for seg in kept], list(kept)
         t_free = kept[-1][0] + kept[-1][1] if kept else 0.0
+        n_kept = kept[-1][5] + 1 if kept else 0
         phi, j = self.schedule[0][1], 0
         for t, b in self.schedule[1:]:
             d = b - phi
             if d == 0.0:
                 continue
-            if j < len(kept):         # already flown or flying: keep it
+            if j < n_kept:            # already flown or flying: keep it
                 j += 1
                 phi = b
                 continue
@@ -93,42 +144,41 @@ class BankProfile:
             t0 = max(t, t_free, t_keep if kept or t_keep > 0 else 0.0)
             lag = max(lag, t0 - t)
             starts.append(t0)
-            segs.append((t0, T, phi, d, b))
+            segs.append((t0, T, _quintic(phi, 0.0, 0.0, b, T), phi, b, j))
             t_free, phi = t0 + T, b
+            j += 1
         self._starts = starts
         self._segs = segs
         self.lag_s = lag
 
     def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float) -> bool:
-        """New limits for every transition that has not started by ``t_now`` (the running
-        one, if any, finishes as planned, so the reference stays C2). True if anything changed."""
+        """New limits from ``t_now``: for every transition that has not started and for the one
+        running, continued from its state at ``t_now`` (the reference stays C2). True if
+        anything changed."""
         for name, v in (("rate_limit_radps", rate_limit_radps), ("accel_limit_radps2", accel_limit_radps2)):
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"BankProfile.replan: {name} must be a finite number > 0, got {v!r}")
         if (rate_limit_radps, accel_limit_radps2) == (self.rate_limit_radps, self.accel_limit_radps2):
             return False
         self.rate_limit_radps, self.accel_limit_radps2 = float(rate_limit_radps), float(accel_limit_radps2)
-        self._plan(t_now)
+        self._plan(t_now, continue_running=True)
         return True
 
     def transitions(self) -> list[tuple[float, float, float, float]]:
-        """(t_start, duration, phi_from, phi_to) of each transition."""
-        return [(t0, T, p, b) for t0, T, p, _, b in self._segs]
+        """(t_start, duration, phi_from, phi_to) of each transition (a continuation after a
+        re-plan is listed as its own entry, from the bank it continued from)."""
+        return [(t0, T, p, b) for t0, T, _, p, b, _ in self._segs]
 
     def evaluate(self, t_s: float) -> tuple[float, float, float]:
         """(phi_r [rad], phidot_r [rad/s], phiddot_r [rad/s^2]) at time t_s."""
         i = bisect.bisect_right(self._starts, t_s) - 1
         if i < 0:
             return self.phi0_rad, 0.0, 0.0
-        t0, T, p, d, b = self._segs[i]
+        t0, T, c, _, b, _ = self._segs[i]
         x = (t_s - t0) / T
         if x >= 1.0:
             return b, 0.0, 0.0
-        x2 = x * x
-        s = x2 * x * (10.0 + x * (-15.0 + 6.0 * x))
-        s1 = x2 * (30.0 + x * (-60.0 + 30.0 * x)) / T
-        s2 = x * (60.0 + x * (-180.0 + 120.0 * x)) / (T * T)
-        return p + d * s, d * s1, d * s2
+        return _eval_quintic(c, T, x)
 
 
 @njit(cache=True)

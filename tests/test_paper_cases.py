@@ -29,7 +29,6 @@ def test_fault_case_completes_within_the_papers_bound(runs, case):
     s = runs[case]
     assert s["completed"] and s["end_reason"] == "mach", (s["end_reason"], s["t_end_s"])
     assert s["bank_err_max_after_fault_deg"] <= BOUND_DEG
-    assert s["cycle_slips"] == 0
 
 
 @pytest.mark.parametrize("case", ["case1", "case2", "case3", "case4"])

@@ -234,3 +234,31 @@ def test_a_second_campaign_process_on_the_same_folder_is_refused(tmp_path):
                 pass
     with _exclusive(tmp_path):   # released
         pass
+
+
+def test_summary_counts_success_over_all_and_over_controllable_runs(tmp_path, camp):
+    from ellipsled.montecarlo.store import rows_to_table
+    from ellipsled.montecarlo.summary import stats, write_summary
+
+    def row(i, success, ctl, err, attrib=None, reason=""):
+        return {"run_id": i, "seed": i, "status": "ok", "success": success, "completed": True,
+                "failed_criteria": None if success else "bank_err_max_after_fault_deg",
+                "bank_err_max_after_fault_deg": err, "bank_err_sched_max_after_fault_deg": err,
+                "bank_err_fault_attrib_max_deg": attrib, "t_end_s": 600.0,
+                "controllability.controllable": ctl, "controllability.reason": reason}
+    rows = [row(0, True, True, 1.0, 0.2), row(1, True, True, 2.0, 0.5), row(2, False, True, 7.0, 6.0),
+            row(3, False, False, 40.0, 39.0, "trim offset 19.5 deg needed to absorb 298 N m (limit 5 deg)"),
+            {"run_id": 4, "seed": 4, "status": "failed", "success": False, "failed_criteria": "raised",
+             "error": "ValueError: boom"}]
+    st = stats(rows_to_table(rows), 5)
+    assert st["runs_controllable"] == 3 and st["success_controllable"] == 2
+    assert st["success_rate_all"] == pytest.approx(2 / 5)
+    assert st["success_rate_controllable"] == pytest.approx(2 / 3)
+    assert st["uncontrollable"] == [{"run_id": 3, "reason": rows[3]["controllability.reason"]}]
+    assert st["fault_attrib_within_goal_controllable"]["fraction"] == pytest.approx(2 / 3)
+    assert st["figures_controllable"]["bank_err_max_after_fault_deg"]["max"] == 7.0
+    md = write_summary(tmp_path, camp, rows_to_table(rows), 5, plots=False).read_text()
+    assert "success over controllable runs: 2 / 3" in md and "| 3 | trim offset 19.5 deg" in md
+    assert "not controllable: trim offset" in md        # the worst run's one-line diagnosis
+    saved = json.loads((tmp_path / "summary_stats.json").read_text())
+    assert {"runs_controllable", "success_rate_controllable", "success_rate_all"} <= set(saved)

@@ -6,6 +6,11 @@ host. Everything about it is in its configuration file (default
 ``data/zenoh/router.json5``: TLS with client certificates required, the access-control
 policy per role); ``--listen`` replaces the file's listen endpoints.
 
+With ``--rt`` every thread of the router runs SCHED_FIFO (``--rt-priority``, default one
+above the SIL nodes' I/O threads) with memory locked: on a host it shares with real-time
+nodes that spin-wait (``ellipsled sim|fsw --rt``), a time-shared router would get the CPU
+only when they sleep, and every frame through it would be late.
+
 It runs until SIGINT/SIGTERM and closes its session on the way out.
 """
 from __future__ import annotations
@@ -44,6 +49,9 @@ def add_router_parser(sub) -> None:
                    help="Zenoh JSON5 configuration in router mode (default: data/zenoh/router.json5)")
     p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
                    help="listen here instead of the file's endpoints, e.g. tls/10.0.0.1:7447 (repeatable)")
+    p.add_argument("--rt", action="store_true", help="every thread SCHED_FIFO --rt-priority, memory locked")
+    p.add_argument("--rt-priority", type=int, default=82,
+                   help="SCHED_FIFO priority with --rt (the SIL nodes: loop 80, their I/O threads 81)")
     p.set_defaults(func=main)
 
 
@@ -55,12 +63,26 @@ def main(args) -> int:
 
     old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
+        rep = None
+        if args.rt:
+            from fsw import rt
+            # threads created from here on inherit the policy; those zenoh started at import
+            # are set after the session opens
+            rep = rt.apply(priority=args.rt_priority)
         try:
             session, endpoints = open_router(args.config, args.listen)
         except Exception as e:     # zenoh.ZError carries the cause (file, certificate, address in use)
             print(f"ellipsled router: cannot start: {e}", file=sys.stderr)
             return 2
         try:
+            if rep is not None:
+                if rep["sched_fifo"]:
+                    others = rt.other_threads(None, args.rt_priority)
+                    rep["messages"] += others["messages"]
+                    rep["threads"] = len(others["threads"]) + 1
+                print(f"[router] real-time: SCHED_FIFO {rep['priority']} ({rep.get('threads', 1)} threads), "
+                      f"mlockall {rep['mlockall']}" + (f"; {'; '.join(rep['messages'])}" if rep["messages"] else ""),
+                      file=sys.stderr, flush=True)
             print(f"[router] {session.zid()} listening on {endpoints} ({args.config})", file=sys.stderr, flush=True)
             while not stop["flag"]:
                 time.sleep(0.1)

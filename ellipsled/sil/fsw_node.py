@@ -300,6 +300,11 @@ class FswNode:
         say(ROLE, f"{self.scn.name}, {a.mode}; waiting for the plant")
         if not transport.wait_for_alive(self.session, self.K.alive_sim, a.wait_peers):
             say(ROLE, f"no plant joined within {a.wait_peers:g} s")
+        # an answer sent before the plant's subscription has reached this process is lost
+        # (through a router the declaration can come after the first sensor frame): in
+        # lockstep that would stall the run
+        elif not transport.wait_for_subscriber(self.pub_jets, a.wait_peers):
+            say(ROLE, f"the plant has not subscribed to the jet commands within {a.wait_peers:g} s")
         (self.run_realtime if a.mode == "realtime" else self.run_lockstep)()
         self.write()
         return 0

@@ -144,12 +144,31 @@ class Network:
         """Cut the host's cable (its veth pair): nothing more reaches it or leaves it."""
         _ip("-n", self.switch, "link", "delete", f"v{self._port[host]}", check=False)
 
+    def kill_all(self, host: str) -> None:
+        """SIGKILL every process inside the host's namespace (also those our processes
+        started, e.g. a Dask nanny's worker), and reap the ones started here."""
+        ns = self.hosts[host][0]
+        for _ in range(3):
+            pids = [int(x) for x in _ip("netns", "pids", ns, check=False).stdout.split()]
+            if not pids:
+                break
+            for pid in pids:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            time.sleep(0.1)
+        for name, (h, p) in self.procs.items():
+            if h == host and p.poll() is None:
+                try:
+                    p.wait(5)
+                except subprocess.TimeoutExpired:
+                    pass
+
     def remove_host(self, host: str) -> None:
         """The host is gone: cable cut, every process on it killed, its namespace deleted."""
         self.unplug(host)
-        for name, (h, p) in list(self.procs.items()):
-            if h == host and p.poll() is None:
-                self.stop(name, signal.SIGKILL, 5.0)
+        self.kill_all(host)
         ns = self.hosts.pop(host)[0]
         _ip("netns", "delete", ns, check=False)
 
@@ -159,6 +178,8 @@ class Network:
                 self.stop(name, signal.SIGTERM, 5.0)
             except Exception:
                 pass
+        for host in list(self.hosts):
+            self.kill_all(host)                     # whatever our processes left behind
         for log in self._logs:
             log.close()
         for ns, _ in list(self.hosts.values()):

@@ -51,6 +51,11 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
                                                 "an existing one is resumed")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="existing Dask scheduler, e.g. tcp://host:8786 (default: an embedded local cluster)")
+    tls = p.add_argument_group("TLS to the scheduler (mutual; the same files as `dask scheduler|worker "
+                               "--tls-ca-file --tls-cert --tls-key`; `ellipsled pki init DIR` makes dask.pem)")
+    tls.add_argument("--tls-ca-file", default=None, metavar="PEM", help="CA certificate(s)")
+    tls.add_argument("--tls-cert", default=None, metavar="PEM", help="this client's certificate")
+    tls.add_argument("--tls-key", default=None, metavar="PEM", help="this client's private key")
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="worker processes of the embedded cluster (default: one per core)")
     p.add_argument("--duration", type=_positive_float, default=None, help="stop every run after S s of flight")
@@ -70,9 +75,10 @@ def main(args) -> int:
               file=sys.stderr)
     from common.config import ConfigError
     try:
+        security = tls_security(args)
         res = run_campaign(args.campaign, args.out, runs=args.runs, master_seed=args.seed, duration_s=args.duration,
                            scheduler=args.scheduler, workers=args.workers, dashboard=args.dashboard,
-                           progress=not args.no_progress, flush_s=args.flush_s)
+                           progress=not args.no_progress, flush_s=args.flush_s, security=security)
     except ConfigError:
         raise
     except (ValueError, OSError) as e:   # a campaign folder of another campaign, an unreachable scheduler...
@@ -87,6 +93,25 @@ def main(args) -> int:
     print(f"{res.recorded} of {res.runs} runs recorded ({res.new} new, {res.failed_new} of them raised) "
           f"in {res.wall_s:.1f} s; summary: {Path(args.out) / 'summary.md'}")
     return 0
+
+
+def tls_security(args):
+    """distributed's Security for the --tls-* options (None without them): encryption
+    required, this client authenticated by its certificate."""
+    files = {"--tls-ca-file": args.tls_ca_file, "--tls-cert": args.tls_cert, "--tls-key": args.tls_key}
+    if not any(files.values()):
+        return None
+    missing = [k for k, v in files.items() if not v]
+    if missing:
+        raise ValueError(f"TLS needs --tls-ca-file, --tls-cert and --tls-key; missing {', '.join(missing)}")
+    for opt, path in files.items():
+        if not Path(path).is_file():
+            raise ValueError(f"{opt}: no such file: {path}")
+    if not args.scheduler or not args.scheduler.startswith("tls://"):
+        raise ValueError(f"--tls-* need a TLS scheduler address (--scheduler tls://HOST:8786), got {args.scheduler!r}")
+    from distributed.security import Security
+    return Security(tls_ca_file=args.tls_ca_file, tls_client_cert=args.tls_cert, tls_client_key=args.tls_key,
+                    require_encryption=True)
 
 
 class CampaignRun(NamedTuple):

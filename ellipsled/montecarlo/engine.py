@@ -218,12 +218,13 @@ class _IgnoreSigint:
             pass
 
 
-def connect(scheduler: str | None, workers: int | None, dashboard: bool = False):
-    """(client, cluster or None)."""
+def connect(scheduler: str | None, workers: int | None, dashboard: bool = False, security=None):
+    """(client, cluster or None). ``security``: distributed.security.Security for a TLS
+    scheduler."""
     from distributed import Client, LocalCluster
     from distributed.diagnostics.plugin import WorkerPlugin
     if scheduler:
-        return Client(scheduler, timeout="30s"), None
+        return Client(scheduler, timeout="30s", security=security), None
     n = workers or os.cpu_count() or 1
     # The scheduler always serves HTTP (health, metrics): a random loopback port, the
     # dashboard pages only when asked for.
@@ -253,7 +254,7 @@ def run_campaign(campaign: Campaign | str | Path, out: str | Path, *, runs: int 
                  master_seed: int | None = None, duration_s: float | None = None, scheduler: str | None = None,
                  workers: int | None = None, dashboard: bool = False, progress: bool = True,
                  flush_rows: int = 50, flush_s: float = 5.0, summary: bool = True,
-                 on_result: Callable[[dict, object], None] | None = None) -> CampaignResult:
+                 on_result: Callable[[dict, object], None] | None = None, security=None) -> CampaignResult:
     """Run (or resume) a campaign into ``out``. ``on_result(row, client)`` is called in
     the client after each finished run (tests use it to kill a worker or interrupt)."""
     camp = campaign if isinstance(campaign, Campaign) else load_campaign(campaign)
@@ -276,7 +277,8 @@ def run_campaign(campaign: Campaign | str | Path, out: str | Path, *, runs: int 
         res = CampaignResult(out, runs, len(done), 0, 0, False, 0.0)
         if todo:
             _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, workers, dashboard,
-                     Progress(runs, len(done & set(range(runs))), progress), flush_rows, flush_s, on_result)
+                     Progress(runs, len(done & set(range(runs))), progress), flush_rows, flush_s, on_result,
+                     security)
         res.recorded = len(store.run_ids())
         res.wall_s = time.monotonic() - t_start
         if summary and not res.interrupted:
@@ -308,7 +310,7 @@ class _exclusive:
 
 
 def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, workers, dashboard, prog,
-             flush_rows, flush_s, on_result) -> None:
+             flush_rows, flush_s, on_result, security=None) -> None:
     from distributed import as_completed
     token = uuid.uuid4().hex[:8]
     buf: list[dict] = []
@@ -325,7 +327,7 @@ def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, w
     client = cluster = None
     pending: dict = {}
     try:
-        client, cluster = connect(scheduler, workers, dashboard)
+        client, cluster = connect(scheduler, workers, dashboard, security)
         res.dashboard = client.dashboard_link if dashboard else None
         queue = iter(todo)
 

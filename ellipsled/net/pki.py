@@ -1,5 +1,6 @@
 """``ellipsled pki init DIR``: a certificate authority and one certificate per SIL role,
-for Zenoh's TLS with mutual authentication (data/zenoh/*.json5).
+for Zenoh's TLS with mutual authentication (data/zenoh/*.json5), and one for the Dask
+cluster of the Monte Carlo campaigns (``ellipsled montecarlo --tls-*``).
 
 The router identifies each peer by its certificate's common name, which is the role
 name its access-control policy (data/zenoh/router.json5) grants rights to: ``sim``
@@ -19,8 +20,11 @@ import os
 import sys
 from pathlib import Path
 
-# Role -> certificate common name; the names the router's policy refers to.
-ROLES = ("router", "sim", "fsw", "viz")
+# Role -> certificate common name; the names the router's policy refers to. ``dask``:
+# the Monte Carlo cluster's scheduler, workers and client (Dask's TLS is mutual too; each
+# end is a server and a client).
+ROLES = ("router", "sim", "fsw", "viz", "dask")
+SERVER_ROLES = ("router", "dask")
 CA_NAME = "ellipsled CA"
 DEFAULT_ROUTER_HOSTS = ("localhost", "127.0.0.1")
 DEFAULT_DAYS = 365
@@ -132,7 +136,7 @@ def init(d: str | Path, router_hosts=DEFAULT_ROUTER_HOSTS, days: int = DEFAULT_D
         # every certificate may act as a TLS client; the router's also as a server, under
         # the names clients reach it at. A client certificate carries its role as a DNS
         # name too (rustls requires a subject alternative name in end-entity certificates).
-        usages = [ExtendedKeyUsageOID.CLIENT_AUTH] + ([ExtendedKeyUsageOID.SERVER_AUTH] if role == "router" else [])
+        usages = [ExtendedKeyUsageOID.CLIENT_AUTH] + ([ExtendedKeyUsageOID.SERVER_AUTH] if role in SERVER_ROLES else [])
         b = (x509.CertificateBuilder().subject_name(_name(role)).issuer_name(ca.subject)
              .public_key(k.public_key()).serial_number(x509.random_serial_number())
              .not_valid_before(now).not_valid_after(until)
@@ -151,7 +155,7 @@ def init(d: str | Path, router_hosts=DEFAULT_ROUTER_HOSTS, days: int = DEFAULT_D
 def add_pki_parser(sub) -> None:
     p = sub.add_parser("pki", help="certificates for Zenoh's mutual TLS (a CA and one per role)")
     psub = p.add_subparsers(dest="pki_cmd", required=True)
-    q = psub.add_parser("init", help="write a CA and the router/sim/fsw/viz certificates into DIR",
+    q = psub.add_parser("init", help="write a CA and the router/sim/fsw/viz/dask certificates into DIR",
                         description=__doc__)
     q.add_argument("dir", help="folder for the certificates and keys (outside any repository)")
     q.add_argument("--router-host", action="append", default=None, metavar="NAME_OR_ADDRESS",

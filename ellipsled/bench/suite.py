@@ -9,7 +9,7 @@ interrupted run keeps what it measured.
 
 Sections (ellipsled/bench/<name>.py, each ``run(quick) -> dict``): machine, codec,
 allocator, plant, cycle, batch, groundlink, latency, jitter, sil_lockstep, sil_realtime,
-bridge; ``rt`` (real-time hygiene) is read from the jitter loop.
+sil_router (ellipsled/bench/router.py), bridge; ``rt`` (real-time hygiene) is read from the jitter loop.
 """
 from __future__ import annotations
 
@@ -42,12 +42,13 @@ REQUIRED: dict[str, tuple[str, ...]] = {
                           "jitter_max_us", "slips"),
     "sil_realtime.load": ("latency_p50_us", "latency_p99_us", "jitter_p50_us", "jitter_p99_us",
                           "jitter_max_us", "slips"),
+    "sil_router": ("p50_us", "p99_us", "baseline_p50_us", "baseline_p99_us"),
     "bridge": ("cpu_pct", "mem_growth_mb"),
     "rt": ("sched_fifo", "affinity", "mlockall", "messages"),
 }
 
 ORDER = ("machine", "codec", "allocator", "plant", "cycle", "batch", "groundlink", "latency", "jitter",
-         "sil_lockstep", "sil_realtime", "bridge")
+         "sil_lockstep", "sil_realtime", "sil_router", "bridge")
 
 
 # --------------------------------------------------------------------------- sections
@@ -125,6 +126,11 @@ def _sil_realtime(quick):
     return sil.realtime(quick)
 
 
+def _sil_router(quick):
+    from . import router
+    return router.run(quick)
+
+
 def _bridge(quick):
     from . import bridge
     r = bridge.run(quick)
@@ -144,7 +150,7 @@ def _bridge(quick):
 SECTIONS: dict[str, Callable[[bool], dict]] = {
     "machine": machine, "codec": _codec, "allocator": _allocator, "plant": _plant, "cycle": _cycle,
     "batch": _batch, "groundlink": _groundlink, "latency": _latency, "jitter": _jitter,
-    "sil_lockstep": _sil_lockstep, "sil_realtime": _sil_realtime, "bridge": _bridge,
+    "sil_lockstep": _sil_lockstep, "sil_realtime": _sil_realtime, "sil_router": _sil_router, "bridge": _bridge,
 }
 
 
@@ -397,6 +403,15 @@ def rows(res: dict) -> list[tuple[str, str, str, str, str, str]]:
             f"low-latency transport p99 {_fmt(_g(res, 'sil_realtime', 'idle', 'latency_p99_us'))}",
             f"{_fmt(_ratio(s.get('latency_p99_us'), _g(res, 'sil_realtime', 'idle', 'latency_p99_us')))}x (p99)",
             "", NO_TARGET)
+    sr = res.get("sil_router") or {}
+    if sr:
+        add(f"sensor-to-actuator latency through the router, mutual TLS ({_fmt(_g(sr, 'router_tls', 'duration_s'))} s)"
+            " p50 / p99 [us]", f"{_fmt(sr.get('p50_us'))} / {_fmt(sr.get('p99_us'))}",
+            f"peer to peer {_fmt(sr.get('baseline_p50_us'))} / {_fmt(sr.get('baseline_p99_us'))}",
+            f"{_fmt(_ratio(sr.get('p99_us'), sr.get('baseline_p99_us')))}x (p99)", "", NO_TARGET)
+        add("  cycle slips through the router / peer to peer",
+            f"{_fmt(_g(sr, 'router_tls', 'slips'))} / {_fmt(_g(sr, 'peer_to_peer', 'slips'))}", "", "", "0",
+            None if _g(sr, "router_tls", "slips") is None else _g(sr, "router_tls", "slips") == 0)
     lat = res.get("latency") or {}
     if lat:
         add("Zenoh + codec round trip p50 / p99 [us] (2 processes)",

@@ -40,7 +40,7 @@ def load_toml(path: str | Path) -> dict:
 def resolve(kind: str, name_or_path: str | Path) -> Path:
     """A data file by name (``data/<kind>/<name>.toml``) or by explicit path."""
     p = Path(name_or_path)
-    if p.suffix == ".toml" or len(p.parts) > 1:
+    if p.suffix == ".toml" or (len(p.parts) > 1 and not (DATA_DIR / kind / f"{name_or_path}.toml").exists()):
         return p
     cand = DATA_DIR / kind / f"{name_or_path}.toml"
     if not cand.exists():

@@ -238,5 +238,82 @@ def dispersion_from_columns(row: dict) -> dict:
     return out
 
 
-__all__ = ["Campaign", "Criteria", "Dispersions", "ConfigError", "load_campaign", "run_rng", "draw_run",
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))           # shortest repr: the file reads back bit for bit
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(f"no TOML form for {type(v).__name__}")
+
+
+def _toml(d: dict, prefix: str = "") -> list[str]:
+    """A scenario dictionary as TOML: plain keys, then sub-tables, then arrays of tables."""
+    out = [f"{k} = {_toml_value(v)}" for k, v in d.items()
+           if not (isinstance(v, dict) and not prefix.endswith("truth") and k != "inertia_scale")
+           and not (isinstance(v, list) and v and isinstance(v[0], dict))]
+    for k, v in d.items():
+        name = f"{prefix}.{k}" if prefix else k
+        if isinstance(v, dict) and k != "inertia_scale":
+            sub = _toml(v, name)
+            out += (["", f"[{name}]"] + sub) if sub and sub[0] else sub    # a table of tables: no header
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                out += ["", f"[[{name}]]"] + _toml(item, name)
+    return out
+
+
+def pinned_scenario_toml(camp: Campaign, base_file: str | Path, run_id: int, master_seed: int | None = None) -> str:
+    """Run ``run_id`` of a campaign as a stand-alone scenario file: the base scenario file with
+    the run's seed, truth dispersions, initial bank and flight-path angle, FDIR delay, time cap
+    and fault events. Flying it flies that run (angles pass through degrees: equal to ~1e-15)."""
+    master_seed = camp.master_seed if master_seed is None else master_seed
+    raw = load_toml(Path(base_file))
+    from common.model import load_scenario
+    base = campaign_base(camp.record(), load_scenario(base_file))
+    seed, d = draw_run(camp, base, run_id, master_seed)
+    sc, ini = raw["scenario"], raw["initial"]
+    sc["name"] = f"mc-{camp.name}-{master_seed}-run{run_id}"
+    sc["description"] = (f"Run {run_id} of campaign {camp.name} (master seed {master_seed}), pinned: "
+                         f"ellipsled montecarlo {camp.name} --seed {master_seed} --pin {run_id}")
+    sc["seed"] = int(seed)
+    if camp.max_duration_s is not None:
+        sc["max_duration_s"] = float(camp.max_duration_s)
+    ini["flight_path_deg"] = float(ini["flight_path_deg"]) + d["flight_path_offset_deg"]
+    ini["bank_deg"] = math.degrees(base.bank_schedule[0][1]) + d["bank0_err_deg"]
+    raw["truth"] = {"inertia_scale": {k: d[f"inertia_scale_{k}"] for k in INERTIA_KEYS},
+                    "density_scale": d["density_scale"], **{f"{k}_scale": d[f"{k}_scale"] for k in AERO_KEYS}}
+    raw.setdefault("fsw", {}).setdefault("fdir", {})["delay_s"] = d["fdir_delay_s"]
+    faults = []
+    for kind, key in (("off", "jets_failed_off"), ("stuck", "jets_stuck_on")):
+        if d[key]:
+            faults.append({"t_s": d["fault_t_s"], "jets": list(d[key]), "kind": kind})
+    faults += [{"t_s": d["fault_t_s"], "jets": [j], "kind": "degraded", "eta": e}
+               for j, e in zip(d["jets_degraded"], d["degraded_eta"])]
+    raw["faults"] = faults
+    head = [f"# {sc['description']}", "# Generated from the campaign's draw (ellipsled/montecarlo/campaign.py); do not edit."]
+    return "\n".join(head + _toml(raw)) + "\n"
+
+
+def pin_runs(camp: Campaign, run_ids, out_dir: str | Path, master_seed: int | None = None) -> list[Path]:
+    """Write runs of a campaign as scenario files ``<campaign>-<seed>-run<id>.toml`` in ``out_dir``."""
+    master_seed = camp.master_seed if master_seed is None else master_seed
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = []
+    for rid in run_ids:
+        f = out / f"{camp.name}-{master_seed}-run{int(rid):03d}.toml"
+        f.write_text(pinned_scenario_toml(camp, resolve("scenarios", camp.scenario), int(rid), master_seed))
+        files.append(f)
+    return files
+
+
+__all__ = ["pinned_scenario_toml", "pin_runs", "Campaign", "Criteria", "Dispersions", "ConfigError", "load_campaign", "run_rng", "draw_run",
            "apply_dispersion", "dispersion_columns", "dispersion_from_columns"]

@@ -48,7 +48,10 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("campaign", help="campaign name (data/campaigns) or .toml path")
     p.add_argument("--runs", type=_positive_int, default=None, help="number of runs (default: the campaign's)")
     p.add_argument("--out", required=True, help="campaign folder: results.parquet, summary.md, plots; "
-                                                "an existing one is resumed")
+                                                "an existing one is resumed (with --pin: the scenario folder)")
+    p.add_argument("--pin", type=_nonneg_int, nargs="+", default=None, metavar="ID",
+                   help="fly nothing: write these runs as scenario files <campaign>-<seed>-run<ID>.toml in --out "
+                        "(e.g. data/scenarios/mc; fly one with `ellipsled batch mc/<file stem>`)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="existing Dask scheduler, e.g. tcp://host:8786 (default: an embedded local cluster)")
     tls = p.add_argument_group("TLS to the scheduler (mutual; the same files as `dask scheduler|worker "
@@ -70,6 +73,11 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
 def main(args) -> int:
     """Run or resume a campaign; Ctrl-C stops cleanly (rerun the same command to resume)."""
     from .engine import run_campaign
+    if args.pin:
+        from .campaign import load_campaign, pin_runs
+        for f in pin_runs(load_campaign(args.campaign), args.pin, args.out, args.seed):
+            print(f"wrote {f}")
+        return 0
     if args.scheduler and args.workers:
         print("ellipsled montecarlo: --workers applies to the embedded cluster only; ignored with --scheduler",
               file=sys.stderr)

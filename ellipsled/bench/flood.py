@@ -195,6 +195,66 @@ def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
 ARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 1, 0, 0, 0, 0, 0, 0)
 
 
+def _free_udp() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, timeout_s: float = 300.0) -> dict:
+    """One real-time SIL (``ellipsled run nominal --realtime``), flooded for ``flood_s`` from
+    its first jet command (None: quiet): the FSW's cycle compute, ground-link task cost and
+    slips from its fsw.json."""
+    import subprocess
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory(prefix="bench-flood-") as d:
+        vehicle, gcs = _free_udp(), _free_udp()
+        log_path = Path(d) / "run.log"
+        with open(log_path, "w") as log:
+            run = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", "run", "nominal", "--realtime",
+                                    "--duration", f"{duration_s:g}", "--out", d, "--rerun", "none", "--no-plots",
+                                    "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
+                                   stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+            sent = None
+            try:
+                end = time.monotonic() + timeout_s
+                while "first jet command" not in log_path.read_text():
+                    if run.poll() is not None or time.monotonic() > end:
+                        raise RuntimeError(f"the SIL did not fly: {log_path.read_text()[-300:]}")
+                    time.sleep(0.1)
+                if flood_s:
+                    sent = send(("127.0.0.1", vehicle), rate, flood_s)
+                run.wait(timeout_s)
+            finally:
+                if run.poll() is None:
+                    run.kill()
+                    run.wait(10)
+        fsw = json.loads((Path(d) / "fsw.json").read_text())
+    ex, gl = fsw["executive"], fsw["tasks_us"].get("groundlink", {})
+    return {"compute_p50_us": ex["compute_p50_us"], "compute_p99_us": ex["compute_p99_us"],
+            "compute_max_us": ex["compute_max_us"], "slips": ex["slips"],
+            "groundlink_p50_us": gl.get("p50"), "groundlink_p99_us": gl.get("p99"), "groundlink_max_us": gl.get("max"),
+            "jitter_p99_us": fsw.get("jitter_p99_us"), "ground_link": fsw.get("ground_link"), "flood": sent,
+            "duration_s": duration_s}
+
+
+def run(quick: bool) -> dict:
+    """Benchmark section: the real-time SIL quiet and flooded (same run of the suite), and
+    the receive work per RG2 tick in process."""
+    dur, flood_s = (20.0, 10.0) if quick else (40.0, 20.0)
+    res = {"figure": "real-time SIL with a ground flood of 2,500 datagrams/s vs quiet: cycle compute, "
+                     "ground-link task cost per RG2 tick, slips",
+           "quiet": sil_run(dur, None), "flood": sil_run(dur, flood_s), "receive": receive_cost(quick),
+           "targets": {"slips": 0, "groundlink_max_us_max": 20_000.0}}
+    f, q = res["flood"], res["quiet"]
+    res.update(flood_compute_p99_us=f["compute_p99_us"], flood_compute_max_us=f["compute_max_us"],
+               flood_groundlink_p99_us=f["groundlink_p99_us"], flood_groundlink_max_us=f["groundlink_max_us"],
+               flood_slips=f["slips"], quiet_compute_p99_us=q["compute_p99_us"],
+               quiet_groundlink_p99_us=q["groundlink_p99_us"], quiet_groundlink_max_us=q["groundlink_max_us"])
+    return res
+
+
 def main(argv: list[str] | None = None) -> int:
     from fsw.groundlink import parse_udp
     from gse.tlog import read_records

@@ -146,3 +146,17 @@ def test_bad_budgets_are_refused():
                 DatagramIntake(s, link, accept=ACCEPT, **kw)
     finally:
         s.close()
+
+
+def test_a_calls_alike_refusals_are_counted_each_and_reported_once():
+    seen = []
+    b = Bench()
+    try:
+        b.link.verifier.on_reject = seen.append
+        for _ in range(3):
+            b.send(b"\x00" * 30)
+        assert b.poll() == 3
+        assert b.link.counts[Reject.GARBAGE] == 3 and len(seen) == 1
+        assert seen[0].text() == "link rejected 3x garbage"
+    finally:
+        b.close()

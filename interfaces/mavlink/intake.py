@@ -82,8 +82,7 @@ class DatagramIntake:
         a flood costs one event a reason per call, not one per datagram."""
         for reason, (count, sysid, compid, msgid, detail) in refused.items():
             self.stats["refused_early"] += count
-            self.link.verifier.reject(Rejection(reason, sysid, compid, msgid, -1,
-                                                detail + (f" (+{count - 1} more)" if count > 1 else "")), count)
+            self.link.verifier.reject(Rejection(reason, sysid, compid, msgid, -1, detail, count))
 
     def poll(self, handle: Callable[[object, tuple[str, int]], None]) -> int:
         """Read and pass on what the budget allows; ``handle(msg, addr)`` gets every

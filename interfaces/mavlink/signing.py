@@ -215,12 +215,14 @@ class Rejection(NamedTuple):
     msgid: int = -1
     link_id: int = -1
     detail: str = ""
+    count: int = 1          # alike rejections reported together (the first one's fields)
 
     def text(self) -> str:
         """One line of at most 50 characters (fits a STATUSTEXT); never contains key data."""
         who = f" {self.sysid}/{self.compid}" if self.sysid >= 0 else ""
         what = f" msg {self.msgid}" if self.msgid >= 0 else ""
-        return f"link rejected {self.reason.value}{who}{what}"[:50]
+        n = f" {self.count}x" if self.count > 1 else ""
+        return f"link rejected{n} {self.reason.value}{who}{what}"[:50]
 
 
 class Verdict(NamedTuple):
@@ -272,10 +274,10 @@ class SigningVerifier:
     def rejected(self) -> int:
         return sum(self.counts.values())
 
-    def reject(self, rej: Rejection, count: int = 1) -> None:
-        """Count a rejection (``count`` alike, reported once) and report it to the hook (a
-        failing hook is logged, not raised)."""
-        self.counts[rej.reason] += count
+    def reject(self, rej: Rejection) -> None:
+        """Count a rejection (``rej.count`` alike) and report it to the hook (a failing hook
+        is logged, not raised)."""
+        self.counts[rej.reason] += rej.count
         if self.on_reject is not None:
             try:
                 self.on_reject(rej)

@@ -134,3 +134,21 @@ def test_the_lp_is_cheap_enough_for_every_reconfiguration():
     controllability(T, h, I_NOM, V_B, A, 5.0, 0.0)
     times = [controllability(T, h, I_NOM, V_B, A, 5.0, 0.0).solve_s for _ in range(5)]
     assert min(times) < 0.1       # generous sanity bound on a shared host; the figure is in the README
+
+
+def test_the_truth_label_uses_the_faults_the_plant_applied_with_their_thrust_factors():
+    from common.model import FaultEvent, load_scenario
+    from ellipsled.controllable import truth_controllability, truth_health
+    from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
+    scn = load_scenario("nominal").with_(faults=(
+        FaultEvent(10.0, (3, 4), "off"), FaultEvent(10.0, (15,), "stuck"), FaultEvent(10.0, (7,), "degraded", 0.4),
+        FaultEvent(900.0, (9,), "off")))                      # after the end: never applied
+    applied = [(10.0, 3, "off"), (10.0, 4, "off"), (10.0, 15, "stuck"), (10.0, 7, "degraded")]
+    h = truth_health(scn, applied)
+    assert [int(h.state[j - 1]) for j in (3, 4, 15, 7, 9)] == [FAILED_OFF, FAILED_OFF, STUCK_ON, DEGRADED, NOMINAL]
+    assert h.eta[6] == 0.4
+    t = np.linspace(0.0, 600.0, 601)
+    q = np.where(t < 300.0, 5000.0, 150.0)
+    lab = truth_controllability(scn, applied, t, q, 5.0)
+    assert lab["qbar_min_pa"] == 150.0                       # the lowest dynamic pressure after the fault
+    assert truth_controllability(scn, [], t, q, 5.0) == {"controllable": True, "reason": ""}

@@ -97,6 +97,15 @@ def fault_free_history(scn: Scenario, seed: int, cache_dir: str | Path | None = 
         except (OSError, ValueError, KeyError, EOFError):
             pass                       # a damaged entry is flown again and replaced
     h = fly_twin(scn, seed)
+    store_twin(scn, seed, h, folder)
+    return h
+
+
+def store_twin(scn: Scenario, seed: int, h: History, cache_dir: str | Path | None = None) -> None:
+    """Cache ``h`` as the fault-free twin of (scn, seed): a run flown without any fault is
+    its own twin (a report stores its nominal run so the faulted cases need not fly it)."""
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    path = folder / f"{twin_key(scn, seed)}.npz"
     folder.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=folder, suffix=".npz.tmp")
     os.close(fd)
@@ -107,4 +116,3 @@ def fault_free_history(scn: Scenario, seed: int, cache_dir: str | Path | None = 
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-    return h

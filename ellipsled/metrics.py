@@ -15,6 +15,7 @@ SETTLE_BAND_DEG = 1.0     # |e_phi| below this counts as settled
 SETTLE_HOLD_S = 2.0       # ... and must stay below it this long
 FINE_BAND_DEG = 0.2       # the tighter band a fault-tolerance claim is judged by (spec 30-scenarios.md)
 TRANSIENT_S = 10.0        # the initial bank error's decay is over by then (bank_err_max_after_transient_deg)
+RECOVERED_FRAC = 0.1      # recovered: the fault-attributable error back within this fraction of its peak
 THETA_NAMES = ("I11", "I22", "I33", "I12", "I13", "I23", "d_roll", "d_pitch", "d_yaw")
 
 
@@ -137,11 +138,13 @@ def summarize(h: History, *, scenario: str, seed: int, end_reason: str, complete
     t_recfg = reconfig_t_s if reconfig_t_s is not None else t_fault
     settle = settle_time(t, e, t_recfg)
     late = t >= TRANSIENT_S
-    attrib = settle_attrib = None
+    attrib = settle_attrib = recovery = None
     if ref is not None:
         attrib = fault_attributable_max_deg(h, ref, t_fault)
         ta, da = fault_attributable_error_deg(h, ref)
         settle_attrib = settle_time(ta, da, t_recfg, FINE_BAND_DEG)
+        # "reduced to zero" (paper 6.4) at any scale: within RECOVERED_FRAC of the error's own peak
+        recovery = settle_time(ta, da, t_recfg, RECOVERED_FRAC * attrib) if attrib else 0.0
     s = {
         "scenario": scenario,
         "seed": seed,
@@ -156,6 +159,7 @@ def summarize(h: History, *, scenario: str, seed: int, end_reason: str, complete
         "settle_time_after_reconfig_s": settle,
         "settle_time_0p2deg_s": settle_time(t, e, t_recfg, FINE_BAND_DEG),
         "settle_time_fault_attrib_0p2deg_s": settle_attrib,
+        "recovery_time_fault_attrib_s": recovery,
         "fault_t_s": fault_t_s,
         "reconfig_t_s": reconfig_t_s,
         "alpha_dev_max_deg": float(np.max(np.abs(np.degrees(h["alpha_rad"] - alpha_trim_rad)))) if n else None,

@@ -61,6 +61,8 @@ def _add_report(sub):
     p.add_argument("--out", required=True)
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--duration", type=float, default=None)
+    p.add_argument("--reuse", action="store_true",
+                   help="write the report from the runs a previous report left in OUT/runs (nothing flown)")
 
     def run(a):
         from ellipsled.report import main as report_main

@@ -16,6 +16,8 @@ SETTLE_HOLD_S = 2.0       # ... and must stay below it this long
 FINE_BAND_DEG = 0.2       # the tighter band a fault-tolerance claim is judged by (spec 30-scenarios.md)
 TRANSIENT_S = 10.0        # the initial bank error's decay is over by then (bank_err_max_after_transient_deg)
 RECOVERED_FRAC = 0.1      # recovered: the fault-attributable error back within this fraction of its peak
+RECOVERY_WINDOW_S = 5.0   # ... the peak of the fault's own transient: within this long after reconfiguration
+RECOVERY_FLOOR_DEG = 0.01 # a peak below this is nothing to recover from
 THETA_NAMES = ("I11", "I22", "I33", "I12", "I13", "I23", "d_roll", "d_pitch", "d_yaw")
 
 
@@ -59,6 +61,23 @@ def fault_attributable_max_deg(case: History, ref: History, t_fault_s: float) ->
     t, d = fault_attributable_error_deg(case, ref)
     m = t >= t_fault_s - 1e-9
     return float(np.max(np.abs(d[m]))) if np.any(m) else None
+
+
+def recovery_time(t: np.ndarray, d: np.ndarray, t_fault: float, t_reconfig: float) -> float | None:
+    """Seconds from reconfiguration until the fault-attributable error ``d`` first falls back
+    within RECOVERED_FRAC of its peak, the peak taken over [t_fault, t_reconfig +
+    RECOVERY_WINDOW_S] (the fault's own transient, not a later reversal): the paper's "time
+    for the error to reduce to zero" (6.4). 0 if that peak is below RECOVERY_FLOOR_DEG; None if
+    the error never comes back."""
+    w = np.nonzero((t >= t_fault - 1e-9) & (t <= t_reconfig + RECOVERY_WINDOW_S))[0]
+    if not len(w):
+        return None
+    ip = w[int(np.argmax(np.abs(d[w])))]
+    peak = abs(float(d[ip]))
+    if peak < RECOVERY_FLOOR_DEG:
+        return 0.0
+    after = np.nonzero((np.arange(len(t)) >= ip) & (t >= t_reconfig) & (np.abs(d) <= RECOVERED_FRAC * peak))[0]
+    return float(t[after[0]] - t_reconfig) if len(after) else None
 
 
 def _window_max(t: np.ndarray, y: np.ndarray, t0: float, t1: float) -> float | None:
@@ -138,13 +157,16 @@ def summarize(h: History, *, scenario: str, seed: int, end_reason: str, complete
     t_recfg = reconfig_t_s if reconfig_t_s is not None else t_fault
     settle = settle_time(t, e, t_recfg)
     late = t >= TRANSIENT_S
-    attrib = settle_attrib = recovery = None
+    attrib = settle_attrib = recovery = t_attrib_max = None
     if ref is not None:
         attrib = fault_attributable_max_deg(h, ref, t_fault)
         ta, da = fault_attributable_error_deg(h, ref)
         settle_attrib = settle_time(ta, da, t_recfg, FINE_BAND_DEG)
-        # "reduced to zero" (paper 6.4) at any scale: within RECOVERED_FRAC of the error's own peak
-        recovery = settle_time(ta, da, t_recfg, RECOVERED_FRAC * attrib) if attrib else 0.0
+        recovery = recovery_time(ta, da, t_fault, t_recfg)
+        m = ta >= t_fault - 1e-9
+        if np.any(m):
+            i_max = np.nonzero(m)[0][int(np.argmax(np.abs(da[m])))]
+            t_attrib_max = float(ta[i_max])
     s = {
         "scenario": scenario,
         "seed": seed,
@@ -154,6 +176,7 @@ def summarize(h: History, *, scenario: str, seed: int, end_reason: str, complete
         "bank_err_max_after_fault_deg": float(np.max(np.abs(e[after]))) if np.any(after) else None,
         "bank_err_rms_deg": float(np.sqrt(np.mean(e ** 2))) if n else None,
         "bank_err_fault_attrib_max_deg": attrib,
+        "bank_err_fault_attrib_t_max_s": t_attrib_max,
         "bank_err_max_after_transient_deg": float(np.max(np.abs(e[late]))) if np.any(late) else None,
         "bank_err_rms_after_transient_deg": float(np.sqrt(np.mean(e[late] ** 2))) if np.any(late) else None,
         "settle_time_after_reconfig_s": settle,

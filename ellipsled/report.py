@@ -61,6 +61,17 @@ class Runs:
                 for case in CASES:
                     self._fly(case, setup, init_err, mode)
 
+    def load(self) -> None:
+        """The runs a previous ``fly`` wrote under out/runs (re-writing the report without flying)."""
+        from .history import History
+        for setup in SETUPS:
+            for mode in MODES:
+                for case in CASES:
+                    d = self.out / "runs" / f"{case}-{setup}-{mode}"
+                    h = History.load(d / "history.npz")
+                    self.s[(case, setup, mode)] = json.loads((d / "summary.json").read_text())
+                    self.h[(case, setup, mode)] = {k: np.array(h[k]) for k in KEEP}
+
     def _fly(self, case: str, setup: str, init_err: bool, mode: str) -> None:
         base, ft_off = ("case1", True) if case == "case1-ft-off" else (case, False)
         s, h, fsw = batch.run(base, seed=self.seed, ft_off=ft_off, duration_s=self.duration_s,
@@ -106,14 +117,16 @@ def claims(R: Runs, trans: dict) -> list[tuple[str, str, str, str]]:
                  ("✅ every case, set-up and mode stays within the paper's 5°." if ok else
                   f"❌ {wc} exceeds 5°.")))
     # 2. recovery
-    st = {c: R[(c,) + P]["settle_time_fault_attrib_0p2deg_s"] for c in FAULT_CASES}
+    st = {c: R[(c,) + P]["recovery_time_fault_attrib_s"] for c in FAULT_CASES}
+    b = {c: R[(c,) + P]["settle_time_fault_attrib_0p2deg_s"] for c in FAULT_CASES}
     ok = all(v is not None and v <= 5.0 for v in st.values())
     rows.append(("recovery after failure", "error regulated to near zero within the first few seconds (6.1)",
-                 f"fault-attributable error within {FINE_BAND_DEG}° (held 2 s) after reconfiguration (paper set-up, oracle): "
-                 + ", ".join(f"{c} {_fmt(v, '{:.2f}')} s" for c, v in st.items()),
-                 (f"✅ every case is back within {FINE_BAND_DEG}° of its fault-free twin within 5 s of reconfiguration."
-                  if ok else "❌ " + ", ".join(c for c, v in st.items() if v is None or v > 5.0)
-                  + f" not within {FINE_BAND_DEG}° of the fault-free twin within 5 s (or never).")))
+                 "fault-attributable error back within 10 % of the fault transient's peak, after reconfiguration "
+                 "(paper set-up, oracle): " + ", ".join(f"{c} {_fmt(v, '{:.2f}')} s" for c, v in st.items())
+                 + f"; within {FINE_BAND_DEG}° (held 2 s): " + ", ".join(f"{c} {_fmt(v, '{:.2f}')} s" for c, v in b.items()),
+                 ("✅ every case's fault transient is regulated back to its fault-free twin within 5 s." if ok else
+                  "❌ " + ", ".join(f"{c} ({_fmt(v, '{:.1f}')} s)" for c, v in st.items() if v is None or v > 5.0)
+                  + " take longer than 5 s (n/a: never) to come back to the fault-free twin.")))
     # 3. fault tolerance off (figure 5)
     parts, worse_all = [], True
     for su in SETUPS:
@@ -151,8 +164,8 @@ def claims(R: Runs, trans: dict) -> list[tuple[str, str, str, str]]:
                  + ", ".join(f"{c} {v}/{n_rev}" for c, v in larger.items()),
                  ("✅ every reversal of every failed case has a larger error than nominal and stays tracked."
                   if all_larger and tracked else
-                  ("❌ still tracked (all < 5°), but the failed cases are not larger than nominal at every reversal: "
-                   "the reversal error is set by the jets' torque quantum, which failures change little."
+                  (f"❌ every reversal is tracked within 5°, but the failed cases exceed nominal at only "
+                   f"{sum(larger.values())} of {n_rev * len(larger)} reversals."
                    if tracked else "❌ a reversal is not tracked within 5°."))))
     # 5. control effort (figures 9, 12)
     eff = {c: _ratio(R[(c,) + P]["control_effort_applied"], R[("nominal",) + P]["control_effort_applied"])
@@ -169,6 +182,10 @@ def claims(R: Runs, trans: dict) -> list[tuple[str, str, str, str]]:
                   _effort_miss(R, [c for c, v in eff.items() if not (v and v > 1)]))))
     # 6. adaptive parameters
     drift = {c: R[(c,) + P]["adaptive_param_drift_last20pct"] for c in ["nominal"] + FAULT_CASES}
+    moving = []
+    for c in ["nominal"] + FAULT_CASES:
+        dr = R[(c,) + P]["adaptive"]["drift_last20pct"]
+        moving += [f"{c} {THETA_NAMES[i]} {v:.1%}" for i, v in enumerate(dr) if v >= 0.02]
     a = R[("nominal",) + P]["adaptive"]
     worst_rel = max(range(len(THETA_NAMES)), key=lambda i: abs(a["rel_err"][i]))
     ok = all(v is not None and v < 0.02 for v in drift.values())
@@ -179,7 +196,8 @@ def claims(R: Runs, trans: dict) -> list[tuple[str, str, str, str]]:
                  f"{a['final'][worst_rel]:.4g} vs {a['truth'][worst_rel]:.4g} ({a['rel_err'][worst_rel]:+.0%})",
                  ("✅ the estimates settle to constants (< 2 % change over the last 20 %), as the paper says; they are "
                   "biased against the truth (the dead zone stops learning once tracking is good), which the paper "
-                  "does not claim otherwise." if ok else "❌ some estimates still drift over the last 20 %.")))
+                  "does not claim otherwise." if ok else
+                  f"❌ not every estimate settles: {', '.join(moving)} over the last 20 % (the others < 2 %).")))
     # 7. detection delay (case 4, 6.4)
     c1o, c4o = R[("case1",) + P], R[("case4",) + P]
     s1, s4 = c1o["recovery_time_fault_attrib_s"], c4o["recovery_time_fault_attrib_s"]
@@ -189,7 +207,7 @@ def claims(R: Runs, trans: dict) -> list[tuple[str, str, str, str]]:
         and 0.5 <= extra <= 1.5
     rows.append(("detection delay (case 4)", "correction at 4 s, then about 1 s more to reduce the error (6.4)",
                  f"oracle: reconfiguration at {_fmt(c4o['reconfig_t_s'], '{:.2f}')} s; fault-attributable error back "
-                 f"within 10 % of its peak (held 2 s) {_fmt(s4)} s after it (case 1: {_fmt(s1)} s after 2.50 s): "
+                 f"within 10 % of the fault transient's peak {_fmt(s4)} s after it (case 1: {_fmt(s1)} s after 2.50 s): "
                  f"{_fmt(extra)} s more; "
                  f"fault-attributable max {_fmt(c4o['bank_err_fault_attrib_max_deg'])}° vs case 1 "
                  f"{_fmt(c1o['bank_err_fault_attrib_max_deg'])}°; detect: reconfiguration at "
@@ -299,6 +317,65 @@ def adaptive_table(R: Runs) -> list[str]:
     return lines
 
 
+def _peak(h: dict, t0: float = TRANSIENT_S) -> tuple[float, float]:
+    """(max |e| [deg], its time [s]) for t >= t0."""
+    from .metrics import bank_error_deg
+    e, t = bank_error_deg(h), h["t_s"]
+    m = np.nonzero(t >= t0)[0]
+    if not len(m):             # a run shorter than t0
+        m = np.arange(len(t))
+    i = m[int(np.argmax(np.abs(e[m])))]
+    return float(abs(e[i])), float(t[i])
+
+
+def notes(R: Runs, trans: dict, reshape_deg: float) -> list[str]:
+    """The explanations the tables need, each computed from the runs."""
+    P, D, N = ("paper", "oracle"), ("paper", "detect"), ("no-init-err", "detect")
+    out = []
+    e0, t0 = _peak(R.h[("nominal",) + D], 2.5)
+    out.append(f"- **The plain max |e| after the fault is the initial error's decay**: nominal {e0:.2f}° at {t0:.1f} s "
+               f"(detect); case 1 {R[('case1',) + D]['bank_err_max_after_fault_deg']:.2f}°, case 3 "
+               f"{R[('case3',) + D]['bank_err_max_after_fault_deg']:.2f}°: it rewards nothing about the faults, hence "
+               "the fault-attributable figure above.")
+    off, c1 = R[("case1-ft-off",) + D], R[("case1",) + D]
+    offn, c1n = R[("case1-ft-off",) + N], R[("case1",) + N]
+    rv_off = [r["bank_err_max_deg"] for r in off["reversals"]]
+    rv_c1 = [r["bank_err_max_deg"] for r in c1["reversals"]]
+    out.append(f"- **Fault tolerance off is worse in tracking (figure 5 reproduced)**: after the initial transient "
+               f"(t ≥ {TRANSIENT_S:.0f} s) {_fmt(off['bank_err_max_after_transient_deg'])}° vs case 1 "
+               f"{_fmt(c1['bank_err_max_after_transient_deg'])}°, per reversal "
+               f"{_fmt(min(rv_off, default=None))}–{_fmt(max(rv_off, default=None))}° vs "
+               f"{_fmt(min(rv_c1, default=None))}–{_fmt(max(rv_c1, default=None))}°, with no initial error "
+               f"{_fmt(offn['bank_err_max_after_transient_deg'])}° vs {_fmt(c1n['bank_err_max_after_transient_deg'])}° "
+               f"(detect); fault-attributable ×{_fmt(_ratio(off['bank_err_fault_attrib_max_deg'], c1['bank_err_fault_attrib_max_deg']), '{:.1f}')}"
+               f"; and it costs propellant ×{_fmt(_ratio(off['propellant_kg'], c1['propellant_kg']), '{:.1f}')}.")
+    e2, t2 = _peak(R.h[("case2",) + D])
+    e2n, t2n = _peak(R.h[("case2",) + N])
+    starts = [r["t_s"] for r in R[("case2",) + D]["reversals"] if r["t_s"] <= t2 < r["t_s"] + 40.0]
+    where = f"in the reversal that starts at {starts[-1]:.0f} s" if starts else "between reversals"
+    out.append(f"- **Case 2's largest error is fault-driven**, not the initial transient: {e2:.2f}° at {t2:.0f} s "
+               f"(detect; {where}), {e2n:.2f}° at {t2n:.0f} s with no initial error; its fault-attributable "
+               f"max is {_fmt(R[('case2',) + D]['bank_err_fault_attrib_max_deg'])}° at "
+               f"{_fmt(R[('case2',) + D].get('bank_err_fault_attrib_t_max_s'), '{:.0f}')} s. Its reference is re-planned "
+               f"after the reconfiguration (up to {reshape_deg:.1f}° from nominal's, figure 11) to the one-way roll "
+               "authority the seven stuck jets leave; against the scenario's own schedule its error is "
+               f"{_fmt(R[('case2',) + D].get('bank_err_sched_max_after_fault_deg'))}°.")
+    c4o, c4d = R[("case4",) + P], R[("case4",) + D]
+    out.append(f"- **Case 4**: with the oracle the correction lands at {_fmt(c4o['reconfig_t_s'])} s (2.5 + 1.5 s), "
+               f"the paper's set-up; with the product's FDIR at {_fmt(c4d['reconfig_t_s'])} s, the delay counting from "
+               "the first detection (a failed-off jet shows only when it is fired).")
+    a = R[("nominal",) + P]["adaptive"]
+    worst = sorted(range(len(THETA_NAMES)), key=lambda i: -abs(a["rel_err"][i]))[:3]
+    out.append("- **Adaptive estimates converge, biased**: " + ", ".join(
+        f"{THETA_NAMES[i]} {a['final'][i]:.4g} vs truth {a['truth'][i]:.4g}" for i in worst)
+        + " (nominal): the dead zone (control.deadzone) stops adaptation once tracking is good.")
+    out.append(f"- **Trajectory (figure 6)**: q̄ peaks at {trans['qbar_peak_t_s']:.0f} s, γ turns positive at "
+               f"{_fmt(trans['gamma_pos_t_s'], '{:.0f}')} s and the vehicle climbs to {trans['climb_km']:.0f} km, "
+               f"Mach 2 at {trans['t_end_s']:.0f} s; the paper's γ changes sign once, near 250 s. Our reference "
+               "schedule is a substitute (the paper's figure-3 steps are not given) flown westward (eastward skips out).")
+    return out
+
+
 # ----------------------------------------------------------------------------- report
 def write_report(out: Path, R: Runs) -> Path:
     trans = translational(R)
@@ -327,13 +404,14 @@ def write_report(out: Path, R: Runs) -> Path:
         "",
         f"FT-off vs case 1 (fault-attributable, paper set-up, oracle): ×"
         f"{_fmt(_ratio(_attrib(R, 'case1-ft-off'), _attrib(R, 'case1')), '{:.1f}')}. "
-        f"Case 2's reference is re-shaped after the reconfiguration (guidance.authority_factor): it differs from "
-        f"nominal's by up to {reshape:.1f}° (figure 11).",
+        f"Case 2's reference is re-planned after the reconfiguration to the roll authority its jets have left: "
+        f"it differs from nominal's by up to {reshape:.1f}° (figure 11).",
         "",
         "### Claims of the paper",
         "",
         "| claim | paper | measured here | verdict |", "|---|---|---|---|",
-    ] + ["| " + " | ".join(x.replace("|", "/") for x in r) + " |" for r in rows]
+    ] + ["| " + " | ".join(x.replace("|", "/") for x in r) + " |" for r in rows] + [
+        "", "### What the numbers say", ""] + notes(R, trans, reshape)
     lines = ["# ellipsled vs the paper (Marwaha & Valasek 2011)", ""] + head
     for su in SETUPS:
         for m in MODES:
@@ -358,7 +436,7 @@ def main(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     R = Runs(out, args.seed, args.duration)
-    R.fly()
+    R.load() if getattr(args, "reuse", False) else R.fly()
     path = write_report(out, R)
     print(f"wrote {path} and {out / 'readme_section.md'}")
     return 0

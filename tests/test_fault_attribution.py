@@ -92,3 +92,27 @@ def test_no_initial_error_variant_starts_on_the_reference():
     assert abs(e[0]) < 0.01                       # the paper's set-up starts 5 deg off
     s5, h5, _ = batch.run("case1", duration_s=12.0, reference=False)
     assert np.degrees(h5["bank_rad"][0] - h5["bank_ref_rad"][0]) == pytest.approx(5.0, abs=0.01)
+
+
+def test_effort_figures_equal_hand_computed_integrals():
+    from ellipsled.metrics import effort
+    h = _history([0, 1, 2, 3], [0, 0, 0, 0], [0, 0, 0, 0], dt=0.5)
+    h.a["u_cal_B"][:] = [[3.0, 4.0, 0.0]] * 4          # |u|^2 = 25
+    h.a["tau_alloc_B"][:] = [[3.0, 0.0, 0.0]] * 4      # missing (0, 4, 0): 16
+    h.a["tau_jets_B"][:] = [[1.0, 0.0, 0.0]] * 4       # applied |tau|^2 = 1
+    e = effort(h)                                       # zero-order hold: 3 intervals of 0.5 s
+    assert e["control_effort_cmd"] == pytest.approx(25 * 1.5)
+    assert e["control_effort_applied"] == pytest.approx(1 * 1.5)
+    assert e["control_effort_undeliverable_share"] == pytest.approx(16 / 25)
+
+
+def test_recovery_time_runs_from_reconfiguration_to_a_tenth_of_the_faults_peak():
+    from ellipsled.metrics import recovery_time
+    t = np.arange(0.0, 30.0, 0.02)
+    # grows from the fault (2.5 s) to 0.2 deg at 4.5 s, falls linearly to 0 at 8.5 s, then a later
+    # excursion of 1 deg at 20 s (a reversal: not the fault's transient)
+    d = np.interp(t, [0, 2.5, 4.5, 8.5, 19, 20, 21], [0, 0, 0.2, 0.0, 0, 1.0, 0])
+    # 10 % of 0.2 = 0.02, reached at 8.1 s; reconfiguration at 4.0 s -> 4.1 s
+    assert recovery_time(t, d, 2.5, 4.0) == pytest.approx(4.1, abs=0.021)
+    assert recovery_time(t, 0.001 * d, 2.5, 4.0) == 0.0          # nothing to recover from
+    assert recovery_time(t, np.where(t > 2.5, 0.5, 0.0), 2.5, 4.0) is None   # never comes back

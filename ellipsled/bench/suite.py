@@ -9,7 +9,8 @@ interrupted run keeps what it measured.
 
 Sections (ellipsled/bench/<name>.py, each ``run(quick) -> dict``): machine, codec,
 allocator, plant, cycle, batch, groundlink, latency, jitter, sil_lockstep, sil_realtime,
-sil_router (ellipsled/bench/router.py), bridge; ``rt`` (real-time hygiene) is read from the jitter loop.
+sil_router (ellipsled/bench/router.py), flood (a ground flood at the real-time SIL),
+bridge; ``rt`` (real-time hygiene) is read from the jitter loop.
 """
 from __future__ import annotations
 
@@ -43,12 +44,14 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "sil_realtime.load": ("latency_p50_us", "latency_p99_us", "jitter_p50_us", "jitter_p99_us",
                           "jitter_max_us", "slips"),
     "sil_router": ("p50_us", "p99_us", "baseline_p50_us", "baseline_p99_us"),
+    "flood": ("flood_compute_p99_us", "flood_compute_max_us", "flood_groundlink_p99_us", "flood_groundlink_max_us",
+              "flood_slips", "quiet_compute_p99_us", "quiet_groundlink_p99_us"),
     "bridge": ("cpu_pct", "mem_growth_mb"),
     "rt": ("sched_fifo", "affinity", "mlockall", "messages"),
 }
 
 ORDER = ("machine", "codec", "allocator", "plant", "cycle", "batch", "groundlink", "latency", "jitter",
-         "sil_lockstep", "sil_realtime", "sil_router", "bridge")
+         "sil_lockstep", "sil_realtime", "sil_router", "flood", "bridge")
 
 
 # --------------------------------------------------------------------------- sections
@@ -131,6 +134,11 @@ def _sil_router(quick):
     return router.run(quick)
 
 
+def _flood(quick):
+    from . import flood
+    return flood.run(quick)
+
+
 def _bridge(quick):
     from . import bridge
     r = bridge.run(quick)
@@ -150,7 +158,8 @@ def _bridge(quick):
 SECTIONS: dict[str, Callable[[bool], dict]] = {
     "machine": machine, "codec": _codec, "allocator": _allocator, "plant": _plant, "cycle": _cycle,
     "batch": _batch, "groundlink": _groundlink, "latency": _latency, "jitter": _jitter,
-    "sil_lockstep": _sil_lockstep, "sil_realtime": _sil_realtime, "sil_router": _sil_router, "bridge": _bridge,
+    "sil_lockstep": _sil_lockstep, "sil_realtime": _sil_realtime, "sil_router": _sil_router, "flood": _flood,
+    "bridge": _bridge,
 }
 
 
@@ -412,6 +421,25 @@ def rows(res: dict) -> list[tuple[str, str, str, str, str, str]]:
         add("  cycle slips through the router / peer to peer",
             f"{_fmt(_g(sr, 'router_tls', 'slips'))} / {_fmt(_g(sr, 'peer_to_peer', 'slips'))}", "", "", "0",
             None if _g(sr, "router_tls", "slips") is None else _g(sr, "router_tls", "slips") == 0)
+    fl = res.get("flood") or {}
+    if fl:
+        rate = _g(fl, "flood", "flood", "rate_per_s")
+        add(f"real-time SIL under a ground flood ({_fmt(rate)} datagrams/s): cycle compute p99 / max [us]",
+            f"{_fmt(fl.get('flood_compute_p99_us'))} / {_fmt(fl.get('flood_compute_max_us'))}",
+            f"quiet {_fmt(fl.get('quiet_compute_p99_us'))} / {_fmt(_g(fl, 'quiet', 'compute_max_us'))}",
+            f"{_fmt(_ratio(fl.get('flood_compute_p99_us'), fl.get('quiet_compute_p99_us')))}x (p99)", "0 slips",
+            None if fl.get("flood_slips") is None else fl.get("flood_slips") == 0)
+        add("  ground-link task per RG2 tick under flood p99 / max [us]",
+            f"{_fmt(fl.get('flood_groundlink_p99_us'))} / {_fmt(fl.get('flood_groundlink_max_us'))}",
+            f"quiet {_fmt(fl.get('quiet_groundlink_p99_us'))} / {_fmt(fl.get('quiet_groundlink_max_us'))}",
+            f"{_fmt(_ratio(fl.get('flood_groundlink_max_us'), 20_000.0))}x period (max)", "max < 20,000 (a period)",
+            _le(fl.get("flood_groundlink_max_us"), 20_000.0))
+        rc = fl.get("receive") or {}
+        add("  receive work per tick, in process, flood: intake / previous path p99 [us]",
+            f"{_fmt(_g(rc, 'flood_intake', 'p99_us'))} / {_fmt(_g(rc, 'flood_previous', 'p99_us'))}",
+            f"quiet {_fmt(_g(rc, 'quiet', 'p99_us'))}; genuine commands through: "
+            f"{_fmt(_g(rc, 'flood_intake', 'genuine_handled'))} / {_fmt(_g(rc, 'flood_previous', 'genuine_handled'))}"
+            f" of {_fmt(_g(rc, 'flood_intake', 'genuine_sent'))}", "", "", NO_TARGET)
     lat = res.get("latency") or {}
     if lat:
         add("Zenoh + codec round trip p50 / p99 [us] (2 processes)",

@@ -169,7 +169,9 @@ else:
     enc = Codec.for_schema("JETS")
     j = records.new(records.JETS)
     base = 7000 if role == "viz" else 8000
-    time.sleep(1.0)                   # the plant's subscription reaches this session (when allowed)
+    # the plant's subscription reaches this session when the policy allows it (never for the
+    # viewer: its puts then go to the router, which drops them)
+    transport.wait_for_subscriber(pub, 5.0 if role == "viz" else 60.0)
     for i in range(20):
         j["k"] = base + i
         j["u"][:] = 1

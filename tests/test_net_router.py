@@ -175,3 +175,35 @@ def test_a_certificate_of_another_ca_is_refused(router, tmp_path):
         assert s.info.routers_zid()
     finally:
         s.close()
+
+
+def test_the_router_drops_a_viewer_put_even_when_the_viewer_knows_the_plant_subscribes(router, tmp_path):
+    """With the shipped policy a viewer's client is not even told that the plant subscribes
+    to the jets, so it may never send. Here the viewer is also allowed to learn of
+    subscribers: its put is then sent for sure (its publisher matches), and the router's
+    ingress rule is what stops it."""
+    _, d, _ = router
+    conf = zenoh.Config.from_file(str(ZCONF / "router.json5"))
+    endpoint = f"tls/localhost:{transport.free_port()}"
+    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    for key, name in (("root_ca_certificate", "ca.pem"), ("listen_certificate", "router.pem"),
+                      ("listen_private_key", "router.key")):
+        conf.insert_json5(f"transport/link/tls/{key}", json.dumps(str(d / name)))
+    policies = json.loads(conf.get_json("access_control/policies"))
+    viewer = next(p for p in policies if p["id"] == "viewer")
+    viewer["rules"].append("matching")
+    conf.insert_json5("access_control/policies", json.dumps(policies))
+    rtr = zenoh.open(conf)
+    sim = zenoh.open(client_config("sim", endpoint, d))
+    viz = zenoh.open(client_config("viz", endpoint, d))
+    sub = pub = None
+    try:
+        sub = sim.declare_subscriber(K.jets, zenoh.handlers.FifoChannel(64))
+        pub = viz.declare_publisher(K.jets)
+        assert transport.wait_for_subscriber(pub, 10), "the viewer should now see the plant's subscription"
+        for i in range(10):
+            pub.put(b"forged")
+        time.sleep(0.5)
+        assert _drain(sub) == []
+    finally:
+        transport.close(sub, pub, sim, viz, rtr)

@@ -8,7 +8,6 @@ import math
 import os
 import shlex
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -20,17 +19,13 @@ from ellipsled.history import History
 from gse.replay import TlogReplay
 from interfaces.mavlink.signing import SigningKey
 
+from tests.ground_procs import free_udp, stop
+
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed (apt-get install tmux)")]
 PY = [sys.executable, "-m", "ellipsled.cli"]
 STATUSTEXT_LEN = 50
 
-
-def _free_udp() -> int:
-    import socket
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Tmux:
@@ -68,7 +63,7 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
     key_file = tmp_path / "keys" / "signing.key"
     key_file.parent.mkdir()
     SigningKey.generate().write_file(str(key_file))
-    vehicle, gcs = _free_udp(), _free_udp()
+    vehicle, gcs = free_udp(), free_udp()
     out = tmp_path / "run"
     tlog = out / "console.tlog"
     out.mkdir()
@@ -131,11 +126,5 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         console.kill()
         if replay is not None:
             replay.kill()
-        if run.poll() is None:
-            run.send_signal(signal.SIGTERM)
-            try:
-                run.wait(15)
-            except subprocess.TimeoutExpired:
-                run.kill()
-                run.wait(5)
+        stop(run)
         log.close()

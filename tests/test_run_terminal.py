@@ -16,16 +16,12 @@ import pytest
 
 from ellipsled.terminal import ProgressFile, RunProgress, files_written
 
+from tests.ground_procs import free_udp
+
 pytestmark = pytest.mark.slow
 PY = [sys.executable, "-m", "ellipsled.cli"]
 URL = re.compile(r"https?://127\.0\.0\.1:\d+/\S*")
 
-
-def _free_udp() -> int:
-    import socket
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Lines:
@@ -70,8 +66,8 @@ def _get(url: str, timeout_s: float) -> tuple[int, bytes]:
 def test_run_with_the_web_viewer_prints_a_url_that_answers_and_names_its_files(tmp_path):
     out = tmp_path / "run"
     run = subprocess.Popen(PY + ["run", "nominal", "--duration", "600", "--rerun", "web+file", "--no-plots",
-                                 "--out", str(out), "--mavlink-bind", f"udp:127.0.0.1:{_free_udp()}",
-                                 "--gcs", f"udp:127.0.0.1:{_free_udp()}"],
+                                 "--out", str(out), "--mavlink-bind", f"udp:127.0.0.1:{free_udp()}",
+                                 "--gcs", f"udp:127.0.0.1:{free_udp()}"],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True)
     lines = Lines(run)
     try:

@@ -5,7 +5,6 @@ each jet, and the run ends within the case-1 bound."""
 from __future__ import annotations
 
 import asyncio
-import signal
 import subprocess
 import sys
 import time
@@ -17,15 +16,11 @@ from gse.console import GroundConsole
 from gse.tlog import read_records
 from interfaces.mavlink.signing import SigningKey
 
+from tests.ground_procs import free_udp, stop
+
 pytestmark = pytest.mark.slow
 PY = [sys.executable, "-m", "ellipsled.cli"]
 
-
-def _free_udp() -> int:
-    import socket
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path):
@@ -33,7 +28,7 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
     key_file.parent.mkdir()
     key = SigningKey.generate()
     key.write_file(str(key_file))
-    vehicle, gcs = _free_udp(), _free_udp()
+    vehicle, gcs = free_udp(), free_udp()
     out = tmp_path / "run"
     log = open(tmp_path / "run.log", "w")
     run = subprocess.Popen(PY + ["run", "nominal", "--realtime", "--rt", "--duration", "40", "--out", str(out),
@@ -97,13 +92,7 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
         assert run.wait(30) == 0, log_text()
     finally:
         client.close()
-        if run.poll() is None:
-            run.send_signal(signal.SIGTERM)
-            try:
-                run.wait(15)
-            except subprocess.TimeoutExpired:
-                run.kill()
-                run.wait(5)
+        stop(run)
         log.close()
     import json
     s = json.loads((out / "summary.json").read_text())

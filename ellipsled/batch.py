@@ -102,7 +102,7 @@ def alloc_sample(fsw: FlightSoftware) -> dict:
 
 def verify_allocations(scn: Scenario, params: dict, samples: list[dict]) -> tuple[float | None, int]:
     """Re-solve sampled demands by exhaustive enumeration: the largest objective gap seen."""
-    from fsw.allocation import solve_enumeration
+    from fsw.allocation.reference import solve_enumeration
     from fsw.health import JetHealth
     veh = scn.vehicle
     w = np.array([params["allocator.w_roll"], params["allocator.w_pitch"], params["allocator.w_yaw"]])

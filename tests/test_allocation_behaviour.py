@@ -5,7 +5,8 @@ import pytest
 
 from common.config import ConfigError
 from common.model import load_vehicle
-from fsw.allocation import Allocator, solve_enumeration, solve_highs
+from fsw.allocation import Allocator
+from fsw.allocation.reference import solve_enumeration, solve_highs
 from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
 from fsw.params import load_params
 

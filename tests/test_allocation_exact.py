@@ -9,8 +9,9 @@ import pytest
 
 from common.model import load_vehicle
 from ellipsled.bench.allocator import cases, demands, params_for
-from fsw.allocation import (TOL_BOX_NM, Allocator, effective_model, solve_enumeration,
-                            solve_enumeration_many, solve_highs)
+from fsw.allocation import Allocator, effective_model
+from fsw.allocation.model import TOL_BOX_NM
+from fsw.allocation.reference import solve_enumeration, solve_enumeration_many, solve_highs
 from fsw.health import FAILED_OFF, STUCK_ON, JetHealth
 from fsw.params import load_params
 

@@ -12,8 +12,9 @@ import pytest
 
 from common.model import load_vehicle
 from ellipsled.bench.allocator import cases, demands, params_for
-from fsw.allocation import (TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, Allocator, effective_model,
-                            solve_enumeration_many)
+from fsw.allocation import Allocator, effective_model
+from fsw.allocation.model import TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE
+from fsw.allocation.reference import solve_enumeration_many
 from fsw.health import DEGRADED, JetHealth
 from fsw.params import load_params
 

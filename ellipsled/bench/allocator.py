@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from common.model import load_vehicle
-from fsw.allocation import (Allocator, _build_tables, _Workspace, effective_model,
-                            solve_enumeration_many, solve_highs)
+from fsw.allocation import Allocator, effective_model
+from fsw.allocation.reference import solve_enumeration_many, solve_highs
+from fsw.allocation.tables import Workspace, build_tables
 from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
 from fsw.params import load_params
 
@@ -129,7 +130,7 @@ def rebuild_figures(T: np.ndarray, thrust: np.ndarray, reps: int = 9) -> dict:
     counted, and wall time), then the asynchronous mode: from the nominal tables, each
     configuration is requested with set_health and solve() runs back to back until the
     switch; the longest solve() meanwhile is the figure ("async interim solve max")."""
-    ws = _Workspace()
+    ws = Workspace()
     per_case = []
     for case in cases():
         health = case.health if case.fault_tolerance else JetHealth()
@@ -137,7 +138,7 @@ def rebuild_figures(T: np.ndarray, thrust: np.ndarray, reps: int = 9) -> dict:
         cpu, wall = [], []
         for _ in range(reps):
             t0, c0 = time.perf_counter(), time.thread_time()
-            t = _build_tables(usable, cols, bias, c, np.array(case.w), ws)
+            t = build_tables(usable, cols, bias, c, np.array(case.w), ws)
             cpu.append(time.thread_time() - c0)
             wall.append(time.perf_counter() - t0)
         per_case.append({"case": case.name, "candidates": len(t.pen), "raw": t.n_raw,

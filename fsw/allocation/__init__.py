@@ -1,0 +1,12 @@
+"""Fault-tolerant discrete control allocation (spec 20-fsw.md; paper section 3).
+
+model      the problem: health -> effective model, tolerances, problem checks
+tables     candidate tables of a health configuration (numba kernels, work buffers)
+allocator  the Allocator and its solve kernels
+rebuild    the background table builder (real time)
+reference  HiGHS and enumeration solvers: test and benchmark references, not flown
+"""
+from .allocator import PARAMS, Allocator
+from .model import effective_model
+
+__all__ = ["PARAMS", "Allocator", "effective_model"]

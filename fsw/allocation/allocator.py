@@ -1,0 +1,524 @@
+"""The exact fault-tolerant discrete allocator (the problem: fsw/allocation/model.py).
+
+Method (exact by construction, see tests/test_allocation_*.py):
+  1. Per health configuration, the distinct achievable torques and their octant tables
+     (fsw/allocation/tables.py).
+  2. Inside the sign box the objective is linear: with s_i = sign(tau_d,i) (+1 for 0),
+     objective = sum_i w_i |tau_d,i| - score,  score = sum_i w_i s_i tau_i - c.
+     score does not depend on the demand, only on its octant, so for each of the 8
+     octants the candidates that can lie in it (s_i tau_i >= 0 on every axis) are sorted
+     by score once. A query is the first candidate in that order inside the box
+     |tau_i| <= |tau_d,i| (blocks of BLOCK rows whose component-wise minimum is outside
+     are skipped), followed by a short scan of the score ties.
+  3. If none is inside the box: an exhaustive scan of all candidates for the
+     unconstrained objective (degraded).
+
+Non-finite demand: ``solve`` returns u = 0 (all usable jets off), sets ``rejected`` and
+leaves ``objective`` = NaN; it never raises in the cycle.
+"""
+from __future__ import annotations
+
+import time
+import weakref
+from collections import OrderedDict
+
+import numpy as np
+from numba import njit
+
+from fsw.health import FAILED_OFF, JetHealth
+from fsw.params import Param
+
+from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, validate_problem
+from .rebuild import Rebuilder
+from .tables import BLOCK, Tables, Workspace, build_tables
+
+CACHE_MAX_CONFIGS = 16     # health configurations whose tables are kept
+STATUS_OK, STATUS_DEGRADED, STATUS_REJECTED = 0, 1, 2
+ZERO3 = np.zeros(N_AXES)
+
+
+PARAMS: list[Param] = [
+    Param("allocator.w_roll", 0.0, 1e3, "-", "weight of the roll-torque error in the objective"),
+    Param("allocator.w_pitch", 0.0, 1e3, "-", "weight of the pitch-torque error in the objective"),
+    Param("allocator.w_yaw", 0.0, 1e3, "-", "weight of the yaw-torque error in the objective"),
+    Param("allocator.penalty_per_N", 0.0, 10.0, "N m/N",
+          "firing penalty per newton of jet thrust: c_k = penalty_per_N * thrust_k"),
+    Param("allocator.fault_tolerance", 0.0, 1.0, "-",
+          "1: allocate with the FDIR jet health; 0: assume every jet nominal (paper fig. 5)",
+          integer=True),
+]
+
+
+@njit(cache=True)
+def _in_box(X, j, hi0, hi1, hi2):
+    # the lower bounds x_i >= -tol_box hold for every member of an octant by construction
+    # bitwise & (not `and`): one well-predicted branch instead of three unpredictable ones
+    return (X[j, 0] <= hi0) & (X[j, 1] <= hi1) & (X[j, 2] <= hi2)
+
+
+@njit(cache=True)
+def _write_answer(r, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out):
+    tau_out[0] = cand_tau[r, 0] + delta[0]
+    tau_out[1] = cand_tau[r, 1] + delta[1]
+    tau_out[2] = cand_tau[r, 2] + delta[2]
+    obj_out[0] = (w[0] * abs(d0 - tau_out[0]) + w[1] * abs(d1 - tau_out[1])
+                  + w[2] * abs(d2 - tau_out[2]) + cand_pen[r])
+    pat = cand_pat[r]
+    for k in range(u_out.shape[0]):
+        u_out[k] = (pat >> k) & 1
+
+
+@njit(cache=True)
+def _reject(u_out, obj_out):
+    for k in range(u_out.shape[0]):
+        u_out[k] = 0
+    obj_out[0] = np.nan
+    return 2
+
+
+@njit(cache=True)
+def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch,
+                  forbid, tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
+    """One allocation over the candidates whose pattern has no bit of ``forbid`` (0: all).
+    Writes u_out (n jets), tau_out (3,), obj_out[0]; returns STATUS_OK / STATUS_DEGRADED /
+    STATUS_REJECTED. No allocation."""
+    d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
+    if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
+        return _reject(u_out, obj_out)
+    o = 0
+    if d0 < 0.0:
+        o |= 1
+    if d1 < 0.0:
+        o |= 2
+    if d2 < 0.0:
+        o |= 4
+    hi0 = abs(d0) + tol_box
+    hi1 = abs(d1) + tol_box
+    hi2 = abs(d2) + tol_box
+    tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
+    first, stop = start[o], start[o + 1]
+    best = -1
+    # first allowed candidate inside the sign box = max score; skip blocks whose
+    # component-wise minimum already leaves the box
+    for blk in range(bstart[o], bstart[o + 1]):
+        if (bmin[blk, 0] > hi0) | (bmin[blk, 1] > hi1) | (bmin[blk, 2] > hi2):
+            continue
+        j0 = first + (blk - bstart[o]) * BLOCK
+        for j in range(j0, min(j0 + BLOCK, stop)):
+            if _in_box(X, j, hi0, hi1, hi2) and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0):
+                best = j
+                break
+        if best >= 0:
+            break
+    status = 0
+    chosen = -1
+    if best >= 0:
+        lim = S[best] - tol
+        end = best + 1
+        while end < stop and S[end] >= lim:
+            end += 1
+        min_pen = P[best]
+        for j in range(best + 1, end):    # score ties: smallest penalty ...
+            if (P[j] < min_pen and _in_box(X, j, hi0, hi1, hi2)
+                    and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0)):
+                min_pen = P[j]
+        for j in range(best, end):        # ... then smallest bit pattern
+            if (P[j] <= min_pen + tol_pen and _in_box(X, j, hi0, hi1, hi2)
+                    and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0)):
+                r = R[j]
+                if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
+                    chosen = r
+    else:                                 # empty sign box: unconstrained exhaustive scan
+        status = 1
+        m = cand_pen.shape[0]
+        best_obj = np.inf
+        for r in range(m):
+            if forbid != 0 and (cand_pat[r] & forbid) != 0:
+                scratch[r] = np.inf
+                continue
+            v = (w[0] * abs(d0 - cand_tau[r, 0]) + w[1] * abs(d1 - cand_tau[r, 1])
+                 + w[2] * abs(d2 - cand_tau[r, 2]) + cand_pen[r])
+            scratch[r] = v
+            if v < best_obj:
+                best_obj = v
+        lim = best_obj + tol
+        min_pen = np.inf
+        for r in range(m):
+            if scratch[r] <= lim and cand_pen[r] < min_pen:
+                min_pen = cand_pen[r]
+        for r in range(m):
+            if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
+                if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
+                    chosen = r
+    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, ZERO3, u_out, tau_out, obj_out)
+    return status
+
+
+@njit(cache=True)
+def _solve_shifted_kernel(tau_d, w, cand_tau, cand_pen, cand_pat, scratch, forbid, delta,
+                          tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
+    """One allocation over the candidates with no bit of ``forbid``, whose torque is
+    cand_tau + delta (a bias the tables were not built with): exhaustive scan with the
+    sign box, else without it (degraded). Same tie-break and outputs as _solve_kernel."""
+    d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
+    if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
+        return _reject(u_out, obj_out)
+    lo0, hi0 = (-tol_box, d0 + tol_box) if d0 >= 0.0 else (d0 - tol_box, tol_box)
+    lo1, hi1 = (-tol_box, d1 + tol_box) if d1 >= 0.0 else (d1 - tol_box, tol_box)
+    lo2, hi2 = (-tol_box, d2 + tol_box) if d2 >= 0.0 else (d2 - tol_box, tol_box)
+    tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
+    m = cand_pen.shape[0]
+    status = 0
+    for attempt in range(2):              # 0: inside the sign box; 1: anywhere (degraded)
+        best_obj = np.inf
+        for r in range(m):
+            scratch[r] = np.inf
+            if (cand_pat[r] & forbid) != 0:
+                continue
+            t0 = cand_tau[r, 0] + delta[0]
+            t1 = cand_tau[r, 1] + delta[1]
+            t2 = cand_tau[r, 2] + delta[2]
+            if attempt == 0 and not ((lo0 <= t0) & (t0 <= hi0) & (lo1 <= t1) & (t1 <= hi1)
+                                     & (lo2 <= t2) & (t2 <= hi2)):
+                continue
+            v = w[0] * abs(d0 - t0) + w[1] * abs(d1 - t1) + w[2] * abs(d2 - t2) + cand_pen[r]
+            scratch[r] = v
+            if v < best_obj:
+                best_obj = v
+        if best_obj < np.inf:
+            break
+        status = 1
+    lim = best_obj + tol
+    min_pen = np.inf
+    for r in range(m):
+        if scratch[r] <= lim and cand_pen[r] < min_pen:
+            min_pen = cand_pen[r]
+    chosen = -1
+    for r in range(m):
+        if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
+            if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
+                chosen = r
+    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out)
+    return status
+
+
+
+
+class Allocator:
+    """Exact fault-tolerant discrete allocator. ``solve`` is allocation-free and bounded
+    (a scan of at most the distinct achievable torques, ~13,000 for the nominal jets).
+
+    Reconfiguration (``set_health``, ``set_params``, ``set_fault_tolerance``) fetches the
+    new configuration's tables from a cache or builds them:
+
+    - ``async_rebuild=False`` (default; batch, lockstep SIL): the build runs in the call
+      (a few ms), so every answer is the exact optimum of the current model and a lockstep
+      run equals the batch run bit for bit.
+    - ``async_rebuild=True`` (real time): the build runs on a background thread and the call
+      returns at once. Until the first ``solve`` after the build completes
+      (``reconfig_pending`` is True, ``interim`` True for the answers meanwhile), ``solve``
+      answers with the previous tables under a SAFE interim model: every jet whose treatment
+      changed (newly failed, inhibited, stuck, degraded with another eta, or back from
+      stuck) is kept off, and the stuck-on bias is the new one (``_solve_shifted_kernel``
+      when it differs). The interim answer never fires a jet the new health forbids, its
+      tau_B and objective are those of the new model for the returned u, and it is the
+      exact optimum (spec tie-break, sign box, degraded answer) over the previous
+      configuration's candidates that avoid the changed jets. It is NOT necessarily the
+      optimum of the new model: combinations that need a changed jet, or a twin of a changed
+      jet (the previous tables keep one representative pattern per torque), are missing, and
+      after ``set_params`` the previous weights and penalties apply until the switch.
+      ``prebuild_single_faults`` (default: on when async) builds, in the background at
+      start-up and after every parameter change, the tables of every single jet failed off
+      from the nominal health, so the most likely first fault switches at once.
+    """
+
+    PARAMS = PARAMS
+
+    def __init__(self, torque_matrix_Nm: np.ndarray, thrust_N: np.ndarray,
+                 params: dict[str, float], *, async_rebuild: bool = False,
+                 prebuild_single_faults: bool | None = None) -> None:
+        T, thrust, _, _ = validate_problem(torque_matrix_Nm, thrust_N, np.ones(3), 0.0)
+        self._T = T
+        self._thrust = thrust
+        self.n_jets = T.shape[1]
+        self.async_rebuild = bool(async_rebuild)
+        self.prebuild_single_faults = (self.async_rebuild if prebuild_single_faults is None
+                                       else bool(prebuild_single_faults))
+        self._ws = Workspace()
+        self._rebuilder: Rebuilder | None = None
+        self._finalizer = None
+        self._cache: OrderedDict = OrderedDict()
+        self._prebuilt: dict = {}                  # single faults, never evicted
+        self._prebuild_keys: set = set()
+        self._gen = 0                              # parameter generation (part of table keys)
+        self._health = JetHealth(self.n_jets)
+        self.u = np.zeros(self.n_jets, dtype=np.uint8)     # reused output
+        self.tau_B = np.zeros(N_AXES)                         # modelled achieved torque [N m]
+        self._obj = np.zeros(1)
+        self.objective = float("nan")
+        self.degraded = False
+        self.rejected = False
+        self.rebuild_time_s = 0.0          # build time of the tables adopted last [s]
+        self.tables_from_cache = False     # the last reconfiguration found its tables ready
+        self.reconfig_pending = False      # async: solving with the interim model
+        self.interim = False               # the last answer came from the interim model
+        self.tables_version = 0            # +1 at every switch of tables
+        self.reconfig_latency_s = 0.0      # request -> switch of the last reconfiguration [s]
+        self._active_key = None
+        self._target_key = None
+        self._target_job = None
+        self._t_request = 0.0
+        self._forbid = 0
+        self._delta = np.zeros(N_AXES)
+        self._shifted = False
+        self._tables: Tables | None = None
+        async_now, self.async_rebuild = self.async_rebuild, False   # first tables: built here
+        self.set_params(params)
+        # warm-up: compile/load the kernels and run every branch once
+        self.solve(np.array([100.0, -50.0, 0.0]))
+        self.solve(np.array([np.nan, 0.0, 0.0]))
+        t = self._tables
+        _solve_shifted_kernel(np.array([1.0, -2.0, 3.0]), t.w, t.tau, t.pen, t.pat, t.scratch,
+                              np.int64(1), np.ones(N_AXES), TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                              self.u, self.tau_B, self._obj)
+        self.solve(np.array([100.0, -50.0, 0.0]))
+        self.rejected = False
+        self.async_rebuild = async_now
+        if self.async_rebuild:
+            self._rebuilder = Rebuilder()
+            self._finalizer = weakref.finalize(self, self._rebuilder.close, 1.0)
+            self._queue_prebuilds()
+
+    # -- configuration (not in the cycle's hot path)
+    def set_params(self, params: dict[str, float]) -> None:
+        """Validate the allocator.* parameters; the tables of every configuration are
+        rebuilt with them (async: the previous tables and objective serve meanwhile)."""
+        vals = {}
+        for p in self.PARAMS:
+            if p.name not in params:
+                raise ValueError(f"{p.name}: missing")
+            vals[p.name] = p.check(params[p.name])
+        self.w = np.array([vals["allocator.w_roll"], vals["allocator.w_pitch"],
+                           vals["allocator.w_yaw"]])
+        self.penalty_per_N = vals["allocator.penalty_per_N"]
+        self.fault_tolerance = bool(vals["allocator.fault_tolerance"])
+        self._gen += 1
+        self._cache.clear()
+        self._prebuilt.clear()
+        if self._rebuilder is not None:
+            self._rebuilder.cancel_queue()
+            self._queue_prebuilds()
+        self._activate()
+
+    def set_health(self, health: JetHealth) -> None:
+        """Adopt a new health picture (see the class docstring for sync/async). Health is
+        stored but not used while fault tolerance is off."""
+        if not isinstance(health, JetHealth) or len(health.state) != self.n_jets:
+            raise ValueError(f"health: expected a JetHealth of {self.n_jets} jets")
+        self._health = health.copy()
+        self._activate()
+
+    def set_fault_tolerance(self, on: bool) -> None:
+        self.fault_tolerance = bool(on)
+        self._activate()
+
+    def poll(self) -> bool:
+        """Async: switch to finished tables now (``solve`` does this itself) and file
+        finished pre-builds; True if the switch happened."""
+        switched = self.reconfig_pending and self._try_switch()
+        self._collect()
+        return switched
+
+    def wait_idle(self, timeout_s: float = 5.0) -> bool:
+        """Async (tests, ground tools; never in the cycle): wait until the background
+        builder has nothing left to do. True if idle in time. Sync mode: True."""
+        return self._rebuilder is None or self._rebuilder.wait_idle(timeout_s)
+
+    def close(self) -> None:
+        """Stop the background builder (async); the allocator keeps solving with the
+        tables it has (a pending reconfiguration is then built synchronously)."""
+        if self._rebuilder is not None:
+            self._finalizer()
+            self._rebuilder = None
+        self.async_rebuild = False
+        if self.reconfig_pending:
+            self._activate()
+
+    def __enter__(self) -> "Allocator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def builder_alive(self) -> bool:
+        return self._rebuilder is not None and self._rebuilder.alive
+
+    @property
+    def n_candidates(self) -> int:
+        """Distinct achievable torque vectors of the active configuration."""
+        return len(self._tables.pen)
+
+    @property
+    def tables_nbytes(self) -> dict[str, int]:
+        """Memory held by tables [bytes]: active, LRU cache, pre-built, work buffers."""
+        self._collect()
+        ws = self._ws.nbytes + (self._rebuilder._ws.nbytes if self._rebuilder is not None else 0)
+        return {"active": self._tables.nbytes,
+                "cache": sum(t.nbytes for t in self._cache.values()),
+                "prebuilt": sum(t.nbytes for t in self._prebuilt.values()),
+                "workspace": ws}
+
+    def _model_key(self):
+        health = self._health if self.fault_tolerance else JetHealth(self.n_jets)
+        return health, (self._gen, health.key())   # fault tolerance off: the nominal tables
+
+    def _job(self, key, health):
+        usable, cols, bias, c = effective_model(self._T, self._thrust, health, self.penalty_per_N)
+        return (key, usable, cols, bias, c, self.w.copy())
+
+    def _queue_prebuilds(self) -> None:
+        if not self.prebuild_single_faults or self._rebuilder is None:
+            return
+        jobs = []
+        for k in range(self.n_jets):
+            h = JetHealth(self.n_jets)
+            h.set(k + 1, FAILED_OFF)
+            jobs.append(self._job((self._gen, h.key()), h))
+        self._prebuild_keys = {job[0] for job in jobs}
+        self._rebuilder.queue(jobs)
+
+    def _collect(self) -> None:
+        """Move finished background builds of this parameter generation into the stores."""
+        if self._rebuilder is None:
+            return
+        done = self._rebuilder.done
+        for key in list(done):
+            t = done.pop(key, None)
+            if t is None or isinstance(t, Exception) or key[0] != self._gen:
+                continue
+            if key in self._prebuild_keys:
+                self._prebuilt[key] = t
+            else:
+                self._remember(key, t)
+
+    def _lookup(self, key):
+        t = self._cache.get(key)
+        if t is not None:
+            self._cache.move_to_end(key)
+            return t
+        return self._prebuilt.get(key)
+
+    def _remember(self, key, tables) -> None:
+        if key in self._prebuilt:
+            return
+        self._cache[key] = tables
+        self._cache.move_to_end(key)
+        while len(self._cache) > CACHE_MAX_CONFIGS:
+            self._cache.popitem(last=False)
+
+    def _adopt(self, key, tables, from_cache: bool) -> None:
+        self._tables = tables
+        self._active_key = key
+        self._target_key = None
+        self._target_job = None
+        self.reconfig_pending = False
+        self._forbid = 0
+        self._shifted = False
+        self.tables_from_cache = from_cache
+        if not from_cache:
+            self.rebuild_time_s = tables.build_s
+        self.tables_version += 1
+        self.reconfig_latency_s = time.perf_counter() - self._t_request
+
+    def _activate(self) -> None:
+        self._t_request = time.perf_counter()
+        health, key = self._model_key()
+        if key == self._active_key:
+            self._target_key = None
+            self.reconfig_pending = False
+            self._forbid = 0
+            self._shifted = False
+            self.tables_from_cache = True
+            return
+        self._collect()
+        tables = self._lookup(key)
+        if tables is not None:
+            self._adopt(key, tables, True)
+            return
+        job = self._job(key, health)
+        if not self.async_rebuild or self._tables is None:
+            tables = build_tables(*job[1:], self._ws)
+            self._remember(key, tables)
+            self._adopt(key, tables, False)
+            return
+        # async: interim model on the active tables, the build in the background
+        _, usable, cols, bias, _, _ = job
+        t = self._tables
+        same = t.usable & usable & np.all(t.cols == cols, axis=0)
+        changed = np.flatnonzero(t.usable & ~same)     # in the old patterns, now different
+        self._forbid = int(sum(1 << int(k) for k in changed))
+        self._delta = bias - t.bias                     # stuck-on bias the tables lack
+        self._shifted = bool(np.any(self._delta != 0.0))
+        self._target_key = key
+        self._target_job = job
+        self.reconfig_pending = True
+        self._rebuilder.submit(job)
+
+    def _try_switch(self) -> bool:
+        t = self._rebuilder.done.pop(self._target_key, None) if self._rebuilder is not None else None
+        if t is None:
+            return False
+        if isinstance(t, Exception):       # never expected; build it here rather than lose it
+            t = build_tables(*self._target_job[1:], self._ws)
+        key = self._target_key
+        self._remember(key, t)
+        self._adopt(key, t, False)
+        return True
+
+    # -- the cycle
+    def solve(self, tau_d: np.ndarray) -> np.ndarray:
+        """u (uint8, n jets; the same array every call) for demand tau_d [N m] in body
+        axes. Sets tau_B, objective, degraded, rejected, interim. A non-finite demand is
+        rejected (u = 0, tau_B = stuck bias, objective NaN); a demand that is not 3 numbers
+        raises ValueError."""
+        if (type(tau_d) is not np.ndarray or tau_d.dtype != np.float64
+                or tau_d.shape != (N_AXES,) or not tau_d.flags.c_contiguous):
+            tau_d = _as_demand(tau_d)
+        if self.reconfig_pending:
+            self._try_switch()
+        t = self._tables
+        self.interim = self.reconfig_pending
+        if not self._shifted or not self.reconfig_pending:
+            status = _solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
+                                   t.tau, t.pen, t.pat, t.scratch,
+                                   self._forbid, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                   self.u, self.tau_B, self._obj)
+        else:
+            status = _solve_shifted_kernel(tau_d, t.w, t.tau, t.pen, t.pat, t.scratch,
+                                           self._forbid, self._delta,
+                                           TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                           self.u, self.tau_B, self._obj)
+        if status == STATUS_REJECTED:
+            if self.interim:
+                np.add(t.bias, self._delta, out=self.tau_B)
+            else:
+                self.tau_B[:] = t.bias
+            self.objective = float("nan")
+            self.degraded = False
+            self.rejected = True
+        else:
+            self.objective = float(self._obj[0])
+            self.degraded = status == STATUS_DEGRADED
+            self.rejected = False
+        return self.u
+
+
+def _as_demand(tau_d) -> np.ndarray:
+    try:
+        d = np.ascontiguousarray(tau_d, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"tau_d: expected 3 numbers [N m], got {tau_d!r}") from None
+    if d.shape != (N_AXES,):
+        raise ValueError(f"tau_d: expected shape (3,), got {d.shape}")
+    return d

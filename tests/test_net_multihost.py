@@ -80,33 +80,73 @@ def _stop_all(n: netns.Network, *names: str) -> None:
             assert n.stop(name) == 0, n.log(name)
 
 
-def test_lockstep_through_the_router_equals_the_batch_run_bit_for_bit(net):
-    """Plant, FSW and viewer on three hosts, through the TLS router: every history array
-    equals the single-process batch run's, FDIR finds the same jets at the same times, and
+def test_lockstep_through_the_router_equals_the_batch_run_bit_for_bit_even_across_a_router_restart(net):
+    """Plant, FSW and viewer on three hosts, through the TLS router, which is killed mid-run
+    and started again: the plant sends its frame again until the answer comes (the FSW
+    answers a frame it has flown with the same command), so every history array still
+    equals the single-process batch run's and FDIR finds the same jets at the same times;
     the viewer on its own host recorded the run."""
     out, prefix = net.work / "lockstep", "ellipsled/multihost-ls"
-    start_router(net, "router-ls")
+    start_router(net, "router-ls1")
+    probe = net.work / "watch.py"
+    probe.write_text(WATCH)
     try:
         net.start("viz-ls", "viewer", viewer(net, out, prefix), cwd=net.work)
         net.start("fsw-ls", "fsw", node(net, "fsw", "lockstep", out, prefix), cwd=net.work)
         net.wait_log("fsw-ls", "waiting for the plant", START_S)
+        # a second viewer-certificate client on the viewer host reports when the flight is under way
+        net.start("watch", "viewer", [sys.executable, str(probe), str(ZCONF / "viz.json5"), net.router_ep,
+                                      keys(prefix).truth, "300"], cwd=net.work)
+        net.wait_log("watch", "watching", START_S)
         net.start("sim-ls", "plant", node(net, "sim", "lockstep", out, prefix,
-                                          ["--duration", "30", "--wait-bridge", "--wait-peers", str(START_S)]),
-                  cwd=net.work)
-        assert net.wait("sim-ls", 240) == 0, net.log("sim-ls")
+                                          ["--duration", "120", "--wait-bridge", "--wait-peers", str(START_S),
+                                           "--fsw-timeout", str(START_S)]), cwd=net.work)
+        net.wait_log("watch", "under way", START_S)
+        net.stop("router-ls1", signal.SIGKILL)
+        assert net.procs["sim-ls"][1].poll() is None, "the run ended before the router was killed"
+        time.sleep(1.0)
+        start_router(net, "router-ls2")
+        assert net.wait("sim-ls", 300) == 0, net.log("sim-ls")
         _stop_all(net, "fsw-ls", "viz-ls")
     finally:
-        _stop_all(net, "router-ls")
+        _stop_all(net, "router-ls2")
     h_sil = merge(History.load(out / "sim_history.npz"), History.load(out / "fsw_history.npz"))
-    s_bat, h_bat, _ = batch.run("case1", duration_s=30)
+    s_bat, h_bat, _ = batch.run("case1", duration_s=120)
     assert h_sil["k"].shape == h_bat["k"].shape
     for name in h_bat.a:
         if name in ("compute_us", "alloc_us"):      # wall-clock measurements, not trajectory
             continue
         assert np.array_equal(h_sil[name], h_bat[name]), name
     fsw = json.loads((out / "fsw.json").read_text())
+    sim = json.loads((out / "sim.json").read_text())
     assert fsw["detections"] == s_bat["fdir"]["detections"]
+    assert sim["counts"]["resent_frames"] >= 1 and fsw["answers_repeated"] + sim["counts"]["resent_frames"] >= 1
     assert (out / "run.rrd").stat().st_size > 0
+
+
+WATCH = r"""
+import json, sys, time
+import zenoh
+from interfaces.codec import Codec
+conf_file, endpoint, key, k_min = sys.argv[1:5]
+conf = zenoh.Config.from_file(conf_file)
+conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+s = zenoh.open(conf)
+sub = s.declare_subscriber(key, zenoh.handlers.RingChannel(8))     # never holds the run back
+dec = Codec.for_schema("TRUTH")
+print("watching", flush=True)
+while True:
+    x = sub.try_recv()
+    if x is None:
+        time.sleep(0.001)
+        continue
+    rec = dec.decode(x.payload.to_bytes())
+    if rec is not None and int(rec["k"]) >= int(k_min):
+        print(f"under way: k={int(rec['k'])}", flush=True)
+        break
+sub.undeclare()
+s.close()
+"""
 
 
 def test_the_viewer_certificate_cannot_command_the_jets(net, tmp_path):

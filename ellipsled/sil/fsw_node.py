@@ -89,6 +89,9 @@ class FswNode:
         self.events_sent = 0
         self.fault_seq = 0
         self.source_id = None
+        self.jets_seq = 0       # per publication: an answer sent again is a new sample, not a replay
+        self.answered_k = -1    # the step of the last jet command published
+        self.answers_repeated = 0
         self.last_frame_wall = 0.0
         self.next_k = 0
         self.jitter_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)   # every tick, whole run
@@ -173,7 +176,9 @@ class FswNode:
         j["u"] = topo.u
         t = now_ns()
         j["t_publish_ns"] = t
-        self.pub_jets.put(self.enc_jets.encode(j, fsw.k, t))
+        self.pub_jets.put(self.enc_jets.encode(j, self.jets_seq, t))
+        self.jets_seq += 1
+        self.answered_k = fsw.k
         st = self.state
         g = fsw.guidance
         st["k"], st["t_ns"], st["t_release_ns"] = fsw.k, int(round(fsw.t_s * 1e9)), cyc.t_release_ns
@@ -252,7 +257,11 @@ class FswNode:
         warm = False
         while not self.stop:
             s = transport.recv(self.sub_sensors, 0.1)
+            source = self.source_id
             if s is None or not self._accept(s):
+                continue
+            if source == self.source_id and int(self.frame["k"]) <= self.answered_k:
+                self._answer_again()
                 continue
             if not warm:
                 self._warm_up()
@@ -261,6 +270,13 @@ class FswNode:
                 self._take_fault_log()
             self.topo.tick(self.frame)
             self._record()
+
+    def _answer_again(self) -> None:
+        """Lockstep: the plant sent a frame already flown again (it, or our answer, was lost
+        on the way): the same command once more; the flight software does not run twice."""
+        self.pub_jets.put(self.enc_jets.encode(self.jets, self.jets_seq, now_ns()))
+        self.jets_seq += 1
+        self.answers_repeated += 1
 
     def _next_good_frame(self) -> int | None:
         """Wait (interruptibly) for the next frame that decodes; its step, or None on stop."""
@@ -327,7 +343,7 @@ class FswNode:
             "frame_age_p50_us": float(np.percentile(age, 50)) if len(age) else None,
             "frame_age_p99_us": float(np.percentile(age, 99)) if len(age) else None,
             "executive": ex, "tasks_us": self.topo.task_percentiles(), "params": self.fsw.params, "sensor_rejects": dict(self.dec_sensors.rejects),
-            "monitor_counts": dict(self.fsw.monitor.counts),
+            "monitor_counts": dict(self.fsw.monitor.counts), "answers_repeated": self.answers_repeated,
             "event_log": [{"t_s": e.t_s, "severity": e.severity.name, "source": e.source, "code": e.code,
                            "text": e.text} for e in self.events.history],
             "rt": self.rt_report,

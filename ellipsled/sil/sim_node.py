@@ -35,6 +35,9 @@ def add_arguments(p) -> None:
     p.add_argument("--fsw-timeout", type=float, default=10.0,
                    help="lockstep: end the run when the FSW has not answered for this long [s]")
     p.add_argument("--wait-peers", type=float, default=30.0, help="how long to wait for the FSW at start [s]")
+    p.add_argument("--resend-s", type=float, default=0.5,
+                   help="lockstep: publish the sensor frame again after this long without its answer (the "
+                        "frame or the answer was lost, e.g. while a router restarts) [s]")
     p.add_argument("--wait-bridge", action="store_true", help="also wait for the Rerun bridge before step 0")
     p.add_argument("--miss-periods", type=int, default=3,
                    help="real time: hold jets off after this many periods without a fresh command")
@@ -75,7 +78,9 @@ class SimNode:
         self.truth_rec = records.new(records.TRUTH)
         self.u = np.zeros(records.N_JETS, dtype=np.uint8)
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
+        self.sensor_seq = 0     # per publication: a frame sent again is a new sample, not a replay
         self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
+                       "resent_frames": 0,
                        "faults_applied": 0}
         self.rejects: dict[str, int] = {}
         # one latency per step at most: preallocated, nothing grows during the run
@@ -130,7 +135,8 @@ class SimNode:
     # ------------------------------------------------------------------ I/O
     def publish_sensors(self) -> int:
         t = now_ns()
-        self.pub_sensors.put(self.enc_sensors.encode(self.plant.sensors, self.plant.k, t))
+        self.pub_sensors.put(self.enc_sensors.encode(self.plant.sensors, self.sensor_seq, t))
+        self.sensor_seq += 1
         return t
 
     def record_and_publish_truth(self) -> None:
@@ -157,12 +163,19 @@ class SimNode:
 
     # ------------------------------------------------------------------ lockstep
     def wait_command(self, k: int) -> bool:
-        """Lockstep: block (interruptibly) until the command answering k arrives."""
-        t_last = time.monotonic()
+        """Lockstep: block (interruptibly) until the command answering k arrives; the frame
+        is published again every --resend-s meanwhile (the FSW answers a frame it has
+        already flown with the same command, so nothing is computed twice)."""
+        t_last = t_sent = time.monotonic()
         while not self.stop:
             s = transport.recv(self.sub_jets, 0.05)
             if s is None:
-                if time.monotonic() - t_last > self.args.fsw_timeout:
+                now = time.monotonic()
+                if now - t_sent >= self.args.resend_s:
+                    self.publish_sensors()
+                    self.counts["resent_frames"] += 1
+                    t_sent = now
+                if now - t_last > self.args.fsw_timeout:
                     self.end_reason = "fsw_timeout"
                     self.message = (f"the FSW has not answered sensor frame k={k} (t={self.plant.t_s:.2f} s) "
                                     f"for {self.args.fsw_timeout:g} s: ending the run")

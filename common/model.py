@@ -71,6 +71,9 @@ class Vehicle:
     torque_matrix_Nm: np.ndarray  # (3, 18): column k = torque of jet k+1 at full thrust
     isp_s: float
     jet_force_B_N: np.ndarray | None = None  # (3, 18) when jets are given by geometry
+    nose_radius_m: float = 1.875             # Sutton-Graves heat rate (spec 60-guidance.md)
+    max_load_g: float = 15.0                 # structural limit of the aerodynamic load factor [g0]
+    max_heat_rate_wcm2: float = 100.0        # stagnation-point heat-rate limit [W/cm^2]
 
 
 @dataclass(frozen=True)
@@ -121,7 +124,7 @@ class Scenario:
     latitude_rad: float
     longitude_rad: float
     bank0_rad: float
-    # end conditions
+    # end conditions (the deploy trigger: Mach, or a speed when end_speed_mps is set)
     end_mach: float
     end_altitude_m: float
     # guidance
@@ -132,6 +135,10 @@ class Scenario:
     sensors: SensorNoise
     faults: tuple[FaultEvent, ...]
     fsw: dict = field(default_factory=dict)  # overrides of data/fsw/default.toml, validated by fsw
+    guidance_mode: str = "profile"           # profile | npc (spec 60-guidance.md)
+    end_speed_mps: float | None = None
+    target_lat_rad: float | None = None      # deploy target (required by mode "npc")
+    target_lon_rad: float | None = None
 
     @property
     def substeps(self) -> int:
@@ -221,8 +228,14 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
         l_ref_m=v.num("l_ref_m", lo=0, lo_open=True),
         aero=aero, thrust_N=thrust, torque_matrix_Nm=T, isp_s=isp, jet_force_B_N=force,
     )
-    v.num("diameter_m", default=None, lo=0, lo_open=True)
+    diameter = v.num("diameter_m", default=None, lo=0, lo_open=True)
     v.num("length_m", default=None, lo=0, lo_open=True)
+    lim = root.table("limits", default={})
+    out = replace(out,
+                  nose_radius_m=v.num("nose_radius_m", default=diameter / 2 if diameter else 1.875, lo=0, lo_open=True),
+                  max_load_g=lim.num("load_g", default=15.0, lo=0, lo_open=True),
+                  max_heat_rate_wcm2=lim.num("heat_rate_wcm2", default=100.0, lo=0, lo_open=True))
+    lim.reject_unknown()
     for t in (v, a, root):
         t.reject_unknown()
     return out
@@ -243,6 +256,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     ini = root.table("initial")
     end = root.table("end", default={})
     g = root.table("guidance")
+    mode = g.str("mode", default="profile", choices=("profile", "npc"))
+    if mode == "npc" and not g.has("bank_schedule"):
+        # the reference starts at the initial bank; guidance commands the rest
+        g.data = {**g.data, "bank_schedule": [[0.0, ini.num("bank_deg", lo=-180, hi=180)]]}
     sched_raw = g.raw("bank_schedule")
     if not isinstance(sched_raw, list) or not sched_raw:
         raise g.error("bank_schedule", "must be a non-empty list of [t_s, bank_deg] pairs")
@@ -298,6 +315,15 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             raise f.error("eta", "required for kind = \"degraded\" (0 < eta < 1)")
         faults.append(FaultEvent(t_s=f.num("t_s", lo=0), jets=tuple(jets), kind=kind, eta=eta))
         f.reject_unknown()
+    tg = root.table("target", default={})
+    target = None
+    if tg.data:
+        target = (math.radians(tg.num("latitude_deg", lo=-90, hi=90)), math.radians(tg.num("longitude_deg", lo=-360, hi=360)))
+    elif mode == "npc":
+        raise root.error("target", "guidance mode \"npc\" needs a [target] with latitude_deg and longitude_deg")
+    end_speed = end.num("speed_mps", default=None, lo=0, lo_open=True)
+    if end_speed is not None and end.has("mach"):
+        raise end.error("speed_mps", "give the deploy condition as mach or as speed_mps, not both")
     fsw = root.raw("fsw", default={})
     if not isinstance(fsw, dict):
         raise root.error("fsw", "must be a table")
@@ -315,13 +341,15 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         latitude_rad=math.radians(ini.num("latitude_deg", lo=-89, hi=89)),
         longitude_rad=math.radians(ini.num("longitude_deg", lo=-360, hi=360)),
         bank0_rad=math.radians(ini.num("bank_deg", lo=-180, hi=180)),
-        end_mach=end.num("mach", default=2.0, lo=0),
+        end_mach=end.num("mach", default=2.0, lo=0) if end_speed is None else 0.0,
+        end_speed_mps=end_speed, guidance_mode=mode,
+        target_lat_rad=target[0] if target else None, target_lon_rad=target[1] if target else None,
         end_altitude_m=end.num("altitude_m", default=6000.0, lo=0),
         bank_schedule=tuple(sched),
         bank_rate_limit_radps=math.radians(g.num("rate_limit_dps", lo=0, lo_open=True)),
         bank_accel_limit_radps2=math.radians(g.num("accel_limit_dps2", lo=0, lo_open=True)),
         truth=truth, sensors=sensors, faults=tuple(sorted(faults, key=lambda f: f.t_s)), fsw=dict(fsw),
     )
-    for t in (s, ini, end, g, tr, sn, root):
+    for t in (s, ini, end, g, tg, tr, sn, root):
         t.reject_unknown()
     return out

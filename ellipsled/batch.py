@@ -23,7 +23,7 @@ from sim.plant import Plant
 
 from .controllable import truth_controllability
 from .history import History, record_fsw, record_truth
-from .metrics import summarize, wrap_deg
+from .metrics import deploy_figures, summarize, wrap_deg
 from .terminal import RunProgress, files_written
 
 KIND_OF_FAULT = {"off": "failed_off", "stuck": "stuck_on", "degraded": "degraded"}
@@ -90,6 +90,7 @@ def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
         "cycle_slips": int(slips),
         "events": len(fsw.events.history),
         "alloc_samples": alloc_samples,
+        **({"guidance": fsw.entry.stats()} if fsw.entry is not None else {}),
     }
 
 
@@ -172,7 +173,16 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
     extra["identification"] = params.get("fdir.mode", "detect")
     if extra["identification"] == "oracle":
         extra["test_mode"] = "oracle identification: the plant's fault log given to FDIR at the fault time"
-    completed = end_reason in ("mach", "altitude", "duration")
+    completed = end_reason in ("mach", "speed", "altitude", "duration")
+    if scn.target_lat_rad is not None:
+        g = rep.get("guidance", {})
+        extra.update(deploy_figures(h, target_lat_rad=scn.target_lat_rad, target_lon_rad=scn.target_lon_rad,
+                                    radius_m=scn.planet.radius_m, nose_radius_m=scn.vehicle.nose_radius_m,
+                                    entry_altitude_m=scn.altitude_m))
+        extra["guidance_mode"] = scn.guidance_mode
+        extra["reversal_count"] = len(g.get("reversal_times_s", []))
+        extra["guidance"] = g
+        extra["limits"] = {"load_g": scn.vehicle.max_load_g, "heat_rate_wcm2": scn.vehicle.max_heat_rate_wcm2}
     return summarize(h, scenario=scn.name, seed=seed, end_reason=end_reason, completed=completed,
                      fault_t_s=min((t for t, _, _ in faults_applied), default=None),
                      reconfig_t_s=rep["reconfig_times_s"][0] if rep["reconfig_times_s"] else None,
@@ -257,6 +267,7 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
             break
         frame = plant.step(u)
     wall = time.perf_counter() - wall0
+    fsw.close()
     rep = fsw_report(fsw, topo.executive.slips, samples)
     ref = fault_free_reference(h, scn, seed, plant.fault_log, reference_cache) if reference else None
     summary = judge(h, scn, seed, end_reason_of(reason, duration_s), rep, plant.fault_log, fsw.params, ref)
@@ -308,4 +319,7 @@ def format_summary(s: dict) -> str:
         f" degraded {a['degraded']}, optimality gap {f(a['optimality_gap_max'], '{:.2g}')} ({a['optimality_checked']} checked)",
         f"  FDIR: {len(s['fdir']['detections'])} detections, {s['fdir']['false_alarms']} false alarms,"
         f" missed {s['fdir']['missed']}; cycle slips {s['cycle_slips']}",
-    ])
+    ] + ([f"  deploy: miss {s['deploy_miss_km']:.2f} km (downrange {s['downrange_err_km']:+.2f}, crossrange "
+          f"{s['crossrange_err_km']:+.2f}) at {s['deploy_alt_km']:.2f} km; peak load {s['peak_load_g']:.2f} g, "
+          f"heat {s['peak_heat_rate_wcm2']:.1f} W/cm2; skip {s['skip']}; {s['reversal_count']} reversals; guidance "
+          f"cycle p99 {f(s['guidance'].get('compute_p99_us'), '{:.0f}')} us"] if "deploy_miss_km" in s else []))

@@ -202,6 +202,49 @@ def summarize(h: History, *, scenario: str, seed: int, end_reason: str, complete
     return _finite_json(s)
 
 
+SUTTON_GRAVES_MARS = 1.9027e-4     # q = k sqrt(rho / R_n) V^3 [SI] (spec 60-guidance.md)
+
+
+def deploy_figures(h: History, *, target_lat_rad: float, target_lon_rad: float, radius_m: float,
+                   nose_radius_m: float, entry_altitude_m: float) -> dict:
+    """Figures of a guided entry (spec 60-guidance.md), from the truth in the history:
+    the miss at the last row (the deploy trigger) as a great-circle distance and split along
+    and across the vehicle's heading there (downrange positive beyond the target,
+    crossrange positive to the right), peak load factor, peak Sutton-Graves heat rate, and
+    skip (gamma positive while above the entry altitude minus 10 km)."""
+    n = len(h["t_s"])
+    if not n:
+        return {}
+    lat, lon = float(h["lat_rad"][-1]), float(h["lon_rad"][-1])
+    p = np.array([math.cos(lat) * math.cos(lon), math.cos(lat) * math.sin(lon), math.sin(lat)])
+    q = np.array([math.cos(target_lat_rad) * math.cos(target_lon_rad),
+                  math.cos(target_lat_rad) * math.sin(target_lon_rad), math.sin(target_lat_rad)])
+    miss = math.atan2(float(np.linalg.norm(np.cross(p, q))), float(p @ q)) * radius_m
+    # target -> vehicle in the vehicle's local plane (north, east), against its heading
+    east = np.array([-math.sin(lon), math.cos(lon), 0.0])
+    north = np.cross(p, east)
+    d = p - q
+    dn, de = float(d @ north) * radius_m, float(d @ east) * radius_m
+    psi = float(h["psi_rad"][-1])
+    down = dn * math.cos(psi) + de * math.sin(psi)
+    cross = -dn * math.sin(psi) + de * math.cos(psi)
+    V = h["V_rel_mps"]
+    rho = 2.0 * h["qbar_pa"] / np.maximum(V, 1e-6) ** 2
+    heat = SUTTON_GRAVES_MARS * np.sqrt(rho / nose_radius_m) * V ** 3 / 1e4
+    high = h["h_m"] > entry_altitude_m - 10_000.0
+    return {
+        "deploy_miss_km": miss / 1e3,
+        "deploy_alt_km": float(h["h_m"][-1]) / 1e3,
+        "downrange_err_km": down / 1e3,
+        "crossrange_err_km": cross / 1e3,
+        "peak_heat_rate_wcm2": float(np.max(heat)),
+        "peak_load_g": float(np.max(h["decel_g"])),
+        "skip": bool(np.any(high & (h["gamma_rad"] > 0.0))),
+        "gamma_positive_max_alt_km": (float(np.max(h["h_m"][h["gamma_rad"] > 0.0])) / 1e3
+                                      if np.any(h["gamma_rad"] > 0.0) else None),
+    }
+
+
 def _finite_json(x):
     """NaN/inf are not JSON: turn them into None so summary.json stays valid."""
     if isinstance(x, dict):

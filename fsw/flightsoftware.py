@@ -26,6 +26,7 @@ from .jetdriver import JetDriver
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation
+from .npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .params import Param, load_params
 from . import executive
 
@@ -39,7 +40,7 @@ GUIDANCE_PARAMS = [
 
 
 def all_params() -> list[Param]:
-    return (GUIDANCE_PARAMS + SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + executive.PARAMS)
+    return (GUIDANCE_PARAMS + NPC_PARAMS + SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + executive.PARAMS)
 
 
 class FlightSoftware:
@@ -62,9 +63,16 @@ class FlightSoftware:
         self.params = load_params(all_params(), overrides)
 
         self.nav = Navigation(planet, veh)
-        self.guidance = Guidance(BankProfile(scenario.bank_schedule, scenario.bank_rate_limit_radps,
-                                             scenario.bank_accel_limit_radps2),
-                                 veh.aero.alpha_trim_rad, planet.omega_radps)
+        # guidance mode (spec 60-guidance.md): the scenario's bank schedule, or the
+        # predictor-corrector's command through its shaper; the attitude chain is the same
+        self.entry = None
+        if scenario.guidance_mode == "npc":
+            self.entry = EntryGuidance(scenario, self.params, self.events, self.dt_s, realtime=realtime)
+            profile = self.entry.shaper
+        else:
+            profile = BankProfile(scenario.bank_schedule, scenario.bank_rate_limit_radps,
+                                  scenario.bank_accel_limit_radps2)
+        self.guidance = Guidance(profile, veh.aero.alpha_trim_rad, planet.omega_radps)
         self.control = SamiController(self.params, veh, self.dt_s)
         self.allocator = Allocator(veh.torque_matrix_Nm, veh.thrust_N, self.params, async_rebuild=realtime)
         self.fdir = Fdir(self.params, self.dt_s, self.events)
@@ -125,6 +133,8 @@ class FlightSoftware:
         if self._lp_worker is not None and self._lp_worker.ready():
             need, r = self._lp_worker.take()
             self._apply_controllability(t_s, need, r)     # re-planned from now: the reference stays C2
+        if self.entry is not None:
+            self.entry.steer(nav)
         self.guidance.update(nav)
         self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
         if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,
@@ -235,6 +245,11 @@ class FlightSoftware:
         self._residual_dt = self.dt_s * self.params["executive.rg2_divisor"]
         self._residual_ready = True
 
+    def entry_guidance_step(self) -> None:
+        """Slow rate group (mode "npc"): one predictor-corrector cycle on the latest navigation."""
+        if self.entry is not None and self.cycles > 0:
+            self.entry.cycle(self.nav.state, self.t_s)
+
     def housekeeping(self) -> None:
         """RG3: nothing periodic beyond telemetry yet (the ground link adds its heartbeat here)."""
 
@@ -244,6 +259,8 @@ class FlightSoftware:
         self.allocator.close()
         if self._lp_worker is not None:
             self._lp_worker.close()
+        if self.entry is not None:
+            self.entry.close()
 
     def health_changed(self) -> None:
         """Hand the allocator the health FDIR now holds (after an override, clear or inhibit)

@@ -355,8 +355,8 @@ class Guidance:
                 raise ValueError(f"Guidance.{name}: must be a finite number, got {v!r}")
         if mu_m3ps2 < 0:
             raise ValueError(f"Guidance.mu_m3ps2: must be >= 0, got {mu_m3ps2!r}")
-        if not isinstance(profile, BankProfile):
-            raise ValueError("Guidance.profile: must be a BankProfile")
+        if not (callable(getattr(profile, "evaluate", None)) and callable(getattr(profile, "replan", None))):
+            raise ValueError("Guidance.profile: must have evaluate(t) and replan(t, rate, accel) (a BankProfile)")
         self.profile = profile
         self.alpha_trim_rad = float(alpha_trim_rad)
         self.omega_planet_radps = float(omega_planet_radps)

@@ -703,6 +703,8 @@ class Plant:
         a = self.aux
         if a[A_MACH] <= self.scenario.end_mach:
             return True, "mach"
+        if self.scenario.end_speed_mps is not None and a[A_V] <= self.scenario.end_speed_mps:
+            return True, "speed"
         if a[A_H] <= self.scenario.end_altitude_m:
             return True, "altitude"
         if self.k * self.dt_control_s >= self.scenario.max_duration_s - 1e-9:

@@ -129,6 +129,39 @@ FAULT_CASES = [
 ]
 
 
+GUIDED = DATA_DIR / "scenarios" / "guided-nominal.toml"
+GUIDED_CASES = [
+    ('mode = "npc"', 'mode = "fnpeg"', "guidance.mode", "must be one of profile, npc"),
+    ("[target]\nlatitude_deg = 0.0\n", "[nottarget]\nlatitude_deg = 0.0\n", "target", "needs a \\[target\\]"),
+    ("latitude_deg = 0.0\nlongitude_deg = 16.5", "latitude_deg = 95.0\nlongitude_deg = 16.5", "target.latitude_deg",
+     "<= 90"),
+    ("longitude_deg = 16.5", "longitude_deg = 16.5\nheight_m = 0.0", "target.height_m", "unknown field"),
+    ("mach = 2.0", "mach = 2.0\nspeed_mps = 450.0", "end.speed_mps", "not both"),
+    ("mach = 2.0", "speed_mps = -4.0", "end.speed_mps", "must be > 0"),
+]
+
+
+@pytest.mark.parametrize("old,new,field,reason", GUIDED_CASES, ids=[c[2] + ":" + c[3] for c in GUIDED_CASES])
+def test_bad_guided_scenario_is_rejected_naming_file_and_field(tmp_path, old, new, field, reason):
+    path = mutate(tmp_path, GUIDED, old, new)
+    with pytest.raises(ConfigError) as ei:
+        load_scenario(path)
+    msg = str(ei.value)
+    assert ei.value.field == field, msg
+    assert re.search(reason, msg), msg
+    assert str(path) in msg
+
+
+def test_guided_scenario_fields_and_vehicle_limits_load():
+    sc = load_scenario("guided-nominal")
+    assert sc.guidance_mode == "npc" and sc.heading_rad == pytest.approx(math.radians(90.0))
+    assert sc.target_lon_rad == pytest.approx(math.radians(16.5)) and sc.end_mach == 2.0
+    assert sc.bank_schedule == ((0.0, math.radians(65.0)),)      # the reference starts at the initial bank
+    assert load_scenario("nominal").guidance_mode == "profile"
+    v = sc.vehicle
+    assert v.nose_radius_m == 1.875 and v.max_load_g > 0 and v.max_heat_rate_wcm2 > 0
+
+
 @pytest.mark.parametrize("body,field,reason", FAULT_CASES, ids=[c[1] + ":" + c[2] for c in FAULT_CASES])
 def test_bad_fault_entries_are_rejected(tmp_path, body, field, reason):
     path = tmp_path / "f.toml"

@@ -1,0 +1,649 @@
+"""Numerical predictor-corrector entry guidance (spec 60-guidance.md), after P. Lu,
+"Entry Guidance: A Unified Method", JGCD 37(3), 2014 (FNPEG).
+
+Only the FSW's own models: point-mass gravity, the planet file's atmosphere scaled by the
+in-flight density estimate, C_L and C_D at trim. The pieces, each testable on its own:
+
+- ``predict``: the 3-DOF entry equations in the rotating planet-fixed frame (Cartesian,
+  so no pole or heading singularity), RK4 in time, bank magnitude linear in energy,
+  stopped at the deploy condition; compiled, and it releases the GIL (a real-time FSW runs
+  it beside the control loop);
+- ``solve_bank``: the corrector, a safeguarded secant on the range miss z(phi_0);
+- ``DensityEstimator``: K_rho = sensed drag / modelled drag, and K_LD likewise for L/D,
+  low-pass filtered and bounded;
+- ``LateralLogic``: bank-sign reversals when the heading error to the target leaves a
+  corridor that narrows with speed;
+- ``path_limited_bank``: altitude-rate feedback that keeps load factor and heat rate
+  under the vehicle's limits;
+- ``BankShaper``: the commanded bank turned into phi_r, phidot_r, phiddot_r within the
+  rate and acceleration limits (the attitude chain downstream is the profile mode's);
+- ``EntryGuidance``: the guidance cycle that ties them together.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+from numba import njit
+
+from common import atmosphere
+from common.model import Scenario
+from .events import EventLog, Severity
+from .params import Param
+
+_rho_exp = njit(cache=True, nogil=True)(atmosphere.density_exponential)
+_rho_poly = njit(cache=True, nogil=True)(atmosphere.density_polynomial)
+_speed_of_sound = njit(cache=True, nogil=True)(atmosphere.speed_of_sound)
+
+PARAMS = [
+    Param("npc.bank_final_deg", 0.0, 180.0, "deg", "bank magnitude at the deploy energy (phi_f)"),
+    Param("npc.bank_min_deg", 0.0, 90.0, "deg", "lower bound of phi_0"),
+    Param("npc.bank_max_deg", 90.0, 180.0, "deg", "upper bound of phi_0"),
+    Param("npc.h_deploy_m", 0.0, 5e4, "m", "altitude that defines the deploy energy e_f"),
+    Param("npc.dt_pred_s", 0.1, 10.0, "s", "predictor RK4 step", ground_settable=False),
+    Param("npc.max_iter", 1, 20, "", "predictions per guidance cycle (at most)", integer=True),
+    Param("npc.tol_m", 1.0, 1e5, "m", "range miss accepted by the corrector"),
+    Param("npc.k_tau_s", 0.1, 100.0, "s", "time constant of the density and L/D estimates"),
+    Param("npc.k_min", 0.05, 1.0, "", "lower bound of the density and L/D scale estimates"),
+    Param("npc.k_max", 1.0, 20.0, "", "upper bound of the density and L/D scale estimates"),
+    Param("npc.k_drag_min", 0.0, 10.0, "m/s^2", "modelled drag below which the estimates hold"),
+    Param("npc.dpsi_hi_deg", 0.0, 45.0, "deg", "heading corridor half-width at entry speed"),
+    Param("npc.dpsi_lo_deg", 0.0, 45.0, "deg", "heading corridor half-width at deploy speed"),
+    Param("npc.rev_gap_s", 0.0, 300.0, "s", "minimum time between bank reversals"),
+    Param("npc.v_norev_mps", 0.0, 8000.0, "m/s", "no reversal below this speed"),
+    Param("npc.limit_frac", 0.1, 1.0, "", "path limits enforced at this fraction of the vehicle's"),
+    Param("npc.hdot_tau_s", 0.5, 200.0, "s", "altitude-rate feedback: time to close on the limit altitude"),
+    Param("npc.hdot_gain", 0.0, 1.0, "s/m", "altitude-rate feedback: change of cos(bank) per m/s"),
+    Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
+]
+
+# flat constants vector of the predictor (indices are compile-time constants)
+C_MU, C_RE, C_OM, C_RHO_MODEL, C_RHO0, C_H, C_KRHO, C_KLD = 0, 1, 2, 3, 4, 5, 6, 7
+C_S_M, C_CL, C_CD, C_MACH_F, C_V_F, C_H_FLOOR, C_H_CEIL, C_T_MAX = 8, 9, 10, 11, 12, 13, 14, 15
+C_G0, C_RN, C_SG = 16, 17, 18
+N_C = 19
+# predictor outputs
+O_R = 0                     # 3: final position, planet-fixed [m]
+O_T, O_NMAX, O_QMAX, O_H, O_V, O_FLAG = 3, 4, 5, 6, 7, 8
+N_O = 9
+REACHED, SKIPPED, GROUND, TIMEOUT = 0, 1, 2, 3
+T_PRED_MAX_S = 1500.0             # a prediction longer than this is a skip-out
+SUTTON_GRAVES_MARS = 1.9027e-4     # k of q = k sqrt(rho / R_n) V^3 [SI] (spec 60-guidance.md)
+
+
+@njit(cache=True, nogil=True)
+def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
+    """dx = f(x), x = [r (3), v (3)] in the rotating planet-fixed frame (v planet-relative):
+    r'' = g - D w1 + L l - 2 Omega x v - Omega x (Omega x r); w1 = v/V, w2 = (v x r)/|.|,
+    w3 = w1 x w2, l = sin(bank) w2 - cos(bank) w3 (the plant's frames, spec 10-plant.md).
+    aux: [h, V, load factor (g), heat rate (W/m^2)]."""
+    rx, ry, rz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
+    r2 = rx * rx + ry * ry + rz * rz
+    r = math.sqrt(r2)
+    mu = c[C_MU]
+    kg = -mu / (r2 * r)
+    h = r - c[C_RE]
+    if c[C_RHO_MODEL] == 0.0:
+        rho = _rho_exp(h, c[C_RHO0], c[C_H])
+    else:
+        rho = _rho_poly(h)
+    rho *= c[C_KRHO]
+    V = math.sqrt(vx * vx + vy * vy + vz * vz)
+    q = 0.5 * rho * V * V * c[C_S_M]
+    D = q * c[C_CD]
+    L = q * c[C_CL] * c[C_KLD]
+    # bank magnitude linear in energy e = mu/r - V^2/2 (spec 60-guidance.md, longitudinal)
+    e = mu / r - 0.5 * V * V
+    f = (e - e0) / (ef - e0) if ef != e0 else 1.0
+    f = min(1.0, max(0.0, f))
+    bank = sign * (b0 + (bf - b0) * f)
+    e1x, e1y, e1z = vx / V, vy / V, vz / V
+    hx, hy, hz = vy * rz - vz * ry, vz * rx - vx * rz, vx * ry - vy * rx
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    e2x, e2y, e2z = hx / hn, hy / hn, hz / hn
+    e3x, e3y, e3z = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    cb, sb = math.cos(bank), math.sin(bank)
+    lx, ly, lz = sb * e2x - cb * e3x, sb * e2y - cb * e3y, sb * e2z - cb * e3z
+    om = c[C_OM]
+    dx[0], dx[1], dx[2] = vx, vy, vz
+    dx[3] = kg * rx - D * e1x + L * lx + 2.0 * om * vy + om * om * rx
+    dx[4] = kg * ry - D * e1y + L * ly - 2.0 * om * vx + om * om * ry
+    dx[5] = kg * rz - D * e1z + L * lz
+    aux[0] = h
+    aux[1] = V
+    aux[2] = math.sqrt(D * D + L * L) / c[C_G0]
+    aux[3] = c[C_SG] * math.sqrt(rho / c[C_RN]) * V * V * V
+
+
+@njit(cache=True, nogil=True)
+def _end_metric(h, V, c):
+    """Distance to the deploy condition, positive before it: Mach - Mach_f, or V - V_f."""
+    if c[C_MACH_F] > 0.0:
+        return V / _speed_of_sound(h) - c[C_MACH_F]
+    return V - c[C_V_F]
+
+
+@njit(cache=True, nogil=True)
+def predict(x0, c, b0, bf, e0, ef, sign, dt, out):
+    """Fly the 3-DOF model from x0 until the deploy condition (or skip, ground, timeout).
+    out: final position (3) [m, planet-fixed], time of flight [s], peak load [g], peak heat
+    rate [W/m^2], final altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT).
+    The last step is cut back linearly to the deploy condition."""
+    x = x0.copy()
+    xp = np.empty(6)
+    k1 = np.empty(6)
+    k2 = np.empty(6)
+    k3 = np.empty(6)
+    k4 = np.empty(6)
+    xt = np.empty(6)
+    aux = np.empty(4)
+    t = 0.0
+    nmax = 0.0
+    qmax = 0.0
+    _deriv(x, c, b0, bf, e0, ef, sign, k1, aux)
+    m_prev = _end_metric(aux[0], aux[1], c)
+    flag = TIMEOUT
+    frac = 1.0
+    while t < c[C_T_MAX]:
+        xp[:] = x
+        _deriv(x, c, b0, bf, e0, ef, sign, k1, aux)
+        if aux[2] > nmax:
+            nmax = aux[2]
+        if aux[3] > qmax:
+            qmax = aux[3]
+        for i in range(6):
+            xt[i] = x[i] + 0.5 * dt * k1[i]
+        _deriv(xt, c, b0, bf, e0, ef, sign, k2, aux)
+        for i in range(6):
+            xt[i] = x[i] + 0.5 * dt * k2[i]
+        _deriv(xt, c, b0, bf, e0, ef, sign, k3, aux)
+        for i in range(6):
+            xt[i] = x[i] + dt * k3[i]
+        _deriv(xt, c, b0, bf, e0, ef, sign, k4, aux)
+        for i in range(6):
+            x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        t += dt
+        r = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+        h = r - c[C_RE]
+        V = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+        m = _end_metric(h, V, c)
+        if m <= 0.0:
+            frac = m_prev / (m_prev - m) if m_prev > m else 1.0
+            flag = REACHED
+            break
+        m_prev = m
+        if h <= c[C_H_FLOOR]:
+            flag = GROUND
+            break
+        if h >= c[C_H_CEIL] and (x[0] * x[3] + x[1] * x[4] + x[2] * x[5]) > 0.0:
+            flag = SKIPPED
+            break
+    for i in range(6):
+        x[i] = xp[i] + frac * (x[i] - xp[i])
+    t -= (1.0 - frac) * dt
+    out[0], out[1], out[2] = x[0], x[1], x[2]
+    out[O_T] = t
+    out[O_NMAX] = nmax
+    out[O_QMAX] = qmax
+    out[O_H] = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) - c[C_RE]
+    out[O_V] = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+    out[O_FLAG] = flag
+
+
+def central_angle(a: np.ndarray, b: np.ndarray) -> float:
+    """Great-circle angle between two position vectors [rad] (atan2 form: exact near 0)."""
+    cr = np.cross(a, b)
+    return math.atan2(math.sqrt(float(cr @ cr)), float(a @ b))
+
+
+def unit_from_latlon(lat_rad: float, lon_rad: float) -> np.ndarray:
+    return np.array([math.cos(lat_rad) * math.cos(lon_rad), math.cos(lat_rad) * math.sin(lon_rad),
+                     math.sin(lat_rad)])
+
+
+def planet_fixed(r_N: np.ndarray, v_N: np.ndarray, t_s: float, omega_radps: float) -> np.ndarray:
+    """[r, v_rel] in the planet-fixed frame at t (N and the planet frame coincide at t = 0;
+    longitude = atan2(y, x) - Omega t, as the plant reports it)."""
+    a = omega_radps * t_s
+    ca, sa = math.cos(a), math.sin(a)
+    vr = np.array([v_N[0] + omega_radps * r_N[1], v_N[1] - omega_radps * r_N[0], v_N[2]])
+    x = np.empty(6)
+    x[0], x[1], x[2] = ca * r_N[0] + sa * r_N[1], -sa * r_N[0] + ca * r_N[1], r_N[2]
+    x[3], x[4], x[5] = ca * vr[0] + sa * vr[1], -sa * vr[0] + ca * vr[1], vr[2]
+    return x
+
+
+def heading_error(x: np.ndarray, target_u: np.ndarray) -> tuple[float, float]:
+    """(heading error to the target [rad] (positive: the target lies to the left), range
+    to go [rad]) from a planet-fixed state. Heading clockwise from north."""
+    r = x[:3]
+    up = r / np.linalg.norm(r)
+    east = np.array([-up[1], up[0], 0.0])
+    en = np.linalg.norm(east)
+    east = east / en if en > 1e-12 else np.array([0.0, 1.0, 0.0])
+    north = np.cross(up, east)
+    v = x[3:]
+    psi = math.atan2(float(v @ east), float(v @ north))
+    d = target_u - float(target_u @ up) * up          # direction to the target, in the local plane
+    bearing = math.atan2(float(d @ east), float(d @ north))
+    return math.remainder(psi - bearing, 2.0 * math.pi), central_angle(r, target_u)
+
+
+def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int,
+               dx0: float = math.radians(5.0)) -> tuple[float, float, int, bool]:
+    """Root of a monotonic scalar function z on [x_lo, x_hi]: secant steps warm-started at
+    x0; once two points of opposite sign are known, an iterate outside them is replaced by
+    their midpoint (so it cannot diverge). Returns (x, z(x), evaluations, converged
+    |z| <= tol). Without a root in the bounds the secant runs into a bound and stops
+    there: the answer is then the point of smallest |z| seen (converged False)."""
+    pts: list[tuple[float, float]] = []
+
+    def ev(x: float) -> float:
+        zx = float(z(x))
+        pts.append((x, zx))
+        return zx
+
+    x1 = min(max(x0, x_lo), x_hi)
+    if abs(ev(x1)) <= tol:
+        return x1, pts[0][1], 1, True
+    ev(x1 + dx0 if x1 + dx0 <= x_hi else x1 - dx0)
+    while len(pts) < max_iter:
+        best = min(pts, key=lambda p: abs(p[1]))
+        if abs(best[1]) <= tol:
+            break
+        (xa, za), (xb, zb) = pts[-2], pts[-1]
+        xn = xb - zb * (xb - xa) / (zb - za) if zb != za else xb + dx0
+        neg = [p[0] for p in pts if p[1] < 0.0]
+        pos = [p[0] for p in pts if p[1] > 0.0]
+        if neg and pos:
+            a, b = min(((u, v) for u in neg for v in pos), key=lambda uv: abs(uv[0] - uv[1]))
+            a, b = min(a, b), max(a, b)
+            if not a < xn < b:
+                xn = 0.5 * (a + b)
+        else:
+            xn = min(max(xn, x_lo), x_hi)
+            if any(abs(xn - p[0]) < 1e-12 for p in pts):
+                break              # pushed against a bound already tried: no root inside
+        ev(xn)
+    best = min(pts, key=lambda p: abs(p[1]))
+    return best[0], best[1], len(pts), abs(best[1]) <= tol
+
+
+class DensityEstimator:
+    """K_rho = sensed drag / modelled drag and K_LD = sensed L/D / model L/D, first-order
+    low-pass filtered (time constant npc.k_tau_s), bounded to [k_min, k_max], held while
+    the modelled drag is below npc.k_drag_min (too thin an atmosphere to measure)."""
+
+    def __init__(self, params: dict, S_m2: float, mass_kg: float, C_L: float, C_D: float):
+        self.tau_s = params["npc.k_tau_s"]
+        self.k_min, self.k_max = params["npc.k_min"], params["npc.k_max"]
+        self.drag_min = params["npc.k_drag_min"]
+        self.S_m, self.C_L, self.C_D = S_m2 / mass_kg, C_L, C_D
+        self.k_rho = 1.0
+        self.k_ld = 1.0
+        self.updates = 0
+        self.drag_sensed = 0.0      # [m/s^2]
+        self.lift_sensed = 0.0
+
+    def update(self, dt_s: float, accel_B: np.ndarray, C_BN: np.ndarray, vrel_N: np.ndarray, rho_model: float) -> None:
+        V = math.sqrt(float(vrel_N @ vrel_N))
+        if V <= 0.0:
+            return
+        a_N = C_BN.T @ accel_B
+        drag = -float(a_N @ vrel_N) / V
+        lift_v = a_N + drag * vrel_N / V
+        lift = math.sqrt(float(lift_v @ lift_v))
+        self.drag_sensed, self.lift_sensed = drag, lift
+        d_model = 0.5 * rho_model * V * V * self.S_m * self.C_D
+        if d_model < self.drag_min or drag <= 0.0:
+            return
+        a = min(1.0, dt_s / self.tau_s)
+        k = min(self.k_max, max(self.k_min, drag / d_model))
+        kl = min(self.k_max, max(self.k_min, (lift / drag) / (self.C_L / self.C_D))) if self.C_L != 0 else 1.0
+        self.k_rho += a * (k - self.k_rho)
+        self.k_ld += a * (kl - self.k_ld)
+        self.updates += 1
+
+
+class LateralLogic:
+    """Bank sign: reverse when the heading error to the target leaves a corridor whose
+    half-width narrows linearly with speed (dpsi_hi at v_hi, dpsi_lo at v_lo), at most one
+    reversal per rev_gap_s, none below v_norev. Positive bank turns right (heading up), so
+    an error beyond +corridor wants a negative bank and beyond -corridor a positive one."""
+
+    def __init__(self, params: dict, v_hi_mps: float, v_lo_mps: float, sign0: float = 1.0):
+        self.dpsi_hi = math.radians(params["npc.dpsi_hi_deg"])
+        self.dpsi_lo = math.radians(params["npc.dpsi_lo_deg"])
+        self.gap_s = params["npc.rev_gap_s"]
+        self.v_norev = params["npc.v_norev_mps"]
+        self.v_hi, self.v_lo = v_hi_mps, v_lo_mps
+        self.sign = 1.0 if sign0 >= 0 else -1.0
+        self.t_last = -math.inf
+        self.reversals: list[float] = []
+
+    def corridor(self, V: float) -> float:
+        f = (V - self.v_lo) / (self.v_hi - self.v_lo) if self.v_hi != self.v_lo else 1.0
+        f = min(1.0, max(0.0, f))
+        return self.dpsi_lo + (self.dpsi_hi - self.dpsi_lo) * f
+
+    def update(self, t_s: float, V: float, dpsi: float) -> bool:
+        """New sign from the heading error dpsi [rad] at speed V; True when it reversed."""
+        w = self.corridor(V)
+        want = -1.0 if dpsi > w else (1.0 if dpsi < -w else self.sign)
+        if want == self.sign or V < self.v_norev or t_s - self.t_last < self.gap_s:
+            return False
+        self.sign = want
+        self.t_last = t_s
+        self.reversals.append(t_s)
+        return True
+
+
+def path_limited_bank(bank_mag: float, h: float, hdot: float, n_g: float, q_wm2: float, n_lim: float,
+                      q_lim: float, H_m: float, tau_s: float, gain: float) -> float:
+    """Bank magnitude after altitude-rate feedback on the path limits (Lu 2014): with an
+    exponential atmosphere the load factor (~rho) and heat rate (~sqrt(rho)) would reach
+    their limits at h_lim = h + H ln(n/n_lim), resp. h + 2H ln(q/q_lim), at today's speed.
+    The vehicle may close on h_lim at hdot_ref = -(h - h_lim)/tau; descending faster than
+    that raises cos(bank) (more lift up) by gain (hdot_ref - hdot)."""
+    c0 = math.cos(bank_mag)
+    c = c0
+    for val, lim, sh in ((n_g, n_lim, H_m), (q_wm2, q_lim, 2.0 * H_m)):
+        if val <= 0.0 or lim <= 0.0:
+            continue
+        h_lim = h + sh * math.log(val / lim)
+        hdot_ref = -(h - h_lim) / tau_s
+        if hdot < hdot_ref:
+            c = max(c, c0 + gain * (hdot_ref - hdot))
+    return math.acos(min(1.0, max(-1.0, c)))
+
+
+class BankShaper:
+    """The commanded bank turned into a reference phi_r, phidot_r, phiddot_r that respects
+    the rate and acceleration limits: a second-order tracker (bang-bang towards the
+    target, braking on sqrt(2 a |e|)), stepped once per control period. A reversal (sign
+    change) goes the shorter way round (through lift up below 90 deg, lift down above);
+    magnitude changes keep the branch. Same interface as guidance.BankProfile for the
+    attitude chain: evaluate(t) and replan(t, rate, accel)."""
+
+    def __init__(self, phi0_rad: float, rate_limit_radps: float, accel_limit_radps2: float, dt_s: float):
+        self.rate_limit_radps = float(rate_limit_radps)
+        self.accel_limit_radps2 = float(accel_limit_radps2)
+        self.dt = float(dt_s)
+        self.phi = float(phi0_rad)
+        self.phid = 0.0
+        self.phidd = 0.0
+        self.target = self.phi
+        self._sign = 1.0 if phi0_rad >= 0 else -1.0
+        self._turn = 0.0            # target = command + turn (a multiple of 2 pi)
+        self._t = None
+
+    def command(self, bank_signed_rad: float) -> None:
+        s = 1.0 if bank_signed_rad >= 0 else -1.0
+        if s != self._sign or math.sin(self.phi) * s > 0.0:
+            # a new reversal goes the shorter way; once the reference is on the commanded
+            # side, magnitude changes take the nearest way (they never cross 0 or 180 deg)
+            self._sign = s
+            self._turn = 2.0 * math.pi * round((self.phi - bank_signed_rad) / (2.0 * math.pi))
+        self.target = bank_signed_rad + self._turn
+
+    def _step(self) -> None:
+        dt, a = self.dt, self.phidd
+        self.phi += self.phid * dt + 0.5 * a * dt * dt
+        self.phid += a * dt
+
+    def evaluate(self, t_s: float) -> tuple[float, float, float]:
+        if self._t is None:
+            self._t = t_s
+        n = int(round((t_s - self._t) / self.dt))
+        for _ in range(max(0, n)):
+            self._step()
+        self._t += n * self.dt if n > 0 else 0.0
+        e = self.target - self.phi
+        v_des = math.copysign(min(self.rate_limit_radps, math.sqrt(2.0 * self.accel_limit_radps2 * abs(e)),
+                                  abs(e) / self.dt), e)
+        self.phidd = max(-self.accel_limit_radps2, min(self.accel_limit_radps2, (v_des - self.phid) / self.dt))
+        return self.phi, self.phid, self.phidd
+
+    def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float) -> bool:
+        changed = (rate_limit_radps, accel_limit_radps2) != (self.rate_limit_radps, self.accel_limit_radps2)
+        self.rate_limit_radps, self.accel_limit_radps2 = float(rate_limit_radps), float(accel_limit_radps2)
+        return changed
+
+
+def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:
+    """The predictor's constants from the FSW's models (nominal vehicle, planet file)."""
+    pl, veh = scenario.planet, scenario.vehicle
+    c = np.zeros(N_C)
+    c[C_MU], c[C_RE], c[C_OM] = pl.mu_m3ps2, pl.radius_m, pl.omega_radps
+    c[C_RHO_MODEL] = 0.0 if pl.density_model == "exponential" else 1.0
+    c[C_RHO0], c[C_H] = pl.rho0_kgpm3, pl.scale_height_m
+    c[C_KRHO] = c[C_KLD] = 1.0
+    c[C_S_M] = veh.S_ref_m2 / veh.mass_kg
+    c[C_CL], c[C_CD] = veh.aero.C_L, veh.aero.C_D
+    c[C_MACH_F] = scenario.end_mach if scenario.end_speed_mps is None else 0.0
+    c[C_V_F] = scenario.end_speed_mps or 0.0
+    c[C_H_FLOOR] = 0.0
+    c[C_H_CEIL] = scenario.altitude_m + 10_000.0
+    c[C_T_MAX] = T_PRED_MAX_S
+    c[C_G0] = pl.g0_mps2
+    c[C_RN] = veh.nose_radius_m
+    c[C_SG] = SUTTON_GRAVES_MARS
+    return c
+
+
+def deploy_energy(scenario: Scenario, h_deploy_m: float) -> float:
+    """e_f = mu/r - V^2/2 at the deploy condition, taken at altitude h_deploy_m."""
+    pl = scenario.planet
+    V = scenario.end_speed_mps if scenario.end_speed_mps is not None else \
+        scenario.end_mach * atmosphere.speed_of_sound(h_deploy_m)
+    return pl.mu_m3ps2 / (pl.radius_m + h_deploy_m) - 0.5 * V * V
+
+
+class EntryGuidance:
+    """Guidance mode ``npc``: one predictor-corrector cycle per call of ``cycle`` (the slow
+    rate group), the bank command applied every control period by ``steer`` (density
+    estimate, path limits, reversal sign, then the shaper).
+
+    The correction runs on a worker thread (the predictor releases the GIL) and its
+    answer is due ``apply_delay_s`` after the cycle's release. Lockstep and batch
+    (``realtime`` False) wait for it at that moment if it is not there yet, so every run
+    applies the same answer at the same step: deterministic, and the control ticks in
+    between run while it computes. In real time the control loop never waits: an answer
+    not there when due is an overrun (event; the previous command stays until it
+    arrives), and a cycle released while the previous one still computes is skipped."""
+
+    STATS = 4096
+
+    def __init__(self, scenario: Scenario, params: dict, events: EventLog, dt_control_s: float,
+                 realtime: bool = False, apply_delay_s: float = 0.5):
+        if scenario.target_lat_rad is None:
+            raise ValueError(f"{scenario.file}: target: guidance mode \"npc\" needs a [target]")
+        self.scenario, self.params, self.events = scenario, params, events
+        veh, pl = scenario.vehicle, scenario.planet
+        self.c = predictor_constants(scenario, params)
+        self.mu, self.R, self.omega = pl.mu_m3ps2, pl.radius_m, pl.omega_radps
+        self.H = pl.scale_height_m
+        self.ef = deploy_energy(scenario, params["npc.h_deploy_m"])
+        self.bank_f = math.radians(params["npc.bank_final_deg"])
+        self.bank_lo = math.radians(params["npc.bank_min_deg"])
+        self.bank_hi = math.radians(params["npc.bank_max_deg"])
+        self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
+        self.n_lim = params["npc.limit_frac"] * veh.max_load_g
+        self.q_lim = params["npc.limit_frac"] * veh.max_heat_rate_wcm2 * 1e4
+        self.estimator = DensityEstimator(params, veh.S_ref_m2, veh.mass_kg, veh.aero.C_L, veh.aero.C_D)
+        bank0 = scenario.bank_schedule[0][1]
+        v_f = scenario.end_speed_mps or scenario.end_mach * atmosphere.speed_of_sound(params["npc.h_deploy_m"])
+        self.lateral = LateralLogic(params, scenario.speed_rel_mps, v_f, sign0=bank0)
+        self.shaper = BankShaper(bank0, scenario.bank_rate_limit_radps, scenario.bank_accel_limit_radps2,
+                                 dt_control_s)
+        self.dt_control_s = dt_control_s
+        self.bank0 = abs(bank0)          # phi_0 solution (warm start of the next cycle)
+        self.bank_cmd = abs(bank0)       # magnitude commanded now (after the path limits)
+        self.miss_m = math.nan           # predicted range miss z of the last solution [m]
+        self.range_to_go_m = math.nan
+        self.pred_impact = np.full(2, math.nan)   # predicted deploy point (lat, lon) [rad]
+        self.pred_h_m = math.nan
+        self.cycles = 0
+        self.no_root = 0
+        self.overruns = 0
+        self.calls = np.zeros(self.STATS, np.int32)
+        self.compute_ns = np.zeros(self.STATS, np.int64)
+        self.k_rho_hist = np.zeros(self.STATS)
+        self.t_hist = np.zeros(self.STATS)
+        self.bank0_hist = np.zeros(self.STATS)
+        self.miss_hist = np.zeros(self.STATS)
+        self._x = np.zeros(6)
+        self._out = np.zeros(N_O)
+        self._frozen = False
+        self.realtime = realtime
+        self.apply_delay_s = apply_delay_s
+        self._due_t = math.inf          # when the running correction's answer is due
+        self._late = False
+        self._result = None
+        self._busy = False
+        self._lock = threading.Lock()
+        self._go = threading.Event()
+        self._done = threading.Event()
+        self._job = None
+        self._stop = False
+        self._thread = threading.Thread(target=self._worker, name="npc-guidance", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ prediction
+    def _z(self, x, e0, s_togo, sign):
+        out = self._out
+
+        def z(b0):
+            predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], out)
+            if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
+                # out of the atmosphere: far long. Its range so far says little, so the miss
+                # is made 1000 km plus a slope towards more bank: the corrector then walks
+                # out of the skip region instead of stalling on a flat function
+                return 1e6 + (self.bank_hi - b0) * 1e6
+            return central_angle(x[:3], out[:3]) * self.R - s_togo
+        return z
+
+    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float) -> dict:
+        """One correction from the planet-fixed state x: phi_0 and the predicted deploy."""
+        t0 = time.perf_counter_ns()
+        self.c[C_KRHO], self.c[C_KLD] = k_rho, k_ld
+        r = math.sqrt(float(x[:3] @ x[:3]))
+        e0 = self.mu / r - 0.5 * float(x[3:] @ x[3:])
+        s_togo = central_angle(x[:3], self.target_u) * self.R
+        b0, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.bank_lo, self.bank_hi, self.bank0,
+                                   self.params["npc.tol_m"], int(self.params["npc.max_iter"]))
+        # the prediction of the answer (the root-finder's last call may have been another)
+        predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], self._out)
+        rf = self._out[:3]
+        return {"bank0": b0, "miss_m": zb, "calls": n + 1, "ok": ok, "s_togo": s_togo,
+                "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
+                "h_f": float(self._out[O_H]), "t_go": float(self._out[O_T]),
+                "ns": time.perf_counter_ns() - t0}
+
+    def _worker(self) -> None:
+        while True:
+            self._go.wait()
+            self._go.clear()
+            if self._stop:
+                return
+            x, sign, k_rho, k_ld, t_s = self._job
+            res = self.solve(x, sign, k_rho, k_ld)
+            res["t_s"] = t_s
+            with self._lock:
+                self._result = res
+                self._busy = False
+            self._done.set()
+
+    def close(self) -> None:
+        self._stop = True
+        self._go.set()
+        self._thread.join(timeout=5.0)
+
+    # ------------------------------------------------------------------ rate groups
+    def cycle(self, nav, t_s: float) -> None:
+        """The guidance cycle (slow rate group): lateral decision, then the correction."""
+        x = planet_fixed(nav.r_N, nav.v_N, t_s, self.omega)
+        dpsi, ang = heading_error(x, self.target_u)
+        self.range_to_go_m = ang * self.R
+        V = nav.V_rel_mps
+        if self.lateral.update(t_s, V, dpsi):
+            self.events.emit(t_s, Severity.INFO, "guidance", "bank_reversal",
+                             f"BANK REVERSAL dpsi {math.degrees(dpsi):+.1f} DEG")
+        if self._frozen:
+            return
+        with self._lock:
+            busy = self._busy
+            if not busy:
+                self._busy = True
+        if busy:        # real time only: lockstep has collected every answer by now
+            self.overruns += 1
+            self.events.emit(t_s, Severity.WARNING, "guidance", "guidance_overrun",
+                             "GUIDANCE CYCLE SKIPPED: PREVIOUS STILL RUNNING", rate_limited=True)
+            return
+        self._due_t = t_s + self.apply_delay_s - 1e-9
+        self._done.clear()
+        sign = self.lateral.sign
+        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_s)
+        self._go.set()
+
+    def _apply(self, res: dict) -> None:
+        i = self.cycles % self.STATS
+        self.calls[i], self.compute_ns[i] = res["calls"], res["ns"]
+        self.k_rho_hist[i], self.t_hist[i] = self.estimator.k_rho, res["t_s"]
+        self.bank0_hist[i], self.miss_hist[i] = res["bank0"], res["miss_m"]
+        self.cycles += 1
+        self.bank0 = res["bank0"]
+        self.miss_m = res["miss_m"]
+        self.pred_impact[:] = (res["lat"], res["lon"])
+        self.pred_h_m = res["h_f"]
+        if not res["ok"]:
+            self.no_root += 1
+            self.events.emit(res["t_s"], Severity.NOTICE, "guidance", "guidance_no_root",
+                             f"NO RANGE SOLUTION: MISS {res['miss_m'] / 1e3:+.1f} KM", rate_limited=True)
+        if res["t_go"] < self.params["npc.tgo_freeze_s"]:
+            self._frozen = True         # too close to the deploy for the range to respond
+
+    def steer(self, nav) -> None:
+        """Every control period: the density estimate, the path limits, then the shaper."""
+        if nav.t_s >= self._due_t:
+            if not self.realtime:
+                self._done.wait()
+            if self._result is None and not self._late:
+                self._late = True
+                self.overruns += 1
+                self.events.emit(nav.t_s, Severity.WARNING, "guidance", "guidance_overrun",
+                                 "GUIDANCE CYCLE OVERRUN: COMMAND KEPT", rate_limited=True)
+            if self._result is not None:
+                with self._lock:
+                    res, self._result = self._result, None
+                self._due_t = math.inf
+                self._late = False
+                self._apply(res)
+        self.estimator.update(self.dt_control_s, nav.accel_B, nav.C_BN, nav.vrel_N, nav.rho_kgpm3)
+        V = nav.V_rel_mps
+        r = nav.r_N
+        hdot = float(nav.vrel_N @ r) / math.sqrt(float(r @ r))
+        a = nav.accel_B
+        n_g = math.sqrt(float(a @ a)) / self.c[C_G0]
+        q = SUTTON_GRAVES_MARS * math.sqrt(max(nav.rho_kgpm3, 0.0) * self.estimator.k_rho / self.c[C_RN]) * V ** 3
+        self.bank_cmd = path_limited_bank(self.bank0, nav.h_m, hdot, n_g, q, self.n_lim, self.q_lim, self.H,
+                                          self.params["npc.hdot_tau_s"], self.params["npc.hdot_gain"])
+        self.shaper.command(self.lateral.sign * self.bank_cmd)
+
+    def stats(self) -> dict:
+        n = min(self.cycles, self.STATS)
+        us = self.compute_ns[:n] / 1e3
+        calls = self.calls[:n]
+
+        def pct(a, q):
+            return float(np.percentile(a, q)) if n else None
+        return {"cycles": self.cycles, "compute_p50_us": pct(us, 50), "compute_p99_us": pct(us, 99),
+                "compute_max_us": float(us.max()) if n else None,
+                "predictions_per_cycle_mean": float(calls.mean()) if n else None,
+                "predictions_per_cycle_max": int(calls.max()) if n else None,
+                "no_root": self.no_root, "overruns": self.overruns,
+                "reversal_times_s": list(self.lateral.reversals),
+                "k_rho_final": self.estimator.k_rho, "k_ld_final": self.estimator.k_ld,
+                "bank0_final_deg": math.degrees(self.bank0)}

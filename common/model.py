@@ -92,6 +92,9 @@ class Truth:
     C_lbeta_scale: float
     C_malpha_scale: float
     C_nbeta_scale: float
+    # altitude-correlated density perturbation: (amplitude, wavelength [m], phase [rad]) waves,
+    # rho_truth = scale x rho_model x (1 + sum a sin(2 pi h / L + phase))
+    density_waves: tuple[tuple[float, float, float], ...] = ()
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,10 @@ P_ALPHA_TRIM, P_CL, P_CD, P_CLA, P_CYB = 12, 13, 14, 15, 16
 P_CMA, P_CNB, P_CLB, P_CLP, P_CMQ, P_CNR = 17, 18, 19, 20, 21, 22
 P_I = 23        # 9 entries, row-major truth inertia [kg m^2]
 P_IINV = 32     # 9 entries, its inverse
-N_P = 41
+P_RHO_NWAVE = 41   # number of altitude waves of the density perturbation (0: none)
+P_RHO_WAVE = 42    # MAX_RHO_WAVES x (amplitude, wavelength [m], phase [rad])
+MAX_RHO_WAVES = 4
+N_P = P_RHO_WAVE + 3 * MAX_RHO_WAVES
 
 # ---- derived outputs at the end of a step (aux) ----
 A_H, A_V, A_ALPHA, A_BETA, A_BANK, A_RHO, A_QBAR, A_MACH = 0, 1, 2, 3, 4, 5, 6, 7
@@ -104,6 +107,14 @@ def _deriv(x, p, tau_B, F_B, dx, C, aux, want_aux):
     else:
         rho = _rho_poly(h)
     rho *= p[P_RHO_SCALE]
+    nw = int(p[P_RHO_NWAVE])
+    if nw > 0:
+        # altitude-correlated perturbation of the profile: rho x (1 + sum a sin(2 pi h / L + phase))
+        f = 1.0
+        for i in range(nw):
+            j = P_RHO_WAVE + 3 * i
+            f += p[j] * math.sin(2.0 * math.pi * h / p[j + 1] + p[j + 2])
+        rho *= f
     qbar = 0.5 * rho * V * V
 
     # wind frame W: w1 along u, w2 = (u x r)/|u x r| (right), w3 = w1 x w2 (down)
@@ -445,6 +456,14 @@ def params_vector(scenario: Scenario) -> np.ndarray:
     p[P_J2], p[P_USE_J2] = pl.j2, float(pl.use_j2)
     p[P_RHO_MODEL] = {"exponential": 0.0, "polynomial": 1.0}[pl.density_model]
     p[P_RHO0], p[P_HSCALE], p[P_RHO_SCALE] = pl.rho0_kgpm3, pl.scale_height_m, tr.density_scale
+    waves = tr.density_waves
+    if len(waves) > MAX_RHO_WAVES:
+        raise ValueError(f"truth.density_waves: at most {MAX_RHO_WAVES} waves, got {len(waves)}")
+    if sum(abs(a) for a, _, _ in waves) >= 1.0:
+        raise ValueError("truth.density_waves: amplitudes must sum below 1 (density stays positive)")
+    p[P_RHO_NWAVE] = len(waves)
+    for i, (a, L, ph) in enumerate(waves):
+        p[P_RHO_WAVE + 3 * i:P_RHO_WAVE + 3 * i + 3] = a, L, ph
     p[P_MASS], p[P_S], p[P_LREF] = veh.mass_kg, veh.S_ref_m2, veh.l_ref_m
     p[P_ALPHA_TRIM], p[P_CL], p[P_CD], p[P_CLA], p[P_CYB] = ae.alpha_trim_rad, ae.C_L, ae.C_D, ae.C_Lalpha, ae.C_Ybeta
     p[P_CMA] = ae.C_malpha * tr.C_malpha_scale

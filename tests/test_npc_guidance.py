@@ -173,3 +173,37 @@ def test_shaper_respects_the_limits_and_reverses_the_shorter_way():
     for k in range(3000):
         p, _, _ = sh2.evaluate(k * dt)
     assert math.degrees(p) == pytest.approx(240.0, abs=0.05)
+
+
+def test_ellipse_of_a_known_normal_sample():
+    from ellipsled.montecarlo.deploy import CHI2_2DOF_99, deploy_stats
+    rng = np.random.default_rng(3)
+    n = 20000
+    down, cross = rng.normal(0.0, 2.0, n), rng.normal(0.0, 1.0, n)
+    st = deploy_stats({"deploy_miss_km": np.hypot(down, cross), "downrange_err_km": down,
+                       "crossrange_err_km": cross})
+    assert st["ellipse99_major_km"] == pytest.approx(2 * 2.0 * math.sqrt(CHI2_2DOF_99), rel=0.03)
+    assert st["ellipse99_minor_km"] == pytest.approx(2 * 1.0 * math.sqrt(CHI2_2DOF_99), rel=0.03)
+    assert st["miss_p50_km"] == pytest.approx(np.median(np.hypot(down, cross)))
+
+
+def test_guided_campaign_draws_entry_state_and_density_waves_and_keeps_the_default_draws():
+    from ellipsled.montecarlo.campaign import apply_dispersion, draw_run, load_campaign
+    from sim.plant import P_RHO_SCALE, A_RHO
+    g = load_campaign("guided")
+    base = load_scenario(g.scenario)
+    seed, d = draw_run(g, base, 5)
+    assert abs(d["speed_offset_mps"]) <= 20 and abs(d["heading_offset_deg"]) <= 0.1
+    assert abs(d["north_offset_km"]) <= 5 and len(d["density_waves"]) == 9
+    sc = apply_dispersion(base, d, seed, "r5")
+    assert sc.speed_rel_mps == pytest.approx(7300.0 + d["speed_offset_mps"])
+    # the plant's density is the model x scale x (1 + sum of the waves) at its altitude
+    plant = Plant(sc)
+    h = plant.aux[0]
+    f = 1.0 + sum(a * math.sin(2 * math.pi * h / L + ph) for a, L, ph in sc.truth.density_waves)
+    model = sc.planet.rho0_kgpm3 * math.exp(-h / sc.planet.scale_height_m)
+    assert plant.aux[A_RHO] == pytest.approx(model * plant.p[P_RHO_SCALE] * f, rel=1e-12)
+    # a campaign without the new ranges draws exactly what it drew before them
+    dflt = load_campaign("default")
+    _, d0 = draw_run(dflt, load_scenario("nominal"), 5)
+    assert "density_waves" not in d0 and "speed_offset_mps" not in d0

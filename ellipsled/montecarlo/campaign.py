@@ -35,6 +35,12 @@ class Dispersions:
     n_stuck_on: tuple[int, int]
     n_degraded: tuple[int, int]
     degraded_eta: tuple[float, float]
+    # entry state and atmosphere (guided campaigns; zero ranges leave the base unchanged)
+    speed_offset_mps: tuple[float, float] = (0.0, 0.0)
+    heading_offset_deg: tuple[float, float] = (0.0, 0.0)
+    position_offset_km: tuple[float, float] = (0.0, 0.0)     # north and east, each
+    density_wave_amp: tuple[float, float] = (0.0, 0.0)       # amplitude of each altitude wave
+    density_wave_km: tuple[float, ...] = ()                  # their wavelengths (phases drawn)
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,7 @@ class Criteria:
     completed: bool
     finite: bool
     bank_err_max_after_fault_deg: float
+    deploy_miss_km: float | None = None       # guided campaigns: deploy within this of the target
 
     def failures(self, summary: dict) -> list[str]:
         """The criteria this run's summary.json breaks (empty: success)."""
@@ -58,6 +65,10 @@ class Criteria:
         fault_flown = t_f is None or t_end is None or t_f <= t_end   # else vacuous: the run ended first
         if fault_flown and (e is None or not e <= self.bank_err_max_after_fault_deg):
             out.append("bank_err_max_after_fault_deg")
+        if self.deploy_miss_km is not None:
+            m = summary.get("deploy_miss_km")
+            if m is None or not m <= self.deploy_miss_km:
+                out.append("deploy_miss_km")
         return out
 
 
@@ -111,7 +122,15 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
         n_stuck_on=_range(f, "stuck_on", lo=0, hi=N_JETS, integer=True),
         n_degraded=_range(f, "degraded", lo=0, hi=N_JETS, integer=True),
         degraded_eta=_range(f, "degraded_eta", lo=0, hi=1, lo_open=True, hi_open=True),
+        speed_offset_mps=_range(d, "speed_offset_mps", lo=-1000, hi=1000) if d.has("speed_offset_mps") else (0.0, 0.0),
+        heading_offset_deg=_range(d, "heading_offset_deg", lo=-30, hi=30) if d.has("heading_offset_deg") else (0.0, 0.0),
+        position_offset_km=_range(d, "position_offset_km", lo=-500, hi=500) if d.has("position_offset_km") else (0.0, 0.0),
+        density_wave_amp=_range(d, "density_wave_amp", lo=0, hi=0.2) if d.has("density_wave_amp") else (0.0, 0.0),
+        density_wave_km=tuple(float(x) for x in d.vec("density_wave_km", len(d.raw("density_wave_km")), lo=0.1,
+                                                      lo_open=False)) if d.has("density_wave_km") else (),
     )
+    if len(disp.density_wave_km) * disp.density_wave_amp[1] >= 1.0:
+        raise d.error("density_wave_amp", "the waves' largest amplitudes must sum below 1 (density stays positive)")
     if disp.n_failed_off[1] + disp.n_stuck_on[1] + disp.n_degraded[1] > N_JETS:
         raise f.error("failed_off", f"the largest fault sets together exceed the {N_JETS} jets")
     s = root.table("success")
@@ -119,6 +138,7 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
         completed=s.bool("completed", default=True),
         finite=s.bool("finite", default=True),
         bank_err_max_after_fault_deg=s.num("bank_err_max_after_fault_deg", lo=0, lo_open=True),
+        deploy_miss_km=s.num("deploy_miss_km", default=None, lo=0, lo_open=True),
     )
     tst = root.table("testing", default={})
     br = tst.raw("break_runs", default=[])
@@ -180,6 +200,17 @@ def draw_run(camp: Campaign, base: Scenario, run_id: int, master_seed: int | Non
     out["jets_stuck_on"] = tuple(sorted(jets[n_off:n_off + n_stuck]))
     out["jets_degraded"] = tuple(sorted(jets[n_off + n_stuck:n_off + n_stuck + n_deg]))
     out["degraded_eta"] = tuple(float(x) for x in rng.uniform(*d.degraded_eta, size=n_deg))
+    # drawn after the original set, so campaigns without them keep every earlier draw
+    if d.speed_offset_mps != (0.0, 0.0) or d.heading_offset_deg != (0.0, 0.0) or d.position_offset_km != (0.0, 0.0):
+        out["speed_offset_mps"] = float(rng.uniform(*d.speed_offset_mps))
+        out["heading_offset_deg"] = float(rng.uniform(*d.heading_offset_deg))
+        out["north_offset_km"] = float(rng.uniform(*d.position_offset_km))
+        out["east_offset_km"] = float(rng.uniform(*d.position_offset_km))
+    if d.density_wave_km:
+        amp = rng.uniform(*d.density_wave_amp, size=len(d.density_wave_km))
+        ph = rng.uniform(0.0, 2.0 * math.pi, size=len(d.density_wave_km))
+        out["density_waves"] = tuple(float(x) for w in zip(amp, d.density_wave_km, ph)
+                                     for x in (w[0], w[1] * 1e3, w[2]))
     if run_id in camp.break_runs:
         out["fdir_delay_s"] = BROKEN_FDIR_DELAY_S
     return seed, out
@@ -190,8 +221,13 @@ def apply_dispersion(base: Scenario, disp: dict, seed: int, name: str) -> Scenar
     truth and faults are replaced), initial bank = reference start + error."""
     try:
         isc = np.array([float(disp[f"inertia_scale_{k}"]) for k in INERTIA_KEYS])
+        w = tuple(float(x) for x in disp.get("density_waves", ()))
         truth = Truth(inertia_scale=isc, density_scale=float(disp["density_scale"]),
-                      **{f"{k}_scale": float(disp[f"{k}_scale"]) for k in AERO_KEYS})
+                      **{f"{k}_scale": float(disp[f"{k}_scale"]) for k in AERO_KEYS},
+                      density_waves=tuple(tuple(w[i:i + 3]) for i in range(0, len(w) - 2, 3)))
+        dv = float(disp.get("speed_offset_mps", 0.0))
+        dpsi = math.radians(float(disp.get("heading_offset_deg", 0.0)))
+        dn, de = float(disp.get("north_offset_km", 0.0)) * 1e3, float(disp.get("east_offset_km", 0.0)) * 1e3
         t_f = float(disp["fault_t_s"])
         off, stuck, deg = (tuple(int(j) for j in disp[k]) for k in ("jets_failed_off", "jets_stuck_on", "jets_degraded"))
         eta = tuple(float(x) for x in disp["degraded_eta"])
@@ -212,9 +248,15 @@ def apply_dispersion(base: Scenario, disp: dict, seed: int, name: str) -> Scenar
     faults += [FaultEvent(t_s=t_f, jets=(j,), kind="degraded", eta=e) for j, e in zip(deg, eta)]
     fsw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.fsw.items()}
     fsw.setdefault("fdir", {})["delay_s"] = delay
+    extra = {}
+    if dv or dpsi or dn or de:
+        r = base.planet.radius_m + base.altitude_m
+        extra = dict(speed_rel_mps=base.speed_rel_mps + dv, heading_rad=base.heading_rad + dpsi,
+                     latitude_rad=base.latitude_rad + dn / r,
+                     longitude_rad=base.longitude_rad + de / (r * math.cos(base.latitude_rad)))
     return base.with_(name=name, seed=int(seed), truth=truth, faults=tuple(faults), fsw=fsw,
                       bank0_rad=base.bank_schedule[0][1] + bank_err,
-                      flight_path_rad=base.flight_path_rad + gamma_off)
+                      flight_path_rad=base.flight_path_rad + gamma_off, **extra)
 
 
 def dispersion_columns(disp: dict) -> dict:

@@ -75,9 +75,11 @@ def viewer(n: netns.Network, out: Path, prefix: str) -> list[str]:
 
 
 def _stop_all(n: netns.Network, *names: str) -> None:
+    """SIGTERM, a clean exit expected (generous: a real-time node's exit on a loaded
+    machine has taken over 10 s)."""
     for name in names:
         if name in n.procs:
-            assert n.stop(name) == 0, n.log(name)
+            assert n.stop(name, timeout_s=30.0) == 0, n.log(name)
 
 
 def test_lockstep_through_the_router_equals_the_batch_run_bit_for_bit_even_across_a_router_restart(net):

@@ -113,6 +113,25 @@ def test_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
         sorted(d["jet"] for d in s_sil["fdir"]["detections"]) == [1, 2, 17, 18]
 
 
+def test_guided_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
+    """Guidance mode npc computes on a worker thread; its answer is applied at a fixed step
+    after the release, so the multi-process lockstep run still equals the batch run."""
+    out = tmp_path / "sil"
+    r = subprocess.run(PY + ["run", "guided-nominal", "--lockstep", "--duration", "30", "--out", str(out),
+                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    s_bat, h_bat, _ = batch.run("guided-nominal", duration_s=30)
+    h_sil = np.load(out / "history.npz")
+    assert h_sil["k"].shape == h_bat["k"].shape
+    for name in h_sil.files:
+        if name not in ("compute_us", "alloc_us"):
+            assert np.array_equal(h_sil[name], h_bat[name]), name
+    s_sil = _json(out / "summary.json")
+    assert s_sil["deploy_miss_km"] == s_bat["deploy_miss_km"]
+    assert s_sil["guidance"]["bank0_final_deg"] == s_bat["guidance"]["bank0_final_deg"]
+    assert s_sil["guidance"]["cycles"] == s_bat["guidance"]["cycles"] == 30
+
+
 def _hogs(n: int) -> list[subprocess.Popen]:
     """n CPU hogs: stress-ng when installed, else plain Python busy loops."""
     import shutil

@@ -32,6 +32,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "plant": ("step_p50_us", "step_p99_us", "entry_real_time_factor"),
     "cycle": ("compute_p50_us", "compute_p99_us", "compute_max_us"),
     "batch": ("realtime_factor",),
+    "guidance": ("p50_us", "p99_us", "max_us", "baseline_control_p99_us"),
     "groundlink": ("tick_p99_us",),
     "latency": ("p50_us", "p99_us", "udp_p50_us", "udp_p99_us", "zenoh_p50_us", "zenoh_p99_us"),
     "jitter": (),
@@ -50,7 +51,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "rt": ("sched_fifo", "affinity", "mlockall", "messages"),
 }
 
-ORDER = ("machine", "codec", "allocator", "plant", "cycle", "batch", "groundlink", "latency", "jitter",
+ORDER = ("machine", "codec", "allocator", "plant", "cycle", "batch", "guidance", "groundlink", "latency", "jitter",
          "sil_lockstep", "sil_realtime", "sil_router", "flood", "bridge")
 
 
@@ -102,6 +103,11 @@ def _cycle(quick):
 def _batch(quick):
     from . import batch
     return batch.run(quick)
+
+
+def _guidance(quick):
+    from . import guidance
+    return guidance.run(quick)
 
 
 def _groundlink(quick):
@@ -157,7 +163,7 @@ def _bridge(quick):
 
 SECTIONS: dict[str, Callable[[bool], dict]] = {
     "machine": machine, "codec": _codec, "allocator": _allocator, "plant": _plant, "cycle": _cycle,
-    "batch": _batch, "groundlink": _groundlink, "latency": _latency, "jitter": _jitter,
+    "batch": _batch, "guidance": _guidance, "groundlink": _groundlink, "latency": _latency, "jitter": _jitter,
     "sil_lockstep": _sil_lockstep, "sil_realtime": _sil_realtime, "sil_router": _sil_router, "flood": _flood,
     "bridge": _bridge,
 }
@@ -455,6 +461,16 @@ def rows(res: dict) -> list[tuple[str, str, str, str, str, str]]:
         add("batch real-time factor (one process)", f"{_fmt(b.get('realtime_factor'))}x",
             f"simulated {_fmt(b.get('baseline_simulated_s'))} s in {_fmt(b.get('wall_s'))} s", "", ">= 200x",
             _ge(b.get("realtime_factor"), 200.0))
+    gd = res.get("guidance") or {}
+    if gd:
+        es = gd.get("entry_state") or {}
+        add("guidance cycle (npc) in flight p50 / p99 / max [us]",
+            f"{_fmt(gd.get('p50_us'))} / {_fmt(gd.get('p99_us'))} / {_fmt(gd.get('max_us'))}",
+            f"control cycle p99 {_fmt(gd.get('baseline_control_p99_us'))}", "", "p99 <= 20000 us",
+            _le(gd.get("p99_us"), 20_000.0))
+        add("  guidance cycle from entry interface, cold p50 / p99 [us]",
+            f"{_fmt(es.get('p50_us'))} / {_fmt(es.get('p99_us'))}",
+            f"{_fmt(es.get('predictions_mean'))} predictions", "", "", NO_TARGET)
     p = res.get("plant") or {}
     if p:
         per = p.get("baseline_control_period_us")

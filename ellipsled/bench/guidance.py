@@ -1,0 +1,62 @@
+"""Guidance benchmark (spec 60-guidance.md): one predictor-corrector cycle, p99 target
+<= 20 ms, next to the control cycle of the same run.
+
+- ``flight``: the guided-nominal entry through ``ellipsled.batch.run``; every guidance cycle's
+  compute time (worker thread, prediction + correction) and the control cycle's;
+- ``entry_state``: the cycle from the entry interface (longest prediction: 250 s of flight)
+  with the corrector started cold at the initial bank, repeated.
+
+    python -m ellipsled.bench.guidance [--quick]
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+from common.model import load_scenario
+from ellipsled.batch import run as batch_run
+from fsw.events import EventLog
+from fsw.npc import PARAMS, EntryGuidance, planet_fixed
+from fsw.params import load_params
+from sim.plant import initial_translation
+
+TARGET_P99_US = 20_000.0
+
+
+def run(quick: bool) -> dict:
+    scn = load_scenario("guided-nominal")
+    params = load_params(PARAMS, scn.fsw)
+    eg = EntryGuidance(scn, params, EventLog(), scn.dt_control_s)
+    try:
+        x = planet_fixed(*initial_translation(scn), 0.0, scn.planet.omega_radps)
+        eg.solve(x, 1.0, 1.0, 1.0)                            # compile / load the kernel
+        us, calls = [], []
+        for _ in range(20 if quick else 100):
+            eg.bank0 = abs(scn.bank_schedule[0][1])           # cold start every time
+            t0 = time.perf_counter_ns()
+            r = eg.solve(x, 1.0, 1.0, 1.0)
+            us.append((time.perf_counter_ns() - t0) / 1e3)
+            calls.append(r["calls"])
+    finally:
+        eg.close()
+    res = {"figure": "one guidance cycle (prediction + correction)",
+           "entry_state": {"p50_us": float(np.percentile(us, 50)), "p99_us": float(np.percentile(us, 99)),
+                           "max_us": float(np.max(us)), "predictions_mean": float(np.mean(calls))},
+           "targets": {"p99_us_max": TARGET_P99_US}}
+    s, _, _ = batch_run("guided-nominal", duration_s=60.0 if quick else None)
+    g, cc = s.get("guidance", {}), s.get("control_cycle", {})
+    res.update({"p50_us": g.get("compute_p50_us"), "p99_us": g.get("compute_p99_us"),
+                "max_us": g.get("compute_max_us"), "cycles": g.get("cycles"),
+                "predictions_per_cycle_mean": g.get("predictions_per_cycle_mean"),
+                "baseline_control_p99_us": cc.get("compute_p99_us"),
+                "deploy_miss_km": s.get("deploy_miss_km"), "end_reason": s.get("end_reason")})
+    p99 = res["p99_us"]
+    res["pass"] = bool(p99 is not None and p99 <= TARGET_P99_US)
+    return res
+
+
+if __name__ == "__main__":
+    import json
+    print(json.dumps(run("--quick" in sys.argv), indent=2))

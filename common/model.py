@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from interfaces.vocabulary import FAULT_KINDS, N_JETS
+
 from .config import ConfigError, Table, load_toml, resolve
 
-N_JETS = 18
 INERTIA_KEYS = ("I11", "I22", "I33", "I12", "I13", "I23")
-FAULT_KINDS = ("off", "stuck", "degraded", "clear")
 
 
 _INERTIA_IDX = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])
@@ -304,7 +304,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     )
     faults = []
     for f in root.tables("faults"):
-        kind = f.str("kind", choices=FAULT_KINDS)
+        kind = f.str("kind", choices=tuple(FAULT_KINDS))
         jets = f.raw("jets")
         if (not isinstance(jets, list) or not jets
                 or not all(isinstance(j, int) and not isinstance(j, bool) and 1 <= j <= N_JETS for j in jets)):

@@ -12,21 +12,20 @@ from pathlib import Path
 
 import numpy as np
 
+from common.events import EventLog
 from common.model import Scenario, inertia_vector, load_scenario
-from fsw.events import EventLog
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
 from fsw.guidance import BankProfile
 from fsw.topology import Topology
 from interfaces import records
+from interfaces.vocabulary import FAULT_HEALTH, HEALTH_NAMES, MARK_NAMES, NOMINAL
 from sim.plant import Plant
 
 from .controllable import truth_controllability
 from .history import History, record_fsw, record_truth
 from .metrics import deploy_figures, summarize, wrap_deg
 from .terminal import RunProgress, files_written
-
-KIND_OF_FAULT = {"off": "failed_off", "stuck": "stuck_on", "degraded": "degraded"}
 
 
 IDENTIFICATION = ("detect", "oracle")     # fdir.mode: the product's FDIR, or the test mode's fault log
@@ -141,7 +140,7 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
         injected.setdefault(jet, (t, kind))
     dets = rep["detections"]
     false_alarms = sum(1 for d in dets
-                       if d["jet"] not in injected or KIND_OF_FAULT.get(injected[d["jet"]][1]) != d["kind"])
+                       if d["jet"] not in injected or HEALTH_NAMES.get(FAULT_HEALTH[injected[d["jet"]][1]]) != d["kind"])
     missed = sorted(j for j, (t, kind) in injected.items()
                     if kind != "clear" and not any(d["jet"] == j for d in dets))
     cu, au = h["compute_us"], h["alloc_us"]
@@ -196,7 +195,7 @@ def tell_faults(fsw: FlightSoftware, fault_log: list, start: int, eta_of) -> int
     ``start`` on, each at the time the plant applied it; returns the new count told.
     ``eta_of[jet - 1]``: the thrust factor the plant gave a degraded jet."""
     for t, jet, kind in fault_log[start:]:
-        fsw.fdir.identified(float(t), int(jet), KIND_OF_FAULT.get(kind, "healthy"), float(eta_of[jet - 1]))
+        fsw.fdir.identified(float(t), int(jet), MARK_NAMES[FAULT_HEALTH.get(kind, NOMINAL)], float(eta_of[jet - 1]))
     return len(fault_log)
 
 

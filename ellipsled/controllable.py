@@ -16,9 +16,8 @@ import numpy as np
 
 from common.model import Scenario, inertia_matrix, inertia_vector
 from fsw.controllability import aero_moment_per_rad, controllability, schedule_accel_need_radps2, velocity_dir_B
-from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON, JetHealth
-
-_STATE_OF_KIND = {"off": FAILED_OFF, "stuck": STUCK_ON, "degraded": DEGRADED, "clear": NOMINAL}
+from fsw.health import JetHealth
+from interfaces.vocabulary import FAULT_HEALTH
 
 
 def truth_health(scn: Scenario, faults_applied: list) -> JetHealth:
@@ -29,7 +28,7 @@ def truth_health(scn: Scenario, faults_applied: list) -> JetHealth:
     for ev in sorted(scn.faults, key=lambda e: e.t_s):
         for j in ev.jets:
             if (int(j), ev.kind) in applied:
-                h.set(int(j), _STATE_OF_KIND[ev.kind], ev.eta)
+                h.set(int(j), FAULT_HEALTH[ev.kind], ev.eta)
     return h
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from interfaces.records import TRUTH
+from interfaces.vocabulary import N_JETS
 
-N_JETS = 18
 
 # name -> trailing shape; all float64 except where noted in _DTYPES
 FIELDS: dict[str, tuple[int, ...]] = {

@@ -9,6 +9,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from interfaces.vocabulary import N_JETS  # noqa: E402
+
 from .history import History  # noqa: E402
 from .metrics import THETA_NAMES, bank_error_deg  # noqa: E402
 
@@ -76,7 +78,7 @@ def plot_run(h: History, out: Path, title: str) -> list[str]:
     jets = h["jets_cmd"]
     step = max(1, len(t) // 4000)
     ax.imshow(jets[::step].T, aspect="auto", interpolation="nearest", cmap="Greys",
-              extent=(t[0], t[-1] if len(t) else 1, 18.5, 0.5))
+              extent=(t[0], t[-1] if len(t) else 1, N_JETS + 0.5, 0.5))
     ax.set_ylabel("jet"); ax.set_xlabel("t [s]"); ax.set_title(f"{title}: jet commands (black = on)")
     files.append(_save(fig, out / "jets.png"))
     return files

@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from .events import EventLog, Severity
+from common.events import EventLog, Severity
 from .params import Param
 
 PARAMS = [

@@ -51,13 +51,14 @@ import math
 import numpy as np
 from numba import njit
 
-from .events import EventLog, Severity
-from .health import DEGRADED, FAILED_OFF, NOMINAL, STATE_NAMES, STUCK_ON, JetHealth
+from common.events import EventLog, Severity
+from interfaces.vocabulary import DEGRADED, FAILED_OFF, HEALTH_NAMES, INHIBITED, MARK_KINDS, N_JETS, NOMINAL, STUCK_ON
+
+from .health import JetHealth
 from .modes import Failsafes
 from .monitors import SensorMonitor
 from .params import Param
 
-KINDS = {"failed_off": FAILED_OFF, "stuck_on": STUCK_ON, "degraded": DEGRADED}
 _TEXT = {FAILED_OFF: "FAILED OFF", STUCK_ON: "STUCK ON", DEGRADED: "DEGRADED", NOMINAL: "HEALTHY"}
 _T_EPS_S = 1e-9          # time comparison slack for "delay elapsed" (float step times)
 
@@ -196,7 +197,7 @@ class Fdir:
     # monitor's and the failsafe list's (declared next to the code that uses them).
     PARAMS: list[Param] = JET_MONITOR_PARAMS + SensorMonitor.PARAMS + Failsafes.PARAMS
 
-    def __init__(self, params: dict[str, float], dt_s: float, events: EventLog, n_jets: int = 18) -> None:
+    def __init__(self, params: dict[str, float], dt_s: float, events: EventLog, n_jets: int = N_JETS) -> None:
         if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s: must be finite and > 0, got {dt_s!r}")
         if not (isinstance(n_jets, int) and n_jets > 0):
@@ -316,15 +317,16 @@ class Fdir:
         if not self.oracle:
             raise ValueError("fdir.identified: only in fdir.mode = oracle")
         jet = self._check_jet(jet)
-        if kind == "healthy":
+        state = MARK_KINDS.get(kind, INHIBITED)
+        if state == NOMINAL:
             self.health_isolated.set(jet, NOMINAL)
             self._t_apply[jet - 1] = t_s + self.delay_s
             self._next_apply = min(self._next_apply, t_s + self.delay_s)
             return
-        if kind not in KINDS:
+        if state == INHIBITED:
             raise ValueError(f"kind: must be one of failed_off, stuck_on, degraded, healthy; got {kind!r}")
         self._new_kind[:] = 0
-        self._new_kind[jet - 1] = KINDS[kind]
+        self._new_kind[jet - 1] = state
         self._eta_new[jet - 1] = float(eta) if kind == "degraded" else (0.0 if kind == "failed_off" else 1.0)
         self._declare(t_s)
 
@@ -342,7 +344,7 @@ class Fdir:
             t_apply = t_s + self.delay_s
             self._t_apply[k] = t_apply
             self._next_apply = min(self._next_apply, t_apply)
-            name = STATE_NAMES[kind]
+            name = HEALTH_NAMES[kind]
             self.detections.append({"jet": int(k + 1), "kind": name, "t_s": float(t_s), "eta_hat": eta,
                                     "t_apply_s": float(t_apply)})
             if kind == DEGRADED:
@@ -395,12 +397,10 @@ class Fdir:
         'failed_off' | 'stuck_on' | 'degraded' (0 < eta < 1) | 'healthy' (use the jet as
         nominal whatever FDIR concludes; FDIR keeps monitoring and reporting)."""
         jet = self._check_jet(jet)
-        if kind == "healthy":
-            state = NOMINAL
-        elif kind in KINDS:
-            state = KINDS[kind]
-        else:
-            raise ValueError(f"kind: must be one of failed_off, stuck_on, degraded, healthy; got {kind!r}")
+        state = MARK_KINDS.get(kind, INHIBITED)
+        if state == INHIBITED:          # the inhibit mask is set_inhibit's, not a health state
+            raise ValueError(f"kind: must be one of {', '.join(k for k, c in MARK_KINDS.items() if c != INHIBITED)};"
+                             f" got {kind!r}")
         if state == DEGRADED:
             if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating)) \
                     or not math.isfinite(eta) or not 0.0 < eta < 1.0:

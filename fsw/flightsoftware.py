@@ -11,14 +11,14 @@ import time
 
 import numpy as np
 
+from common.events import EventLog, Severity
 from common.frames import wrap_pi
-
 from common.model import Scenario
+
 from .allocation import Allocator
 from .control import SamiController
 from .controllability import (Controllability, aero_moment_per_rad, controllability,
                               schedule_accel_need_radps2)
-from .events import EventLog, Severity
 from .fdir import Fdir
 from .guidance import BankProfile, Guidance
 from .health import JetHealth
@@ -99,7 +99,7 @@ class FlightSoftware:
         self.cycles = 0
         self.bank_err_rad = 0.0
         self._frame_views: tuple = (None,)
-        self._zero_u = np.zeros(18, dtype=np.uint8)   # jets off
+        self._zero_u = np.zeros(self.driver.n, dtype=np.uint8)   # jets off
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self._residual_dt = 0.0
@@ -110,7 +110,7 @@ class FlightSoftware:
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
-        """One control cycle on a SENSORS record; returns the jet command (uint8, 18)."""
+        """One control cycle on a SENSORS record; returns the jet command (uint8, one per jet)."""
         self.cycles += 1
         t_s = float(frame["t_ns"]) * 1e-9     # a Python float (a 0-d field times 1e-9 is a NumPy scalar)
         ok = self.monitor.check(t_s, frame)

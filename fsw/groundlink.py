@@ -136,21 +136,20 @@ from common.frames import local_axes
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing import SignedLink, SigningKey, Rejection
 
-from .events import Severity
-from .health import NOMINAL
-from .modes import Mode
+from common.events import Severity
+from interfaces.records import FAULT_NAMES
+from interfaces.vocabulary import (DEFAULT_GCS, DEFAULT_VEHICLE, INHIBITED, MARK_KINDS, N_JETS, NOMINAL, Mode,
+                                   parse_udp)
 
 log = logging.getLogger(__name__)
 
 SYSTEM_ID = 1
 COMPONENT_ID = mav.MAV_COMP_ID_AUTOPILOT1        # 1
-N_JETS = 18
 PARAM_ID_LEN = 16
 STATUSTEXT_LEN = 50
 NAMED_VALUE_LEN = 10
 
-DEFAULT_GCS = "udp:127.0.0.1:14550"
-DEFAULT_BIND = "udp:127.0.0.1:14555"
+DEFAULT_BIND = DEFAULT_VEHICLE
 
 PARAM_PREFIX = {"control": "C_", "allocator": "A_", "fdir": "F_", "driver": "D_", "executive": "X_",
                 "guidance": "G_"}
@@ -177,13 +176,7 @@ DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
 ALLOW_UNSIGNED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
                             mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ})
 
-# MAV_CMD_INJECT_FAILURE type -> the plant's fault kind.
-INJECT_KINDS = {mav.FAILURE_TYPE_OK: "clear", mav.FAILURE_TYPE_OFF: "off",
-                mav.FAILURE_TYPE_STUCK: "stuck", mav.FAILURE_TYPE_WRONG: "degraded"}
-# ELLIPSLED_CMD_FDIR_MARK_JET kind -> Fdir.override kind ("inhibited" handled apart).
-MARK_KINDS = {mav.ELLIPSLED_JET_HEALTH_NOMINAL: "healthy", mav.ELLIPSLED_JET_HEALTH_FAILED_OFF: "failed_off",
-              mav.ELLIPSLED_JET_HEALTH_STUCK_ON: "stuck_on", mav.ELLIPSLED_JET_HEALTH_DEGRADED: "degraded",
-              mav.ELLIPSLED_JET_HEALTH_INHIBITED: "inhibited"}
+MARK_NAMES = {code: kind for kind, code in MARK_KINDS.items()}   # ELLIPSLED_CMD_FDIR_MARK_JET p2 -> kind
 
 InjectFn = Callable[[int, str, float], bool]
 
@@ -212,23 +205,6 @@ def param_ids(names) -> dict[str, str]:
         used.add(pid)
         out[name] = pid
     return out
-
-
-def parse_udp(spec: str, what: str) -> tuple[str, int]:
-    """"udp:HOST:PORT" (or "HOST:PORT") -> (host, port); ValueError naming ``what``."""
-    if not isinstance(spec, str):
-        raise ValueError(f"{what}: expected 'udp:HOST:PORT', got {spec!r}")
-    s = spec[4:] if spec.startswith("udp:") else spec
-    host, sep, port = s.rpartition(":")
-    if not sep or not host:
-        raise ValueError(f"{what}: expected 'udp:HOST:PORT', got {spec!r}")
-    try:
-        p = int(port)
-    except ValueError:
-        raise ValueError(f"{what}: port must be an integer, got {port!r}") from None
-    if not 0 <= p <= 65535:
-        raise ValueError(f"{what}: port must be in 0..65535, got {p}")
-    return host, p
 
 
 def _ascii(text: str, n: int) -> bytes:
@@ -489,11 +465,11 @@ class GroundLink:
         unit, ftype, jet, eta = p[0], p[1], p[2], p[3]
         if not _is_int_in(unit, 0, 1000) or int(unit) != mav.FAILURE_UNIT_SYSTEM_MOTOR:
             return mav.MAV_RESULT_UNSUPPORTED, f"INJECT UNIT {unit:g} UNSUPPORTED (101=JET)"
-        if not _is_int_in(ftype, 0, 1000) or int(ftype) not in INJECT_KINDS:
+        if not _is_int_in(ftype, 0, 1000) or int(ftype) not in FAULT_NAMES:
             return mav.MAV_RESULT_UNSUPPORTED, f"INJECT TYPE {ftype:g} UNSUPPORTED"
         if not _is_int_in(jet, 0, N_JETS):
-            return mav.MAV_RESULT_DENIED, f"INJECT JET {jet:g} DENIED (1..18, 0=ALL)"
-        kind = INJECT_KINDS[int(ftype)]
+            return mav.MAV_RESULT_DENIED, f"INJECT JET {jet:g} DENIED (1..{N_JETS}, 0=ALL)"
+        kind = FAULT_NAMES[int(ftype)]
         if kind == "degraded":
             if not (math.isfinite(eta) and 0.0 < eta < 1.0):
                 return mav.MAV_RESULT_DENIED, f"INJECT ETA {eta:g} DENIED (0<ETA<1)"
@@ -543,10 +519,10 @@ class GroundLink:
     def _cmd_mark(self, p) -> tuple[int, str]:
         jet, kind_code, eta = p[0], p[1], p[2]
         if not _is_int_in(jet, 1, N_JETS):
-            return mav.MAV_RESULT_DENIED, f"MARK JET {jet:g} DENIED (1..18)"
-        if not _is_int_in(kind_code, 0, 255) or int(kind_code) not in MARK_KINDS:
+            return mav.MAV_RESULT_DENIED, f"MARK JET {jet:g} DENIED (1..{N_JETS})"
+        if not _is_int_in(kind_code, 0, 255) or int(kind_code) not in MARK_NAMES:
             return mav.MAV_RESULT_DENIED, f"MARK KIND {kind_code:g} DENIED (0..4)"
-        kind = MARK_KINDS[int(kind_code)]
+        kind = MARK_NAMES[int(kind_code)]
         jet = int(jet)
         t = self.fsw.t_s
         if kind == "inhibited":
@@ -564,7 +540,7 @@ class GroundLink:
 
     def _cmd_clear(self, p) -> tuple[int, str]:
         if not _is_int_in(p[0], 0, N_JETS):
-            return mav.MAV_RESULT_DENIED, f"CLEAR JET {p[0]:g} DENIED (0..18)"
+            return mav.MAV_RESULT_DENIED, f"CLEAR JET {p[0]:g} DENIED (0..{N_JETS})"
         jet, t = int(p[0]), self.fsw.t_s
         self.fsw.fdir.clear(t, jet)
         self.fsw.driver.set_inhibit(t, jet, False)
@@ -781,7 +757,7 @@ class GroundLink:
         health = [int(s) for s in h.state]
         for i in range(N_JETS):
             if h.inhibited[i] and health[i] == NOMINAL:
-                health[i] = mav.ELLIPSLED_JET_HEALTH_INHIBITED
+                health[i] = INHIBITED
         cmd = int(np.dot(fsw.driver.last_command.astype(np.int64) != 0, 1 << np.arange(N_JETS, dtype=np.int64)))
         firing = 0
         if sensors is not None:
@@ -802,4 +778,4 @@ class GroundLink:
 
 
 __all__ = ["GroundLink", "param_id", "param_ids", "parse_udp", "DEFAULT_RATES_HZ", "DEFAULT_GCS",
-           "DEFAULT_BIND", "INJECT_KINDS", "MARK_KINDS", "euler321"]
+           "DEFAULT_BIND", "euler321"]

@@ -3,15 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
-N_JETS = 18
-
-NOMINAL, FAILED_OFF, STUCK_ON, DEGRADED = 0, 1, 2, 3
-STATE_NAMES = {NOMINAL: "nominal", FAILED_OFF: "failed_off", STUCK_ON: "stuck_on", DEGRADED: "degraded"}
+from interfaces.vocabulary import DEGRADED, FAILED_OFF, N_JETS, NOMINAL, STUCK_ON
 
 
 class JetHealth:
     """Per-jet state (NOMINAL / FAILED_OFF / STUCK_ON / DEGRADED), thrust factor eta, and
-    the ground inhibit mask. Arrays are indexed 0..17 for jets 1..18."""
+    the ground inhibit mask (states: interfaces/vocabulary.py). Arrays are indexed by jet - 1."""
 
     __slots__ = ("state", "eta", "inhibited")
 

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .events import EventLog, Severity
+from common.events import EventLog, Severity
 from .params import Param
 
 

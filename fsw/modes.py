@@ -22,14 +22,10 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
-from .events import EventLog, Severity
+from common.events import EventLog, Severity
+from interfaces.vocabulary import Mode
+
 from .params import Param
-
-
-class Mode(IntEnum):
-    STANDBY = 0
-    ENTRY = 1
-    SAFE = 2
 
 
 _ALLOWED = {

@@ -29,7 +29,7 @@ from numba import njit
 
 from interfaces.records import SENSORS
 
-from .events import EventLog, Severity
+from common.events import EventLog, Severity
 from .params import Param, load_params
 
 MARS_RADIUS_M = 3396.2e3   # default only; pass the planet's radius from data/planets

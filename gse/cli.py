@@ -20,6 +20,7 @@ import os
 import sys
 
 from interfaces.mavlink.signing import SigningKeyError
+from interfaces.vocabulary import DEFAULT_GCS, FAULT_KINDS, MARK_KINDS, N_JETS, Mode, parse_udp
 
 from .client import (DEFAULT_VEHICLE, GroundClient, Request, float32_equal, load_key, make_request,
                      result_name)
@@ -50,7 +51,7 @@ def add_gse_parser(subparsers) -> argparse.ArgumentParser:
     sub = gse.add_subparsers(dest="gse_cmd", required=True)
 
     p = sub.add_parser("console", help="terminal UI: live state, jets, events; commands by key or line")
-    _common(p, 14550)
+    _common(p, parse_udp(DEFAULT_GCS, "DEFAULT_GCS")[1])
     p.add_argument("--view-only", action="store_true",
                    help="watch without the signing key: nothing is sent, telemetry is shown unverified")
     p.add_argument("--replay", default=None, metavar="FILE.tlog", help="play a recorded .tlog on the same screens")
@@ -58,26 +59,26 @@ def add_gse_parser(subparsers) -> argparse.ArgumentParser:
     p.set_defaults(func=_run_console)
 
     p = sub.add_parser("inject", help="inject a jet fault in the plant (MAV_CMD_INJECT_FAILURE)")
-    p.add_argument("--jet", required=True, help="1..18, 0 = all")
-    p.add_argument("--kind", required=True, choices=["off", "stuck", "degraded", "clear"])
+    p.add_argument("--jet", required=True, help=f"1..{N_JETS}, 0 = all")
+    p.add_argument("--kind", required=True, help="|".join(FAULT_KINDS))
     p.add_argument("--eta", default=None, help="thrust factor in (0, 1) for degraded")
     _common(p, 0)
     p.set_defaults(func=lambda a: _run_words(a, "inject", a.jet, a.kind, *([a.eta] if a.eta is not None else [])))
 
     p = sub.add_parser("mark", help="FDIR override: mark a jet failed/stuck/degraded/healthy/inhibited")
-    p.add_argument("--jet", required=True, help="1..18")
-    p.add_argument("--kind", required=True, choices=["failed", "stuck", "degraded", "healthy", "inhibited"])
+    p.add_argument("--jet", required=True, help=f"1..{N_JETS}")
+    p.add_argument("--kind", required=True, help="|".join(MARK_KINDS) + " (or a unique prefix)")
     p.add_argument("--eta", default=None, help="thrust factor in (0, 1) for degraded")
     _common(p, 0)
     p.set_defaults(func=lambda a: _run_words(a, "mark", a.jet, a.kind, *([a.eta] if a.eta is not None else [])))
 
     p = sub.add_parser("clear", help="clear a jet's FDIR latch, override and inhibit")
-    p.add_argument("--jet", required=True, help="1..18, 0 = all")
+    p.add_argument("--jet", required=True, help=f"1..{N_JETS}, 0 = all")
     _common(p, 0)
     p.set_defaults(func=lambda a: _run_words(a, "clear", a.jet))
 
     for verb, choices, hlp in (("arm", ["on", "off"], "arm or disarm the jets"),
-                               ("mode", ["standby", "entry", "safe"], "set the FSW mode"),
+                               ("mode", [m.name.lower() for m in Mode], "set the FSW mode"),
                                ("ft", ["on", "off"], "fault-tolerant allocation on or off")):
         p = sub.add_parser(verb, help=hlp)
         p.add_argument("value", choices=choices)

@@ -33,8 +33,7 @@ from pathlib import Path
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import FrameSplitter, parse_header
 from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
-
-from fsw.groundlink import parse_udp      # one parser of "udp:HOST:PORT" for both ends
+from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_KINDS, MARK_KINDS, N_JETS, Mode, parse_udp
 
 from .tlog import TlogWriter
 
@@ -42,8 +41,7 @@ GCS_SYSTEM_ID = 255
 GCS_COMPONENT_ID = mav.MAV_COMP_ID_MISSIONPLANNER        # 190
 VEHICLE_SYSTEM_ID = 1
 VEHICLE_COMPONENT_ID = 1
-DEFAULT_LISTEN = "udp:127.0.0.1:14550"
-DEFAULT_VEHICLE = "udp:127.0.0.1:14555"
+DEFAULT_LISTEN = DEFAULT_GCS                 # where the vehicle sends its telemetry
 
 
 def result_name(result: int | None) -> str:
@@ -426,19 +424,16 @@ def load_key(path: str | os.PathLike[str] | None) -> SigningKey:
 # One definition of what an operator can ask, shared by the console's command line and
 # the non-interactive CLI.
 
-INJECT_TYPES = {"clear": mav.FAILURE_TYPE_OK, "off": mav.FAILURE_TYPE_OFF, "stuck": mav.FAILURE_TYPE_STUCK,
-                "degraded": mav.FAILURE_TYPE_WRONG}
-MARK_KINDS = {"healthy": mav.ELLIPSLED_JET_HEALTH_NOMINAL, "failed": mav.ELLIPSLED_JET_HEALTH_FAILED_OFF,
-              "stuck": mav.ELLIPSLED_JET_HEALTH_STUCK_ON, "degraded": mav.ELLIPSLED_JET_HEALTH_DEGRADED,
-              "inhibited": mav.ELLIPSLED_JET_HEALTH_INHIBITED}
-MODES = {"standby": mav.ELLIPSLED_MODE_STANDBY, "entry": mav.ELLIPSLED_MODE_ENTRY, "safe": mav.ELLIPSLED_MODE_SAFE}
+# Kind and mode words are the vocabulary's (interfaces/vocabulary.py); an operator may
+# type any unambiguous prefix ("mark 7 failed" = failed_off).
+MODES = {m.name.lower(): int(m) for m in Mode}
 ON_OFF = {"on": 1, "off": 0}
 
-USAGE = """commands:
-  inject JET off|stuck|clear        inject JET degraded ETA     (JET 1..18, 0 = all)
+USAGE = f"""commands:
+  inject JET {'|'.join(k for k in FAULT_KINDS if k != 'degraded')}        inject JET degraded ETA     (JET 1..{N_JETS}, 0 = all)
   clear JET                          (FDIR latch, override, inhibit; 0 = all)
-  mark JET failed|stuck|healthy|inhibited      mark JET degraded ETA
-  mode standby|entry|safe            arm on|off            ft on|off
+  mark JET {'|'.join(k for k in MARK_KINDS if k != 'degraded')}      mark JET degraded ETA
+  mode {'|'.join(MODES)}            arm on|off            ft on|off
   delay SECONDS                      (FDIR reconfiguration delay)
   param list | param get ID | param set ID VALUE"""
 
@@ -469,16 +464,18 @@ def _jet(word, allow_all: bool) -> int:
     except (TypeError, ValueError):
         raise ValueError(f"jet: expected an integer, got {word!r}") from None
     lo = 0 if allow_all else 1
-    if not lo <= j <= 18:           # also checked by the vehicle; caught early for the operator
-        raise ValueError(f"jet: must be in {lo}..18{' (0 = all)' if allow_all else ''}, got {j}")
+    if not lo <= j <= N_JETS:       # also checked by the vehicle; caught early for the operator
+        raise ValueError(f"jet: must be in {lo}..{N_JETS}{' (0 = all)' if allow_all else ''}, got {j}")
     return j
 
 
 def _choice(word: str, table: dict, what: str):
+    """(name, value) of the entry ``word`` names exactly or is the only prefix of."""
     w = str(word).lower()
-    if w not in table:
+    hits = [w] if w in table else [k for k in table if k.startswith(w)] if w else []
+    if len(hits) != 1:
         raise ValueError(f"{what}: expected one of {'|'.join(table)}, got {word!r}")
-    return w, table[w]
+    return hits[0], table[hits[0]]
 
 
 def make_request(verb: str, *args: str) -> Request:
@@ -492,9 +489,9 @@ def make_request(verb: str, *args: str) -> Request:
             raise ValueError(f"usage: {usage}")
 
     if verb == "inject":
-        need(2, 3, "inject JET off|stuck|degraded|clear [ETA]")
+        need(2, 3, f"inject JET {'|'.join(FAULT_KINDS)} [ETA]")
         jet = _jet(a[0], True)
-        kind, ftype = _choice(a[1], INJECT_TYPES, "kind")
+        kind, ftype = _choice(a[1], FAULT_KINDS, "kind")
         eta = 0.0
         if kind == "degraded":
             if len(a) != 3:
@@ -505,7 +502,7 @@ def make_request(verb: str, *args: str) -> Request:
         label = f"inject jet {jet} {kind}" + (f" eta {eta:g}" if kind == "degraded" else "")
         return Request(label, mav.MAV_CMD_INJECT_FAILURE, (mav.FAILURE_UNIT_SYSTEM_MOTOR, ftype, jet, eta))
     if verb == "mark":
-        need(2, 3, "mark JET failed|stuck|degraded|healthy|inhibited [ETA]")
+        need(2, 3, f"mark JET {'|'.join(MARK_KINDS)} [ETA]")
         jet = _jet(a[0], False)
         kind, code = _choice(a[1], MARK_KINDS, "kind")
         eta = 1.0
@@ -522,7 +519,7 @@ def make_request(verb: str, *args: str) -> Request:
         jet = _jet(a[0], True)
         return Request(f"clear jet {jet}", mav.ELLIPSLED_CMD_FDIR_CLEAR, (jet,))
     if verb == "mode":
-        need(1, 1, "mode standby|entry|safe")
+        need(1, 1, f"mode {'|'.join(MODES)}")
         name, code = _choice(a[0], MODES, "mode")
         return Request(f"mode {name}", mav.ELLIPSLED_CMD_SET_MODE, (code,))
     if verb == "arm":

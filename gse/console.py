@@ -31,15 +31,24 @@ from textual.css.query import NoMatches
 from textual.widgets import Footer, Input, RichLog, Static
 
 from interfaces.mavlink import dialect as mav
+from interfaces.vocabulary import N_JETS, JetState, Mode, Severity
 
 from .client import GroundClient, PendingCommand, make_request, parse_line, result_name
 
-MODE_NAMES = {0: "STANDBY", 1: "ENTRY", 2: "SAFE"}
-HEALTH_CELLS = {0: ("N", "green"), 1: ("F", "bold red"), 2: ("S", "bold magenta"), 3: ("D", "yellow"),
-                4: ("I", "cyan")}
-SEVERITY_STYLE = {0: "bold white on red", 1: "bold red", 2: "bold red", 3: "red", 4: "yellow", 5: "cyan",
-                  6: "white", 7: "dim"}
-SEVERITY_NAME = {0: "EMERG", 1: "ALERT", 2: "CRIT", 3: "ERROR", 4: "WARN", 5: "NOTICE", 6: "INFO", 7: "DEBUG"}
+# how each jet state and severity is drawn (the names and codes: interfaces/vocabulary.py)
+HEALTH_STYLE = {JetState.NOMINAL: "green", JetState.FAILED_OFF: "bold red", JetState.STUCK_ON: "bold magenta",
+                JetState.DEGRADED: "yellow", JetState.INHIBITED: "cyan"}
+SEVERITY_STYLE = {Severity.EMERGENCY: "bold white on red", Severity.ALERT: "bold red", Severity.CRITICAL: "bold red",
+                  Severity.ERROR: "red", Severity.WARNING: "yellow", Severity.NOTICE: "cyan", Severity.INFO: "white",
+                  Severity.DEBUG: "dim"}
+
+
+def _mode_name(code: int) -> str:
+    return Mode(code).name if code in Mode._value2member_map_ else str(code)
+
+
+def _severity_name(code: int) -> str:
+    return Severity(code).name if code in Severity._value2member_map_ else str(code)
 
 
 def _deg(x) -> str:
@@ -146,7 +155,7 @@ class GroundConsole(App):
         new = c.state.events_total - self._events_shown
         for e in evs[max(0, len(evs) - new):]:
             log.write(Text(f"{time.strftime('%H:%M:%S', time.localtime(e.t_unix_s))} "
-                           f"{SEVERITY_NAME.get(e.severity, e.severity):<6} {e.text}",
+                           f"{_severity_name(e.severity):<9} {e.text}",
                            style=SEVERITY_STYLE.get(e.severity, "")))
         self._events_shown = c.state.events_total
 
@@ -229,7 +238,7 @@ class GroundConsole(App):
             style = {"ACTIVE": "green", "CRITICAL": "bold red", "EMERGENCY": "bold white on red"}.get(status, "yellow")
             where = f"{c.vehicle_addr[0]}:{c.vehicle_addr[1]}" if c.vehicle_addr else "?"
             top = Text.assemble(
-                (f" {MODE_NAMES.get(hb.custom_mode, hb.custom_mode)} ", "bold"), (f"{status} ", style),
+                (f" {_mode_name(hb.custom_mode)} ", "bold"), (f"{status} ", style),
                 f"{armed}  link: hb {age:.1f}s ago  rx {c.rate_hz('rx'):.0f}/s  tx {c.rate_hz('tx'):.1f}/s  "
                 f"rejected {c.rejected}  vehicle {where}")
         if self.watch_only:
@@ -267,19 +276,24 @@ class GroundConsole(App):
     def _jet_table(self) -> Table:
         js = self.client.state.latest.get("ELLIPSLED_JET_STATUS")
         t = Table(title="jets: cmd / fire / health", show_header=False, box=None, padding=(0, 1))
-        for _ in range(6):
+        cols = 6
+        for _ in range(cols):
             t.add_column(justify="center")
         cells = []
-        for j in range(18):
+        for j in range(N_JETS):
             if js is None:
                 cells.append(Text(f"{j + 1:2d} ---", style="dim"))
                 continue
             cmd = "●" if js.commanded >> j & 1 else "·"
             fire = "*" if js.firing >> j & 1 else "·"
-            letter, style = HEALTH_CELLS.get(js.health[j], ("?", "white"))
+            code = int(js.health[j])
+            if code in JetState._value2member_map_:
+                letter, style = JetState(code).name[0], HEALTH_STYLE[code]
+            else:
+                letter, style = "?", "white"
             cells.append(Text(f"{j + 1:2d} {cmd}{fire}{letter}", style=style))
-        for r in range(3):
-            t.add_row(*cells[r * 6:(r + 1) * 6])
+        for r in range(0, N_JETS, cols):
+            t.add_row(*cells[r:r + cols])
         return t
 
     def _timing_table(self) -> Table:

@@ -3,13 +3,13 @@
 Each record is a fixed-layout little-endian NumPy structured dtype. In-process code (the
 batch runner) passes the same records without encoding; the SIL encodes them with a
 header (schema id, version, sequence, timestamp) in interfaces/codec.py.
-Jets are numbered 1..18 in text and 0..17 in arrays.
+Jets are numbered 1..N_JETS in text and 0..N_JETS-1 in arrays.
 """
 from __future__ import annotations
 
 import numpy as np
 
-N_JETS = 18
+from .vocabulary import FAULT_KINDS, N_JETS
 
 # sim -> fsw, once per control period: the sensor frame for step k (time t_k).
 SENSORS = np.dtype([
@@ -38,25 +38,20 @@ def new(dtype: np.dtype) -> np.ndarray:
 
 
 # fsw or test harness -> sim: inject or clear a jet fault (spec 40-interfaces.md, MAVLink
-# MAV_CMD_INJECT_FAILURE mapping). Jet numbering follows the command: 1..18, 0 = all jets.
-FAULT_CLEAR = 0        # MAVLink FAILURE_TYPE_OK
-FAULT_OFF = 1          # FAILURE_TYPE_OFF: failed off
-FAULT_STUCK = 2        # FAILURE_TYPE_STUCK: stuck on
-FAULT_DEGRADED = 4     # FAILURE_TYPE_WRONG: degraded, eta in (0, 1)
-FAULT_KINDS = (FAULT_CLEAR, FAULT_OFF, FAULT_STUCK, FAULT_DEGRADED)
-FAULT_NAMES = {FAULT_CLEAR: "clear", FAULT_OFF: "off", FAULT_STUCK: "stuck", FAULT_DEGRADED: "degraded"}
-FAULT_CODES = {v: k for k, v in FAULT_NAMES.items()}
+# MAV_CMD_INJECT_FAILURE mapping; kinds and codes: interfaces/vocabulary.py FAULT_KINDS).
+# Jet numbering follows the command: 1..N_JETS, 0 = all jets.
+FAULT_NAMES = {code: kind for kind, code in FAULT_KINDS.items()}     # wire code -> kind
 
 
 def check_fault_request(jet, kind: str, eta) -> None:
-    """What the plant can apply: jet 0..18 (0 = all), kind clear|off|stuck|degraded, eta
+    """What the plant can apply: jet 0..N_JETS (0 = all), kind clear|off|stuck|degraded, eta
     in (0, 1) for degraded and 1 otherwise. ValueError with the reason if not. The plant
     and the FSW's ground link both judge requests with this one rule."""
     import math
     if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= jet <= N_JETS:
         raise ValueError(f"jet must be an integer 0..{N_JETS} (0 = all), got {jet!r}")
-    if kind not in FAULT_CODES:
-        raise ValueError(f"fault kind must be one of {', '.join(FAULT_CODES)}, got {kind!r}")
+    if kind not in FAULT_KINDS:
+        raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {kind!r}")
     if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating, np.integer)) or not math.isfinite(eta):
         raise ValueError(f"eta must be a finite number, got {eta!r}")
     if kind == "degraded":
@@ -67,10 +62,10 @@ def check_fault_request(jet, kind: str, eta) -> None:
 
 FAULT = np.dtype([
     ("t_apply_ns", "<i8"),         # simulated time at which to apply [ns]; < 0 = at the next step
-    ("eta", "<f8"),                # thrust efficiency for FAULT_DEGRADED, in (0, 1) [-]
+    ("eta", "<f8"),                # thrust efficiency for kind "degraded", in (0, 1) [-]
     ("request_id", "<u4"),         # echoed in the acknowledgement
-    ("jet", "u1"),                 # 1..18, 0 = all jets
-    ("kind", "u1"),                # one of FAULT_KINDS
+    ("jet", "u1"),                 # 1..N_JETS, 0 = all jets
+    ("kind", "u1"),                # a FAULT_KINDS code
     ("_pad", "u1", (2,)),          # keeps the record a multiple of 8 bytes
 ])
 
@@ -98,7 +93,7 @@ EVENT = np.dtype([
 ])
 
 # sim -> viewers: the full truth at step k (sim/plant.py Plant.fill_truth; spec 40-interfaces.md).
-# fault_state per jet: 0 nominal, 1 failed off, 2 stuck on, 3 degraded (as fsw/health.py).
+# fault_state per jet: a jet health code (interfaces/vocabulary.py).
 TRUTH = np.dtype([
     ("k", "<i8"),                      # step index
     ("t_ns", "<i8"),                   # simulated time [ns]
@@ -148,8 +143,8 @@ FSW_STATE = np.dtype([
     ("jitter_us", "<f8"),                  # release time - scheduled release time [us]
     ("slips", "<u4"),                      # cycle slips so far
     ("jets_cmd", "u1", (N_JETS,)),         # 1 = open
-    ("health", "i1", (N_JETS,)),           # fsw/health.py states
-    ("mode", "i1"),                        # fsw/modes.py Mode
+    ("health", "i1", (N_JETS,)),           # jet health codes (interfaces/vocabulary.py)
+    ("mode", "i1"),                        # Mode (interfaces/vocabulary.py)
     ("alloc_degraded", "u1"),              # 1 = allocation infeasible, degraded solution
     ("_pad", "u1", (6,)),
 ])

@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from common.model import Scenario, load_scenario
+from interfaces.vocabulary import N_JETS
 from sim.plant import (A_BANK, A_ALPHA, A_BETA, A_E1, A_E2, A_E3, A_H, A_MACH, A_OMEGA_W_N, A_QBAR,
                        A_SIN_GAMMA, A_TAU_AERO_B, A_F_AERO_N, A_V, Plant, mrp_to_dcm)
 
@@ -103,7 +104,7 @@ def fly(scenario: Scenario, seed: int | None = None, history_dt_s: float = 1.0) 
     I = plant.inertia_truth_kgm2
     kp, kd = OMEGA_N_RADPS ** 2, 2.0 * ZETA * OMEGA_N_RADPS
     alpha_trim = scenario.vehicle.aero.alpha_trim_rad
-    u = np.zeros(18, dtype=np.uint8)
+    u = np.zeros(N_JETS, dtype=np.uint8)
     tau = np.zeros(3)
     C = np.zeros((3, 3))
     aux = plant.aux

@@ -18,12 +18,9 @@ from numba import njit
 
 from common import atmosphere, mrp
 from common.frames import R1, R2, local_axes, v_rel_N, wind_dcm
-from common.model import FAULT_KINDS, N_JETS, Scenario, inertia_matrix, inertia_vector
+from common.model import Scenario, inertia_matrix, inertia_vector
 from interfaces import records
-
-# ---- jet fault states (same numbering as fsw/health.py, which sim must not import) ----
-NOMINAL, FAILED_OFF, STUCK_ON, DEGRADED = 0, 1, 2, 3
-FAULT_STATE_NAMES = {NOMINAL: "nominal", FAILED_OFF: "failed_off", STUCK_ON: "stuck_on", DEGRADED: "degraded"}
+from interfaces.vocabulary import DEGRADED, FAILED_OFF, N_JETS, NOMINAL, STUCK_ON
 
 # ---- flat parameter vector p (indices are compile-time constants in the kernels) ----
 P_MU, P_RE, P_OMEGA, P_J2, P_USE_J2 = 0, 1, 2, 3, 4

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from fsw.events import EventLog, Severity
+from common.events import EventLog, Severity
 from fsw.executive import PARAMS, Executive, LockstepClock, RealTimeClock, sleep_until_ns
 from fsw.params import load_params
 

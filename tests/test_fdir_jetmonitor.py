@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from fsw.events import EventLog, Severity
+from common.events import EventLog, Severity
 from fsw.fdir import Fdir
 from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
 from fsw.params import load_params

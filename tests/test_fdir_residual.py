@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fsw.events import EventLog, Severity
+from common.events import EventLog, Severity
 from fsw.fdir import Fdir
 from fsw.params import load_params
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fsw.events import EventLog
+from common.events import EventLog
 from fsw.jetdriver import JetDriver
 
 DT = 0.02

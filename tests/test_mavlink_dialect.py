@@ -13,7 +13,6 @@ from pathlib import Path
 
 import pytest
 
-from fsw import health
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink import generate
 from interfaces.mavlink.framing import HEADER_LEN_V2
@@ -82,15 +81,6 @@ def test_generated_module_exposes_custom_ids_and_inject_failure():
     assert (mav.FAILURE_TYPE_OK, mav.FAILURE_TYPE_OFF, mav.FAILURE_TYPE_STUCK,
             mav.FAILURE_TYPE_WRONG) == (0, 1, 2, 4)
     assert mav.WIRE_PROTOCOL_VERSION == "2.0"
-
-
-def test_jet_health_enum_matches_fsw_health_constants():
-    assert mav.ELLIPSLED_JET_HEALTH_NOMINAL == health.NOMINAL
-    assert mav.ELLIPSLED_JET_HEALTH_FAILED_OFF == health.FAILED_OFF
-    assert mav.ELLIPSLED_JET_HEALTH_STUCK_ON == health.STUCK_ON
-    assert mav.ELLIPSLED_JET_HEALTH_DEGRADED == health.DEGRADED
-    assert mav.ELLIPSLED_JET_HEALTH_INHIBITED not in health.STATE_NAMES
-    assert (mav.ELLIPSLED_MODE_STANDBY, mav.ELLIPSLED_MODE_ENTRY, mav.ELLIPSLED_MODE_SAFE) == (0, 1, 2)
 
 
 def test_every_field_has_units_or_is_dimensionless_by_design():

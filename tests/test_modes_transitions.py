@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from fsw.events import EventLog, Severity
+from common.events import EventLog, Severity
 from fsw.modes import FailsafeAction, Failsafes, Mode, ModeManager
 from fsw.params import load_params
 

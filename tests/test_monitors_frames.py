@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fsw.events import EventLog, Severity
+from common.events import EventLog, Severity
 from fsw.monitors import SensorMonitor
 from interfaces.records import JETS, SENSORS, new
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fsw.events import EventLog
+from common.events import EventLog
 from fsw.monitors import SensorMonitor
 from interfaces.records import SENSORS, new
 from tests.test_monitors_frames import DT, R_MARS, fill

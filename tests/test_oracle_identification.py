@@ -13,7 +13,7 @@ import pytest
 
 from common.model import load_scenario
 from ellipsled import batch
-from fsw.events import EventLog
+from common.events import EventLog
 from fsw.fdir import Fdir
 from fsw.flightsoftware import all_params
 from fsw.health import DEGRADED, FAILED_OFF

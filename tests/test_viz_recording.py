@@ -14,7 +14,7 @@ from rerun.chunk import RrdReader
 
 from common.model import load_planet
 from ellipsled.history import History
-from fsw.events import Event, Severity
+from common.events import Event, Severity
 from gse.viz import RerunLogger, open_sinks, record_history
 from gse.viz.blueprint import VIEW_NAMES
 from gse.viz.logger import FSW, SCALAR_CHANNELS, TRUTH

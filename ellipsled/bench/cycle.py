@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from common.model import load_scenario
-from fsw.events import EventLog
+from common.events import EventLog
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
 from fsw.topology import Topology

@@ -256,7 +256,7 @@ def run(quick: bool) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from fsw.groundlink import parse_udp
+    from interfaces.vocabulary import parse_udp
     from gse.tlog import read_records
     ap = argparse.ArgumentParser(prog="python -m ellipsled.bench.flood", description=__doc__.splitlines()[0])
     ap.add_argument("--target", required=True, help="udp:127.0.0.1:PORT (the vehicle's MAVLink address)")

@@ -173,7 +173,7 @@ def child(seconds: float, priority: int | None, cpu: int | None, scenario: str =
     import numpy as np
 
     from common.model import load_scenario
-    from fsw.events import EventLog
+    from common.events import EventLog
     from fsw.executive import RealTimeClock
     from fsw.flightsoftware import FlightSoftware
     from fsw.topology import Topology

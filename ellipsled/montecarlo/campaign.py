@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from common.config import ConfigError, Table, load_toml, resolve
-from common.model import INERTIA_KEYS, N_JETS, FaultEvent, Scenario, Truth, inertia_matrix, inertia_vector
+from common.model import INERTIA_KEYS, FaultEvent, Scenario, Truth, inertia_matrix, inertia_vector
+from interfaces.vocabulary import N_JETS
 
 AERO_KEYS = ("C_lbeta", "C_malpha", "C_nbeta")
 BROKEN_FDIR_DELAY_S = -1.0   # outside fdir.delay_s's bounds: the FSW refuses it, run() raises

@@ -21,14 +21,16 @@ from fsw import rt
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.frames import wrap_pi  # noqa: E402
-from ellipsled.batch import KIND_OF_FAULT, alloc_sample, fsw_report, prepare_args  # noqa: E402
+from ellipsled.batch import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from ellipsled.history import History, record_fsw  # noqa: E402
-from fsw.events import EventLog, Severity  # noqa: E402
+from common.events import EventLog, Severity  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock, sleep_until_ns  # noqa: E402
 from fsw.flightsoftware import FlightSoftware  # noqa: E402
 from fsw.topology import Topology  # noqa: E402
 from interfaces import records, transport  # noqa: E402
 from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
+from interfaces.vocabulary import (DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_HEALTH, FAULT_KINDS, MARK_NAMES,  # noqa: E402
+                                   NOMINAL)
 
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
 
@@ -43,8 +45,8 @@ def add_arguments(p) -> None:
                         "Zenoh's threads one priority up, cannot delay the release)")
     p.add_argument("--frame-wait-us", type=float, default=3000.0,
                    help="real time: at a release, wait this long at most for the frame due")
-    p.add_argument("--gcs", default="udp:127.0.0.1:14550", help="ground station address (MAVLink)")
-    p.add_argument("--mavlink-bind", default="udp:127.0.0.1:14555", help="the vehicle's MAVLink address")
+    p.add_argument("--gcs", default=DEFAULT_GCS, help="ground station address (MAVLink)")
+    p.add_argument("--mavlink-bind", default=DEFAULT_VEHICLE, help="the vehicle's MAVLink address")
     p.add_argument("--signing-key", default=None,
                    help="MAVLink signing key file (or $ELLIPSLED_SIGNING_KEY_FILE); no key = no ground link")
     p.add_argument("--wait-peers", type=float, default=30.0)
@@ -140,7 +142,7 @@ class FswNode:
             rec = self.dec_fault_log.decode(s.payload.to_bytes())
             if rec is None:
                 continue
-            kind = KIND_OF_FAULT.get(records.FAULT_NAMES.get(int(rec["kind"]), ""), "healthy")
+            kind = MARK_NAMES[FAULT_HEALTH.get(records.FAULT_NAMES.get(int(rec["kind"]), ""), NOMINAL)]
             try:
                 self.fsw.fdir.identified(int(rec["t_ns"]) * 1e-9, int(rec["jet"]), kind, float(rec["eta"]))
             except ValueError as e:      # a bad record is refused, never passed on
@@ -210,7 +212,7 @@ class FswNode:
         if time.monotonic() - self.last_frame_wall > 1.0:
             return False
         f = self.fault
-        f["jet"], f["kind"], f["eta"] = jet, records.FAULT_CODES[kind], eta
+        f["jet"], f["kind"], f["eta"] = jet, FAULT_KINDS[kind], eta
         f["t_apply_ns"], f["request_id"] = 0, self.fault_seq
         self.pub_faults.put(self.enc_faults.encode(f, self.fault_seq, now_ns()))
         self.fault_seq += 1

@@ -31,6 +31,7 @@ from ellipsled.batch import (add_variant_arguments, fault_free_reference, format
 from ellipsled.history import History, merge
 from ellipsled.terminal import ProgressFile, RunProgress, files_written
 from interfaces import transport
+from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE
 
 from .common import DEFAULT_PREFIX, say
 
@@ -59,8 +60,8 @@ def add_arguments(p) -> None:
     p.add_argument("--console", action="store_true", help="open the ground console beside the SIL")
     p.add_argument("--signing-key", default=None,
                    help="MAVLink signing key file; default: a fresh key for this run in a private temp folder")
-    p.add_argument("--mavlink-bind", default="udp:127.0.0.1:14555", help="the vehicle's MAVLink address")
-    p.add_argument("--gcs", default="udp:127.0.0.1:14550", help="where the vehicle sends its telemetry")
+    p.add_argument("--mavlink-bind", default=DEFAULT_VEHICLE, help="the vehicle's MAVLink address")
+    p.add_argument("--gcs", default=DEFAULT_GCS, help="where the vehicle sends its telemetry")
     p.add_argument("--zenoh-config", default=None, metavar="FILE", help="Zenoh JSON5 configuration for every node")
     p.add_argument("--zenoh-lowlatency", action=argparse.BooleanOptionalAction, default=True,
                    help="Zenoh's low-latency transport for every node (default on): ~30-60 us less per "

@@ -22,6 +22,7 @@ from ellipsled.terminal import ProgressFile
 from fsw.executive import sleep_until_ns
 from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard
+from interfaces.vocabulary import FAULT_KINDS
 from sim.plant import Plant
 
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say
@@ -128,7 +129,7 @@ class SimNode:
         while self.faults_published < len(log):
             t, jet, kind = log[self.faults_published]
             f["k"], f["t_ns"] = self.plant.k, int(round(t * 1e9))
-            f["jet"], f["kind"], f["eta"] = jet, records.FAULT_CODES[kind], float(self.plant.fault_eta[jet - 1])
+            f["jet"], f["kind"], f["eta"] = jet, FAULT_KINDS[kind], float(self.plant.fault_eta[jet - 1])
             self.pub_fault_log.put(self.enc_fault_log.encode(f, self.faults_published, now_ns()))
             self.faults_published += 1
 

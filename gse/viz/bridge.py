@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fsw.events import Event, EventLog, Severity
+from common.events import Event, EventLog, Severity
 from gse.viz.logger import RerunLogger
 from gse.viz.sinks import open_sinks
 from interfaces import codec, records

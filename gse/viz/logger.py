@@ -25,11 +25,9 @@ import numpy as np
 import rerun as rr
 
 from common.config import load_toml, resolve
-from common.model import N_JETS, load_vehicle
+from common.model import load_vehicle
 from common.mrp import sigma_to_quat
-from fsw.events import Severity
-from fsw.health import STATE_NAMES
-from fsw.modes import Mode
+from interfaces.vocabulary import HEALTH_NAMES, N_JETS, Mode, Severity
 
 DEG = 180.0 / math.pi
 TRUTH, FSW = "truth", "fsw"
@@ -46,7 +44,7 @@ SOURCE_FIELDS: dict[str, dict[str, tuple[int, ...]]] = {
           "slips": ()},
 }
 
-# Rerun TextLog levels of the MAVLink severities (fsw/events.py Severity).
+# Rerun TextLog levels of the MAVLink severities.
 TEXTLOG_LEVEL = {Severity.EMERGENCY: "CRITICAL", Severity.ALERT: "CRITICAL", Severity.CRITICAL: "CRITICAL",
                  Severity.ERROR: "ERROR", Severity.WARNING: "WARN", Severity.NOTICE: "INFO",
                  Severity.INFO: "INFO", Severity.DEBUG: "DEBUG"}
@@ -437,7 +435,7 @@ class RerunLogger:
         if changed:
             ci = np.array(changed)
             codes = h[ci].astype(int)
-            names = [STATE_NAMES.get(int(c), f"code{int(c)}") for c in codes.ravel()]
+            names = [HEALTH_NAMES.get(int(c), f"code{int(c)}") for c in codes.ravel()]
             self._send("jets/health", _time_columns(k[ci], t_s[ci]),
                        rr.StateChange.columns(state=names).partition(np.full(len(ci), N_JETS)))
             for i, c in zip(ci, codes):      # rare (a fault): one bar chart per change

@@ -1,23 +1,13 @@
-"""Events: every detection and action of the FSW, with a severity, rate-limited per code.
-
-Severities follow MAVLink's MAV_SEVERITY numbering so the ground link maps them 1:1.
+"""Events: every detection and action of the FSW (and of the ground tools), with a
+severity, rate-limited per code. Severities are MAVLink's (interfaces/vocabulary.py), so
+the ground link carries them 1:1.
 """
 from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from enum import IntEnum
 
-
-class Severity(IntEnum):
-    EMERGENCY = 0
-    ALERT = 1
-    CRITICAL = 2
-    ERROR = 3
-    WARNING = 4
-    NOTICE = 5
-    INFO = 6
-    DEBUG = 7
+from interfaces.vocabulary import Severity
 
 
 @dataclass(frozen=True)
@@ -76,3 +66,6 @@ class EventLog:
 
     def __len__(self) -> int:
         return len(self._queue)
+
+
+__all__ = ["Event", "EventLog", "Severity"]

@@ -70,6 +70,28 @@ def _add_report(sub):
     p.set_defaults(func=run)
 
 
+def _add_params(sub):
+    p = sub.add_parser("params", help="the FSW parameters: MAVLink id, owner, unit, bounds, default, description")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--markdown", action="store_true", help="the table of interfaces/mavlink/README.md")
+    g.add_argument("--json", action="store_true", help="one object per parameter (machine-readable metadata)")
+
+    def run(a):
+        import json
+        from fsw.flightsoftware import declarations
+        from fsw.params import ParamRegistry
+        reg = ParamRegistry(declarations())
+        if a.json:
+            print(json.dumps(reg.describe(), indent=1))
+        elif a.markdown:
+            print(reg.markdown(), end="")
+        else:
+            for r in reg.describe():
+                bounds = "|".join(r["choices"]) if r["choices"] else f"[{r['min']:g}, {r['max']:g}]"
+                print(f"{r['param_id'] or '(not settable)':<17} {r['name']:<27} {r['default']!s:<9} {bounds} {r['unit']}")
+    p.set_defaults(func=run)
+
+
 def _add_sil(sub):
     from ellipsled.sil import fsw_node, launcher, sim_node
 
@@ -98,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     _add_plant(sub)
     _add_batch(sub)
     _add_report(sub)
+    _add_params(sub)
     from gse.cli import add_gse_parser
     add_gse_parser(sub)
     _add_sil(sub)

@@ -55,8 +55,6 @@ from common.events import EventLog, Severity
 from interfaces.vocabulary import DEGRADED, FAILED_OFF, HEALTH_NAMES, INHIBITED, MARK_KINDS, N_JETS, NOMINAL, STUCK_ON
 
 from .health import JetHealth
-from .modes import Failsafes
-from .monitors import SensorMonitor
 from .params import Param
 
 _TEXT = {FAILED_OFF: "FAILED OFF", STUCK_ON: "STUCK ON", DEGRADED: "DEGRADED", NOMINAL: "HEALTHY"}
@@ -193,9 +191,9 @@ class Fdir:
     ``set_inhibit``), so a consumer can tell that it must reconfigure.
     """
 
-    # Every fdir.* parameter: the jet monitor's and residual's here, plus the sensor-frame
-    # monitor's and the failsafe list's (declared next to the code that uses them).
-    PARAMS: list[Param] = JET_MONITOR_PARAMS + SensorMonitor.PARAMS + Failsafes.PARAMS
+    # The jet monitor's and the residual's; the other fdir.* parameters are declared by the
+    # sensor-frame monitor (fsw/monitors.py) and the failsafe list (fsw/modes.py).
+    PARAMS: list[Param] = JET_MONITOR_PARAMS
 
     def __init__(self, params: dict[str, float], dt_s: float, events: EventLog, n_jets: int = N_JETS) -> None:
         if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and dt_s > 0):
@@ -258,14 +256,12 @@ class Fdir:
         self.delay_s = p["fdir.delay_s"]
 
     def set_param(self, name: str, value: float) -> float:
-        """Set one of this object's fdir.* parameters (validated, consistent with the others);
-        ValueError leaves everything unchanged. Parameters of the sensor monitor and the
-        failsafes are accepted and ignored here (their owners read them)."""
-        plist = {q.name: q for q in JET_MONITOR_PARAMS}
+        """Owner's hook: one of the jet monitor's or residual's parameters (validated,
+        consistent with the others), used from the next sample on; ValueError leaves
+        everything unchanged."""
+        plist = {q.name: q for q in self.PARAMS}
         if name not in plist:
-            if name in {q.name for q in self.PARAMS}:
-                return next(q for q in self.PARAMS if q.name == name).check(value)
-            raise ValueError(f"{name}: not an FDIR parameter")
+            raise ValueError(f"{name}: not a jet-monitor or residual parameter")
         v = plist[name].check(value)
         trial = dict(self.p)
         trial[name] = v
@@ -276,9 +272,7 @@ class Fdir:
 
     def set_delay(self, delay_s: float, t_s: float | None = None) -> None:
         """Isolation-to-reconfiguration delay for detections declared from now on."""
-        v = JET_MONITOR_PARAMS[5].check(delay_s)
-        self.p["fdir.delay_s"] = v
-        self.delay_s = v
+        v = self.set_param("fdir.delay_s", delay_s)
         if t_s is not None:
             self.events.emit(t_s, Severity.NOTICE, "fdir", "fdir_delay", f"FDIR DELAY {v:.2f} S")
 

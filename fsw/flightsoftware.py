@@ -1,12 +1,14 @@
 """The flight software assembled: what the rate groups call.
 
 RG1 (control, every tick): sensor frame -> monitors -> FDIR -> navigation -> guidance ->
-SAMI -> allocator -> jet driver. RG2 (slow): analytic-redundancy check. RG3: housekeeping.
+SAMI -> allocator -> jet driver. RG2 (slow): analytic-redundancy check. Ground commands
+(``cmd_*``, ``set_param``) arrive between cycles.
 This object is the same in the one-process batch runner and in the SIL FSW process; the
 process shell only moves records in and out. No transport, threads or clocks here.
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -14,6 +16,7 @@ import numpy as np
 from common.events import EventLog, Severity
 from common.frames import wrap_pi
 from common.model import Scenario
+from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult
 
 from .allocation import Allocator
 from .control import SamiController
@@ -27,8 +30,11 @@ from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation
 from .npc import PARAMS as NPC_PARAMS, EntryGuidance
-from .params import Param, load_params
+from .params import Param, ParamRegistry
 from . import executive
+
+Reply = tuple[CommandResult, str]
+_MODE_CHOICES = ",".join(f"{int(m)} {m.name}" for m in Mode)
 
 GUIDANCE_PARAMS = [
     Param("guidance.authority_use", 0.05, 1.0, "",
@@ -39,8 +45,16 @@ GUIDANCE_PARAMS = [
 ]
 
 
+def declarations() -> tuple[tuple[str, list[Param]], ...]:
+    """Every FSW parameter, by the owner that declares it and applies a new value."""
+    return (("FlightSoftware", GUIDANCE_PARAMS), ("SamiController", SamiController.PARAMS),
+            ("EntryGuidance", NPC_PARAMS), ("Allocator", Allocator.PARAMS), ("Fdir", Fdir.PARAMS),
+            ("SensorMonitor", SensorMonitor.PARAMS),
+            ("Failsafes", Failsafes.PARAMS), ("JetDriver", JetDriver.PARAMS), ("Executive", executive.PARAMS))
+
+
 def all_params() -> list[Param]:
-    return (GUIDANCE_PARAMS + NPC_PARAMS + SamiController.PARAMS + Allocator.PARAMS + Fdir.PARAMS + JetDriver.PARAMS + executive.PARAMS)
+    return [p for _, plist in declarations() for p in plist]
 
 
 class FlightSoftware:
@@ -59,8 +73,8 @@ class FlightSoftware:
         overrides = dict(scenario.fsw)
         if param_overrides:
             overrides.update(param_overrides)
-        self.param_table = {p.name: p for p in all_params()}
-        self.params = load_params(all_params(), overrides)
+        self.registry = ParamRegistry(declarations(), overrides)
+        self.params = self.registry.values          # current values, read by the owners below
 
         self.nav = Navigation(planet, veh)
         # guidance mode (spec 60-guidance.md): the scenario's bank schedule, or the
@@ -80,6 +94,17 @@ class FlightSoftware:
         self.modes = ModeManager(self.events)
         self.monitor = SensorMonitor(self.events, self.dt_s, self.params, planet.radius_m)
         self.failsafes = Failsafes(self.params, self.modes)
+
+        self.driver.set_param("driver.arm_on_entry", self.params["driver.arm_on_entry"])
+        reg = self.registry            # each owner applies its own parameters
+        reg.bind("FlightSoftware", self._set_guidance_param)
+        reg.bind("SamiController", self.control.set_param)
+        reg.bind("Allocator", self._set_allocator_param)
+        reg.bind("Fdir", self.fdir.set_param)
+        reg.bind("SensorMonitor", self.monitor.set_param)
+        reg.bind("Failsafes", self.failsafes.set_param)
+        reg.bind("JetDriver", self.driver.set_param)
+        reg.check_bound()
 
         if start_mode != Mode.STANDBY:
             self.modes.request(0.0, start_mode, "start")
@@ -232,7 +257,7 @@ class FlightSoftware:
         self.tau_alloc_B[:] = 0.0
         return self.driver.command(self._zero_u, False)
 
-    # ---------------------------------------------------------------- RG2 / RG3
+    # ---------------------------------------------------------------- RG2
     def slow_step(self) -> None:
         """RG2: analytic-redundancy residual (needs two consecutive good cycles)."""
         nav = self.nav.state
@@ -250,10 +275,86 @@ class FlightSoftware:
         if self.entry is not None and self.cycles > 0:
             self.entry.cycle(self.nav.state, self.t_s)
 
-    def housekeeping(self) -> None:
-        """RG3: nothing periodic beyond telemetry yet (the ground link adds its heartbeat here)."""
-
     # ---------------------------------------------------------------- commands
+    # The ground's requests (the ground link translates MAVLink to these). Each returns
+    # (CommandResult, reason): the reason says why a request was refused, for the operator;
+    # nothing here raises on a bad request. A command acts between control cycles (the
+    # executive runs the ground link in the same thread), so it holds from the next cycle.
+
+    def cmd_mode(self, mode) -> Reply:
+        """Request a mode (Mode, its number or name); entering ENTRY arms the jets when
+        driver.arm_on_entry is set."""
+        try:
+            target = Mode[mode.upper()] if isinstance(mode, str) else Mode(int(mode))
+        except (KeyError, ValueError, TypeError, AttributeError):
+            return CommandResult.DENIED, f"MODE {mode!s:.12} DENIED ({_MODE_CHOICES})"
+        before = self.modes.mode
+        if not self.modes.request(self.t_s, target, "ground"):
+            return CommandResult.DENIED, ""              # ModeManager already said why
+        if target == Mode.ENTRY and before != Mode.ENTRY:
+            self.driver.entering_entry(self.t_s)
+        return CommandResult.ACCEPTED, ""
+
+    def cmd_arm(self, on: bool) -> Reply:
+        self.driver.arm(self.t_s, bool(on))
+        return CommandResult.ACCEPTED, ""
+
+    def cmd_fault_tolerance(self, on: bool) -> Reply:
+        self.set_param("allocator.fault_tolerance", float(bool(on)))
+        self.events.emit(self.t_s, Severity.NOTICE, "ground", "fault_tolerance",
+                         f"GND FAULT TOLERANCE {'ON' if on else 'OFF'}")
+        return CommandResult.ACCEPTED, ""
+
+    def cmd_mark(self, jet: int, kind: str, eta: float = 1.0) -> Reply:
+        """Operator override of one jet's health (a MARK_KINDS word); "inhibited" sets the
+        inhibit mask instead. The allocator adopts it now."""
+        if not _jet_in(jet, 1):
+            return CommandResult.DENIED, f"MARK JET {jet} DENIED (1..{N_JETS})"
+        if kind not in MARK_KINDS:
+            return CommandResult.DENIED, f"MARK KIND {kind!s:.12} DENIED"
+        jet = int(jet)
+        if kind == "inhibited":
+            return self.cmd_inhibit(jet, True)
+        if kind == "degraded" and not (isinstance(eta, (int, float)) and math.isfinite(eta) and 0.0 < eta < 1.0):
+            return CommandResult.DENIED, f"MARK ETA {eta:g} DENIED (0<ETA<1)"
+        try:
+            self.fdir.override(self.t_s, jet, kind, float(eta) if kind == "degraded" else 1.0)
+        except ValueError as e:
+            return CommandResult.DENIED, f"MARK DENIED: {e}"
+        self.health_changed()
+        return CommandResult.ACCEPTED, ""
+
+    def cmd_inhibit(self, jet: int, on: bool) -> Reply:
+        """The ground inhibit mask (jet 0 = all): the driver never fires the jet and the
+        allocator no longer plans with it."""
+        if not _jet_in(jet, 0):
+            return CommandResult.DENIED, f"INHIBIT JET {jet} DENIED (0..{N_JETS})"
+        self.driver.set_inhibit(self.t_s, int(jet), bool(on))
+        self.fdir.set_inhibit(self.t_s, int(jet), bool(on))
+        self.health_changed()
+        return CommandResult.ACCEPTED, ""
+
+    def cmd_clear(self, jet: int) -> Reply:
+        """FDIR latch, pending reconfiguration, override and inhibit of ``jet`` (0 = all) cleared."""
+        if not _jet_in(jet, 0):
+            return CommandResult.DENIED, f"CLEAR JET {jet} DENIED (0..{N_JETS})"
+        self.fdir.clear(self.t_s, int(jet))
+        return self.cmd_inhibit(jet, False)
+
+    def cmd_delay(self, delay_s: float) -> Reply:
+        """FDIR isolation-to-reconfiguration delay for detections from now on."""
+        try:
+            v = self.set_param("fdir.delay_s", delay_s)
+        except ValueError as e:
+            return CommandResult.DENIED, f"DELAY DENIED: {str(e).split(': ', 1)[-1]}"
+        self.events.emit(self.t_s, Severity.NOTICE, "fdir", "fdir_delay", f"FDIR DELAY {v:.2f} S")
+        return CommandResult.ACCEPTED, ""
+
+    def set_param(self, name: str, value: float) -> float:
+        """Validated parameter set, applied by its owner; ValueError (nothing changed) when
+        refused (fsw/params.py ParamRegistry)."""
+        return self.registry.set(name, value)
+
     def close(self) -> None:
         """Stop background work (the allocator's table builder, the controllability LP)."""
         self.allocator.close()
@@ -268,31 +369,19 @@ class FlightSoftware:
         self.allocator.set_health(self.fdir.health_active)
         self.assess_controllability(self.t_s)
 
-    def set_fault_tolerance(self, on: bool) -> None:
-        self.allocator.set_fault_tolerance(on)
-        self.health_changed()
+    # ---------------------------------------------------------------- owners' hooks
+    def _set_guidance_param(self, name: str, value: float) -> None:
+        """guidance.*: the LP and the re-plan read them from ``params`` (already holding the
+        new value); after a reconfiguration, assess again so the reference uses it now."""
+        if self.controllability is not None:
+            self.assess_controllability(self.t_s)
 
-    def set_param(self, name: str, value: float) -> float:
-        """Validated ground parameter set; raises ValueError (value unchanged) when refused."""
-        p = self.param_table.get(name)
-        if p is None:
-            raise ValueError(f"{name}: unknown parameter")
-        if not p.ground_settable:
-            raise ValueError(f"{name}: not settable in flight")
-        v = p.check(value)
-        section = name.split(".", 1)[0]
-        if section == "control":
-            self.control.set_param(name, v)
-        elif section == "allocator":
-            if name == "allocator.fault_tolerance":
-                self.set_fault_tolerance(bool(v))
-            else:
-                self.allocator.set_params({**self.params, name: v})
-                self.health_changed()
-        elif section == "fdir":
-            self.fdir.set_param(name, v)
-        self.params[name] = v
-        return v
+    def _set_allocator_param(self, name: str, value: float) -> None:
+        if name == "allocator.fault_tolerance":
+            self.allocator.set_fault_tolerance(bool(value))
+        else:
+            self.allocator.set_params({**self.params, name: value})
+        self.health_changed()
 
     def allocator_health(self) -> JetHealth:
         """The health the allocator is solving with (nominal when fault tolerance is off)."""
@@ -347,3 +436,11 @@ class _LpWorker:
             self._stop = True
             self._cv.notify()
         self._thread.join(timeout=5.0)
+
+
+def _jet_in(jet, lo: int) -> bool:
+    """A jet number lo..N_JETS given as an integer or an integral float (a MAVLink param)."""
+    try:
+        return float(jet).is_integer() and lo <= jet <= N_JETS and not isinstance(jet, bool)
+    except (TypeError, ValueError, OverflowError):
+        return False

@@ -39,7 +39,8 @@ def _drive(u_on, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s):
 
 class JetDriver:
     PARAMS = [
-        Param("driver.arm_on_entry", 0, 1, "-", "1 = the executive arms the jets when ENTRY starts", integer=True),
+        Param("driver.arm_on_entry", 0, 1, "-", "1 = a ground request that enters ENTRY also arms the jets",
+              integer=True),
     ]
 
     def __init__(self, thrust_N: np.ndarray, isp_s: float, g0_mps2: float, dt_s: float, events: EventLog) -> None:
@@ -56,6 +57,8 @@ class JetDriver:
         self.thrust_N = thrust_N.copy()
         self._mdot_kgps = thrust_N / (isp_s * g0_mps2)       # per jet, while on
         self.armed = False
+        self.arm_on_entry = True
+        self._params = {p.name: p for p in self.PARAMS}
         self.inhibit = np.zeros(n, dtype=bool)
         self.pulses = np.zeros(n, dtype=np.int64)
         self.on_time_s = np.zeros(n)
@@ -75,6 +78,19 @@ class JetDriver:
             self.armed = on
             self.events.emit(t_s, Severity.NOTICE, "driver", "jets_armed" if on else "jets_disarmed",
                              "JETS ARMED" if on else "JETS DISARMED")
+
+    def set_param(self, name: str, value: float) -> float:
+        """Owner's hook (driver.arm_on_entry)."""
+        if name != "driver.arm_on_entry":
+            raise ValueError(f"{name}: not a jet-driver parameter")
+        v = self._params[name].check(value)
+        self.arm_on_entry = bool(v)
+        return v
+
+    def entering_entry(self, t_s: float) -> None:
+        """The mode has just become ENTRY by request: arm if ``arm_on_entry``."""
+        if self.arm_on_entry:
+            self.arm(t_s, True)
 
     def set_inhibit(self, t_s: float, jet: int, on: bool) -> None:
         """Ground inhibit mask; jet is 1-based, 0 = all jets."""

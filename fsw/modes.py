@@ -101,11 +101,22 @@ class Failsafes:
         for p in self.PARAMS:
             if p.name not in params:
                 raise ValueError(f"{p.name}: missing")
-        self.limit_rad = math.radians(self.PARAMS[0].check(params["fdir.safe_track_deg"]))
-        self.persist_s = self.PARAMS[1].check(params["fdir.safe_track_s"])
+            self.set_param(p.name, params[p.name])
         self.modes = modes
         self._above_s = 0.0
         self.last_rule = ""
+
+    def set_param(self, name: str, value: float) -> float:
+        """Owner's hook: a new limit, used from the next evaluation on; ValueError if not ours."""
+        q = next((p for p in self.PARAMS if p.name == name), None)
+        if q is None:
+            raise ValueError(f"{name}: not a failsafe parameter")
+        v = q.check(value)
+        if name == "fdir.safe_track_deg":
+            self.limit_rad = math.radians(v)
+        else:
+            self.persist_s = v
+        return v
 
     def evaluate(self, t_s: float, dt_s: float, *, sensors_stale: bool, tracking_error_rad: float) -> FailsafeAction:
         """Once per control period. A non-finite tracking error counts as beyond the limit."""

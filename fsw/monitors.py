@@ -103,27 +103,21 @@ class SensorMonitor:
                  radius_m: float = MARS_RADIUS_M) -> None:
         if params is None:
             params = load_params(self.PARAMS)
-        p = {}
+        self._table = {q.name: q for q in self.PARAMS}
+        self.p: dict[str, float] = {}
         for q in self.PARAMS:
             if q.name not in params:
                 raise ValueError(f"{q.name}: missing")
-            p[q.name] = q.check(params[q.name])
+            self.p[q.name] = q.check(params[q.name])
         if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s: must be finite and > 0, got {dt_s!r}")
         if not (math.isfinite(radius_m) and radius_m > 0):
             raise ValueError(f"radius_m: must be finite and > 0, got {radius_m!r}")
         self.events = events
         self.dt_s = float(dt_s)
-        self.stale_n = int(p["fdir.stale_n"])
-        self._omega_max = p["fdir.omega_max_radps"]
-        self._sigma_max = 1.0 + p["fdir.sigma_tol"]
-        self._r_min = max(0.0, radius_m - p["fdir.r_below_m"])
-        self._r_max = radius_m + p["fdir.alt_max_m"]
-        self._v_max = p["fdir.v_max_mps"]
-        self._a_max = p["fdir.accel_max_mps2"]
-        self._ch_lo, self._ch_hi = p["fdir.chamber_lo"], p["fdir.chamber_hi"]
-        self._lims = np.array([[0.0, self._omega_max], [0.0, self._sigma_max], [self._r_min, self._r_max],
-                               [0.0, self._v_max], [0.0, self._a_max], [self._ch_lo, self._ch_hi]])
+        self.radius_m = float(radius_m)
+        self._lims = np.zeros((6, 2))
+        self._apply()
         self._out = np.zeros(5)
         self._fviews: tuple = (None, None, None, None)   # (frame, its dtype, float view, k view) of the last frame
         self.counts: dict[str, int] = {r: 0 for r in REASONS}
@@ -131,6 +125,24 @@ class SensorMonitor:
         self.last_k: int | None = None
         self.missed = 0            # consecutive periods without fresh data
         self.stale = False
+
+    def _apply(self) -> None:
+        """Limits of the frame checks from the parameters (in place: the kernel reads them)."""
+        p, R = self.p, self.radius_m
+        self.stale_n = int(p["fdir.stale_n"])
+        self._lims[:] = [[0.0, p["fdir.omega_max_radps"]], [0.0, 1.0 + p["fdir.sigma_tol"]],
+                         [max(0.0, R - p["fdir.r_below_m"]), R + p["fdir.alt_max_m"]],
+                         [0.0, p["fdir.v_max_mps"]], [0.0, p["fdir.accel_max_mps2"]],
+                         [p["fdir.chamber_lo"], p["fdir.chamber_hi"]]]
+
+    def set_param(self, name: str, value: float) -> float:
+        """Owner's hook: a new limit, used from the next frame on; ValueError if not ours."""
+        q = self._table.get(name)
+        if q is None:
+            raise ValueError(f"{name}: not a sensor-monitor parameter")
+        self.p[name] = v = q.check(value)
+        self._apply()
+        return v
 
     @property
     def jets_must_hold_off(self) -> bool:

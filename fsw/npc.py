@@ -30,33 +30,36 @@ from numba import njit
 
 from common import atmosphere
 from common.model import Scenario
-from .events import EventLog, Severity
+from common.events import EventLog, Severity
 from .params import Param
 
 _rho_exp = njit(cache=True, nogil=True)(atmosphere.density_exponential)
 _rho_poly = njit(cache=True, nogil=True)(atmosphere.density_polynomial)
 _speed_of_sound = njit(cache=True, nogil=True)(atmosphere.speed_of_sound)
 
+# Read once, at construction, into the predictor, the estimator and the corridor: not settable
+# in flight until those have an owner's hook (fsw/params.py ParamRegistry refuses a
+# ground-settable parameter without one).
 PARAMS = [
-    Param("npc.bank_final_deg", 0.0, 180.0, "deg", "bank magnitude at the deploy energy (phi_f)"),
-    Param("npc.bank_min_deg", 0.0, 90.0, "deg", "lower bound of phi_0"),
-    Param("npc.bank_max_deg", 90.0, 180.0, "deg", "upper bound of phi_0"),
-    Param("npc.h_deploy_m", 0.0, 5e4, "m", "altitude that defines the deploy energy e_f"),
+    Param("npc.bank_final_deg", 0.0, 180.0, "deg", "bank magnitude at the deploy energy (phi_f)", ground_settable=False),
+    Param("npc.bank_min_deg", 0.0, 90.0, "deg", "lower bound of phi_0", ground_settable=False),
+    Param("npc.bank_max_deg", 90.0, 180.0, "deg", "upper bound of phi_0", ground_settable=False),
+    Param("npc.h_deploy_m", 0.0, 5e4, "m", "altitude that defines the deploy energy e_f", ground_settable=False),
     Param("npc.dt_pred_s", 0.1, 10.0, "s", "predictor RK4 step", ground_settable=False),
-    Param("npc.max_iter", 1, 20, "", "predictions per guidance cycle (at most)", integer=True),
-    Param("npc.tol_m", 1.0, 1e5, "m", "range miss accepted by the corrector"),
-    Param("npc.k_tau_s", 0.1, 100.0, "s", "time constant of the density and L/D estimates"),
-    Param("npc.k_min", 0.05, 1.0, "", "lower bound of the density and L/D scale estimates"),
-    Param("npc.k_max", 1.0, 20.0, "", "upper bound of the density and L/D scale estimates"),
-    Param("npc.k_drag_min", 0.0, 10.0, "m/s^2", "modelled drag below which the estimates hold"),
-    Param("npc.dpsi_hi_deg", 0.0, 45.0, "deg", "heading corridor half-width at entry speed"),
-    Param("npc.dpsi_lo_deg", 0.0, 45.0, "deg", "heading corridor half-width at deploy speed"),
-    Param("npc.rev_gap_s", 0.0, 300.0, "s", "minimum time between bank reversals"),
-    Param("npc.v_norev_mps", 0.0, 8000.0, "m/s", "no reversal below this speed"),
-    Param("npc.limit_frac", 0.1, 1.0, "", "path limits enforced at this fraction of the vehicle's"),
-    Param("npc.hdot_tau_s", 0.5, 200.0, "s", "altitude-rate feedback: time to close on the limit altitude"),
-    Param("npc.hdot_gain", 0.0, 1.0, "s/m", "altitude-rate feedback: change of cos(bank) per m/s"),
-    Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
+    Param("npc.max_iter", 1, 20, "", "predictions per guidance cycle (at most)", integer=True, ground_settable=False),
+    Param("npc.tol_m", 1.0, 1e5, "m", "range miss accepted by the corrector", ground_settable=False),
+    Param("npc.k_tau_s", 0.1, 100.0, "s", "time constant of the density and L/D estimates", ground_settable=False),
+    Param("npc.k_min", 0.05, 1.0, "", "lower bound of the density and L/D scale estimates", ground_settable=False),
+    Param("npc.k_max", 1.0, 20.0, "", "upper bound of the density and L/D scale estimates", ground_settable=False),
+    Param("npc.k_drag_min", 0.0, 10.0, "m/s^2", "modelled drag below which the estimates hold", ground_settable=False),
+    Param("npc.dpsi_hi_deg", 0.0, 45.0, "deg", "heading corridor half-width at entry speed", ground_settable=False),
+    Param("npc.dpsi_lo_deg", 0.0, 45.0, "deg", "heading corridor half-width at deploy speed", ground_settable=False),
+    Param("npc.rev_gap_s", 0.0, 300.0, "s", "minimum time between bank reversals", ground_settable=False),
+    Param("npc.v_norev_mps", 0.0, 8000.0, "m/s", "no reversal below this speed", ground_settable=False),
+    Param("npc.limit_frac", 0.1, 1.0, "", "path limits enforced at this fraction of the vehicle's", ground_settable=False),
+    Param("npc.hdot_tau_s", 0.5, 200.0, "s", "altitude-rate feedback: time to close on the limit altitude", ground_settable=False),
+    Param("npc.hdot_gain", 0.0, 1.0, "s/m", "altitude-rate feedback: change of cos(bank) per m/s", ground_settable=False),
+    Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held", ground_settable=False),
 ]
 
 # flat constants vector of the predictor (indices are compile-time constants)

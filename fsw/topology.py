@@ -3,7 +3,7 @@
   RG1 (every tick, 50 Hz)  control: frame -> monitors -> FDIR -> nav -> guidance -> SAMI
                                      -> allocator -> jet driver
   RG2 (every 5th, 10 Hz)   fdir_slow: analytic-redundancy residual
-  RG3 (every 50th, 1 Hz)   housekeeping; entry guidance (mode "npc": predictor-corrector)
+  RG3 (every 50th, 1 Hz)   entry guidance (mode "npc": predictor-corrector)
 Process shells append their own tasks (publish the jet command, ground link) with add().
 The batch runner and the SIL FSW process both fly through this object.
 """
@@ -36,7 +36,6 @@ class Topology:
             self.executive.add(1, "input", self._input)
         self.executive.add(1, "control", self._control)
         self.executive.add(2, "fdir_slow", lambda c: fsw.slow_step())
-        self.executive.add(3, "housekeeping", lambda c: fsw.housekeeping())
         if fsw.entry is not None:
             self.executive.add(3, "entry_guidance", lambda c: fsw.entry_guidance_step())
 

@@ -75,6 +75,15 @@ class Severity(IntEnum):
     DEBUG = 7
 
 
+# ---- command results: MAVLink MAV_RESULT numbering, so COMMAND_ACK carries them 1:1
+class CommandResult(IntEnum):
+    ACCEPTED = 0                # done
+    TEMPORARILY_REJECTED = 1    # valid, but cannot be done now; the ground may retry
+    DENIED = 2                  # a parameter is invalid, or the request is not allowed now
+    UNSUPPORTED = 3             # this vehicle does not do that
+    FAILED = 4                  # valid and allowed, but executing it failed
+
+
 # ---- ground link endpoints: the vehicle listens on VEHICLE, sends telemetry to GCS
 DEFAULT_GCS = "udp:127.0.0.1:14550"
 DEFAULT_VEHICLE = "udp:127.0.0.1:14555"
@@ -98,5 +107,6 @@ def parse_udp(spec: str, what: str) -> tuple[str, int]:
 
 
 __all__ = ["N_JETS", "JetState", "NOMINAL", "FAILED_OFF", "STUCK_ON", "DEGRADED", "INHIBITED", "HEALTH_NAMES",
-           "MARK_KINDS", "MARK_NAMES", "FAULT_KINDS", "FAULT_HEALTH", "Mode", "Severity", "DEFAULT_GCS", "DEFAULT_VEHICLE",
+           "MARK_KINDS", "MARK_NAMES", "FAULT_KINDS", "FAULT_HEALTH", "Mode", "Severity", "CommandResult", "DEFAULT_GCS",
+           "DEFAULT_VEHICLE",
            "parse_udp"]

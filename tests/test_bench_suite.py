@@ -110,7 +110,7 @@ def test_realtime_loop_child_reports_shape():
     for k in ("p50_us", "p99_us", "max_us", "compute_p99_us"):
         assert math.isfinite(r[k]) and r[k] >= 0
     assert r["p50_us"] <= r["p99_us"] <= r["max_us"]
-    assert set(r["tasks"]) == {"input", "control", "fdir_slow", "housekeeping", "plant"}
+    assert set(r["tasks"]) == {"input", "control", "fdir_slow", "plant"}
     assert set(r["rt"]) >= {"sched_fifo", "affinity", "mlockall", "messages"}
     assert r["gc"]["enabled_in_loop"] is False          # GC kept out of the cycle
     assert r["threads"]["env"]["OPENBLAS_NUM_THREADS"] == "1"

@@ -12,9 +12,8 @@ from pathlib import Path
 
 import pytest
 
-import fsw.groundlink as groundlink
-from fsw.flightsoftware import all_params
-from fsw.groundlink import param_id, param_ids
+from fsw.flightsoftware import all_params, declarations
+from fsw.params import ParamRegistry, param_id, param_ids
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing import Reject
 
@@ -37,19 +36,41 @@ def settable():
     return [p for p in all_params() if p.ground_settable]
 
 
-def test_param_ids_are_short_unique_and_documented():
-    ids = param_ids([p.name for p in settable()])
+# The ids the console, scripts and tests use: a new parameter may add an id, none may change.
+STABLE_IDS = {
+    "allocator.fault_tolerance": "A_FAULT_TOLERANC", "allocator.penalty_per_N": "A_PENALTY_PER_N",
+    "allocator.w_pitch": "A_W_PITCH", "allocator.w_roll": "A_W_ROLL", "allocator.w_yaw": "A_W_YAW",
+    "control.d_max": "C_D_MAX", "control.d_min": "C_D_MIN", "control.deadzone": "C_DEADZONE",
+    "control.gamma_d": "C_GAMMA_D", "control.gamma_h": "C_GAMMA_H", "control.h_bound_frac": "C_H_BOUND_FRAC",
+    "control.h_prod_scale": "C_H_PROD_SCALE", "control.int_limit": "C_INT_LIMIT",
+    "control.lambda_radps": "C_LAMBDA_RADPS", "control.q_weight": "C_Q_WEIGHT",
+    "control.safe_rate_gain": "C_SAFE_RATE_GAIN", "control.shortfall_frac": "C_SHORTFALL_FRAC",
+    "control.sigma_switch": "C_SIGMA_SWITCH", "driver.arm_on_entry": "D_ARM_ON_ENTRY",
+    "fdir.accel_max_mps2": "F_ACCEL_MAX_MPS2", "fdir.alt_max_m": "F_ALT_MAX_M", "fdir.chamber_hi": "F_CHAMBER_HI",
+    "fdir.chamber_lo": "F_CHAMBER_LO", "fdir.degraded_hi": "F_DEGRADED_HI", "fdir.degraded_lo": "F_DEGRADED_LO",
+    "fdir.delay_s": "F_DELAY_S", "fdir.off_threshold": "F_OFF_THRESHOLD", "fdir.omega_max_radps": "F_OMEGA_MAX_RADP",
+    "fdir.on_threshold": "F_ON_THRESHOLD", "fdir.persist_n": "F_PERSIST_N", "fdir.r_below_m": "F_R_BELOW_M",
+    "fdir.res_persist_s": "F_RES_PERSIST_S", "fdir.res_rel": "F_RES_REL", "fdir.res_tau_s": "F_RES_TAU_S",
+    "fdir.res_thr_Nm": "F_RES_THR_NM", "fdir.safe_track_deg": "F_SAFE_TRACK_DEG",
+    "fdir.safe_track_s": "F_SAFE_TRACK_S", "fdir.sigma_tol": "F_SIGMA_TOL", "fdir.stale_n": "F_STALE_N",
+    "fdir.v_max_mps": "F_V_MAX_MPS", "guidance.authority_factor": "G_AUTHORITY_FACT",
+}
+
+
+def test_param_ids_are_short_unique_stable_and_documented():
+    reg = ParamRegistry(declarations())
+    ids = reg.ids
+    assert ids == param_ids([p.name for p in settable()])
     assert len(set(ids.values())) == len(ids)
     assert all(1 <= len(i) <= 16 and i.isascii() for i in ids.values())
-    # the table in the module docstring is exactly the derived mapping
-    src = Path(groundlink.__file__).read_text()
-    body = src.split("PARAM_ID_TABLE_BEGIN\n")[1].split("PARAM_ID_TABLE_END")[0]
-    rows = {}
-    for line in body.splitlines():
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) == 2 and "." in cells[0]:
-            rows[cells[0]] = cells[1]
-    assert rows == ids
+    assert {n: ids[n] for n in STABLE_IDS} == STABLE_IDS
+    # the table in the interface document is exactly the generated one
+    doc = (Path(__file__).resolve().parents[1] / "interfaces" / "mavlink" / "README.md").read_text()
+    table = doc.split("<!-- PARAMS BEGIN")[1].split("\n", 1)[1].split("<!-- PARAMS END")[0]
+    assert table == reg.markdown(), "regenerate with: ellipsled params --markdown"
+    rows = [r for r in reg.describe() if r["ground_settable"]]
+    assert [r["param_id"] for r in rows] == [ids[n] for n in reg.settable()]
+    assert all(r["min"] <= r["default"] <= r["max"] and r["owner"] and r["description"] for r in reg.describe())
 
 
 def test_param_id_collisions_are_resolved_deterministically():

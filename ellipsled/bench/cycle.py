@@ -1,5 +1,5 @@
 """FSW control-cycle benchmark (spec 50-performance.md): compute time of the rate-group
-tasks (RG1 control, RG2 fdir_slow, RG3 housekeeping) and of a whole cycle, p50/p99/max,
+tasks (RG1 control, RG2 fdir_slow) and of a whole cycle, p50/p99/max,
 over a full nominal entry flown in lockstep — against the control period.
 
 The loop is the batch runner's (ellipsled/batch.py: Plant -> Topology.tick -> plant.step),

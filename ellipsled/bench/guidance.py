@@ -17,7 +17,7 @@ import numpy as np
 
 from common.model import load_scenario
 from ellipsled.batch import run as batch_run
-from fsw.events import EventLog
+from common.events import EventLog
 from fsw.npc import PARAMS, EntryGuidance, planet_fixed
 from fsw.params import load_params
 from sim.plant import initial_translation

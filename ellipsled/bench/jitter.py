@@ -1,7 +1,7 @@
 """Release jitter of the real-time 50 Hz loop (spec 50-performance.md) next to cyclictest.
 
 The loop: fsw.executive.RealTimeClock + the FSW topology's rate groups (RG1 control,
-RG2 fdir_slow, RG3 housekeeping) fed by the plant in the same process (an extra RG1 task
+RG2 fdir_slow) fed by the plant in the same process (an extra RG1 task
 steps sim.plant.Plant with the jet command, so the control task always has a fresh frame),
 under fsw/rt.py's hygiene: single-threaded numerics before NumPy is imported, warm-up,
 rt.apply (SCHED_FIFO, CPU affinity, mlockall), GC out of the cycle (young generation

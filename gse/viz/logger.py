@@ -234,7 +234,7 @@ class RerunLogger:
         self._maybe_flush_on_time()
 
     def log_event(self, event, k: int | None = None) -> None:
-        """An fsw.events.Event (t_s, severity, source, code, text) as a TextLog at its time.
+        """A common.events.Event (t_s, severity, source, code, text) as a TextLog at its time.
         ``k``: its step; by default the step nearest its time from the rows seen so far."""
         if self.rec is None:
             return

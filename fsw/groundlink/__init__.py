@@ -1,0 +1,13 @@
+"""The FSW's MAVLink 2 ground link; the interface it implements (messages, rates,
+commands, parameters, security) is documented in interfaces/mavlink/README.md.
+
+- ``link.py``: the protocol: UDP socket, verify-first signing, peers, receive and dispatch,
+  telemetry scheduling and sending (``GroundLink``, what the executive ticks).
+- ``telemetry.py``: each telemetry message built from the FlightSoftware's state.
+- ``commands.py``: translation of COMMAND_LONG to the FlightSoftware command API and of
+  the parameter protocol to its parameter registry.
+"""
+from .link import DEFAULT_BIND, DEFAULT_GCS, DEFAULT_RATES_HZ, GroundLink
+from .telemetry import euler321
+
+__all__ = ["GroundLink", "DEFAULT_RATES_HZ", "DEFAULT_GCS", "DEFAULT_BIND", "euler321"]

@@ -1,0 +1,364 @@
+"""The ground link's protocol side: a non-blocking UDP socket, verify-first signing, the
+ground peers, receive and dispatch, telemetry scheduling and sending. What it sends and
+accepts is documented in interfaces/mavlink/README.md.
+
+Runs in the FSW process, off the control rate group: the executive calls ``tick()`` from
+RG2, in the same thread as ``FlightSoftware.control_step`` and between cycles (commands
+change FSW state, so they must not run concurrently with a control cycle). ``tick`` polls
+the socket (at most ``max_rx_per_tick`` datagrams), answers what arrived, then sends the
+telemetry that is due; it never blocks and never raises on anything from the network.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import socket
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+
+from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
+from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, Severity, parse_udp
+
+from . import telemetry as tm
+from .commands import CommandTranslator, InjectFn, ParamProtocol
+
+log = logging.getLogger(__name__)
+
+SYSTEM_ID = 1
+COMPONENT_ID = mav.MAV_COMP_ID_AUTOPILOT1        # 1
+DEFAULT_BIND = DEFAULT_VEHICLE
+
+# Telemetry streams and their default rates [Hz]; 0 disables a stream. The achieved rate
+# is at most the rate at which tick() is called.
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "HEARTBEAT": 1.0,
+    "SYS_STATUS": 1.0,
+    "ATTITUDE": 10.0,
+    "ATTITUDE_QUATERNION": 10.0,
+    "ATTITUDE_TARGET": 10.0,
+    "ACTUATOR_OUTPUT_STATUS": 10.0,
+    "NAMED_VALUE_FLOAT": 5.0,
+    "ELLIPSLED_ENTRY_STATE": 5.0,
+    "ELLIPSLED_JET_STATUS": 5.0,
+    "ELLIPSLED_CONTROL_STATUS": 5.0,
+    "ELLIPSLED_LOOP_TIMING": 1.0,
+}
+ATTITUDE_GROUP = ("ATTITUDE", "ATTITUDE_QUATERNION", "ATTITUDE_TARGET", "NAMED_VALUE_FLOAT", "ELLIPSLED_ENTRY_STATE")
+MAX_RATE_HZ = 100.0
+DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
+
+# What a ground station may send unsigned: its presence and the parameter reads (they
+# change nothing, so a stock ground station without the key can list parameters).
+ALLOW_UNSIGNED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
+                            mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ})
+# What the link acts on besides HEARTBEAT (messages with a target system and component).
+_ADDRESSED = frozenset({mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
+                        mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ, mav.MAVLINK_MSG_ID_PARAM_SET})
+
+
+class GroundLink:
+    """MAVLink 2 ground link of one FlightSoftware.
+
+    fsw      fsw.flightsoftware.FlightSoftware (read for telemetry, commanded).
+    key      SigningKey shared with the ground station.
+    gcs      "udp:HOST:PORT" the telemetry goes to (and to every peer that sent an accepted
+             signed frame within ``peer_timeout_s``, as MAVLink vehicles answer the sender).
+    bind     "udp:HOST:PORT" the link listens on (port 0 = ephemeral; see ``address``).
+    inject   callback forwarding a fault injection to the plant (may be None).
+    rates    {stream: Hz} overriding DEFAULT_RATES_HZ.
+    clock    monotonic time [s] for telemetry scheduling (tests pass a fake one).
+    """
+
+    def __init__(self, fsw, key: SigningKey, *, gcs: str = DEFAULT_GCS, bind: str = DEFAULT_BIND,
+                 inject: InjectFn | None = None, rates: Mapping[str, float] | None = None,
+                 clock: Callable[[], float] = time.monotonic, max_rx_per_tick: int = 64,
+                 max_tx_per_tick: int = 64, peer_timeout_s: float = 10.0, max_peers: int = 4):
+        if not isinstance(key, SigningKey):
+            raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
+        self.fsw = fsw
+        self.clock = clock
+        self.max_rx_per_tick = int(max_rx_per_tick)
+        self.max_tx_per_tick = int(max_tx_per_tick)
+        self.peer_timeout_s = float(peer_timeout_s)
+        self.max_peers = int(max_peers)
+        self.rates_hz = self._check_rates(rates)
+        self.gcs = parse_udp(gcs, "gcs")
+        bind_addr = parse_udp(bind, "bind")
+        self.commands_in = CommandTranslator(fsw, inject)
+        self.params_in = ParamProtocol(fsw)
+
+        self.link = SignedLink(key, system_id=SYSTEM_ID, component_id=COMPONENT_ID,
+                               allow_unsigned=ALLOW_UNSIGNED, on_reject=self._on_reject)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind(bind_addr)
+        except OSError as e:
+            self.sock.close()
+            raise OSError(f"ground link cannot bind {bind}: {e.strerror or e}") from None
+        self.sock.setblocking(False)
+        self._rxbuf = bytearray(65536)
+
+        self.peers: dict[tuple[str, int], float] = {}                     # addr -> last signed rx
+        self._param_queue: deque[str] = deque()
+        self._next_due = {name: 0.0 for name in self.rates_hz}
+        self._event_index = 0                          # the start-up events go out too
+        self._pack_only = False                        # warm_up packs without sending
+        self._loop_timing: dict[int, tuple] = {}
+        self._alloc_ns: deque[int] = deque(maxlen=512)
+        self._alloc_degraded = 0
+        self.rejections = 0
+        self.ground_heartbeat_t: float | None = None                     # clock() of last GCS heartbeat
+        self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
+        self.stats = {"rx_datagrams": 0, "rx_bytes": 0, "rx_messages": 0, "tx_frames": 0,
+                      "tx_bytes": 0, "tx_errors": 0}
+        self.tick_ns_max = 0
+
+    # -------------------------------------------------------------- configuration
+    @staticmethod
+    def _check_rates(rates: Mapping[str, float] | None) -> dict[str, float]:
+        out = dict(DEFAULT_RATES_HZ)
+        for name, hz in (rates or {}).items():
+            if name not in DEFAULT_RATES_HZ:
+                raise ValueError(f"rates: unknown stream {name!r} (known: {', '.join(DEFAULT_RATES_HZ)})")
+            if isinstance(hz, bool) or not isinstance(hz, (int, float)) or not math.isfinite(hz) \
+                    or not 0.0 <= hz <= MAX_RATE_HZ:
+                raise ValueError(f"rates.{name}: must be a number in [0, {MAX_RATE_HZ:g}] Hz, got {hz!r}")
+            out[name] = float(hz)
+        return out
+
+    @property
+    def inject(self) -> InjectFn | None:
+        return self.commands_in.inject
+
+    @inject.setter
+    def inject(self, fn: InjectFn | None) -> None:
+        self.commands_in.inject = fn
+
+    @property
+    def param_names(self) -> list[str]:
+        return self.params_in.names
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) the link is bound to."""
+        return self.sock.getsockname()
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def set_loop_timing(self, rate_group: int, *, jitter_p50_us: float, jitter_p99_us: float,
+                        jitter_max_us: float, compute_p50_us: float, compute_p99_us: float,
+                        compute_max_us: float, cycle_slips: int) -> None:
+        """Latest timing statistics of one rate group (from the executive), sent as
+        ELLIPSLED_LOOP_TIMING (one message per rate group at that stream's rate)."""
+        self._loop_timing[int(rate_group)] = (jitter_p50_us, jitter_p99_us, jitter_max_us, compute_p50_us,
+                                              compute_p99_us, compute_max_us, int(cycle_slips))
+
+    # -------------------------------------------------------------- the tick
+    def tick(self, sensors=None) -> None:
+        """Call from RG2: receive and answer (bounded), then send what is due.
+        ``sensors``: the latest SENSORS record (for "firing" from the chamber pressures)."""
+        t0 = time.perf_counter_ns()
+        try:
+            self.poll()
+            self._sample_allocator()
+            self.send_due(sensors)
+        except Exception:                       # the link must never take the FSW down
+            log.exception("ground link tick failed")
+        self.tick_ns_max = max(self.tick_ns_max, time.perf_counter_ns() - t0)
+
+    def warm_up(self, spare_fsw, sensors=None) -> None:
+        """Encode (pack) every telemetry message once from ``spare_fsw`` — a throwaway
+        FlightSoftware that has flown a cycle — and send nothing: the first encode of each
+        message type costs milliseconds, which would otherwise land in the first real-time
+        cycles. Schedules, counters and the link's sequence numbers are left as they were."""
+        saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq)
+        self.fsw = spare_fsw
+        self._pack_only = True
+        try:
+            self.send_due(sensors)
+            self._send(self.params_in.value_msg(self.params_in.names[0]))
+            self._send(tm.statustext(Severity.INFO, "warm-up"))
+        except Exception:                       # a warm-up failure must not stop the FSW
+            log.exception("ground link warm-up failed")
+        finally:
+            self.fsw, self._next_due, self._event_index, self.link.signer.seq = saved
+            self._pack_only = False
+
+    def poll(self) -> int:
+        """Receive at most ``max_rx_per_tick`` datagrams without blocking; returns how many."""
+        n = 0
+        view = memoryview(self._rxbuf)
+        while n < self.max_rx_per_tick:
+            try:
+                size, addr = self.sock.recvfrom_into(self._rxbuf)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:                     # e.g. ICMP errors reported on a later recv
+                self.stats["tx_errors"] += 1
+                continue
+            n += 1
+            self.stats["rx_datagrams"] += 1
+            self.stats["rx_bytes"] += size
+            for msg in self.link.receive(view[:size]):
+                self.stats["rx_messages"] += 1
+                try:
+                    self.handle(msg, addr)
+                except Exception:
+                    log.exception("ground link: handling %s failed", msg.get_type())
+        return n
+
+    # -------------------------------------------------------------- receive side
+    def _on_reject(self, rej: Rejection) -> None:
+        self.rejections += 1
+        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", "link_reject", rej.text(),
+                             rate_limited=True)
+
+    def handle(self, msg, addr: tuple[str, int]) -> None:
+        """Act on one verified, decoded message that arrived from ``addr``: commands and
+        parameter writes only when signed and addressed to this vehicle."""
+        signed = bool(msg.get_signed())
+        mid = msg.get_msgId()
+        if signed:
+            self._add_peer(addr)
+        if mid == mav.MAVLINK_MSG_ID_HEARTBEAT:
+            if msg.type == mav.MAV_TYPE_GCS:
+                self.ground_heartbeat_t = self.clock()
+        elif mid not in _ADDRESSED or not self._for_me(msg):
+            return
+        elif mid == mav.MAVLINK_MSG_ID_COMMAND_LONG and signed:
+            self._command(msg, addr)
+        elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
+            self._param_queue.extend(n for n in self.params_in.names if n not in self._param_queue)
+        elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
+            name, why = self.params_in.read(msg)
+            if name is None:
+                self._refuse("param_unknown", why)
+            else:
+                self._send(self.params_in.value_msg(name), extra=addr)
+        elif mid == mav.MAVLINK_MSG_ID_PARAM_SET and signed:
+            name, why = self.params_in.set(msg)
+            if why:
+                self._refuse("param_unknown" if name is None else "param_refused", why)
+            if name is not None:
+                self._send(self.params_in.value_msg(name), extra=addr)     # new value, or unchanged
+
+    @staticmethod
+    def _for_me(msg) -> bool:
+        return msg.target_system in (0, SYSTEM_ID) and msg.target_component in (0, COMPONENT_ID)
+
+    def _add_peer(self, addr) -> None:
+        now = self.clock()
+        self.peers[addr] = now
+        for a, t in list(self.peers.items()):
+            if now - t > self.peer_timeout_s:
+                del self.peers[a]
+        while len(self.peers) > self.max_peers:
+            oldest = min(self.peers, key=self.peers.get)
+            del self.peers[oldest]
+
+    def _refuse(self, code: str, text: str) -> None:
+        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", code, text[:tm.STATUSTEXT_LEN])
+
+    def _command(self, msg, addr) -> None:
+        p = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7]
+        result, why = self.commands_in.execute(msg.command, p)
+        if result != CommandResult.ACCEPTED and why:
+            self._refuse("cmd_refused", why)
+        self.commands[result] = self.commands.get(result, 0) + 1
+        ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, msg.get_srcSystem(),
+                                              msg.get_srcComponent())
+        # to the requester only: another ground station waiting on the same command id
+        # must not take this answer for its own
+        self._send(ack, only=addr)
+
+    # -------------------------------------------------------------- send side
+    def _destinations(self, extra=None) -> list[tuple[str, int]]:
+        now = self.clock()
+        dest = [self.gcs]
+        for a, t in self.peers.items():
+            if now - t <= self.peer_timeout_s and a not in dest:
+                dest.append(a)
+        if extra is not None and extra not in dest:
+            dest.append(extra)
+        return dest
+
+    def _send(self, msg, extra=None, only=None) -> None:
+        frame = self.link.pack(msg)
+        if self._pack_only:                     # warm_up: encode, send nothing
+            return
+        for addr in ((only,) if only is not None else self._destinations(extra)):
+            try:
+                self.sock.sendto(frame, addr)
+                self.stats["tx_frames"] += 1
+                self.stats["tx_bytes"] += len(frame)
+            except OSError:
+                self.stats["tx_errors"] += 1
+
+    def _sample_allocator(self) -> None:
+        self._alloc_ns.append(int(getattr(self.fsw, "alloc_ns", 0)))
+        if self.fsw.allocator.degraded:
+            self._alloc_degraded += 1
+
+    def _due(self, name: str, now: float) -> bool:
+        hz = self.rates_hz[name]
+        if hz <= 0.0:
+            return False
+        period = 1.0 / hz
+        if now < self._next_due[name] - DUE_SLACK * period:     # slack: tick jitter must not skip a period
+            return False
+        nxt = self._next_due[name] + period
+        self._next_due[name] = nxt if nxt > now else now + period
+        return True
+
+    def system_status(self) -> int:
+        return tm.system_status(self.fsw)
+
+    def send_due(self, sensors=None) -> None:
+        """Send every telemetry stream that is due, queued parameters and new events."""
+        now = self.clock()
+        fsw = self.fsw
+        ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
+        if self._due("HEARTBEAT", now):
+            self._send(tm.heartbeat(fsw))
+        if self._due("SYS_STATUS", now):
+            self._send(tm.sys_status(fsw, self._loop_timing, self.rejections))
+        if tm.nav_valid(fsw):
+            want = tuple(self._due(n, now) for n in ATTITUDE_GROUP)
+            if any(want):
+                for msg in tm.attitude(fsw, ms, want):
+                    self._send(msg)
+        if self._due("ACTUATOR_OUTPUT_STATUS", now):
+            self._send(tm.actuator_output_status(fsw))
+        if self._due("ELLIPSLED_JET_STATUS", now):
+            self._send(tm.jet_status(fsw, ms, sensors))
+        if self._due("ELLIPSLED_CONTROL_STATUS", now):
+            self._send(tm.control_status(fsw, ms, self._alloc_ns, self._alloc_degraded))
+        if self._due("ELLIPSLED_LOOP_TIMING", now):
+            for msg in tm.loop_timing(ms, self._loop_timing):
+                self._send(msg)
+        budget = self.max_tx_per_tick
+        while self._param_queue and budget > 0:
+            self._send(self.params_in.value_msg(self._param_queue.popleft()))
+            budget -= 1
+        self._send_events(budget)
+
+    def _send_events(self, budget: int) -> None:
+        """Every event of ``fsw.events.history`` as a STATUSTEXT (read by index, so another
+        consumer may ``drain()`` the queue)."""
+        hist = self.fsw.events.history
+        if self._event_index > len(hist):         # history was reset by its owner
+            self._event_index = 0
+        while self._event_index < len(hist) and budget > 0:
+            ev = hist[self._event_index]
+            self._event_index += 1
+            budget -= 1
+            self._send(tm.statustext(ev.severity, ev.text))

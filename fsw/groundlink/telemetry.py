@@ -1,0 +1,161 @@
+"""Telemetry messages of the ground link, each built from the FlightSoftware's state
+(what each one carries: interfaces/mavlink/README.md). Pure functions of their arguments;
+scheduling and sending are link.py's.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator
+
+import numpy as np
+
+from common import frames, mrp
+from common.frames import local_axes
+from interfaces.mavlink import dialect as mav
+from interfaces.vocabulary import INHIBITED, N_JETS, NOMINAL, Mode
+
+STATUSTEXT_LEN = 50
+_JET_BITS = 1 << np.arange(N_JETS, dtype=np.int64)
+
+
+def ascii_text(text: str, n: int) -> bytes:
+    return str(text).encode("ascii", "replace")[:n]
+
+
+def local_ned_dcm(r_N: np.ndarray) -> np.ndarray:
+    """C_LN: rows north, east, down at r_N (spherical planet, N3 = spin axis)."""
+    north, east, up = local_axes(r_N)
+    return np.vstack((north, east, -up))
+
+
+def euler321(C: np.ndarray) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) [rad] of C = R1(roll) R2(pitch) R3(yaw)."""
+    pitch = -math.asin(max(-1.0, min(1.0, float(C[0, 2]))))
+    return math.atan2(C[1, 2], C[2, 2]), pitch, math.atan2(C[0, 1], C[0, 0])
+
+
+def system_status(fsw) -> int:
+    """MAV_STATE, first match wins: SAFE -> EMERGENCY; a jet not nominal or the allocation
+    degraded -> CRITICAL; STANDBY -> STANDBY; otherwise ACTIVE."""
+    mode = fsw.modes.mode
+    if mode == Mode.SAFE:
+        return mav.MAV_STATE_EMERGENCY
+    if np.any(fsw.fdir.health_active.state != NOMINAL) or fsw.allocator.degraded:
+        return mav.MAV_STATE_CRITICAL
+    if mode == Mode.STANDBY:
+        return mav.MAV_STATE_STANDBY
+    return mav.MAV_STATE_ACTIVE
+
+
+def heartbeat(fsw):
+    base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if fsw.driver.armed else 0)
+    return mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GENERIC, mav.MAV_AUTOPILOT_GENERIC, base,
+                                         int(fsw.modes.mode), system_status(fsw), 3)
+
+
+def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int):
+    S = mav
+    present = (S.MAV_SYS_STATUS_SENSOR_3D_GYRO | S.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+               | S.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION | S.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+    enabled = present if fsw.driver.armed else present & ~S.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    health = present
+    if np.any(fsw.fdir.health_active.state != NOMINAL):
+        health &= ~S.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    if getattr(fsw.monitor, "stale", False):
+        health &= ~(S.MAV_SYS_STATUS_SENSOR_3D_GYRO | S.MAV_SYS_STATUS_SENSOR_3D_ACCEL)
+    load = 0
+    rg = loop_timing.get(0) or loop_timing.get(1)
+    if rg is not None:
+        load = int(round(min(1000.0, max(0.0, rg[3] * 1e-6 / fsw.dt_s * 1000.0))))
+    return mav.MAVLink_sys_status_message(present, enabled, health, load, 0xFFFF, -1, -1, 0,
+                                          min(rejections, 0xFFFF), 0, 0, 0, 0)
+
+
+def nav_valid(fsw) -> bool:
+    """Navigation has a state to report (a frame was accepted)."""
+    return fsw.k >= 0 and float(np.dot(fsw.nav.state.r_N, fsw.nav.state.r_N)) > 1.0
+
+
+def attitude(fsw, ms: int, want: tuple[bool, bool, bool, bool, bool]) -> Iterator:
+    """The attitude group relative to local NED: ATTITUDE, ATTITUDE_QUATERNION,
+    ATTITUDE_TARGET, the NAMED_VALUE_FLOATs, ELLIPSLED_ENTRY_STATE (those ``want`` selects)."""
+    nav, g = fsw.nav.state, fsw.guidance
+    C_LN = local_ned_dcm(nav.r_N)
+    w = nav.omega_BN_B
+    if want[0] or want[1]:
+        C_BL = nav.C_BN @ C_LN.T
+        if want[0]:
+            roll, pitch, yaw = euler321(C_BL)
+            yield mav.MAVLink_attitude_message(ms, roll, pitch, yaw, w[0], w[1], w[2])
+        if want[1]:
+            q = mrp.dcm_to_quat(C_BL)
+            yield mav.MAVLink_attitude_quaternion_message(ms, q[0], q[1], q[2], q[3], w[0], w[1], w[2])
+    if want[2]:
+        q = mrp.dcm_to_quat(mrp.to_dcm(g.sigma_RN) @ C_LN.T)
+        wr = g.omega_RN_R
+        yield mav.MAVLink_attitude_target_message(
+            ms, mav.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE, [float(x) for x in q], wr[0], wr[1], wr[2], 0.0)
+    if want[3]:
+        bank_err = frames.wrap_pi(nav.bank_rad - g.phi_r)
+        for name, value in (("bank_deg", math.degrees(nav.bank_rad)), ("bref_deg", math.degrees(g.phi_r)),
+                            ("berr_deg", math.degrees(bank_err)), ("mach", nav.mach),
+                            ("qbar_pa", nav.qbar_pa), ("alt_km", nav.h_m * 1e-3)):
+            yield mav.MAVLink_named_value_float_message(ms, name.encode(), float(value))
+    if want[4]:
+        yield entry_state(fsw, ms, C_LN)
+
+
+def entry_state(fsw, ms: int, C_LN: np.ndarray):
+    nav = fsw.nav.state
+    north, east, down = C_LN
+    V = max(nav.V_rel_mps, 1e-9)
+    gamma = math.asin(max(-1.0, min(1.0, -float(nav.vrel_N @ down) / V)))
+    psi = math.atan2(float(nav.vrel_N @ east), float(nav.vrel_N @ north))
+    r = float(np.linalg.norm(nav.r_N))
+    lat = math.asin(max(-1.0, min(1.0, nav.r_N[2] / r)))
+    lon = frames.wrap_pi(math.atan2(nav.r_N[1], nav.r_N[0]) - fsw.scenario.planet.omega_radps * fsw.t_s)
+    return mav.MAVLink_ellipsled_entry_state_message(
+        ms, nav.h_m, nav.V_rel_mps, gamma, psi, lat, lon, nav.mach, nav.qbar_pa, nav.alpha_rad,
+        nav.beta_rad, nav.bank_rad, fsw.guidance.phi_r)
+
+
+def actuator_output_status(fsw):
+    act = [0.0] * 32
+    act[:N_JETS] = [float(x) for x in fsw.driver.last_command]
+    return mav.MAVLink_actuator_output_status_message(int(fsw.t_s * 1e6), (1 << N_JETS) - 1, act)
+
+
+def jet_status(fsw, ms: int, sensors):
+    """Health per jet (an inhibited nominal jet shows INHIBITED), commanded and firing bits
+    (firing: chamber pressure above fdir.on_threshold), eta, pulses, on-time."""
+    h = fsw.fdir.health_active
+    health = [int(s) for s in h.state]
+    for i in range(N_JETS):
+        if h.inhibited[i] and health[i] == NOMINAL:
+            health[i] = INHIBITED
+    cmd = int(np.dot(fsw.driver.last_command.astype(np.int64) != 0, _JET_BITS))
+    firing = 0
+    if sensors is not None:
+        on = np.asarray(sensors["chamber"]) > fsw.params["fdir.on_threshold"]
+        firing = int(np.dot(on.astype(np.int64), _JET_BITS))
+    return mav.MAVLink_ellipsled_jet_status_message(
+        ms, cmd, firing, health, [float(x) for x in h.effective_eta()],
+        [int(min(x, 0xFFFFFFFF)) for x in fsw.driver.pulses], [float(x) for x in fsw.driver.on_time_s])
+
+
+def control_status(fsw, ms: int, alloc_ns: Iterable[int], alloc_degraded: int):
+    a = np.fromiter(alloc_ns, dtype=np.int64)
+    p99 = float(np.percentile(a, 99)) * 1e-3 if a.size else 0.0
+    return mav.MAVLink_ellipsled_control_status_message(
+        ms, [float(x) for x in fsw.u_cal_B], [float(x) for x in fsw.tau_alloc_B],
+        [float(x) for x in fsw.control.theta_hat], int(fsw.cycles) & 0xFFFFFFFF, p99,
+        alloc_degraded & 0xFFFFFFFF)
+
+
+def loop_timing(ms: int, timing: dict[int, tuple]) -> Iterator:
+    for rg, v in sorted(timing.items()):
+        yield mav.MAVLink_ellipsled_loop_timing_message(ms, *v[:6], v[6] & 0xFFFFFFFF, rg & 0xFF)
+
+
+def statustext(severity: int, text: str):
+    return mav.MAVLink_statustext_message(int(severity), ascii_text(text, STATUSTEXT_LEN))

@@ -22,8 +22,8 @@ import sys
 from interfaces.mavlink.signing import SigningKeyError
 from interfaces.vocabulary import DEFAULT_GCS, FAULT_KINDS, MARK_KINDS, N_JETS, Mode, parse_udp
 
-from .client import (DEFAULT_VEHICLE, GroundClient, Request, float32_equal, load_key, make_request,
-                     result_name)
+from .client import DEFAULT_VEHICLE, GroundClient, float32_equal, load_key, result_name
+from .commands import Request, make_request
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_TIMEOUT = 0, 1, 2, 3
 REASON_WAIT_S = 0.5         # after a refusal, how long to wait for the vehicle's STATUSTEXT

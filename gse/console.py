@@ -5,7 +5,7 @@ MAV_STATE), entry state (altitude, speed, gamma, Mach, qbar, alpha, beta), bank 
 reference and the error, the 18-jet grid (commanded, firing, health), loop timing and
 allocator figures, the events (STATUSTEXT with severity) and the acknowledgements.
 
-Commands from the command line at the bottom (the vocabulary of gse.client.USAGE, e.g.
+Commands from the command line at the bottom (the language of gse/commands.py USAGE, e.g.
 "inject 17 off", "mark 3 degraded 0.5", "param set C_LAMBDA_RADPS 1.2") or keys, when
 the command line is not focused (Escape leaves it, ":" enters it):
   i inject...  c clear...  k mark...  p param set...   (prefill the command line)
@@ -33,7 +33,8 @@ from textual.widgets import Footer, Input, RichLog, Static
 from interfaces.mavlink import dialect as mav
 from interfaces.vocabulary import N_JETS, JetState, Mode, Severity
 
-from .client import GroundClient, PendingCommand, make_request, parse_line, result_name
+from .client import GroundClient, PendingCommand, result_name
+from .commands import make_request, parse_line
 
 # how each jet state and severity is drawn (the names and codes: interfaces/vocabulary.py)
 HEALTH_STYLE = {JetState.NOMINAL: "green", JetState.FAILED_OFF: "bold red", JetState.STUCK_ON: "bold magenta",

@@ -20,7 +20,8 @@ from fsw.flightsoftware import FlightSoftware
 from fsw.groundlink import GroundLink
 from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
 from fsw.modes import Mode
-from gse.client import GroundClient, make_request
+from gse.client import GroundClient
+from gse.commands import make_request
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing import SigningKey
 from sim.plant import Plant
@@ -291,3 +292,27 @@ def test_fdir_detection_of_an_injected_failure_reaches_the_ground(rig):
     js = rig.gcs.state.latest["ELLIPSLED_JET_STATUS"]
     assert js.health[16] == mav.ELLIPSLED_JET_HEALTH_FAILED_OFF
     assert np.count_nonzero(np.array(js.health)) == 1
+
+
+# --------------------------------------------------------------------------- failures inside the vehicle
+
+def test_a_command_whose_handler_raises_is_answered_failed_with_a_statustext(rig, monkeypatch):
+    def broken(on):
+        raise RuntimeError("driver fault")
+    monkeypatch.setattr(rig.fsw, "cmd_arm", broken)
+    assert rig.command("arm", "off") == mav.MAV_RESULT_FAILED          # answered, not left to time out
+    assert any("FAILED: RUNTIMEERROR" in t.upper() for t in rig.texts())
+    assert rig.command("mode", "standby") == ACCEPTED                  # the link keeps working
+    assert rig.fsw.modes.mode == Mode.STANDBY
+
+
+def test_a_parameter_whose_owner_fails_keeps_its_value_and_says_so(rig, monkeypatch):
+    def broken(name, value):
+        raise RuntimeError("owner fault")
+    monkeypatch.setitem(rig.fsw.registry._hooks, "fdir.stale_n", broken)
+    before = rig.fsw.params["fdir.stale_n"]
+    rig.gcs.start(make_request("param", "set", "F_STALE_N", "7"))
+    assert rig.exchange(lambda: "F_STALE_N" in rig.gcs.state.params)
+    assert rig.gcs.state.params["F_STALE_N"] == before                # echo: the unchanged value
+    assert rig.fsw.params["fdir.stale_n"] == before
+    assert any("F_STALE_N FAILED: RuntimeError" in t for t in rig.texts())

@@ -1,0 +1,370 @@
+"""Every ground-settable parameter, set through the real ground link during a flight, changes
+the behaviour it controls from the next cycles on.
+
+The flight: case1 (its scheduled faults removed) flown by a FlightSoftware in its Topology
+(RG1 control, RG2 residual check and the GroundLink on an ephemeral loopback port) stepping
+the plant in-process; the ground station is a GroundClient sending signed PARAM_SET and
+COMMAND_LONG over UDP. Each parameter's case flies twice, the same way, once with the
+PARAM_SET and once without, and compares one concrete observable of the behaviour the
+parameter controls (a detection, a mode, a rejection, the torque command, the estimates,
+the jets fired). Independent truth: the other flight, and the direction the parameter's
+documented meaning predicts. Where flight alone never exercises a limit, the test plays a
+sensor fault in the frame path (a transducer offset, a corrupted vector, frames withheld).
+"""
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import pytest
+
+from common.model import load_scenario
+from fsw.executive import LockstepClock
+from fsw.flightsoftware import FlightSoftware, all_params
+from fsw.groundlink import GroundLink
+from fsw.params import param_ids
+from fsw.topology import Topology
+from gse.client import GroundClient
+from gse.commands import make_request
+from interfaces.mavlink import dialect as mav
+from sim.plant import Plant
+
+from tests.test_groundlink_commands import Clock, write_key
+
+JET = 2          # the jet case1 fires most in its first seconds
+
+
+def f32(x: float) -> float:
+    """What a PARAM_SET carries (float32)."""
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+class Flight:
+    """FSW (in its Topology, ground link in RG2) + plant + ground station, stepped here."""
+
+    def __init__(self, tmp_path):
+        self.scn = load_scenario("case1").with_(faults=())
+        self.plant = Plant(self.scn)
+        self.fsw = FlightSoftware(self.scn)
+        self.topo = Topology(self.fsw, LockstepClock())
+        key = write_key(tmp_path)
+        self.clock = Clock()
+        self.gcs = GroundClient(key, listen="udp:127.0.0.1:0")
+        self.gl = GroundLink(self.fsw, key, gcs=f"udp:127.0.0.1:{self.gcs.address[1]}", bind="udp:127.0.0.1:0",
+                             inject=self._inject, clock=self.clock)
+        self.gcs.set_vehicle(self.gl.address)
+        self.topo.add(2, "groundlink", lambda c: self.gl.tick(self.frame))
+        self.frame = self.plant.sensors
+        self.tamper: Callable | None = None         # a sensor fault played on each frame
+        self.ids = param_ids(p.name for p in all_params() if p.ground_settable)
+
+    def _inject(self, jet, kind, eta):
+        self.plant.set_fault(jet, kind, eta)
+        return True
+
+    def fly(self, n: int, every: Callable | None = None, withhold: bool = False) -> None:
+        for _ in range(n):
+            if withhold:
+                self.topo.tick()                      # a period without a sensor frame
+            else:
+                frame = self.frame
+                if self.tamper is not None:
+                    frame = frame.copy()
+                    self.tamper(frame)
+                self.topo.tick(frame)
+                self.frame = self.plant.step(self.topo.u)
+            self.clock.t += self.scn.dt_control_s
+            self.gcs.poll(0.0)
+            if every is not None:
+                every(self)
+
+    def param_set(self, name: str, value: float, apply: bool = True) -> None:
+        """PARAM_SET over the link (if ``apply``), then 10 cycles (two link ticks) either
+        way, so both flights of a case stay in step; the vehicle must echo the value."""
+        pid = self.ids[name]
+        if apply:
+            self.gcs.start(make_request("param", "set", pid, repr(value)))
+        self.fly(10)
+        if apply:
+            got = self.gcs.state.params.get(pid)
+            assert got == f32(value), f"{pid}: echo {got}, vehicle says {[e.text for e in self.gcs.state.events]}"
+            assert self.fsw.params[name] == f32(value)
+
+    def command(self, *words) -> None:
+        pc = self.gcs.start(make_request(*words))
+        self.fly(10)
+        assert pc.done and pc.result == mav.MAV_RESULT_ACCEPTED, (words, pc.result)
+
+    def codes(self) -> list[str]:
+        return [e.code for e in self.fsw.events.history]
+
+    def close(self):
+        self.gl.close()
+        self.gcs.close()
+        self.fsw.close()
+
+
+# ------------------------------------------------------------------ observables
+
+def torque_mean(fl: Flight, n: int = 50) -> float:
+    acc = []
+    fl.fly(n, every=lambda f: acc.append(np.linalg.norm(f.fsw.u_cal_B)))
+    return float(np.mean(acc))
+
+
+def estimate_change(sl: slice, n: int = 150) -> Callable[[Flight], float]:
+    def obs(fl: Flight) -> float:
+        th0 = fl.fsw.control.theta_hat[sl].copy()
+        fl.fly(n)
+        return float(np.max(np.abs(fl.fsw.control.theta_hat[sl] - th0)))
+    return obs
+
+
+def d_hat_extreme(fn, n: int = 150) -> Callable[[Flight], float]:
+    def obs(fl: Flight) -> float:
+        vals = []
+        fl.fly(n, every=lambda f: vals.append(fn(f.fsw.control.d_hat)))
+        return float(fn(vals))
+    return obs
+
+
+def axis_error(axis: int, n: int = 100) -> Callable[[Flight], float]:
+    def obs(fl: Flight) -> float:
+        acc = []
+        fl.fly(n, every=lambda f: acc.append(abs(f.fsw.u_cal_B[axis] - f.fsw.tau_alloc_B[axis])))
+        return float(np.sum(acc))
+    return obs
+
+
+def detection_of(jet: int, *inject: str, n: int = 200) -> Callable[[Flight], str]:
+    """FDIR's finding on ``jet`` after the plant fault ``inject`` (injected from the ground)."""
+    def obs(fl: Flight) -> str:
+        if inject:
+            fl.command("inject", str(jet), *inject)
+        fl.fly(n)
+        kinds = [d["kind"] for d in fl.fsw.fdir.detections if d["jet"] == jet]
+        return kinds[0] if kinds else "none"
+    return obs
+
+
+def rejected(reason: str, n: int = 25) -> Callable[[Flight], bool]:
+    def obs(fl: Flight) -> bool:
+        before = fl.fsw.monitor.counts[reason]
+        fl.fly(n)
+        return fl.fsw.monitor.counts[reason] > before
+    return obs
+
+
+def event_within(code: str, n: int) -> Callable[[Flight], bool]:
+    def obs(fl: Flight) -> bool:
+        i = len(fl.fsw.events.history)
+        fl.fly(n)
+        return any(e.code == code for e in fl.fsw.events.history[i:])
+    return obs
+
+
+def max_residual(fl: Flight) -> float:
+    acc = []
+    fl.fly(200, every=lambda f: acc.append(f.fsw.fdir.residual_norm_Nm))
+    return float(np.max(acc))
+
+
+def went_safe(fl: Flight) -> bool:
+    fl.fly(200)
+    return int(fl.fsw.modes.mode) == 2
+
+
+def chart_switch_on_crossing(fl: Flight) -> bool:
+    """The reported attitude jumps across the 180-degree principal angle (|sigma| 0.85 ->
+    its shadow-side twin with |sigma_chart| = 1.3): the controller's chart switches only if
+    1.3 exceeds control.sigma_switch."""
+    s = np.array(fl.frame["sigma_BN"])
+    u = s / np.linalg.norm(s)
+    fl.tamper = lambda f: f["sigma_BN"].__setitem__(slice(None), -u / 1.3)
+    switched = []
+    fl.fly(3, every=lambda f: switched.append(bool(f.fsw.control.chart_switched)))
+    return any(switched)
+
+
+def jet_pulses_after(jet: int, n: int = 150) -> Callable[[Flight], int]:
+    def obs(fl: Flight) -> int:
+        before = int(fl.fsw.driver.pulses[jet - 1])
+        fl.fly(n)
+        return int(fl.fsw.driver.pulses[jet - 1]) - before
+    return obs
+
+
+def propellant_used(fl: Flight) -> float:
+    before = fl.fsw.driver.propellant_kg
+    fl.fly(100)
+    return fl.fsw.driver.propellant_kg - before
+
+
+def armed_after_entry(fl: Flight) -> bool:
+    fl.command("mode", "entry")
+    return bool(fl.fsw.driver.armed)
+
+
+# ------------------------------------------------------------------ set-ups (both flights)
+
+def offset_chamber(jet: int, dp: float):
+    def setup(fl: Flight) -> None:
+        def tamper(frame):
+            frame["chamber"][jet - 1] += dp     # a transducer offset
+        fl.tamper = tamper
+    return setup
+
+
+def ground(*steps):
+    """Commands or parameter sets both flights get before the case's own set."""
+    def setup(fl: Flight) -> None:
+        for s in steps:
+            if s[0] == "param":
+                fl.param_set(s[1], s[2])
+            else:
+                fl.command(*s)
+    return setup
+
+
+def corrupt_once(field: str, fn):
+    """The case's observation window starts with one frame whose ``field`` is replaced."""
+    def setup(fl: Flight) -> None:
+        state = {"n": 0}
+
+        def tamper(frame):
+            if state["n"] == 0:
+                frame[field][:] = fn(np.array(frame[field]))
+            state["n"] += 1
+        fl.after_set = lambda: setattr(fl, "tamper", tamper)
+    return setup
+
+
+def withhold(n: int):
+    def obs(fl: Flight) -> bool:
+        fl.fly(n, withhold=True)
+        return bool(fl.fsw.monitor.stale)
+    return obs
+
+
+@dataclass
+class Case:
+    name: str
+    value: float
+    observe: Callable[[Flight], object]
+    relation: str                       # set vs default: ">", "<", or "==" with ``expect``
+    expect: tuple = ()                  # (with the set, without it) for "=="
+    setup: Callable[[Flight], None] | None = None
+    at: int = 25                        # cycles flown before the set
+
+
+R_MARS = 3396.2e3
+CASES = [
+    # SAMI controller
+    Case("control.lambda_radps", 3.0, torque_mean, ">"),
+    Case("control.q_weight", 1e3, estimate_change(slice(0, 6)), ">"),
+    Case("control.gamma_h", 1e4, estimate_change(slice(0, 6)), ">"),
+    Case("control.gamma_d", 1e4, estimate_change(slice(6, 9)), ">"),
+    Case("control.h_bound_frac", 0.02, estimate_change(slice(0, 3)), "<",
+         setup=ground(("param", "control.gamma_h", 1e4))),
+    Case("control.h_prod_scale", 1.0, estimate_change(slice(3, 6)), ">"),
+    Case("control.d_min", 1.0, d_hat_extreme(np.min), ">",
+         setup=ground(("param", "control.gamma_d", 1e4))),
+    Case("control.d_max", 1.0, d_hat_extreme(np.max), "<",
+         setup=ground(("param", "control.gamma_d", 1e4))),
+    Case("control.deadzone", 1e4, estimate_change(slice(0, 9)), "==", (0.0, None)),
+    Case("control.int_limit", 0.0, lambda fl: [fl.fly(50), float(np.max(np.abs(fl.fsw.control.eps_int)))][1],
+         "==", (0.0, None)),
+    Case("control.shortfall_frac", 0.0,
+         lambda fl: sum([fl.fly(1), bool(fl.fsw.control.saturated)][1] for _ in range(100)), ">"),
+    Case("control.safe_rate_gain", 5.0, torque_mean, ">", setup=ground(("mode", "safe"))),
+    Case("control.sigma_switch", 1.5, chart_switch_on_crossing, "==", (False, True)),
+    # allocator
+    Case("allocator.w_roll", 0.0, axis_error(0), ">"),
+    Case("allocator.w_pitch", 0.0, axis_error(1), ">"),
+    Case("allocator.w_yaw", 0.0, axis_error(2), ">"),
+    Case("allocator.penalty_per_N", 10.0, propellant_used, "<"),
+    Case("allocator.fault_tolerance", 0.0, jet_pulses_after(JET), ">",
+         setup=ground(("mark", str(JET), "failed_off"))),
+    # FDIR jet monitor (faults injected in the plant from the ground, or a transducer offset)
+    Case("fdir.persist_n", 200, detection_of(JET, "stuck", n=150), "==", ("none", "stuck_on")),
+    Case("fdir.on_threshold", 0.25, detection_of(JET), "==", ("stuck_on", "none"),
+         setup=offset_chamber(JET, 0.3)),
+    Case("fdir.off_threshold", 0.1, detection_of(JET, "degraded", "0.15"), "==", ("none", "failed_off")),
+    Case("fdir.degraded_lo", 0.5, detection_of(JET, "degraded", "0.4"), "==", ("none", "degraded")),
+    Case("fdir.degraded_hi", 0.85, detection_of(JET, "degraded", "0.9"), "==", ("none", "degraded")),
+    Case("fdir.delay_s", 3.0,
+         lambda fl: [fl.command("inject", str(JET), "off"), fl.fly(200),
+                     round(fl.fsw.fdir.detections[0]["t_apply_s"] - fl.fsw.fdir.detections[0]["t_s"], 6)][2],
+         "==", (3.0, 0.0)),
+    # analytic-redundancy residual (later in the entry, where it is small against its threshold)
+    Case("fdir.res_thr_Nm", 0.0, event_within("unexplained_torque", 500), "==", (True, False), at=750),
+    Case("fdir.res_rel", 10.0, event_within("unexplained_torque", 500), "==", (False, True), at=750,
+         setup=ground(("param", "fdir.res_thr_Nm", 0.0))),
+    Case("fdir.res_persist_s", 60.0, event_within("unexplained_torque", 500), "==", (False, True), at=750,
+         setup=ground(("param", "fdir.res_thr_Nm", 0.0))),
+    Case("fdir.res_tau_s", 0.0, max_residual, ">"),
+    # sensor-frame monitor
+    Case("fdir.stale_n", 10, withhold(5), "==", (False, True)),
+    Case("fdir.omega_max_radps", 0.02, rejected("range"), "==", (True, False)),
+    Case("fdir.sigma_tol", 0.1, rejected("range"), "==", (False, True),
+         setup=corrupt_once("sigma_BN", lambda s: s / np.linalg.norm(s) * 1.05)),
+    Case("fdir.r_below_m", 1000.0, rejected("range"), "==", (True, False),
+         setup=corrupt_once("r_N", lambda r: r / np.linalg.norm(r) * (R_MARS - 3000.0))),
+    Case("fdir.alt_max_m", 1000.0, rejected("range"), "==", (True, False)),
+    Case("fdir.v_max_mps", 1.0, rejected("range"), "==", (True, False)),
+    Case("fdir.accel_max_mps2", 1.0, rejected("range"), "==", (True, False),
+         setup=corrupt_once("accel_B", lambda a: np.array([5.0, 0.0, 0.0]))),
+    Case("fdir.chamber_lo", 0.0, rejected("chamber_range"), "==", (True, False)),
+    Case("fdir.chamber_hi", 1.0, rejected("chamber_range", 100), "==", (True, False), at=5),
+    # failsafes
+    Case("fdir.safe_track_deg", 0.5, went_safe, "==", (True, False)),
+    Case("fdir.safe_track_s", 60.0, went_safe, "==", (False, True),
+         setup=ground(("param", "fdir.safe_track_deg", 0.5))),
+    # jet driver
+    Case("driver.arm_on_entry", 0, armed_after_entry, "==", (False, True),
+         setup=ground(("mode", "standby"), ("arm", "off"))),
+    # guidance
+    Case("guidance.authority_factor", 0.1,
+         lambda fl: [fl.command("inject", str(JET), "off"), fl.fly(100), "reference_reshaped" in fl.codes()][2],
+         "==", (True, False)),
+]
+
+
+def test_every_ground_settable_parameter_has_a_case():
+    assert sorted(c.name for c in CASES) == sorted(p.name for p in all_params() if p.ground_settable)
+
+
+def fly_case(tmp_path, case: Case, apply: bool):
+    where = tmp_path / ("set" if apply else "default")
+    where.mkdir()
+    fl = Flight(where)
+    try:
+        fl.after_set = None
+        fl.fly(case.at)
+        if case.setup is not None:
+            case.setup(fl)
+        fl.param_set(case.name, case.value, apply)
+        if fl.after_set is not None:
+            fl.after_set()
+        return case.observe(fl)
+    finally:
+        fl.close()
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
+def test_a_ground_set_changes_what_the_parameter_controls(tmp_path, case):
+    with_set = fly_case(tmp_path, case, True)
+    without = fly_case(tmp_path, case, False)
+    if case.relation == ">":
+        assert with_set > without, (with_set, without)
+    elif case.relation == "<":
+        assert with_set < without, (with_set, without)
+    else:
+        want_set, want_default = case.expect
+        assert with_set == want_set, (with_set, without)
+        if want_default is None:        # "anything but the set value"
+            assert without != want_set, (with_set, without)
+        else:
+            assert without == want_default, (with_set, without)

@@ -70,7 +70,8 @@ def test_param_ids_are_short_unique_stable_and_documented():
     assert table == reg.markdown(), "regenerate with: ellipsled params --markdown"
     rows = [r for r in reg.describe() if r["ground_settable"]]
     assert [r["param_id"] for r in rows] == [ids[n] for n in reg.settable()]
-    assert all(r["min"] <= r["default"] <= r["max"] and r["owner"] and r["description"] for r in reg.describe())
+    assert all((r["default"] in r["choices"] if r["choices"] else r["min"] <= r["default"] <= r["max"])
+               and r["owner"] and r["description"] for r in reg.describe())
 
 
 def test_param_id_collisions_are_resolved_deterministically():

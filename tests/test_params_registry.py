@@ -43,7 +43,7 @@ def test_every_parameter_is_described_for_a_ground_station():
     by_name = {r["name"]: r for r in rows}
     assert by_name["fdir.omega_max_radps"] == {
         "name": "fdir.omega_max_radps", "param_id": "F_OMEGA_MAX_RADP", "owner": "SensorMonitor", "unit": "rad/s",
-        "min": 0.01, "max": 100.0, "integer": False, "ground_settable": True, "default": 2.0,
+        "min": 0.01, "max": 100.0, "choices": None, "integer": False, "ground_settable": True, "default": 2.0,
         "description": "largest credible |omega|"}
     assert by_name["executive.rg2_divisor"]["param_id"] is None
     assert all(r["description"] for r in rows)

@@ -405,7 +405,7 @@ class Codec:
 # --------------------------------------------------------------------------- helpers
 def event_record(t_ns: int, severity: int, source: str, code: str, text: str,
                  out: np.ndarray | None = None) -> np.ndarray:
-    """An EVENT record (fsw/events.py Event fields); strings UTF-8, truncated to their width."""
+    """An EVENT record (common/events.py Event fields); strings UTF-8, truncated to their width."""
     rec = records.new(records.EVENT) if out is None else out
     rec["t_ns"] = t_ns
     rec["severity"] = int(severity)

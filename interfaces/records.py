@@ -81,7 +81,7 @@ FAULT_APPLIED = np.dtype([
     ("_pad", "u1", (6,)),          # keeps the record a multiple of 8 bytes
 ])
 
-# fsw -> viewers, ground: one event (fsw/events.py Event), fixed width. Strings are
+# fsw -> viewers, ground: one event (common/events.py Event), fixed width. Strings are
 # UTF-8, NUL-padded; text <= 50 bytes fits one MAVLink STATUSTEXT.
 EVENT = np.dtype([
     ("t_ns", "<i8"),               # event time [ns] (FSW time)

@@ -1,4 +1,4 @@
-"""Ground-link benchmark (fsw/groundlink.py): cost of one ``GroundLink.tick`` (poll the
+"""Ground-link benchmark (fsw/groundlink/): cost of one ``GroundLink.tick`` (poll the
 socket, sample the allocator, send the MAVLink telemetry that is due, signed) against the
 FSW control step measured in the same run — the link runs in RG2 (10 Hz) of the FSW process.
 

@@ -53,7 +53,8 @@ STABLE_IDS = {
     "fdir.res_persist_s": "F_RES_PERSIST_S", "fdir.res_rel": "F_RES_REL", "fdir.res_tau_s": "F_RES_TAU_S",
     "fdir.res_thr_Nm": "F_RES_THR_NM", "fdir.safe_track_deg": "F_SAFE_TRACK_DEG",
     "fdir.safe_track_s": "F_SAFE_TRACK_S", "fdir.sigma_tol": "F_SIGMA_TOL", "fdir.stale_n": "F_STALE_N",
-    "fdir.v_max_mps": "F_V_MAX_MPS", "guidance.authority_factor": "G_AUTHORITY_FACT",
+    "fdir.v_max_mps": "F_V_MAX_MPS", "guidance.authority_use": "G_AUTHORITY_USE",
+    "guidance.trim_max_deg": "G_TRIM_MAX_DEG",
 }
 
 

@@ -202,6 +202,16 @@ def propellant_used(fl: Flight) -> float:
     return fl.fsw.driver.propellant_kg - before
 
 
+def stuck_pair_controllable(fl: Flight) -> bool:
+    """Jets 14 and 18 stuck on at 60 s (qbar 1.4 kPa), injected from the ground: the other
+    jets cannot cancel their 284 N m; an alpha/beta trim offset of 1.8 deg can, if the
+    parameter allows it. What the controllability LP concludes after FDIR isolates them."""
+    for jet in (14, 18):
+        fl.command("inject", str(jet), "stuck")
+    fl.fly(50)
+    return bool(fl.fsw.controllability.controllable)
+
+
 def armed_after_entry(fl: Flight) -> bool:
     fl.command("mode", "entry")
     return bool(fl.fsw.driver.armed)
@@ -325,10 +335,11 @@ CASES = [
     # jet driver
     Case("driver.arm_on_entry", 0, armed_after_entry, "==", (False, True),
          setup=ground(("mode", "standby"), ("arm", "off"))),
-    # guidance
-    Case("guidance.authority_factor", 0.1,
-         lambda fl: [fl.command("inject", str(JET), "off"), fl.fly(100), "reference_reshaped" in fl.codes()][2],
-         "==", (True, False)),
+    # guidance (read at a reconfiguration: FDIR isolating a fault injected from the ground)
+    Case("guidance.authority_use", 0.05,
+         lambda fl: [fl.command("inject", str(JET), "off"), fl.fly(100), fl.fsw.guidance.profile.accel_limit_radps2][2],
+         "<"),
+    Case("guidance.trim_max_deg", 0.0, stuck_pair_controllable, "==", (False, True), at=3000),
 ]
 
 

@@ -73,32 +73,26 @@ def make_request(verb: str, *args: str) -> Request:
         if not n_min <= len(a) <= n_max:
             raise ValueError(f"usage: {usage}")
 
-    if verb == "inject":
-        need(2, 3, f"inject JET {'|'.join(FAULT_KINDS)} [ETA]")
-        jet = _jet(a[0], True)
-        kind, ftype = _choice(a[1], FAULT_KINDS, "kind")
-        eta = 0.0
+    def jet_kind_eta(table: dict, allow_all: bool, eta_default: float):
+        """JET KIND [ETA]: ETA only (and always) for degraded."""
+        need(2, 3, f"{verb} JET {'|'.join(table)} [ETA]")
+        jet = _jet(a[0], allow_all)
+        kind, code = _choice(a[1], table, "kind")
+        eta = eta_default
         if kind == "degraded":
             if len(a) != 3:
-                raise ValueError("inject degraded needs ETA in (0, 1)")
+                raise ValueError(f"{verb} degraded needs ETA in (0, 1)")
             eta = _num(a[2], "eta")
         elif len(a) == 3:
             raise ValueError(f"eta applies to degraded only (kind {kind})")
-        label = f"inject jet {jet} {kind}" + (f" eta {eta:g}" if kind == "degraded" else "")
+        return jet, kind, code, eta, f"{verb} jet {jet} {kind}" + (f" eta {eta:g}" if kind == "degraded" else "")
+
+    if verb == "inject":
+        jet, kind, ftype, eta, label = jet_kind_eta(FAULT_KINDS, True, 0.0)
         return Request(label, mav.MAV_CMD_INJECT_FAILURE, (mav.FAILURE_UNIT_SYSTEM_MOTOR, ftype, jet, eta))
     if verb == "mark":
-        need(2, 3, f"mark JET {'|'.join(MARK_KINDS)} [ETA]")
-        jet = _jet(a[0], False)
-        kind, code = _choice(a[1], MARK_KINDS, "kind")
-        eta = 1.0
-        if kind == "degraded":
-            if len(a) != 3:
-                raise ValueError("mark degraded needs ETA in (0, 1)")
-            eta = _num(a[2], "eta")
-        elif len(a) == 3:
-            raise ValueError(f"eta applies to degraded only (kind {kind})")
-        return Request(f"mark jet {jet} {kind}" + (f" eta {eta:g}" if kind == "degraded" else ""),
-                       mav.ELLIPSLED_CMD_FDIR_MARK_JET, (jet, code, eta))
+        jet, kind, code, eta, label = jet_kind_eta(MARK_KINDS, False, 1.0)
+        return Request(label, mav.ELLIPSLED_CMD_FDIR_MARK_JET, (jet, code, eta))
     if verb == "clear":
         need(1, 1, "clear JET (0 = all)")
         jet = _jet(a[0], True)

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from interfaces.vocabulary import FAULT_HEALTH, FAULT_KINDS
+
 SOLVE_EVERY_S = 0.0005      # the solve loop while a reconfiguration is pending
 PERIOD_MS = 20.0            # the control period (50 Hz)
 DEGRADED_ETA = 0.5
@@ -42,14 +44,10 @@ def paper_fault_sets() -> list[tuple[str, dict]]:
         for f in load_scenario(path).faults:
             for j in f.jets:
                 last[j] = (f.kind, f.eta)
-        spec: dict = {"failed": [], "stuck": [], "degraded": []}
+        spec: dict = {kind: [] for kind in FAULT_KINDS if kind != "clear"}
         for j, (kind, eta) in sorted(last.items()):
-            if kind == "off":
-                spec["failed"].append(j)
-            elif kind == "stuck":
-                spec["stuck"].append(j)
-            elif kind == "degraded":
-                spec["degraded"].append((j, float(eta)))
+            if kind != "clear":
+                spec[kind].append((j, float(eta)))
         if any(spec.values()):
             same = next((i for i, (_, s) in enumerate(out) if s == spec), None)
             if same is None:
@@ -60,15 +58,19 @@ def paper_fault_sets() -> list[tuple[str, dict]]:
 
 
 def _health(spec: dict):
+    """{fault kind (interfaces/vocabulary.py FAULT_KINDS): [(jet, eta), ...]} -> JetHealth."""
     from fsw.health import JetHealth
-    return JetHealth.of(failed=spec.get("failed", ()), stuck=spec.get("stuck", ()),
-                        degraded=spec.get("degraded", ()))
+    h = JetHealth()
+    for kind, jets in spec.items():
+        for j, eta in jets:
+            h.set(int(j), FAULT_HEALTH[kind], float(eta))
+    return h
 
 
 def single_fault_sets(n_jets: int = 18) -> list[tuple[str, dict]]:
     out = []
     for j in range(1, n_jets + 1):
-        out += [(f"failed-{j}", {"failed": [j]}), (f"stuck-{j}", {"stuck": [j]}),
+        out += [(f"failed-{j}", {"off": [(j, 1.0)]}), (f"stuck-{j}", {"stuck": [(j, 1.0)]}),
                 (f"degraded-{j}", {"degraded": [(j, DEGRADED_ETA)]})]
     return out
 

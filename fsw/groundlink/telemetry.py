@@ -53,7 +53,10 @@ def heartbeat(fsw):
                                          int(fsw.modes.mode), system_status(fsw), 3)
 
 
-def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int):
+def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int, dropped: int = 0, refused_early: int = 0):
+    """SYS_STATUS; the link's counters in the standard error fields (a stock ground station
+    shows them): errors_comm every rejection, errors_count1 datagrams dropped on the full
+    receive queue, errors_count2 datagrams refused before verification (each saturating)."""
     S = mav
     present = (S.MAV_SYS_STATUS_SENSOR_3D_GYRO | S.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                | S.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION | S.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
@@ -68,7 +71,8 @@ def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int):
     if rg is not None:
         load = int(round(min(1000.0, max(0.0, rg[3] * 1e-6 / fsw.dt_s * 1000.0))))
     return mav.MAVLink_sys_status_message(present, enabled, health, load, 0xFFFF, -1, -1, 0,
-                                          min(rejections, 0xFFFF), 0, 0, 0, 0)
+                                          min(rejections, 0xFFFF), min(dropped, 0xFFFF), min(refused_early, 0xFFFF),
+                                          0, 0)
 
 
 def nav_valid(fsw) -> bool:

@@ -23,8 +23,8 @@ import scipy.linalg
 from numba import njit
 
 from common.model import Vehicle, inertia_matrix, inertia_vector
-from common.mrp import nearest_set_into
-from fsw.guidance import _B_mul, _Bdot_mul, reference_derivatives
+from common.mrp import B_mul, Bdot_mul, nearest_set_into, sigma_derivatives, sigma_dot_into
+from common.mrp import omega_from_sigma_dot_into as _Pa_mul   # P_a x = 4 B^T x / (1 + s.s)^2
 from fsw.params import Param
 
 # prm vector layout (derived from the parameters, see SamiController._derive)
@@ -49,30 +49,17 @@ def _lam_rows(v, M, sign):
 
 
 @njit(cache=True)
-def _Pa_mul(s, x, out):
-    """out = P_a x = 4 B(s)^T x / (1 + s.s)^2, using B(s)^T = B(-s)."""
-    ns = np.empty(3)
-    ns[0], ns[1], ns[2] = -s[0], -s[1], -s[2]
-    _B_mul(ns, x, out)
-    f = 4.0 / (1.0 + s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) ** 2
-    for i in range(3):
-        out[i] *= f
-
-
-@njit(cache=True)
 def regressor_M(sigma, omega, sr_d, sr_dd, M):
     """M (3x6) with Y = P_a^T M: Lambda(P_a sr_dd) - Lambda(P_a Jdot P_a sr_d) + [omega x] Lambda(P_a sr_d)."""
     sd = np.empty(3)
-    _B_mul(sigma, omega, sd)
-    for i in range(3):
-        sd[i] *= 0.25
+    sigma_dot_into(sigma, omega, sd)
     a1 = np.empty(3)
     a2 = np.empty(3)
     a3 = np.empty(3)
     t = np.empty(3)
     _Pa_mul(sigma, sr_dd, a1)
     _Pa_mul(sigma, sr_d, a3)
-    _Bdot_mul(sigma, sd, a3, t)
+    Bdot_mul(sigma, sd, a3, t)
     for i in range(3):
         t[i] *= 0.25
     _Pa_mul(sigma, t, a2)
@@ -188,13 +175,12 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
     nearest_set_into(sr, sig)
     sr_d = np.empty(3)
     sr_dd = np.empty(3)
-    reference_derivatives(sr, omega_RN_R, domega_RN_R, sr_d, sr_dd)
+    sigma_derivatives(sr, omega_RN_R, domega_RN_R, sr_d, sr_dd)
     sd = np.empty(3)
-    _B_mul(sig, omega, sd)
+    sigma_dot_into(sig, omega, sd)
     e = np.empty(3)
     ed = np.empty(3)
     for i in range(3):
-        sd[i] *= 0.25
         e[i] = sig[i] - sr[i]
         ed[i] = sd[i] - sr_d[i]
     # --- control law (paper eq 18)
@@ -263,9 +249,9 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
         t1 = np.empty(3)
         t2 = np.empty(3)
         z = np.empty(3)
-        _B_mul(nsig, w, t1)
+        B_mul(nsig, w, t1)
         _inv3_mul(h, t1, t2)
-        _B_mul(sig, t2, z)
+        B_mul(sig, t2, z)
         for i in range(3):
             z[i] *= 1.0 / 16.0
         pz = np.empty(3)

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from common.model import load_planet
-from common.mrp import nearest_set_into
+from common.mrp import from_dcm_into, nearest_set_into, sigma_derivatives
 
 # Minimum-jerk (quintic) blend s(x) = 10x^3 - 15x^4 + 6x^5 on x in [0, 1]:
 # max s' = 15/8 at x = 1/2; max |s''| = 10/sqrt(3) at x = 1/2 -+ sqrt(3)/6.
@@ -182,81 +182,6 @@ class BankProfile:
 
 
 @njit(cache=True)
-def _mrp_from_dcm(C, out):
-    """sigma (|sigma| <= 1) of a DCM via Shepperd's quaternion (same as common.mrp.from_dcm)."""
-    tr = C[0, 0] + C[1, 1] + C[2, 2]
-    b0 = (1.0 + tr) / 4.0
-    b1 = (1.0 + 2.0 * C[0, 0] - tr) / 4.0
-    b2 = (1.0 + 2.0 * C[1, 1] - tr) / 4.0
-    b3 = (1.0 + 2.0 * C[2, 2] - tr) / 4.0
-    if b0 >= b1 and b0 >= b2 and b0 >= b3:
-        q0 = math.sqrt(b0)
-        q1 = (C[1, 2] - C[2, 1]) / (4 * q0)
-        q2 = (C[2, 0] - C[0, 2]) / (4 * q0)
-        q3 = (C[0, 1] - C[1, 0]) / (4 * q0)
-    elif b1 >= b2 and b1 >= b3:
-        q1 = math.sqrt(b1)
-        q0 = (C[1, 2] - C[2, 1]) / (4 * q1)
-        q2 = (C[0, 1] + C[1, 0]) / (4 * q1)
-        q3 = (C[2, 0] + C[0, 2]) / (4 * q1)
-    elif b2 >= b3:
-        q2 = math.sqrt(b2)
-        q0 = (C[2, 0] - C[0, 2]) / (4 * q2)
-        q1 = (C[0, 1] + C[1, 0]) / (4 * q2)
-        q3 = (C[1, 2] + C[2, 1]) / (4 * q2)
-    else:
-        q3 = math.sqrt(b3)
-        q0 = (C[0, 1] - C[1, 0]) / (4 * q3)
-        q1 = (C[2, 0] + C[0, 2]) / (4 * q3)
-        q2 = (C[1, 2] + C[2, 1]) / (4 * q3)
-    if q0 < 0.0:
-        q0, q1, q2, q3 = -q0, -q1, -q2, -q3
-    out[0] = q1 / (1.0 + q0)
-    out[1] = q2 / (1.0 + q0)
-    out[2] = q3 / (1.0 + q0)
-
-
-@njit(cache=True)
-def _B_mul(s, x, out):
-    """out = B(s) x, B = (1 - s.s) I + 2[s x] + 2 s s^T (spec 10-plant.md)."""
-    s2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
-    sx = s[0] * x[0] + s[1] * x[1] + s[2] * x[2]
-    c0 = s[1] * x[2] - s[2] * x[1]
-    c1 = s[2] * x[0] - s[0] * x[2]
-    c2 = s[0] * x[1] - s[1] * x[0]
-    out[0] = (1.0 - s2) * x[0] + 2.0 * c0 + 2.0 * s[0] * sx
-    out[1] = (1.0 - s2) * x[1] + 2.0 * c1 + 2.0 * s[1] * sx
-    out[2] = (1.0 - s2) * x[2] + 2.0 * c2 + 2.0 * s[2] * sx
-
-
-@njit(cache=True)
-def _Bdot_mul(s, sd, x, out):
-    """out = Bdot(s, sd) x, Bdot = -2 (s.sd) I + 2[sd x] + 2 (sd s^T + s sd^T) (spec 20-fsw.md)."""
-    ssd = s[0] * sd[0] + s[1] * sd[1] + s[2] * sd[2]
-    sx = s[0] * x[0] + s[1] * x[1] + s[2] * x[2]
-    sdx = sd[0] * x[0] + sd[1] * x[1] + sd[2] * x[2]
-    c0 = sd[1] * x[2] - sd[2] * x[1]
-    c1 = sd[2] * x[0] - sd[0] * x[2]
-    c2 = sd[0] * x[1] - sd[1] * x[0]
-    out[0] = -2.0 * ssd * x[0] + 2.0 * c0 + 2.0 * (sd[0] * sx + s[0] * sdx)
-    out[1] = -2.0 * ssd * x[1] + 2.0 * c1 + 2.0 * (sd[1] * sx + s[1] * sdx)
-    out[2] = -2.0 * ssd * x[2] + 2.0 * c2 + 2.0 * (sd[2] * sx + s[2] * sdx)
-
-
-@njit(cache=True)
-def reference_derivatives(sigma_r, omega_R, domega_R, sdot, sddot):
-    """sigma_r_dot = 1/4 B omega_R; sigma_r_ddot = 1/4 (Bdot omega_R + B domega_R) (spec 20-fsw.md)."""
-    tmp = np.empty(3)
-    _B_mul(sigma_r, omega_R, sdot)
-    for i in range(3):
-        sdot[i] *= 0.25
-    _Bdot_mul(sigma_r, sdot, omega_R, sddot)
-    _B_mul(sigma_r, domega_R, tmp)
-    for i in range(3):
-        sddot[i] = 0.25 * (sddot[i] + tmp[i])
-
-
-@njit(cache=True)
 def wind_rate(r_N, v_N, vrel_N, C_WN, a_N, omega_planet, out_W):
     """Angular velocity of W relative to N, in W components [rad/s].
 
@@ -318,7 +243,7 @@ def _guidance_kernel(phi, phid, phidd, alpha, omega_planet, mu, r_N, v_N, vrel_N
         for j in range(3):
             C_RN[i, j] = C_RW[i, 0] * C_WN[0, j] + C_RW[i, 1] * C_WN[1, j] + C_RW[i, 2] * C_WN[2, j]
     sr = out[0:3]
-    _mrp_from_dcm(C_RN, sr)
+    from_dcm_into(C_RN, sr)
     nearest_set_into(sr, sigma_BN)      # eps = sigma - sigma_r never jumps
     # omega_RN = omega_WN + phidot w1; its N-derivative (omegadot_WN neglected) in W comps:
     # phiddot w1 + phidot (omega_WN x w1) = [phiddot, phidot wW3, -phidot wW2]
@@ -329,7 +254,7 @@ def _guidance_kernel(phi, phid, phidd, alpha, omega_planet, mu, r_N, v_N, vrel_N
     for i in range(3):
         oR[i] = C_RW[i, 0] * w_W[0] + C_RW[i, 1] * w_W[1] + C_RW[i, 2] * w_W[2]
         doR[i] = C_RW[i, 0] * dw_W[0] + C_RW[i, 1] * dw_W[1] + C_RW[i, 2] * dw_W[2]
-    reference_derivatives(sr, oR, doR, out[3:6], out[6:9])
+    sigma_derivatives(sr, oR, doR, out[3:6], out[6:9])
 
 
 class Guidance:

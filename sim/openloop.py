@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from common import mrp
 from common.model import Scenario, load_scenario
 from interfaces.vocabulary import N_JETS
 from sim.plant import (A_BANK, A_ALPHA, A_BETA, A_E1, A_E2, A_E3, A_H, A_MACH, A_OMEGA_W_N, A_QBAR,
-                       A_SIN_GAMMA, A_TAU_AERO_B, A_F_AERO_N, A_V, Plant, mrp_to_dcm)
+                       A_SIN_GAMMA, A_TAU_AERO_B, A_F_AERO_N, A_V, Plant)
 
 OMEGA_N_RADPS = 4.0   # PD natural frequency of the ideal attitude hold
 ZETA = 0.9
@@ -72,7 +73,7 @@ class BankReference:
 def ideal_torque(x, aux, I, phi, phidot, phiddot, alpha_trim, kp, kd, C, tau):
     """Computed torque tau = I w_dot_cmd + w x I w - tau_aero (spec 20-fsw.md reference
     attitude: C_RN = R2(alpha_trim) R1(phi_r) C_WN, omega_R = omega_W + phidot_r w1)."""
-    mrp_to_dcm(x[6], x[7], x[8], C)
+    mrp.dcm_into(x[6], x[7], x[8], C)
     cp, sp, ca, sa = math.cos(phi), math.sin(phi), math.cos(alpha_trim), math.sin(alpha_trim)
     # rows of C_RN in N: a2 = cp w2 + sp w3, a3 = -sp w2 + cp w3, r1 = ca w1 - sa a3, r3 = sa w1 + ca a3
     R = np.empty((3, 3))

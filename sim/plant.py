@@ -54,23 +54,6 @@ _speed_of_sound = njit(cache=True)(atmosphere.speed_of_sound)
 
 
 @njit(cache=True)
-def mrp_to_dcm(s1, s2, s3, C):
-    """C_BN (3x3, written into C) from sigma_BN (common/mrp.py to_dcm, scalar form)."""
-    ss = s1 * s1 + s2 * s2 + s3 * s3
-    d = 1.0 / ((1.0 + ss) * (1.0 + ss))
-    f = 4.0 * (1.0 - ss)
-    C[0, 0] = 1.0 + d * (8.0 * s1 * s1 - 8.0 * ss)
-    C[0, 1] = d * (8.0 * s1 * s2 + f * s3)
-    C[0, 2] = d * (8.0 * s1 * s3 - f * s2)
-    C[1, 0] = d * (8.0 * s2 * s1 - f * s3)
-    C[1, 1] = 1.0 + d * (8.0 * s2 * s2 - 8.0 * ss)
-    C[1, 2] = d * (8.0 * s2 * s3 + f * s1)
-    C[2, 0] = d * (8.0 * s3 * s1 + f * s2)
-    C[2, 1] = d * (8.0 * s3 * s2 - f * s1)
-    C[2, 2] = 1.0 + d * (8.0 * s3 * s3 - 8.0 * ss)
-
-
-@njit(cache=True)
 def _deriv(x, p, tau_B, F_B, dx, C, aux, want_aux):
     """dx = f(x) for the coupled 6-DOF state (spec 10-plant.md, translational and
     rotational dynamics). tau_B: jet + external torque [N m]; F_B: jet force [N].
@@ -122,7 +105,7 @@ def _deriv(x, p, tau_B, F_B, dx, C, aux, want_aux):
     e3x, e3y, e3z = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
 
     # aerodynamic angles from C_BN = R2(alpha) R3(-beta) R1(bank) C_WN (common/frames.py)
-    mrp_to_dcm(s1, s2, s3, C)
+    mrp.dcm_into(s1, s2, s3, C)
     b1x = C[0, 0] * e1x + C[0, 1] * e1y + C[0, 2] * e1z
     b1y = C[1, 0] * e1x + C[1, 1] * e1y + C[1, 2] * e1z
     b1z = C[2, 0] * e1x + C[2, 1] * e1y + C[2, 2] * e1z
@@ -175,15 +158,9 @@ def _deriv(x, p, tau_B, F_B, dx, C, aux, want_aux):
     t2 = -(w3 * iw1 - w1 * iw3) + tau_B[1] + mm
     t3 = -(w1 * iw2 - w2 * iw1) + tau_B[2] + mn
     J0 = P_IINV
-    # sigma_dot = 1/4 [(1 - s.s) w + 2 s x w + 2 s (s.w)]
-    ss = s1 * s1 + s2 * s2 + s3 * s3
-    sw = s1 * w1 + s2 * w2 + s3 * w3
-    a = 1.0 - ss
     dx[0], dx[1], dx[2] = vx, vy, vz
     dx[3], dx[4], dx[5] = ax, ay, az
-    dx[6] = 0.25 * (a * w1 + 2.0 * (s2 * w3 - s3 * w2) + 2.0 * s1 * sw)
-    dx[7] = 0.25 * (a * w2 + 2.0 * (s3 * w1 - s1 * w3) + 2.0 * s2 * sw)
-    dx[8] = 0.25 * (a * w3 + 2.0 * (s1 * w2 - s2 * w1) + 2.0 * s3 * sw)
+    mrp.sigma_dot_into(x[6:9], x[9:12], dx[6:9])
     dx[9] = p[J0] * t1 + p[J0 + 1] * t2 + p[J0 + 2] * t3
     dx[10] = p[J0 + 3] * t1 + p[J0 + 4] * t2 + p[J0 + 5] * t3
     dx[11] = p[J0 + 6] * t1 + p[J0 + 7] * t2 + p[J0 + 8] * t3
@@ -249,9 +226,7 @@ def _rk4(x, p, tau_B, F_B, n_sub, dt, ws, C, aux):
         _deriv(xt, p, tau_B, F_B, k4, C, aux, False)
         for j in range(12):
             x[j] += h6 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-        ss = x[6] * x[6] + x[7] * x[7] + x[8] * x[8]
-        if ss > 1.0:   # shadow set -sigma/|sigma|^2
-            x[6], x[7], x[8] = -x[6] / ss, -x[7] / ss, -x[8] / ss
+        mrp.switch_shadow_into(x[6:9])
     _deriv(x, p, tau_B, F_B, k1, C, aux, True)
 
 
@@ -293,19 +268,9 @@ def _sense(x, aux, frac, sig, gyro_bias, blocks_g, blocks_a, blocks_n, blocks_c,
     for j in range(3):
         out_w[j] = x[9 + j] + gyro_bias[j] + sig[0] * blocks_g[i, j]
     # attitude: small rotation d (MRP ~ theta/4) composed after sigma_BN: C_meas = C(d) C_BN
-    s1, s2, s3 = x[6], x[7], x[8]
     d1, d2, d3 = 0.25 * sig[1] * blocks_a[i, 0], 0.25 * sig[1] * blocks_a[i, 1], 0.25 * sig[1] * blocks_a[i, 2]
-    ss = s1 * s1 + s2 * s2 + s3 * s3
-    dd = d1 * d1 + d2 * d2 + d3 * d3
-    den = 1.0 + ss * dd - 2.0 * (s1 * d1 + s2 * d2 + s3 * d3)
-    c1, c2, c3 = d2 * s3 - d3 * s2, d3 * s1 - d1 * s3, d1 * s2 - d2 * s1
-    m1 = ((1.0 - ss) * d1 + (1.0 - dd) * s1 - 2.0 * c1) / den
-    m2 = ((1.0 - ss) * d2 + (1.0 - dd) * s2 - 2.0 * c2) / den
-    m3 = ((1.0 - ss) * d3 + (1.0 - dd) * s3 - 2.0 * c3) / den
-    mm = m1 * m1 + m2 * m2 + m3 * m3
-    if mm > 1.0:
-        m1, m2, m3 = -m1 / mm, -m2 / mm, -m3 / mm
-    out_s[0], out_s[1], out_s[2] = m1, m2, m3
+    m1, m2, m3 = mrp.compose(d1, d2, d3, x[6], x[7], x[8])
+    out_s[0], out_s[1], out_s[2] = mrp.shadow_switched(m1, m2, m3)
     for j in range(3):
         if nav_noise:
             out_r[j] = x[j] + sig[2] * blocks_n[i, j]

@@ -1,2 +1,3 @@
-"""Code shared by the plant and the flight software: attitude math, frames, atmosphere
-models and data-file loading. Nothing here knows about processes or transports."""
+"""Code shared by the plant, the flight software and the ground tools: attitude math,
+frames, atmosphere models, data-file loading, and the runtime helpers every process uses
+(rt.py). Nothing here knows about transports, and nothing imports fsw/, sim/ or gse/."""

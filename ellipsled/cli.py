@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fsw import rt
+from common import rt
 
 # Every ellipsled process runs its numerics single-threaded (lean, deterministic hot loops,
 # two processes on two cores): pinned before NumPy or numba load their thread pools.

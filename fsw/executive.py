@@ -18,14 +18,13 @@ preallocated ring buffers; percentiles are computed only when asked (telemetry).
 """
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import time
 from typing import Callable
 
 import numpy as np
 
 from common.events import EventLog, Severity
+from common.rt import sleep_until_ns
 from .params import Param
 
 PARAMS = [
@@ -36,35 +35,6 @@ PARAMS = [
     Param("executive.spin_us", 0.0, 5000.0, "us", "real-time clock: final busy-wait before each release",
           ground_settable=False),
 ]
-
-
-# --------------------------------------------------------------------------- sleeping
-class _Timespec(ctypes.Structure):
-    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
-
-
-_CLOCK_MONOTONIC = 1      # Linux <time.h>
-_TIMER_ABSTIME = 1
-try:
-    _libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-    _clock_nanosleep = _libc.clock_nanosleep
-    _clock_nanosleep.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.POINTER(_Timespec), ctypes.c_void_p]
-    _clock_nanosleep.restype = ctypes.c_int
-except (OSError, AttributeError):          # not Linux/glibc: relative sleeps
-    _clock_nanosleep = None
-
-
-def sleep_until_ns(t_ns: int, now_ns: Callable[[], int] = time.monotonic_ns) -> None:
-    """Sleep until the monotonic clock reads ``t_ns`` (absolute: no drift from the time
-    spent computing the remaining interval). Interruptible: a signal (Ctrl-C) ends the
-    sleep and its Python handler runs on return."""
-    if _clock_nanosleep is not None:
-        ts = _Timespec(t_ns // 1_000_000_000, t_ns % 1_000_000_000)
-        _clock_nanosleep(_CLOCK_MONOTONIC, _TIMER_ABSTIME, ctypes.byref(ts), None)
-    else:
-        dt = t_ns - now_ns()
-        if dt > 0:
-            time.sleep(dt * 1e-9)
 
 
 # --------------------------------------------------------------------------- clocks
@@ -310,7 +280,7 @@ class Executive:
             on_slack: Callable[[int], None] | None = None) -> int:
         """Real-time loop: tick until ``n_cycles`` or ``should_stop()``; returns cycles run.
         ``on_slack(ns_left)`` runs after each on-time cycle with the time left before the
-        next release (e.g. fsw/rt.py's collect_in_slack)."""
+        next release (e.g. common/rt.py's collect_in_slack)."""
         if isinstance(self.clock, LockstepClock):
             raise RuntimeError("Executive.run: a lockstep executive is ticked by its frames")
         n = 0

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from common.events import EventLog, Severity
-from fsw.executive import PARAMS, Executive, LockstepClock, RealTimeClock, sleep_until_ns
+from common.rt import sleep_until_ns
+from fsw.executive import PARAMS, Executive, LockstepClock, RealTimeClock
 from fsw.params import load_params
 
 MS = 1_000_000

@@ -1,4 +1,4 @@
-"""fsw/rt.py: the report tells the truth (checked against the kernel's /proc view in a
+"""common/rt.py: the report tells the truth (checked against the kernel's /proc view in a
 child process), and every refused step falls back cleanly."""
 from __future__ import annotations
 
@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from fsw import rt
+from common import rt
 
 ROOT = Path(__file__).resolve().parents[1]
 
 CHILD = r"""
 import json, os, sys
-from fsw import rt
+from common import rt
 env = rt.single_threaded_numerics()
 import numpy, numba
 rep = rt.apply(cpus=[0], priority=10, lock_memory=True)
@@ -105,7 +105,7 @@ def test_timer_slack_is_set_and_read_back_for_a_normal_thread():
 
 THREADS_CHILD = r"""
 import json, os, threading, time
-from fsw import rt
+from common import rt
 import zenoh                                   # its runtime starts native threads at import/open
 from interfaces import transport
 ev = threading.Event()

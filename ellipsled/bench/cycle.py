@@ -6,7 +6,7 @@ The loop is the batch runner's (ellipsled/batch.py: Plant -> Topology.tick -> pl
 with an executive ring large enough to keep every cycle, so the per-task percentiles cover
 the whole entry. Two garbage-collection regimes are measured in the same invocation:
 
-- ``gc_out_of_cycle`` (the real-time FSW process, fsw/rt.py): collect + freeze after the
+- ``gc_out_of_cycle`` (the real-time FSW process, common/rt.py): collect + freeze after the
   warm-up, automatic GC disabled, young generation collected between cycles (the slack);
 - ``gc_default``: automatic GC on, as the batch runner runs.
 

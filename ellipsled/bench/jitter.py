@@ -3,7 +3,7 @@
 The loop: fsw.executive.RealTimeClock + the FSW topology's rate groups (RG1 control,
 RG2 fdir_slow) fed by the plant in the same process (an extra RG1 task
 steps sim.plant.Plant with the jet command, so the control task always has a fresh frame),
-under fsw/rt.py's hygiene: single-threaded numerics before NumPy is imported, warm-up,
+under common/rt.py's hygiene: single-threaded numerics before NumPy is imported, warm-up,
 rt.apply (SCHED_FIFO, CPU affinity, mlockall), GC out of the cycle (young generation
 collected in the slack). It runs in a child interpreter (``--child``) so that neither the
 real-time policy nor the locked memory leaks into the rest of the benchmark.
@@ -166,7 +166,7 @@ def _threads() -> int:
 
 def child(seconds: float, priority: int | None, cpu: int | None, scenario: str = "nominal") -> dict:
     """The real-time loop in this process; returns its statistics (plain JSON values)."""
-    from fsw import rt
+    from common import rt
     threads_rep = rt.single_threaded_numerics()
     import gc
 

@@ -260,7 +260,7 @@ def _derive(res: dict, quick: bool) -> None:
     jit = res.get("jitter") or {}
     rt = dict(jit.get("rt") or {})
     if rt:
-        rt["source"] = "the jitter loop's fsw.rt.apply() report (read back from the kernel)"
+        rt["source"] = "the jitter loop's common.rt.apply() report (read back from the kernel)"
         rt["gc_disabled_in_cycle"] = not rt.get("gc", {}).get("enabled_in_loop", True)
         rt["cycle_bench_gc_disabled"] = (res.get("cycle") or {}).get("gc_disabled_in_cycle")
     else:

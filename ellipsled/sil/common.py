@@ -63,12 +63,12 @@ class Stop:
 
 def apply_rt(role: str, args) -> dict | None:
     """Real-time hygiene for a node when --rt is given: SCHED_FIFO --rt-priority, CPU
-    affinity, mlockall (fsw.rt.apply). Call it before anything starts threads; ``open_node``
-    then raises every other thread to one priority above the loop. Returns fsw.rt's report
+    affinity, mlockall (common.rt.apply). Call it before anything starts threads; ``open_node``
+    then raises every other thread to one priority above the loop. Returns common.rt's report
     (None without --rt)."""
     if not args.rt:
         return None
-    from fsw import rt
+    from common import rt
     rep = rt.apply(cpus=[args.cpu] if args.cpu is not None else None, priority=args.rt_priority)
     rep["io_priority"] = min(int(args.rt_priority) + 1, os.sched_get_priority_max(os.SCHED_FIFO)) \
         if rep["sched_fifo"] else None
@@ -91,7 +91,7 @@ def open_node(role: str, args, rt_report: dict | None = None):
     session = transport.open_session(role, args.listen, args.connect, args.zenoh_config,
                                      lowlatency=bool(getattr(args, "zenoh_lowlatency", True)))
     if rt_in_force(rt_report):
-        from fsw import rt
+        from common import rt
         others = rt.other_threads([args.cpu] if args.cpu is not None else None, rt_report["io_priority"],
                                   python_priority=int(args.rt_priority))
         rt_report["threads"] = [f"{name}:{prio}" for _, name, prio, _ in others["threads"]]

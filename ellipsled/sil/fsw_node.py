@@ -16,15 +16,14 @@ import os
 import time
 from pathlib import Path
 
-from fsw import rt
+from common import rt
 
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
-from common.frames import wrap_pi  # noqa: E402
+from common.events import EventLog, Severity  # noqa: E402
 from ellipsled.batch import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from ellipsled.history import History, record_fsw  # noqa: E402
-from common.events import EventLog, Severity  # noqa: E402
-from fsw.executive import LockstepClock, RealTimeClock, sleep_until_ns  # noqa: E402
+from fsw.executive import LockstepClock, RealTimeClock  # noqa: E402
 from fsw.flightsoftware import FlightSoftware  # noqa: E402
 from fsw.topology import Topology  # noqa: E402
 from interfaces import records, transport  # noqa: E402

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from common.rt import sleep_until_ns
 from ellipsled.batch import end_reason_of, prepare_args
 from ellipsled.history import History, record_truth
 from ellipsled.terminal import ProgressFile
-from fsw.executive import sleep_until_ns
 from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard
 from interfaces.vocabulary import FAULT_KINDS

@@ -1,8 +1,9 @@
-"""Real-time hygiene for the FSW process (spec 20-fsw.md, Executive; 50-performance.md).
+"""Runtime helpers of every ellipsled process (plant, FSW, ground tools): real-time
+hygiene (spec 20-fsw.md, Executive; 50-performance.md) and absolute sleeps.
 
 Call order in a process shell:
 
-    from fsw import rt
+    from common import rt
     rt.single_threaded_numerics()      # first: before NumPy / numba are imported
     import numpy ...                   # then everything else
     ... build the FSW objects, open sessions, warm up (first calls compile / allocate)
@@ -21,6 +22,7 @@ import gc
 import os
 import sys
 import threading
+import time
 from typing import Callable
 
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
@@ -38,6 +40,34 @@ def _libc():
 
 
 _LIBC = _libc()
+
+
+# --------------------------------------------------------------------------- sleeping
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+_CLOCK_MONOTONIC = 1      # Linux <time.h>
+_TIMER_ABSTIME = 1
+try:
+    _clock_nanosleep = _LIBC.clock_nanosleep
+    _clock_nanosleep.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.POINTER(_Timespec), ctypes.c_void_p]
+    _clock_nanosleep.restype = ctypes.c_int
+except AttributeError:          # no libc, or not Linux/glibc: relative sleeps
+    _clock_nanosleep = None
+
+
+def sleep_until_ns(t_ns: int, now_ns: Callable[[], int] = time.monotonic_ns) -> None:
+    """Sleep until the monotonic clock reads ``t_ns`` (absolute: no drift from the time
+    spent computing the remaining interval). Interruptible: a signal (Ctrl-C) ends the
+    sleep and its Python handler runs on return."""
+    if _clock_nanosleep is not None:
+        ts = _Timespec(t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+        _clock_nanosleep(_CLOCK_MONOTONIC, _TIMER_ABSTIME, ctypes.byref(ts), None)
+    else:
+        dt = t_ns - now_ns()
+        if dt > 0:
+            time.sleep(dt * 1e-9)
 
 
 def _mlockall(flags: int) -> tuple[bool, str]:

@@ -37,7 +37,7 @@ def _add_batch(sub):
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--rrd", action="store_true", help="also write DIR/run.rrd, the Rerun recording of the run")
-    from ellipsled.batch import add_variant_arguments
+    from ellipsled.runlib import add_variant_arguments
     add_variant_arguments(p)
 
     def run(a):

@@ -30,7 +30,7 @@ from .history import History
 TWIN_FIELDS = ("k", "t_s", "bank_rad", "bank_ref_rad")
 # Source trees whose code decides a flight (a change there invalidates every twin).
 _CODE_DIRS = ("fsw", "sim", "common", "interfaces")
-_CODE_FILES = ("ellipsled/batch.py", "ellipsled/history.py")
+_CODE_FILES = ("ellipsled/batch.py", "ellipsled/runlib.py", "ellipsled/history.py")
 _ROOT = Path(__file__).resolve().parent.parent
 _IGNORED = {"name", "description", "file", "faults"}
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import batch, plots, reference
+from . import batch, plots, reference, runlib
 from .metrics import FINE_BAND_DEG, THETA_NAMES, TRANSIENT_S
 
 CASES = ["nominal", "case1", "case1-ft-off", "case2", "case3", "case4"]
@@ -82,7 +82,7 @@ class Runs:
                               identification=mode, initial_error=init_err, reference_cache=self.cache)
         fsw.close()
         if case == "nominal":        # its own twin: store it for the faulted cases that share it
-            scn = batch.prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err)
+            scn = runlib.prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err)
             reference.store_twin(scn, s["seed"], h, self.cache)
         key = (case, setup, mode)
         self.s[key] = s
@@ -90,7 +90,7 @@ class Runs:
         d = self.out / "runs" / f"{case}-{setup}-{mode}"
         batch.write_outputs(s, h, d, plots=(setup == "paper"))
         if not self.quiet:
-            print(batch.format_summary(s))
+            print(runlib.format_summary(s))
 
     def __getitem__(self, key):
         return self.s[key]
@@ -385,7 +385,7 @@ def notes(R: Runs, trans: dict, reshape_deg: float) -> list[str]:
 # ----------------------------------------------------------------------------- report
 def write_report(out: Path, R: Runs) -> Path:
     trans = translational(R)
-    figs = plots.paper_figures(R.h, out, trans, batch.prepare("nominal").planet.radius_m)
+    figs = plots.paper_figures(R.h, out, trans, runlib.prepare("nominal").planet.radius_m)
     commit = R.commit
     rows = claims(R, trans)
     c2 = R.h[("case2", "paper", "oracle")]

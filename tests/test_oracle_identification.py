@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from common.model import load_scenario
-from ellipsled import batch
+from ellipsled import batch, runlib
 from common.events import EventLog
 from fsw.fdir import Fdir
 from fsw.flightsoftware import all_params
@@ -36,7 +36,7 @@ def test_batch_oracle_reconfigures_at_fault_time_plus_delay(case):
     assert all(d["t_s"] == pytest.approx(t_fault, abs=1e-9) for d in s["fdir"]["detections"])
     assert s["fdir"]["false_alarms"] == 0 and not s["fdir"]["missed"]
     assert s["identification"] == "oracle" and "oracle" in s["test_mode"]
-    assert "TEST MODE" in batch.format_summary(s)
+    assert "TEST MODE" in runlib.format_summary(s)
     assert any(e.code == "fdir_oracle" for e in fsw.events.history)
 
 

@@ -18,7 +18,7 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--ft-off", action="store_true", help="fault tolerance off")
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
-    from ellipsled.batch import add_variant_arguments
+    from ellipsled.runlib import add_variant_arguments
     add_variant_arguments(p)
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",

@@ -21,8 +21,8 @@ from common import rt
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.events import EventLog, Severity  # noqa: E402
-from ellipsled.batch import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from ellipsled.history import History, record_fsw  # noqa: E402
+from ellipsled.runlib import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock  # noqa: E402
 from fsw.flightsoftware import FlightSoftware  # noqa: E402
 from fsw.topology import Topology  # noqa: E402

@@ -26,9 +26,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from ellipsled.batch import (add_variant_arguments, fault_free_reference, format_summary, judge, prepare_args,
-                             variant_argv)
 from ellipsled.history import History, merge
+from ellipsled.runlib import (add_variant_arguments, fault_free_reference, format_summary, judge, prepare_args,
+                              variant_argv)
 from ellipsled.terminal import ProgressFile, RunProgress, files_written
 from interfaces import transport
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE
@@ -162,7 +162,6 @@ class Launcher:
         return p.returncode
 
     def run(self) -> int:
-        a = self.args
         old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             return self._run()

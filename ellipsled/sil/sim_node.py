@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from common.rt import sleep_until_ns
-from ellipsled.batch import end_reason_of, prepare_args
 from ellipsled.history import History, record_truth
+from ellipsled.runlib import end_reason_of, prepare_args
 from ellipsled.terminal import ProgressFile
 from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard

@@ -1,0 +1,238 @@
+"""The run functions batch and SIL share: the scenario with a run's command-line changes, what
+the FSW reports, the allocation samples and their offline check, and the judgement that
+turns a history into summary.json. The batch runner (ellipsled/batch.py) and the SIL nodes
+(ellipsled/sil/) call the same functions, so a lockstep SIL run is judged like its batch
+twin. The plant process imports this module: FSW modules are imported where they are used.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from common.model import Scenario, inertia_vector, load_scenario
+from interfaces.vocabulary import FAULT_HEALTH, HEALTH_NAMES
+
+from .history import History
+from .metrics import deploy_figures, summarize, wrap_deg
+
+if TYPE_CHECKING:       # the plant process imports this module, never the FSW
+    from fsw.flightsoftware import FlightSoftware
+
+IDENTIFICATION = ("detect", "oracle")     # fdir.mode: the product's FDIR, or the test mode's fault log
+
+
+def _with_fsw(scn: Scenario, section: str, key: str, value, suffix: str) -> Scenario:
+    fsw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in scn.fsw.items()}
+    fsw.setdefault(section, {})[key] = value
+    return scn.with_(fsw=fsw, name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
+
+
+def prepare(scenario: Scenario | str, ft_off: bool = False, duration_s: float | None = None,
+            identification: str | None = None, initial_error: bool = True) -> Scenario:
+    """The scenario with the run's command-line changes applied: fault tolerance off,
+    duration, identification mode (None: the scenario's), and ``initial_error=False``: the
+    bank starts on the reference (no initial bank error)."""
+    scn = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
+    if ft_off:
+        scn = _with_fsw(scn, "allocator", "fault_tolerance", 0, "-ft-off")
+    if identification is not None:
+        if identification not in IDENTIFICATION:
+            raise ValueError(f"identification: must be one of {', '.join(IDENTIFICATION)}, got {identification!r}")
+        scn = _with_fsw(scn, "fdir", "mode", identification, "-oracle" if identification == "oracle" else "")
+    if not initial_error:
+        suffix = "-no-init-err"
+        scn = scn.with_(bank0_rad=scn.bank_schedule[0][1],
+                        name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
+    if duration_s is not None:
+        scn = scn.with_(max_duration_s=float(duration_s))
+    return scn
+
+
+def add_variant_arguments(p) -> None:
+    """Command-line options of a run's variant, shared by batch, the SIL launcher and its nodes."""
+    p.add_argument("--identification", choices=IDENTIFICATION, default=None,
+                   help="detect: FDIR identifies faults (default); oracle: TEST MODE, the plant's fault log "
+                        "reaches FDIR at the fault time (the paper's assumption)")
+    p.add_argument("--no-initial-error", action="store_true",
+                   help="the bank starts on the reference (the paper's set-up has a 5 deg initial error)")
+
+
+def variant_argv(a) -> list[str]:
+    return ((["--identification", a.identification] if a.identification else [])
+            + (["--no-initial-error"] if a.no_initial_error else []))
+
+
+def prepare_args(a) -> Scenario:
+    """prepare() from parsed command-line arguments."""
+    return prepare(a.scenario, a.ft_off, a.duration, a.identification, not a.no_initial_error)
+
+
+def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
+    """What only the FSW knows, as plain JSON values (the SIL FSW process writes this)."""
+    return {
+        "detections": [{"jet": int(d["jet"]), "kind": d["kind"], "t_s": round(float(d["t_s"]), 6),
+                        **({"eta_hat": round(float(d["eta_hat"]), 4)} if d.get("eta_hat") is not None else {})}
+                       for d in fsw.fdir.detections],
+        "reconfig_times_s": list(fsw.reconfig_times),
+        "propellant_kg": float(fsw.driver.propellant_kg),
+        "jet_pulses_per_jet": [int(x) for x in fsw.driver.pulses],
+        "cycle_slips": int(slips),
+        "events": len(fsw.events.history),
+        "alloc_samples": alloc_samples,
+        **({"guidance": fsw.entry.stats()} if fsw.entry is not None else {}),
+    }
+
+
+def alloc_sample(fsw: FlightSoftware) -> dict:
+    """One allocator demand, its health and its objective, for an offline optimality check."""
+    hl = fsw.allocator_health()
+    return {"tau_d": fsw.u_cal_B.tolist(), "state": hl.state.tolist(), "eta": hl.eta.tolist(),
+            "inhibited": hl.inhibited.tolist(), "objective": float(fsw.allocator.objective)}
+
+
+def verify_allocations(scn: Scenario, params: dict, samples: list[dict]) -> tuple[float | None, int]:
+    """Re-solve sampled demands by exhaustive enumeration: the largest objective gap seen."""
+    from fsw.allocation.reference import solve_enumeration
+    from fsw.health import JetHealth
+    veh = scn.vehicle
+    w = np.array([params["allocator.w_roll"], params["allocator.w_pitch"], params["allocator.w_yaw"]])
+    c = params["allocator.penalty_per_N"]   # per newton: c_k = c * thrust_k
+    gap = 0.0
+    n = 0
+    for s in samples:
+        if not math.isfinite(s["objective"]):
+            continue
+        h = JetHealth()
+        h.state[:], h.eta[:], h.inhibited[:] = s["state"], s["eta"], s["inhibited"]
+        _, ref, _ = solve_enumeration(veh.torque_matrix_Nm, veh.thrust_N, h, w, c, np.array(s["tau_d"]), True)
+        gap = max(gap, abs(s["objective"] - ref))
+        n += 1
+    return (gap if n else None), n
+
+
+def adaptive_truth(scn: Scenario) -> np.ndarray:
+    """The true values of SAMI's parameters [h (6) kg m^2; d (3)]: the truth inertia, and the
+    aerodynamic factors the FSW's nominal moments are off by (density lumped with each
+    coefficient, as the FSW's nominal atmosphere does)."""
+    tr = scn.truth
+    h = inertia_vector(scn.vehicle.inertia_kgm2) * tr.inertia_scale
+    d = tr.density_scale * np.array([tr.C_lbeta_scale, tr.C_malpha_scale, tr.C_nbeta_scale])
+    return np.concatenate((h, d))
+
+
+def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faults_applied: list,
+          params: dict, ref: History | None = None) -> dict:
+    """summary.json: figures of merit from the history, FDIR judged against the faults the
+    plant actually applied (its ``fault_log``). The same function serves batch and SIL.
+    ``ref``: the fault-free twin (reference.fault_free_history) for the fault-attributable figures."""
+    from .controllable import truth_controllability     # the FSW's LP: not in the plant process
+    injected = {}
+    for t, jet, kind in faults_applied:
+        injected.setdefault(jet, (t, kind))
+    dets = rep["detections"]
+    false_alarms = sum(1 for d in dets
+                       if d["jet"] not in injected or HEALTH_NAMES.get(FAULT_HEALTH[injected[d["jet"]][1]]) != d["kind"])
+    missed = sorted(j for j, (t, kind) in injected.items()
+                    if kind != "clear" and not any(d["jet"] == j for d in dets))
+    cu, au = h["compute_us"], h["alloc_us"]
+
+    def pct(x, q):
+        return float(np.percentile(x, q)) if len(x) else None
+
+    gap, checked = verify_allocations(scn, params, rep["alloc_samples"])
+    extra = {
+        "control_cycle": {"compute_p50_us": pct(cu, 50), "compute_p99_us": pct(cu, 99),
+                          "compute_max_us": float(np.max(cu)) if len(cu) else None,
+                          # cycles whose compute took longer than the control period: a host figure
+                          # in lockstep (the plant waits), a cycle slip in real time
+                          "compute_overruns": int(np.sum(cu > scn.dt_control_s * 1e6))},
+        "allocator": {"solves": int(len(au)), "p50_us": pct(au, 50), "p99_us": pct(au, 99),
+                      "max_us": float(np.max(au)) if len(au) else None,
+                      "degraded": int(np.sum(h["alloc_degraded"])),
+                      "optimality_gap_max": gap, "optimality_checked": checked},
+        "fdir": {"detections": dets, "false_alarms": false_alarms, "missed": missed},
+        "propellant_kg": rep["propellant_kg"],
+        "jet_pulses": int(sum(rep["jet_pulses_per_jet"])),
+        "jet_pulses_per_jet": rep["jet_pulses_per_jet"],
+        "cycle_slips": rep["cycle_slips"],
+        "events": rep["events"],
+        "bank_err_sched_max_after_fault_deg": schedule_error_max_deg(h, scn, faults_applied),
+        "controllability": truth_controllability(scn, faults_applied, h["t_s"], h["qbar_pa"],
+                                                 params["guidance.trim_max_deg"]),
+    }
+    extra["identification"] = params.get("fdir.mode", "detect")
+    if extra["identification"] == "oracle":
+        extra["test_mode"] = "oracle identification: the plant's fault log given to FDIR at the fault time"
+    completed = end_reason in ("mach", "speed", "altitude", "duration")
+    if scn.target_lat_rad is not None:
+        g = rep.get("guidance", {})
+        extra.update(deploy_figures(h, target_lat_rad=scn.target_lat_rad, target_lon_rad=scn.target_lon_rad,
+                                    radius_m=scn.planet.radius_m, nose_radius_m=scn.vehicle.nose_radius_m,
+                                    entry_altitude_m=scn.altitude_m))
+        extra["guidance_mode"] = scn.guidance_mode
+        extra["reversal_count"] = len(g.get("reversal_times_s", []))
+        extra["guidance"] = g
+        extra["limits"] = {"load_g": scn.vehicle.max_load_g, "heat_rate_wcm2": scn.vehicle.max_heat_rate_wcm2}
+    return summarize(h, scenario=scn.name, seed=seed, end_reason=end_reason, completed=completed,
+                     fault_t_s=min((t for t, _, _ in faults_applied), default=None),
+                     reconfig_t_s=rep["reconfig_times_s"][0] if rep["reconfig_times_s"] else None,
+                     alpha_trim_rad=scn.vehicle.aero.alpha_trim_rad,
+                     schedule_t=[t for t, _ in scn.bank_schedule], extra=extra, ref=ref,
+                     theta_truth=adaptive_truth(scn))
+
+
+def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> float | None:
+    """max |bank - the scenario's own smoothed schedule| after the fault [deg]: the bank error
+    against the reference before any re-plan (the FSW's re-planned reference may lag it)."""
+    from fsw.guidance import BankProfile
+    t = h["t_s"]
+    t_f = min((tf for tf, _, _ in faults_applied), default=2.5)
+    m = t >= t_f
+    if not np.any(m):
+        return None
+    prof = BankProfile(scn.bank_schedule, scn.bank_rate_limit_radps, scn.bank_accel_limit_radps2)
+    ref = np.array([prof.evaluate(float(x))[0] for x in t[m]])
+    return float(np.max(np.abs(wrap_deg(np.degrees(h["bank_rad"][m] - ref)))))
+
+
+def end_reason_of(reason: str, duration_s: float | None) -> str:
+    return "duration" if duration_s is not None and reason == "timeout" else reason
+
+
+def fault_free_reference(h: History, scn: Scenario, seed: int, faults_applied: list,
+                         cache_dir: str | Path | None = None) -> History:
+    """The run's fault-free twin: the run itself when no fault was applied, else flown (or
+    taken from the cache, see ellipsled/reference.py)."""
+    if not faults_applied:
+        return h
+    from .reference import fault_free_history
+    return fault_free_history(scn, seed, cache_dir)
+
+
+def format_summary(s: dict) -> str:
+    def f(x, fmt="{:.2f}"):
+        return "n/a" if x is None else fmt.format(x)
+    a = s["allocator"]
+    rt = s.get("realtime_factor")
+    return "\n".join([
+        f"{s['scenario']} (seed {s['seed']}): {'completed' if s['completed'] else 'NOT completed'} "
+        f"({s['end_reason']}) at t = {s['t_end_s']:.1f} s" + (f", {rt:.0f}x real time" if rt else "")
+        + (f"  [TEST MODE: {s['test_mode']}]" if s.get("test_mode") else ""),
+        f"  bank error: max after fault {f(s['bank_err_max_after_fault_deg'])} deg, due to the faults"
+        f" {f(s.get('bank_err_fault_attrib_max_deg'))} deg, after t = 10 s {f(s['bank_err_max_after_transient_deg'])} deg,"
+        f" RMS {f(s['bank_err_rms_deg'])} deg, settle after reconfiguration {f(s['settle_time_after_reconfig_s'])} s",
+        f"  alpha dev max {f(s['alpha_dev_max_deg'])} deg, beta dev max {f(s['beta_dev_max_deg'])} deg",
+        f"  propellant {s['propellant_kg']:.2f} kg, {s['jet_pulses']} pulses, effort applied"
+        f" {s['control_effort_applied']:.3g} (commanded {s['control_effort_cmd']:.3g},"
+        f" undeliverable {f(s['control_effort_undeliverable_share'], '{:.0%}')})",
+        f"  allocator: {a['solves']} solves, p50 {f(a['p50_us'], '{:.1f}')} us, p99 {f(a['p99_us'], '{:.1f}')} us,"
+        f" degraded {a['degraded']}, optimality gap {f(a['optimality_gap_max'], '{:.2g}')} ({a['optimality_checked']} checked)",
+        f"  FDIR: {len(s['fdir']['detections'])} detections, {s['fdir']['false_alarms']} false alarms,"
+        f" missed {s['fdir']['missed']}; cycle slips {s['cycle_slips']}",
+    ] + ([f"  deploy: miss {s['deploy_miss_km']:.2f} km (downrange {s['downrange_err_km']:+.2f}, crossrange "
+          f"{s['crossrange_err_km']:+.2f}) at {s['deploy_alt_km']:.2f} km; peak load {s['peak_load_g']:.2f} g, "
+          f"heat {s['peak_heat_rate_wcm2']:.1f} W/cm2; skip {s['skip']}; {s['reversal_count']} reversals; guidance "
+          f"cycle p99 {f(s['guidance'].get('compute_p99_us'), '{:.0f}')} us"] if "deploy_miss_km" in s else []))

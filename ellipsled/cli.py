@@ -11,6 +11,7 @@ from common import rt
 rt.single_threaded_numerics()
 
 from common.config import ConfigError  # noqa: E402
+from ellipsled.argtypes import positive_float  # noqa: E402
 
 
 def _add_plant(sub):
@@ -34,7 +35,7 @@ def _add_batch(sub):
     p.add_argument("--run", type=int, default=None, metavar="ID", help="run_id within --from-campaign")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--ft-off", action="store_true", help="fault tolerance off (paper figure 5)")
-    p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--rrd", action="store_true", help="also write DIR/run.rrd, the Rerun recording of the run")
     from ellipsled.runlib import add_variant_arguments
@@ -60,7 +61,7 @@ def _add_report(sub):
     p = sub.add_parser("report", help="fly every paper case and write report.md (paper claims vs measured)")
     p.add_argument("--out", required=True)
     p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--duration", type=float, default=None)
+    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--reuse", action="store_true",
                    help="write the report from the runs a previous report left in OUT/runs (nothing flown)")
 

@@ -8,36 +8,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from common.model import Scenario
-
-
-def _positive_int(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer, got {s!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
-    return v
-
-
-def _nonneg_int(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer, got {s!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
-    return v
-
-
-def _positive_float(s: str) -> float:
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got {s!r}") from None
-    if not (v > 0 and v < float("inf")):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {s}")
-    return v
+from ellipsled.argtypes import nonneg_int, positive_float, positive_int
 
 
 def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
@@ -46,10 +17,10 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("montecarlo", help="dispersed Monte Carlo campaign on Dask (local or a cluster)",
                               description=main.__doc__)
     p.add_argument("campaign", help="campaign name (data/campaigns) or .toml path")
-    p.add_argument("--runs", type=_positive_int, default=None, help="number of runs (default: the campaign's)")
+    p.add_argument("--runs", type=positive_int, default=None, help="number of runs (default: the campaign's)")
     p.add_argument("--out", required=True, help="campaign folder: results.parquet, summary.md, plots; "
                                                 "an existing one is resumed (with --pin: the scenario folder)")
-    p.add_argument("--pin", type=_nonneg_int, nargs="+", default=None, metavar="ID",
+    p.add_argument("--pin", type=nonneg_int, nargs="+", default=None, metavar="ID",
                    help="fly nothing: write these runs as scenario files <campaign>-<seed>-run<ID>.toml in --out "
                         "(e.g. data/scenarios/mc; fly one with `ellipsled batch mc/<file stem>`)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -59,11 +30,11 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
     tls.add_argument("--tls-ca-file", default=None, metavar="PEM", help="CA certificate(s)")
     tls.add_argument("--tls-cert", default=None, metavar="PEM", help="this client's certificate")
     tls.add_argument("--tls-key", default=None, metavar="PEM", help="this client's private key")
-    p.add_argument("--workers", type=_positive_int, default=None,
+    p.add_argument("--workers", type=positive_int, default=None,
                    help="worker processes of the embedded cluster (default: one per core)")
-    p.add_argument("--duration", type=_positive_float, default=None, help="stop every run after S s of flight")
-    p.add_argument("--seed", type=_nonneg_int, default=None, help="master seed (default: the campaign's)")
-    p.add_argument("--flush-s", type=_positive_float, default=5.0, help="write finished rows at least this often")
+    p.add_argument("--duration", type=positive_float, default=None, help="stop every run after S s of flight")
+    p.add_argument("--seed", type=nonneg_int, default=None, help="master seed (default: the campaign's)")
+    p.add_argument("--flush-s", type=positive_float, default=5.0, help="write finished rows at least this often")
     p.add_argument("--dashboard", action="store_true", help="embedded cluster: Dask dashboard on 127.0.0.1")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=main)

@@ -7,6 +7,7 @@ import signal
 import sys
 import time
 
+from ellipsled.argtypes import positive_float
 from interfaces import transport
 from interfaces.keys import keys
 
@@ -17,7 +18,7 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", nargs="?", default="nominal", help="scenario name (data/scenarios) or .toml path")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--ft-off", action="store_true", help="fault tolerance off")
-    p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
     from ellipsled.runlib import add_variant_arguments
     add_variant_arguments(p)
     mode = p.add_mutually_exclusive_group()

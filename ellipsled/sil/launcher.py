@@ -26,6 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from ellipsled.argtypes import positive_float
 from ellipsled.history import History, merge
 from ellipsled.runlib import (add_variant_arguments, fault_free_reference, format_summary, judge, prepare_args,
                               variant_argv)
@@ -49,7 +50,7 @@ def add_arguments(p) -> None:
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
                       help="the plant on its own clock at --speed, the FSW on absolute deadlines")
     p.set_defaults(mode="lockstep")
-    p.add_argument("--duration", type=float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
     add_variant_arguments(p)
     p.add_argument("--out", default="runs/sil", help="output folder")
     p.add_argument("--seed", type=int, default=None)

@@ -26,11 +26,14 @@ import rerun as rr
 from gse.viz.logger import SCALAR_CHANNELS, SOURCE_FIELDS, RerunLogger
 from gse.viz.sinks import open_sinks
 
+from .rows import Row, all_, fmt, le, row
+
 RATE_HZ = 50.0
 FULL_ENTRY_STEPS = 22_500
 QUICK_STEPS = 10_000             # long enough that a leak of a few MB per entry shows
 RSS_SAMPLE_STEPS = 2_500
 MEM_FLAT_MB_PER_10K_STEPS = 1.0  # <= 2.25 MB over a full entry's 22,500 steps
+TARGETS = {"cpu_pct_max": 5.0, "mem_mb_per_10k_steps_max": MEM_FLAT_MB_PER_10K_STEPS}
 
 
 def memory_verdict(rss_MB: list[tuple[int, float]]) -> dict:
@@ -163,6 +166,44 @@ def run(quick: bool) -> dict:
     if web_run is not None:
         res["logger_file_and_grpc_server"] = web_run
     return res
+
+
+def section(quick: bool) -> dict:
+    """The suite's ``bridge`` figures: the file-sink run's, the baseline beside them, ``run``'s detail."""
+    r = run(quick)
+    lf = r["logger_file"]
+    web = r.get("logger_file_and_grpc_server") or {}
+    return {"cpu_pct": lf["cpu_pct_at_50Hz"], "mem_growth_mb": lf["rss_growth_MB"],
+            "mem_growth_second_half_mb": lf["rss_growth_second_half_MB"], "steps": lf["steps"],
+            "mem_slope_second_half_mb_per_10k_steps": lf["rss_slope_second_half_MB_per_10k_steps"],
+            "mem_growth_with_grpc_server_mb": web.get("rss_growth_MB"),
+            "baseline_per_signal_us_per_frame": r["per_signal_rr_log"]["us_per_frame"],
+            "batched_us_per_frame": r["send_columns_batched"]["us_per_frame"],
+            "speedup_batched_vs_per_signal": r["speedup_batched_vs_per_signal"],
+            "targets": dict(TARGETS), "detail": r}
+
+
+def rows(res: dict) -> list[Row]:
+    br = res.get("bridge") or {}
+    if not br:
+        return []
+    # memory flat: RSS slope over the second half of the file-sink run; when only the total
+    # growth is known, that total is held to the same bound
+    mem_max, cpu_max = TARGETS["mem_mb_per_10k_steps_max"], TARGETS["cpu_pct_max"]
+    slope = br.get("mem_slope_second_half_mb_per_10k_steps")
+    mem_ok = le(slope if slope is not None else br.get("mem_growth_mb"), mem_max)
+    half = br.get("mem_growth_second_half_mb")
+    web = br.get("mem_growth_with_grpc_server_mb")
+    return [row("Rerun bridge at 50 Hz: CPU [% of a core] / RSS growth [MB]",
+                f"{fmt(br.get('cpu_pct'))} / {fmt(br.get('mem_growth_mb'))}"
+                + (f" (second half {fmt(half)}, {fmt(slope)} MB per 10k steps)" if half is not None else ""),
+                f"per-signal rr.log {fmt(br.get('baseline_per_signal_us_per_frame'))} us/frame vs batched "
+                f"{fmt(br.get('batched_us_per_frame'))}"
+                + (f"; with the gRPC server sink {fmt(web)} MB (history kept up to its memory limit)"
+                   if web is not None else ""),
+                f"{fmt(br.get('speedup_batched_vs_per_signal'))}x",
+                f"<= {cpu_max:g} %, memory flat (<= {fmt(mem_max)} MB per 10k steps, file sink)",
+                all_(le(br.get("cpu_pct"), cpu_max), mem_ok))]
 
 
 if __name__ == "__main__":

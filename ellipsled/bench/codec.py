@@ -15,6 +15,8 @@ import numpy as np
 from interfaces import records
 from interfaces.codec import Codec
 
+from .rows import NO_TARGET, Row, fmt, row
+
 
 def _stats(ns: np.ndarray) -> dict:
     us = ns * 1e-3
@@ -73,6 +75,19 @@ def run(quick: bool) -> dict:
             "sensors_roundtrip_p99_us": s["encode_p99_us"] + s["decode_p99_us"],
             "jets_roundtrip_p99_us": j["encode_p99_us"] + j["decode_p99_us"],
             "rejected": s["rejected"] + j["rejected"]}
+
+
+def rows(res: dict) -> list[Row]:
+    cd = res.get("codec") or {}
+    if not cd:
+        return []
+    R = []
+    for name, key in (("SENSORS", "sensors"), ("JETS", "jets")):
+        s = cd.get(key) or {}
+        R.append(row(f"codec {name} encode / decode p50 [us]", f"{fmt(s.get('encode_p50_us'))} / {fmt(s.get('decode_p50_us'))}",
+                     f"bytes() {fmt(s.get('baseline_bytes_p50_us'))} / frombuffer {fmt(s.get('baseline_frombuffer_p50_us'))}",
+                     "", "", NO_TARGET))
+    return R
 
 
 if __name__ == "__main__":

@@ -21,6 +21,8 @@ from fsw.groundlink import GroundLink
 from interfaces.mavlink.signing import SigningKey
 from sim.plant import Plant
 
+from .rows import NO_TARGET, Row, fmt, g, row
+
 
 class _Clock:
     def __init__(self, t: float = 1000.0):
@@ -99,6 +101,16 @@ def run(quick: bool) -> dict:
             "baseline_control_step_p50_us": ctl["p50_us"], "baseline_control_step_p99_us": ctl["p99_us"],
             "tick_p99_over_control_p99": out["rg2_tick_10Hz"]["p99_us"] / ctl["p99_us"],
             "tx_errors": int(gl.stats["tx_errors"]), "telemetry_bytes_received": rx_bytes}
+
+
+def rows(res: dict) -> list[Row]:
+    gl = res.get("groundlink") or {}
+    if not gl:
+        return []
+    return [row("ground link tick at 10 Hz p50 / p99 [us]",
+                f"{fmt(g(gl, 'rg2_tick_10Hz', 'p50_us'))} / {fmt(gl.get('tick_p99_us'))}",
+                f"control step p99 {fmt(gl.get('baseline_control_step_p99_us'))}",
+                f"{fmt(gl.get('tick_p99_over_control_p99'))}x", "", NO_TARGET)]
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@ from fsw.npc import PARAMS, EntryGuidance, planet_fixed
 from fsw.params import load_params
 from sim.plant import initial_translation
 
+from .rows import NO_TARGET, Row, fmt, le, row
+
 TARGET_P99_US = 20_000.0
 
 
@@ -55,6 +57,20 @@ def run(quick: bool) -> dict:
     p99 = res["p99_us"]
     res["pass"] = bool(p99 is not None and p99 <= TARGET_P99_US)
     return res
+
+
+def rows(res: dict) -> list[Row]:
+    gd = res.get("guidance") or {}
+    if not gd:
+        return []
+    es = gd.get("entry_state") or {}
+    return [row("guidance cycle (npc) in flight p50 / p99 / max [us]",
+                f"{fmt(gd.get('p50_us'))} / {fmt(gd.get('p99_us'))} / {fmt(gd.get('max_us'))}",
+                f"control cycle p99 {fmt(gd.get('baseline_control_p99_us'))}", "", f"p99 <= {TARGET_P99_US:.0f} us",
+                le(gd.get("p99_us"), TARGET_P99_US)),
+            row("  guidance cycle from entry interface, cold p50 / p99 [us]",
+                f"{fmt(es.get('p50_us'))} / {fmt(es.get('p99_us'))}",
+                f"{fmt(es.get('predictions_mean'))} predictions", "", "", NO_TARGET)]
 
 
 if __name__ == "__main__":

@@ -32,9 +32,13 @@ import subprocess
 import sys
 import time
 
+from .rows import NO_TARGET, Row, all_, fmt, g, le, ratio, row
+
 PERIOD_US = 20_000
 PRIORITY = 80
 RESULT_TAG = "JITTER-RESULT "
+TARGETS = {"idle_p99_over_cyclictest_max": 2.0, "load_p99_over_cyclictest_max": 3.0,
+           "idle_max_us": 1000.0, "slips": 0}
 
 
 # --------------------------------------------------------------------------- system tools
@@ -329,12 +333,50 @@ def run(quick: bool) -> dict:
     res = {"figure": "release jitter of the 50 Hz loop [us] vs cyclictest, same period/priority/CPU/load",
            "seconds_per_regime": seconds, "period_us": PERIOD_US, "priority": PRIORITY, "cpu": cpu,
            "idle": idle, "load": load,
-           "targets": {"idle_p99_over_cyclictest_max": 2.0, "load_p99_over_cyclictest_max": 3.0,
-                       "idle_max_us": 1000.0, "slips": 0}}
+           "targets": dict(TARGETS)}
     loop = idle.get("loop") or load.get("loop")
     if loop:
         res["rt"] = {**loop["rt"], "gc": loop["gc"], "threads": loop["threads"]}
     return res
+
+
+def jitter_verdict(regime: str, p99, max_us, cyclictest_p99) -> tuple[str, object]:
+    """(target text, verdict) of a release jitter against cyclictest in the same regime
+    (also the real-time SIL's, ellipsled/bench/sil.py)."""
+    mult = TARGETS[f"{regime}_p99_over_cyclictest_max"]
+    text = f"p99 <= {mult:g}x cyclictest" + (f", max <= {TARGETS['idle_max_us']:g} us" if regime == "idle" else "")
+    return text, all_(le(p99, None if cyclictest_p99 is None else mult * cyclictest_p99),
+                      le(max_us, TARGETS["idle_max_us"]) if regime == "idle" else True)
+
+
+def rows(res: dict) -> list[Row]:
+    R = []
+    for regime in ("idle", "load"):
+        j = g(res, "jitter", regime) or {}
+        if not j:
+            continue
+        ct99 = j.get("cyclictest_p99_us")
+        target, ok = jitter_verdict(regime, j.get("p99_us"), j.get("max_us"), ct99)
+        R.append(row(f"release jitter {regime} p50 / p99 / max [us]",
+                     f"{fmt(j.get('p50_us'))} / {fmt(j.get('p99_us'))} / {fmt(j.get('max_us'))}",
+                     f"cyclictest {fmt(j.get('cyclictest_p50_us'))} / {fmt(ct99)} / {fmt(j.get('cyclictest_max_us'))}",
+                     f"{fmt(ratio(j.get('p99_us'), ct99))}x (p99)", target, ok))
+        R.append(row(f"cycle slips, in-process loop {regime} ({fmt(j.get('cycles'))} cycles)", fmt(j.get("slips")),
+                     "", "", f"{TARGETS['slips']}", None if j.get("slips") is None else j.get("slips") == TARGETS["slips"]))
+    return R
+
+
+def rt_rows(res: dict) -> list[Row]:
+    """The real-time hygiene the jitter loop ran under (the suite's ``rt`` table)."""
+    rt = res.get("rt") or {}
+    if not rt:
+        return []
+    th = rt.get("threads") or {}
+    return [row("real-time hygiene (jitter loop)",
+                f"SCHED_FIFO {fmt(rt.get('sched_fifo'))} prio {fmt(rt.get('priority'))}, CPUs {rt.get('affinity')}, "
+                f"mlockall {fmt(rt.get('mlockall'))}, GC off in cycle {fmt(rt.get('gc_disabled_in_cycle'))}, "
+                f"threads {fmt(th.get('process_threads'))} (numba {fmt(th.get('numba_threads'))})",
+                "", "", "used when permitted", NO_TARGET)]
 
 
 def main(argv=None) -> int:

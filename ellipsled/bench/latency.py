@@ -22,6 +22,8 @@ import time
 
 import numpy as np
 
+from .rows import NO_TARGET, Row, fmt, ratio, row
+
 READY = "ECHO-READY"
 
 
@@ -200,6 +202,16 @@ def run(quick: bool) -> dict:
             "zenoh_p50_us": zen["p50_us"], "zenoh_p99_us": zen["p99_us"], "zenoh_max_us": zen["max_us"],
             "zenoh_lost": zen["lost"],
             "zenoh_over_udp_p99": (zen["p99_us"] / udp["p99_us"]) if zen["p99_us"] and udp["p99_us"] else None}
+
+
+def rows(res: dict) -> list[Row]:
+    lat = res.get("latency") or {}
+    if not lat:
+        return []
+    return [row("Zenoh + codec round trip p50 / p99 [us] (2 processes)",
+                f"{fmt(lat.get('zenoh_p50_us'))} / {fmt(lat.get('zenoh_p99_us'))}",
+                f"UDP {fmt(lat.get('udp_p50_us'))} / {fmt(lat.get('udp_p99_us'))}",
+                f"{fmt(ratio(lat.get('zenoh_p99_us'), lat.get('udp_p99_us')))}x (p99)", "", NO_TARGET)]
 
 
 def main(argv=None) -> int:

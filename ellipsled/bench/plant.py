@@ -20,6 +20,8 @@ from common.model import load_scenario
 from sim.openloop import fly
 from sim.plant import Plant
 
+from .rows import NO_TARGET, Row, fmt, ratio, row
+
 
 def _step_costs_us(n: int, scenario) -> np.ndarray:
     plant = Plant(scenario, seed=1)
@@ -77,6 +79,17 @@ def run(quick: bool) -> dict:
             "t_end_s", "end_reason", "h_end_m", "qbar_max_pa", "t_qbar_max_s", "decel_max_g", "wall_s",
             "real_time_factor")},
     }
+
+
+def rows(res: dict) -> list[Row]:
+    p = res.get("plant") or {}
+    if not p:
+        return []
+    per = p.get("baseline_control_period_us")
+    return [row("plant cost per control period p50 / p99 [us]", f"{fmt(p.get('step_p50_us'))} / {fmt(p.get('step_p99_us'))}",
+                f"period {fmt(per)}", f"{fmt(ratio(p.get('step_p99_us'), per))} of period", "", NO_TARGET),
+            row("plant open-loop entry real-time factor", f"{fmt(p.get('entry_real_time_factor'))}x",
+                f"simulated {fmt(p.get('baseline_entry_simulated_s'))} s", "", "", NO_TARGET)]
 
 
 def main(argv: list[str] | None = None) -> int:

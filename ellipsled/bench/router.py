@@ -22,6 +22,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from .rows import NO_TARGET, Row, fmt, g, ratio, row
+
+TARGETS = {"slips": 0}           # through the router; latency is shown beside peer to peer
 FIGURES = ("latency_p50_us", "latency_p99_us", "latency_max_us", "jitter_p99_us", "slips")
 PREFIX = "ellipsled/bench-router"
 
@@ -130,7 +133,21 @@ def run(quick: bool) -> dict:
                       "control, loopback) vs peer to peer [us]",
             "p50_us": rtr.get("latency_p50_us"), "p99_us": rtr.get("latency_p99_us"),
             "baseline_p50_us": p2p.get("latency_p50_us"), "baseline_p99_us": p2p.get("latency_p99_us"),
-            "router_tls": rtr, "peer_to_peer": p2p, "targets": {}}
+            "router_tls": rtr, "peer_to_peer": p2p, "targets": dict(TARGETS)}
+
+
+def rows(res: dict) -> list[Row]:
+    sr = res.get("sil_router") or {}
+    if not sr:
+        return []
+    slips = g(sr, "router_tls", "slips")
+    return [row(f"sensor-to-actuator latency through the router, mutual TLS ({fmt(g(sr, 'router_tls', 'duration_s'))} s)"
+                " p50 / p99 [us]", f"{fmt(sr.get('p50_us'))} / {fmt(sr.get('p99_us'))}",
+                f"peer to peer {fmt(sr.get('baseline_p50_us'))} / {fmt(sr.get('baseline_p99_us'))}",
+                f"{fmt(ratio(sr.get('p99_us'), sr.get('baseline_p99_us')))}x (p99)", "", NO_TARGET),
+            row("  cycle slips through the router / peer to peer",
+                f"{fmt(slips)} / {fmt(g(sr, 'peer_to_peer', 'slips'))}", "", "", f"{TARGETS['slips']}",
+                None if slips is None else slips == TARGETS["slips"])]
 
 
 if __name__ == "__main__":

@@ -18,6 +18,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from .jitter import jitter_verdict
+from .rows import NO_TARGET, Row, fmt, g, ge, le, ratio, row
+
+LOCKSTEP_TARGETS = {"realtime_factor_min": 20.0}
+REALTIME_TARGETS = {"latency_p99_us_max": 1000.0, "slips": 0}   # jitter: as the in-process loop (jitter.py)
 SIL_KEYS = ("realtime_factor", "latency_p50_us", "latency_p99_us", "jitter_p50_us", "jitter_p99_us",
             "jitter_max_us", "slips")
 
@@ -81,7 +86,7 @@ def lockstep(quick: bool, available: tuple[bool, str] | None = None) -> dict:
            "realtime_factor": rtf, "baseline_simulated_s": s.get("t_end_s"),
            "wall_s": s.get("wall_s"), "process_wall_s": r["wall_s"], "end_reason": s.get("end_reason"),
            "completed": s.get("completed"), "cycle_slips": s.get("cycle_slips"), "command": r["command"],
-           "exit_code": r["exit_code"], "targets": {"realtime_factor_min": 20.0}}
+           "exit_code": r["exit_code"], "targets": dict(LOCKSTEP_TARGETS)}
     if rtf is None:
         res["realtime_factor_reason"] = "the run wrote no realtime_factor"
     return res
@@ -125,8 +130,46 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
             res["load"]["background"] = "stress-ng --cpu 2"
         except Exception as e:
             res["load"] = _nulls(SIL_KEYS[1:], f"background load failed: {type(e).__name__}: {e}")
-    res["targets"] = {"latency_p99_us_max": 1000.0, "slips": 0}
+    res["targets"] = dict(REALTIME_TARGETS)
     return res
+
+
+def lockstep_rows(res: dict) -> list[Row]:
+    sl = res.get("sil_lockstep") or {}
+    if not sl:
+        return []
+    m = LOCKSTEP_TARGETS["realtime_factor_min"]
+    return [row("lockstep SIL real-time factor (multi-process, Zenoh)", f"{fmt(sl.get('realtime_factor'))}x",
+                f"simulated {fmt(sl.get('baseline_simulated_s'))} s", "", f">= {m:g}x", ge(sl.get("realtime_factor"), m))]
+
+
+def realtime_rows(res: dict) -> list[Row]:
+    R = []
+    lat_max, slips = REALTIME_TARGETS["latency_p99_us_max"], REALTIME_TARGETS["slips"]
+    for regime in ("idle", "load"):
+        s = g(res, "sil_realtime", regime) or {}
+        if not s:
+            continue
+        ct99 = g(res, "jitter", regime, "cyclictest_p99_us")
+        target, ok = jitter_verdict(regime, s.get("jitter_p99_us"), s.get("jitter_max_us"), ct99)
+        R.append(row(f"real-time SIL jitter {regime} p50 / p99 / max [us]",
+                     f"{fmt(s.get('jitter_p50_us'))} / {fmt(s.get('jitter_p99_us'))} / {fmt(s.get('jitter_max_us'))}",
+                     f"cyclictest p99 {fmt(ct99)}", f"{fmt(ratio(s.get('jitter_p99_us'), ct99))}x (p99)", target, ok))
+        R.append(row(f"real-time SIL cycle slips {regime} ({fmt(s.get('duration_s'))} s)", fmt(s.get("slips")), "", "",
+                     f"{slips}", None if s.get("slips") is None else s.get("slips") == slips))
+        udp = g(res, "latency", "udp_p99_us")
+        R.append(row(f"sensor-to-actuator latency {regime} p50 / p99 [us]",
+                     f"{fmt(s.get('latency_p50_us'))} / {fmt(s.get('latency_p99_us'))}",
+                     f"UDP round trip p99 {fmt(udp)}", f"{fmt(ratio(s.get('latency_p99_us'), udp))}x (p99)",
+                     f"p99 <= {lat_max:g} us", le(s.get("latency_p99_us"), lat_max)))
+    s = g(res, "sil_realtime", "idle_standard_transport") or {}
+    if s:
+        low = g(res, "sil_realtime", "idle", "latency_p99_us")
+        R.append(row("sensor-to-actuator latency idle, --no-zenoh-lowlatency p50 / p99 [us]",
+                     f"{fmt(s.get('latency_p50_us'))} / {fmt(s.get('latency_p99_us'))}",
+                     f"low-latency transport p99 {fmt(low)}", f"{fmt(ratio(s.get('latency_p99_us'), low))}x (p99)",
+                     "", NO_TARGET))
+    return R
 
 
 if __name__ == "__main__":

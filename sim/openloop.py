@@ -30,8 +30,9 @@ from numba import njit
 from common import mrp
 from common.model import Scenario, load_scenario
 from interfaces.vocabulary import N_JETS
-from sim.plant import (A_BANK, A_ALPHA, A_BETA, A_E1, A_E2, A_E3, A_H, A_MACH, A_OMEGA_W_N, A_QBAR,
-                       A_SIN_GAMMA, A_TAU_AERO_B, A_F_AERO_N, A_V, Plant)
+from sim.dynamics import (A_ALPHA, A_BANK, A_BETA, A_E1, A_E2, A_E3, A_F_AERO_N, A_H, A_MACH, A_OMEGA_W_N,
+                          A_QBAR, A_SIN_GAMMA, A_TAU_AERO_B, A_V)
+from sim.plant import Plant
 
 OMEGA_N_RADPS = 4.0   # PD natural frequency of the ideal attitude hold
 ZETA = 0.9

@@ -13,7 +13,8 @@ from fsw import npc
 from fsw.navigation import Navigation
 from fsw.params import load_params
 from sim.openloop import OMEGA_N_RADPS, ZETA, ideal_torque
-from sim.plant import A_V, Plant
+from sim.dynamics import A_V
+from sim.plant import Plant
 
 SCN = load_scenario("guided-nominal")
 PARAMS = load_params(npc.PARAMS)
@@ -97,7 +98,7 @@ def test_root_finder_recovers_a_known_bank():
 
 
 def _initial_state():
-    from sim.plant import initial_translation
+    from sim.dynamics import initial_translation
     return initial_translation(SCN)
 
 
@@ -189,7 +190,7 @@ def test_ellipse_of_a_known_normal_sample():
 
 def test_guided_campaign_draws_entry_state_and_density_waves_and_keeps_the_default_draws():
     from ellipsled.montecarlo.campaign import apply_dispersion, draw_run, load_campaign
-    from sim.plant import P_RHO_SCALE, A_RHO
+    from sim.dynamics import A_RHO, P_RHO_SCALE
     g = load_campaign("guided")
     base = load_scenario(g.scenario)
     seed, d = draw_run(g, base, 5)

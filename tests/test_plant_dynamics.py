@@ -11,7 +11,8 @@ import pytest
 
 from common import mrp
 from common.model import load_scenario
-from sim.plant import A_OMEGA_W_N, Plant, state_derivative
+from sim.dynamics import A_OMEGA_W_N, state_derivative
+from sim.plant import Plant
 
 SC = load_scenario("nominal")
 MU, RE, OM = SC.planet.mu_m3ps2, SC.planet.radius_m, SC.planet.omega_radps

@@ -20,7 +20,7 @@ from ellipsled.batch import run as batch_run
 from common.events import EventLog
 from fsw.npc import PARAMS, EntryGuidance, planet_fixed
 from fsw.params import load_params
-from sim.plant import initial_translation
+from sim.dynamics import initial_translation
 
 from .rows import NO_TARGET, Row, fmt, le, row
 

@@ -15,6 +15,9 @@ Method (exact by construction, see tests/test_allocation_*.py):
 
 Non-finite demand: ``solve`` returns u = 0 (all usable jets off), sets ``rejected`` and
 leaves ``objective`` = NaN; it never raises in the cycle.
+
+One job in one file (~520 lines): the query kernels and the class that switches the tables
+they scan change together (the interim model of an asynchronous reconfiguration lives in both).
 """
 from __future__ import annotations
 

@@ -152,20 +152,21 @@ def cyclictest(loops: int, priority: int = PRIORITY, cpu: int | None = None,
 
 
 # --------------------------------------------------------------------------- the loop (child)
-def _rss_kb() -> int:
+def _proc_status(field: str) -> int:
+    """An integer field of /proc/self/status (e.g. "VmRSS" [kB], "Threads"); -1 if absent."""
     with open("/proc/self/status") as f:
         for line in f:
-            if line.startswith("VmRSS:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1])
     return -1
+
+
+def _rss_kb() -> int:
+    return _proc_status("VmRSS")
 
 
 def _threads() -> int:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("Threads:"):
-                return int(line.split()[1])
-    return -1
+    return _proc_status("Threads")
 
 
 def child(seconds: float, priority: int | None, cpu: int | None, scenario: str = "nominal") -> dict:

@@ -80,6 +80,23 @@ def _reject(u_out, obj_out):
 
 
 @njit(cache=True)
+def _tie_break(scratch, lim, cand_pen, cand_pat, tol_pen):
+    """Of the candidates whose objective (scratch) is at most lim: the smallest penalty
+    (within tol_pen), then the smallest bit pattern; its index."""
+    m = cand_pen.shape[0]
+    min_pen = np.inf
+    for r in range(m):
+        if scratch[r] <= lim and cand_pen[r] < min_pen:
+            min_pen = cand_pen[r]
+    chosen = -1
+    for r in range(m):
+        if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
+            if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
+                chosen = r
+    return chosen
+
+
+@njit(cache=True)
 def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch,
                   forbid, tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
     """One allocation over the candidates whose pattern has no bit of ``forbid`` (0: all).
@@ -144,15 +161,7 @@ def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen,
             scratch[r] = v
             if v < best_obj:
                 best_obj = v
-        lim = best_obj + tol
-        min_pen = np.inf
-        for r in range(m):
-            if scratch[r] <= lim and cand_pen[r] < min_pen:
-                min_pen = cand_pen[r]
-        for r in range(m):
-            if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
-                if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
-                    chosen = r
+        chosen = _tie_break(scratch, best_obj + tol, cand_pen, cand_pat, tol_pen)
     _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, ZERO3, u_out, tau_out, obj_out)
     return status
 
@@ -191,16 +200,7 @@ def _solve_shifted_kernel(tau_d, w, cand_tau, cand_pen, cand_pat, scratch, forbi
         if best_obj < np.inf:
             break
         status = 1
-    lim = best_obj + tol
-    min_pen = np.inf
-    for r in range(m):
-        if scratch[r] <= lim and cand_pen[r] < min_pen:
-            min_pen = cand_pen[r]
-    chosen = -1
-    for r in range(m):
-        if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
-            if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
-                chosen = r
+    chosen = _tie_break(scratch, best_obj + tol, cand_pen, cand_pat, tol_pen)
     _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out)
     return status
 

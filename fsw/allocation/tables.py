@@ -261,6 +261,15 @@ def _bucket_sort(ka, ia, lo, hi, kmin, kmax, kb, ib, count):
 
 
 @njit(cache=True, nogil=True)
+def _in_octant(o, t0, t1, t2, tol_box):
+    """Whether torque (t0, t1, t2) can lie in octant o's sign box: s_i t_i >= -tol_box."""
+    a0 = -t0 >= -tol_box if (o & 1) else t0 >= -tol_box
+    a1 = -t1 >= -tol_box if (o & 2) else t1 >= -tol_box
+    a2 = -t2 >= -tol_box if (o & 4) else t2 >= -tol_box
+    return a0 and a1 and a2
+
+
+@njit(cache=True, nogil=True)
 def _octant_members(tau, n, tol_box, octm):
     """Octant membership of candidates 0:n: a candidate belongs to octant o (bit i set:
     tau_d,i < 0, s_i = -1) if it can lie in that octant's sign box, s_i tau_i >= -tol_box
@@ -277,14 +286,26 @@ def _octant_members(tau, n, tol_box, octm):
         else:                               # on or near a coordinate plane: several octants
             octm[r] = -1
             for o in range(8):
-                a0 = -t0 >= -tol_box if (o & 1) else t0 >= -tol_box
-                a1 = -t1 >= -tol_box if (o & 2) else t1 >= -tol_box
-                a2 = -t2 >= -tol_box if (o & 4) else t2 >= -tol_box
-                if a0 and a1 and a2:
+                if _in_octant(o, t0, t1, t2, tol_box):
                     start[o + 1] += 1
     for o in range(8):
         start[o + 1] += start[o]
     return start
+
+
+@njit(cache=True, nogil=True)
+def _push_key(o, r, t0, t1, t2, pen_r, w, pos, ka, ia, kmin, kmax):
+    """Append candidate r to octant o's sort input with key -score = pen - sum_i w_i s_i t_i."""
+    s0 = 1.0 - 2.0 * (o & 1)                # signs by arithmetic: no unpredictable branches
+    s1 = 1.0 - (o & 2)
+    s2 = 1.0 - 0.5 * (o & 4)
+    k = pen_r - (w[0] * s0 * t0 + w[1] * s1 * t1 + w[2] * s2 * t2)
+    j = pos[o]
+    pos[o] = j + 1
+    ka[j] = k
+    ia[j] = r
+    kmin[o] = min(kmin[o], k)
+    kmax[o] = max(kmax[o], k)
 
 
 @njit(cache=True, nogil=True)
@@ -312,31 +333,11 @@ def _octant_fill(tau, pen, pat, n, w, tol_box, octm, start, ka, ia, kb, ib, coun
         t0, t1, t2 = tau[r, 0], tau[r, 1], tau[r, 2]
         o1 = octm[r]
         if o1 >= 0:
-            o = np.int64(o1)                # signs by arithmetic: no unpredictable branches
-            s0 = 1.0 - 2.0 * (o & 1)
-            s1 = 1.0 - (o & 2)
-            s2 = 1.0 - 0.5 * (o & 4)
-            k = pen[r] - (w[0] * s0 * t0 + w[1] * s1 * t1 + w[2] * s2 * t2)
-            j = pos[o]
-            pos[o] = j + 1
-            ka[j] = k
-            ia[j] = r
-            kmin[o] = min(kmin[o], k)
-            kmax[o] = max(kmax[o], k)
+            _push_key(np.int64(o1), r, t0, t1, t2, pen[r], w, pos, ka, ia, kmin, kmax)
             continue
         for o in range(8):
-            a0 = -t0 >= -tol_box if (o & 1) else t0 >= -tol_box
-            a1 = -t1 >= -tol_box if (o & 2) else t1 >= -tol_box
-            a2 = -t2 >= -tol_box if (o & 4) else t2 >= -tol_box
-            if a0 and a1 and a2:
-                k = pen[r] - (w[0] * (-1.0 if (o & 1) else 1.0) * t0 + w[1] * (-1.0 if (o & 2) else 1.0) * t1
-                              + w[2] * (-1.0 if (o & 4) else 1.0) * t2)
-                j = pos[o]
-                pos[o] = j + 1
-                ka[j] = k
-                ia[j] = r
-                kmin[o] = min(kmin[o], k)
-                kmax[o] = max(kmax[o], k)
+            if _in_octant(o, t0, t1, t2, tol_box):
+                _push_key(np.int64(o), r, t0, t1, t2, pen[r], w, pos, ka, ia, kmin, kmax)
     for o in range(8):
         _bucket_sort(ka, ia, start[o], start[o + 1], kmin[o], kmax[o], kb, ib, count)
     for o in range(8):

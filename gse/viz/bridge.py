@@ -31,10 +31,6 @@ from gse.viz.sinks import open_sinks
 from interfaces import codec, records
 from interfaces import keys as keymod
 
-# Proposed layout of the fsw/state record (to be moved to interfaces/records.py as
-# FSW_STATE and registered in interfaces/codec.py with the reserved id 6). Field names are
-# those of gse/viz/logger.py SOURCE_FIELDS['fsw'] and ellipsled/history.py FIELDS.
-
 
 def make_codecs(on_reject=None) -> dict[str, codec.Codec]:
     return {"truth": codec.Codec.for_schema("TRUTH", on_reject=on_reject),

@@ -82,16 +82,10 @@ class Navigation:
     def __init__(self, planet: Planet, vehicle: Vehicle):
         self.planet = planet
         self.vehicle = vehicle
-        self._density = atmosphere.DENSITY_MODELS[planet.density_model]
         self._model = _MODEL_FLAG[planet.density_model]
         self._consts = (float(planet.omega_radps), float(planet.radius_m), self._model,
                         float(planet.rho0_kgpm3), float(planet.scale_height_m))
         self.state = NavState()
-
-    def density(self, h_m: float) -> float:
-        if self.planet.density_model == "exponential":
-            return atmosphere.density_exponential(h_m, self.planet.rho0_kgpm3, self.planet.scale_height_m)
-        return self._density(h_m)
 
     def update(self, t_s: float, sigma_BN, omega_BN_B, r_N, v_N, accel_B) -> NavState:
         """The flight condition at t_s from one frame's attitude, rate, position, velocity

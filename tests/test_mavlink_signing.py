@@ -19,8 +19,7 @@ from pymavlink.dialects.v20 import common as stock
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import FrameSplitter, parse_header
 from interfaces.mavlink.signing import (
-    KEY_ENV, REPO_ROOT, Reject, SignedLink, Signer, SigningKey, SigningKeyError,
-    SigningVerifier, signing_timestamp)
+    KEY_ENV, REPO_ROOT, Reject, SignedLink, Signer, SigningKey, SigningKeyError, signing_timestamp)
 
 T0 = 1_760_000_000.0            # fake Unix time [s] (2025-10)
 TS0 = signing_timestamp(T0)

@@ -15,9 +15,7 @@ import numpy as np
 import pytest
 
 from ellipsled import batch
-from interfaces import records, transport
-from interfaces.codec import Codec
-from interfaces.keys import keys
+from interfaces import transport
 
 pytestmark = pytest.mark.slow
 

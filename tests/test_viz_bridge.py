@@ -9,7 +9,6 @@ import urllib.request
 
 import numpy as np
 import psutil
-import pytest
 import rerun as rr
 
 from common.model import N_JETS

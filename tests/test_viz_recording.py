@@ -17,7 +17,7 @@ from ellipsled.history import History
 from common.events import Event, Severity
 from gse.viz import RerunLogger, open_sinks, record_history
 from gse.viz.blueprint import VIEW_NAMES
-from gse.viz.logger import FSW, SCALAR_CHANNELS, TRUTH
+from gse.viz.logger import SCALAR_CHANNELS, TRUTH
 from gse.viz.record import r_N_from_history
 from gse.viz.sinks import parse_mode
 

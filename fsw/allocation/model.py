@@ -9,15 +9,14 @@ Problem, per control cycle, for demand tau_d (3,) [N m]:
     subject to 0 <= tau_i <= tau_d,i (tau_d,i >= 0),  tau_d,i <= tau_i <= 0 (tau_d,i < 0)
 
 If no u satisfies the sign box (possible only with a stuck-on bias) the same objective is
-minimised without it and the answer is flagged ``degraded``. Ties (objectives within
-``tie_tol``) are broken by the smaller penalty sum, then by the smaller jet-bit pattern
+minimised without it and the answer is flagged ``degraded``. Ties (objectives within the
+tie tolerance) are broken by the smaller penalty sum, then by the smaller jet-bit pattern
 sum_k u_k 2^(k-1) (jet 1 = bit 0). The constant penalty of stuck-on jets is not part of
 the objective (it does not change the argmin).
 
 Tolerances: a torque is inside the box if it overshoots a bound by at most TOL_BOX_NM;
-two objectives tie if they differ by at most tie_tol(w, tau_d) = TOL_TIE + TIE_REL *
-sum_i w_i |tau_d,i| (the relative term covers rounding of huge demands); two penalties tie
-within TOL_PEN.
+two objectives tie if they differ by at most TOL_TIE + TIE_REL * sum_i w_i |tau_d,i| (the
+relative term covers rounding of huge demands); two penalties tie within TOL_PEN.
 
 Fault tolerance off (paper figure 5): the model assumes every jet nominal (usable,
 eta = 1, nothing stuck, nothing inhibited) whatever the health says; the jet driver still
@@ -34,11 +33,6 @@ TOL_BOX_NM = 1e-9          # allowed overshoot of a sign-box bound [N m]
 TOL_TIE = 1e-9             # absolute objective tie tolerance [N m]
 TIE_REL = 32 * np.finfo(float).eps   # per unit of sum_i w_i |tau_d,i|: rounding of huge demands
 TOL_PEN = 1e-9             # penalty tie tolerance [N m]
-
-
-def tie_tol(w: np.ndarray, tau_d: np.ndarray) -> float:
-    """Objective tie tolerance [N m] for demand tau_d (see module docstring)."""
-    return TOL_TIE + TIE_REL * float(np.sum(np.abs(w) * np.abs(tau_d)))
 
 
 

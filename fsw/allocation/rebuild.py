@@ -23,7 +23,6 @@ class Rebuilder:
         self._gate = threading.Event()        # cleared: jobs wait (deterministic tests)
         self._gate.set()
         self.done: dict = {}
-        self.builds = 0
         self._thread = threading.Thread(target=self._run, name="allocator-rebuild", daemon=True)
         self._thread.start()
 
@@ -94,6 +93,5 @@ class Rebuilder:
                 tables = e
             with self._cv:
                 self.done[key] = tables
-                self.builds += 1
                 self._busy = False
                 self._cv.notify_all()

@@ -10,7 +10,9 @@ interrupted run keeps what it measured.
 Sections (ellipsled/bench/<name>.py, each ``run(quick) -> dict``): machine, codec,
 allocator, plant, cycle, batch, groundlink, latency, jitter, sil_lockstep, sil_realtime,
 sil_router (ellipsled/bench/router.py), flood (a ground flood at the real-time SIL),
-bridge; ``rt`` (real-time hygiene) is read from the jitter loop.
+bridge; ``rt`` (real-time hygiene) is read from the jitter loop. Each section module
+declares its TARGETS and builds its own table rows from them (``rows(res)``); this module
+only orders them (ROWS).
 """
 from __future__ import annotations
 

@@ -65,7 +65,7 @@ def main(args) -> int:
     try:
         rep = None
         if args.rt:
-            from fsw import rt
+            from common import rt
             # threads created from here on inherit the policy; those zenoh started at import
             # are set after the session opens
             rep = rt.apply(priority=args.rt_priority)

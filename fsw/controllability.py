@@ -39,6 +39,7 @@ import numpy as np
 
 from .guidance import _S2_MAX
 from .health import STUCK_ON, JetHealth
+from .lp import set_colwise_matrix
 
 # HiGHS feasibility tolerance on the torque rows [N m]: far below one jet's torque
 _TOL_NM = 1e-7
@@ -117,16 +118,7 @@ def _lp(cost, M, row_lo, row_hi, lo, hi):
     lp.col_upper_ = np.asarray(hi, float)
     lp.row_lower_ = np.asarray(row_lo, float)
     lp.row_upper_ = np.asarray(row_hi, float)
-    start, index, value = [0], [], []
-    for j in range(n):
-        nz = np.flatnonzero(M[:, j])
-        index.extend(nz.tolist())
-        value.extend(M[nz, j].tolist())
-        start.append(len(index))
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = np.array(start, dtype=np.int32)
-    lp.a_matrix_.index_ = np.array(index, dtype=np.int32)
-    lp.a_matrix_.value_ = np.array(value, dtype=float)
+    set_colwise_matrix(lp, M)
     h.passModel(lp)
     h.run()
     status = h.getModelStatus()

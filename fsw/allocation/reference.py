@@ -14,6 +14,8 @@ from collections import OrderedDict
 import numpy as np
 from numba import njit
 
+from fsw.lp import set_colwise_matrix
+
 from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, validate_problem
 
 
@@ -66,16 +68,7 @@ def solve_highs(T, thrust, health, w, c, tau_d, fault_tolerance=True):
         lp.num_row_ = M.shape[0]
         lp.row_lower_ = np.array(lower)
         lp.row_upper_ = np.array(upper)
-        csc_start, csc_index, csc_value = [0], [], []
-        for j in range(M.shape[1]):
-            nz = np.flatnonzero(M[:, j])
-            csc_index.extend(nz.tolist())
-            csc_value.extend(M[nz, j].tolist())
-            csc_start.append(len(csc_index))
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-        lp.a_matrix_.start_ = np.array(csc_start, dtype=np.int32)
-        lp.a_matrix_.index_ = np.array(csc_index, dtype=np.int32)
-        lp.a_matrix_.value_ = np.array(csc_value)
+        set_colwise_matrix(lp, M)
         lp.integrality_ = [highspy.HighsVarType.kInteger] * p + [highspy.HighsVarType.kContinuous] * N_AXES
         h.passModel(lp)
         h.run()

@@ -189,12 +189,8 @@ class FlightSoftware:
         self._have_prev = True
         return self.driver.command(u_alloc, self.modes.jets_enabled)
 
-    def assess_controllability(self, t_s: float) -> None:
-        """The duty-cycle LP (fsw/controllability.py) on the health the allocator now uses, with
-        the FSW's own models: inertia estimate, velocity direction from navigation, the aero
-        moment of its density model, nominal derivatives and current factors d_hat. In real time
-        it runs on a background thread (tens of ms: longer than a control period); its answer is
-        applied by the first cycle after it is ready. Batch and lockstep apply it here."""
+    def _lp_problem(self, t_s: float) -> tuple:
+        """(schedule's need, arguments of controllability()) for the health the allocator uses."""
         nav = self.nav.state
         veh = self.scenario.vehicle
         a = veh.aero
@@ -209,6 +205,15 @@ class FlightSoftware:
         need = schedule_accel_need_radps2(self.scenario.bank_schedule, t_s)
         args = (veh.torque_matrix_Nm, self.allocator_health().copy(), self.control.inertia_hat(), v_B, A,
                 self.params["guidance.trim_max_deg"], need, float(nav.qbar_pa))
+        return need, args
+
+    def assess_controllability(self, t_s: float) -> None:
+        """The duty-cycle LP (fsw/controllability.py) on the health the allocator now uses, with
+        the FSW's own models: inertia estimate, velocity direction from navigation, the aero
+        moment of its density model, nominal derivatives and current factors d_hat. In real time
+        it runs on a background thread (tens of ms: longer than a control period); its answer is
+        applied by the first cycle after it is ready. Batch and lockstep apply it here."""
+        need, args = self._lp_problem(t_s)
         if not self.realtime:
             self._apply_controllability(t_s, need, controllability(*args))
             return
@@ -362,6 +367,15 @@ class FlightSoftware:
             self._lp_worker.close()
         if self.entry is not None:
             self.entry.close()
+
+    def warm_background(self, timeout_s: float = 10.0) -> bool:
+        """Before the first cycle (real time): the allocator's single-fault pre-builds finished
+        and the controllability LP solved once here (answer discarded), so the first fault's
+        reconfiguration finds nothing cold. Cold, the LP thread's first solve loads HiGHS
+        (~150 ms holding the GIL) while the allocator's builder and the control thread wait,
+        and the new tables queue behind the pre-builds. True if the builder is idle in time."""
+        controllability(*self._lp_problem(self.t_s)[1])
+        return self.allocator.wait_idle(timeout_s)
 
     def health_changed(self) -> None:
         """Hand the allocator the health FDIR now holds (after an override, clear or inhibit)

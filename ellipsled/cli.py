@@ -115,24 +115,73 @@ def _add_sil(sub):
     p.set_defaults(func=viz)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="ellipsled", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    _add_plant(sub)
-    _add_batch(sub)
-    _add_report(sub)
-    _add_params(sub)
+def _add_gse(sub):
     from gse.cli import add_gse_parser
     add_gse_parser(sub)
-    _add_sil(sub)
-    from ellipsled.net.pki import add_pki_parser
+
+
+def _add_router(sub):
     from ellipsled.net.router import add_router_parser
     add_router_parser(sub)
+
+
+def _add_pki(sub):
+    from ellipsled.net.pki import add_pki_parser
     add_pki_parser(sub)
+
+
+def _add_montecarlo(sub):
     from ellipsled.montecarlo import add_montecarlo_parser
     add_montecarlo_parser(sub)
+
+
+def _add_bench(sub):
     from ellipsled.bench.suite import add_bench_parser
     add_bench_parser(sub)
+
+
+# (subcommand, its one-line help, the function adding it and its siblings in full). Only the
+# chosen subcommand's modules are imported: building every parser imported the batch runner,
+# the SIL, Rerun and the ground station (seconds) before any command could start.
+COMMANDS: tuple[tuple[str, str, object], ...] = (
+    ("plant", "open-loop plant run: attitude held on the reference by an ideal torque", _add_plant),
+    ("batch", "fly a scenario: plant and FSW in one process, lockstep", _add_batch),
+    ("report", "fly every paper case and write report.md (paper claims vs measured)", _add_report),
+    ("params", "the FSW parameters: MAVLink id, owner, unit, bounds, default, description", _add_params),
+    ("gse", "ground station: console and scripted commands (MAVLink 2, signed)", _add_gse),
+    ("run", "the SIL: plant, flight software and viewers as processes over Zenoh", _add_sil),
+    ("sim", "the plant process of the SIL", _add_sil),
+    ("fsw", "the flight-software process of the SIL", _add_sil),
+    ("viz", "the Rerun bridge: Zenoh truth/state/events -> Rerun", _add_sil),
+    ("router", "the Zenoh router of a SIL across machines (TLS, access control)", _add_router),
+    ("pki", "certificates for Zenoh's mutual TLS (a CA and one per role)", _add_pki),
+    ("montecarlo", "dispersed Monte Carlo campaign on Dask (local or a cluster)", _add_montecarlo),
+    ("bench", "benchmark suite: every figure next to its baseline, JSON + table", _add_bench),
+)
+
+
+def build_parser(argv: list[str]) -> argparse.ArgumentParser:
+    """The parser, in full for the subcommand ``argv`` names (its first word that is not an
+    option) and as a name and help line for the others (enough for ``--help`` and for
+    argparse's choice of subcommand)."""
+    chosen = next((w for w in argv if not w.startswith("-")), None)
+    ap = argparse.ArgumentParser(prog="ellipsled", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    full = next((add for name, _, add in COMMANDS if name == chosen), None)
+    done = set()
+    for name, hlp, add in COMMANDS:
+        if add is full:
+            if add not in done:
+                done.add(add)
+                add(sub)
+        else:
+            sub.add_parser(name, help=hlp)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    ap = build_parser(argv)
     a = ap.parse_args(argv)
     try:
         return int(a.func(a) or 0)

@@ -22,14 +22,14 @@ FIELDS: dict[str, tuple[int, ...]] = {
     # flight software
     "bank_ref_rad": (), "bankdot_ref_radps": (), "sigma_RN": (3,), "u_cal_B": (3,), "tau_alloc_B": (3,),
     "theta_hat": (9,), "jets_cmd": (N_JETS,), "health": (N_JETS,), "mode": (),
-    "alloc_degraded": (), "compute_us": (), "alloc_us": (),
+    "alloc_degraded": (), "alloc_short": (), "compute_us": (), "alloc_us": (),
 }
 # Which side of the SIL records each field (the batch runner records both).
 TRUTH_FIELDS = ("k", "t_s", "bank_rad", "alpha_rad", "beta_rad", "omega_BN_B", "sigma_BN", "h_m", "V_rel_mps",
                 "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa", "decel_g", "tau_jets_B")
 FSW_FIELDS = tuple(k for k in FIELDS if k not in TRUTH_FIELDS)
 
-_DTYPES = {"k": np.int64, "jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8}
+_DTYPES = {"k": np.int64, "jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8, "alloc_short": np.uint8}
 
 
 class History:
@@ -101,6 +101,7 @@ def record_fsw(h: History, i: int, fsw, u: np.ndarray, compute_ns: int) -> None:
     a["health"][i] = fsw.health.state
     a["mode"][i] = int(fsw.modes.mode)
     a["alloc_degraded"][i] = fsw.allocator.degraded
+    a["alloc_short"][i] = fsw.alloc_short
     a["compute_us"][i] = compute_ns * 1e-3
     a["alloc_us"][i] = fsw.alloc_ns * 1e-3
 

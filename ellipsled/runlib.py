@@ -93,8 +93,16 @@ def alloc_sample(fsw: FlightSoftware) -> dict:
             "inhibited": hl.inhibited.tolist(), "objective": float(fsw.allocator.objective)}
 
 
+def box_name(spill_jets: float) -> str:
+    """The allocation box flown, as the report names it."""
+    if spill_jets == 0.0:
+        return "sign box (paper)"
+    return f"spill box ({spill_jets:g} largest-jet torque per axis)"
+
+
 def verify_allocations(scn: Scenario, params: dict, samples: list[dict]) -> tuple[float | None, int]:
     """Re-solve sampled demands by exhaustive enumeration: the largest objective gap seen."""
+    from fsw.allocation.model import spill_of
     from fsw.allocation.reference import solve_enumeration
     from fsw.health import JetHealth
     veh = scn.vehicle
@@ -107,7 +115,8 @@ def verify_allocations(scn: Scenario, params: dict, samples: list[dict]) -> tupl
             continue
         h = JetHealth()
         h.state[:], h.eta[:], h.inhibited[:] = s["state"], s["eta"], s["inhibited"]
-        _, ref, _ = solve_enumeration(veh.torque_matrix_Nm, veh.thrust_N, h, w, c, np.array(s["tau_d"]), True)
+        _, ref, _ = solve_enumeration(veh.torque_matrix_Nm, veh.thrust_N, h, w, c, np.array(s["tau_d"]), True,
+                                      spill_of(veh.torque_matrix_Nm, params["allocator.spill_jets"]))
         gap = max(gap, abs(s["objective"] - ref))
         n += 1
     return (gap if n else None), n
@@ -152,6 +161,8 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
         "allocator": {"solves": int(len(au)), "p50_us": pct(au, 50), "p99_us": pct(au, 99),
                       "max_us": float(np.max(au)) if len(au) else None,
                       "degraded": int(np.sum(h["alloc_degraded"])),
+                      "short": int(np.sum(h["alloc_short"])),
+                      "box": box_name(params["allocator.spill_jets"]),
                       "optimality_gap_max": gap, "optimality_checked": checked},
         "fdir": {"detections": dets, "false_alarms": false_alarms, "missed": missed},
         "propellant_kg": rep["propellant_kg"],
@@ -229,7 +240,7 @@ def format_summary(s: dict) -> str:
         f" {s['control_effort_applied']:.3g} (commanded {s['control_effort_cmd']:.3g},"
         f" undeliverable {f(s['control_effort_undeliverable_share'], '{:.0%}')})",
         f"  allocator: {a['solves']} solves, p50 {f(a['p50_us'], '{:.1f}')} us, p99 {f(a['p99_us'], '{:.1f}')} us,"
-        f" degraded {a['degraded']}, optimality gap {f(a['optimality_gap_max'], '{:.2g}')} ({a['optimality_checked']} checked)",
+        f" degraded {a['degraded']}, short on the bank axis {a.get('short')}, optimality gap {f(a['optimality_gap_max'], '{:.2g}')} ({a['optimality_checked']} checked)",
         f"  FDIR: {len(s['fdir']['detections'])} detections, {s['fdir']['false_alarms']} false alarms,"
         f" missed {s['fdir']['missed']}; cycle slips {s['cycle_slips']}",
     ] + ([f"  deploy: miss {s['deploy_miss_km']:.2f} km (downrange {s['downrange_err_km']:+.2f}, crossrange "

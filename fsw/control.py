@@ -31,7 +31,7 @@ from fsw.params import Param
 _CD, _KD, _KI, _GH, _GD, _DT, _VDEAD, _ILIM, _SFRAC, _DMIN, _DMAX, _SWITCH, _QSL, _CLB, _CMA, _CNB, _ATRIM = range(17)
 _NPRM = 17
 # diag vector layout (telemetry of the last update)
-_D_V, _D_ADAPT, _D_SAT, _D_PROJ, _D_SWITCH, _D_BAD = range(6)
+_D_V, _D_ADAPT, _D_SAT, _D_PROJ, _D_SWITCH, _D_BAD, _D_SHORT = range(7)
 
 
 @njit(cache=True)
@@ -137,7 +137,7 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
                 u_prev, tau_del, have_del, freeze, have_chart, prm, h_scale, h_lo, h_hi, u_sat_min, P,
                 theta, eps_int, sigma_c, u_out, eps, eps_dot, diag):
     """One SAMI cycle. State (theta, eps_int, sigma_c) is committed only when every output is finite."""
-    for i in range(6):
+    for i in range(diag.shape[0]):
         diag[i] = 0.0
     # --- controller MRP chart: continuous with the last cycle, switched with hysteresis
     s2n = sigma_nav[0] ** 2 + sigma_nav[1] ** 2 + sigma_nav[2] ** 2
@@ -222,14 +222,24 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
         if i >= 6:
             w[i - 6] = Py                      # E^T P y
     diag[_D_V] = Vl
-    # --- saturation awareness: last cycle's delivered torque far short of the command
+    # --- saturation awareness: last cycle's delivered torque far short of the command.
+    # short[i]: axis i got more than one largest jet increment (u_sat_min / 2) and more than
+    # shortfall_frac of its command away from it: the tracking error then carries torque
+    # that was commanded but not delivered (or delivered unasked), which is no evidence about
+    # the model, so that axis's aero factor does not learn from it, nor does the inertia.
     sat = False
+    short = np.zeros(3, dtype=np.bool_)
+    any_short = False
     if have_del:
         for i in range(3):
-            short = abs(u_prev[i] - tau_del[i])
-            if abs(u_prev[i]) > u_sat_min[i] and short > prm[_SFRAC] * abs(u_prev[i]):
+            miss = abs(u_prev[i] - tau_del[i])
+            if abs(u_prev[i]) > u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
                 sat = True
+            if miss > 0.5 * u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
+                short[i] = True
+                any_short = True
     diag[_D_SAT] = 1.0 if sat else 0.0
+    diag[_D_SHORT] = 1.0 if any_short else 0.0
     # --- integrator (frozen while saturated, clamped)
     ei_new = np.empty(3)
     lim = prm[_ILIM]
@@ -258,6 +268,8 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
         _Pa_mul(sig, z, pz)
         # h_hat_dot = -Gamma_h Y^T z, Y^T z = M^T P_a z; Gamma_h = gamma_h diag(h_scale^2)
         for j in range(6):
+            if any_short:
+                break
             yz = M[0, j] * pz[0] + M[1, j] * pz[1] + M[2, j] * pz[2]
             v = theta[j] - prm[_DT] * prm[_GH] * h_scale[j] * h_scale[j] * yz
             th_new[j] = min(h_hi[j], max(h_lo[j], v))
@@ -269,6 +281,8 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
             diag[_D_PROJ] = 1.0
         # d_hat_dot = -Gamma_d (-P_a^T L)^T z = Gamma_d L P_a z
         for i in range(3):
+            if short[i]:
+                continue
             v = theta[6 + i] + prm[_DT] * prm[_GD] * lv[i] * pz[i]
             th_new[6 + i] = min(prm[_DMAX], max(prm[_DMIN], v))
             if th_new[6 + i] != v:
@@ -368,7 +382,7 @@ class SamiController:
         self.eps_int = np.zeros(3)
         self.u_cal_B = np.zeros(3)
         self._sigma_c = np.zeros(3)
-        self._diag = np.zeros(6)
+        self._diag = np.zeros(7)
         self._zero3 = np.zeros(3)
         self._u_safe = np.zeros(3)
         self._lv = np.zeros(3)
@@ -468,6 +482,12 @@ class SamiController:
     @property
     def saturated(self) -> bool:
         return bool(self._diag[_D_SAT])
+
+    @property
+    def short(self) -> bool:
+        """True when last cycle's delivered torque missed the command on some axis by more
+        than quantisation: the affected aero factors and the inertia did not learn."""
+        return bool(self._diag[_D_SHORT])
 
     @property
     def projected(self) -> bool:

@@ -363,6 +363,12 @@ class Fdir:
             changed = self._refresh_active()
         return changed
 
+    @property
+    def reconfig_pending(self) -> bool:
+        """A detection waits for its reconfiguration delay: the allocator still plans with
+        jets FDIR knows do not deliver what it models."""
+        return self._next_apply < np.inf
+
     def _refresh_active(self) -> bool:
         """Recompute health_active from overrides and applied detections; True if it changed."""
         act = self.health_active

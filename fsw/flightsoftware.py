@@ -20,7 +20,7 @@ from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult
 
 from .allocation import Allocator
 from .control import SamiController
-from .controllability import (Controllability, aero_moment_per_rad, controllability,
+from .controllability import (Controllability, aero_moment_per_rad, controllability, velocity_dir_B,
                               schedule_accel_need_radps2)
 from .fdir import Fdir
 from .guidance import BankProfile, Guidance
@@ -116,6 +116,14 @@ class FlightSoftware:
         self.t_s = 0.0
         self.u_cal_B = np.zeros(3)
         self.tau_alloc_B = np.zeros(3)
+        # the bank axis (velocity direction at trim, body axes) and its jet quantum: a cycle is
+        # short when the torque delivered about it falls short of the demand by more than
+        # control.shortfall_frac of a demand worth two or more of the largest jet increments
+        # (the rule SAMI's saturation awareness applies per body axis)
+        self.bank_axis_B = velocity_dir_B(veh.aero.alpha_trim_rad)
+        self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
+        self.alloc_short = False
+        self.alloc_short_cycles = 0
         self._omega_prev = np.zeros(3)
         self._tau_cmd_prev = np.zeros(3)
         self._have_prev = False
@@ -167,7 +175,9 @@ class FlightSoftware:
             return self._hold_off(t_s)
         mode = self.modes.mode
         if mode == Mode.ENTRY:
-            self.control.freeze = not self.modes.adaptation_enabled
+            # no learning while FDIR holds a detection not yet reconfigured: the torque
+            # commanded through the faulty jets is not what the tracking error saw
+            self.control.freeze = not self.modes.adaptation_enabled or self.fdir.reconfig_pending
             u_cal = self.control.update(nav, self.guidance, self.tau_alloc_B if self._have_prev else None)
         elif mode == Mode.SAFE:
             self.control.freeze = True
@@ -186,8 +196,20 @@ class FlightSoftware:
         if self.allocator.degraded:
             self.events.emit(t_s, Severity.WARNING, "allocator", "alloc_degraded",
                              "ALLOCATION DEGRADED (infeasible)", rate_limited=True)
+        self._check_bank_shortfall(t_s)
         self._have_prev = True
         return self.driver.command(u_alloc, self.modes.jets_enabled)
+
+    def _check_bank_shortfall(self, t_s: float) -> None:
+        ax = self.bank_axis_B
+        d = float(ax[0] * self.u_cal_B[0] + ax[1] * self.u_cal_B[1] + ax[2] * self.u_cal_B[2])
+        got = float(ax[0] * self.tau_alloc_B[0] + ax[1] * self.tau_alloc_B[1] + ax[2] * self.tau_alloc_B[2])
+        self.alloc_short = (abs(d) > self._bank_short_min_Nm
+                            and (d - got) * np.sign(d) > self.params["control.shortfall_frac"] * abs(d))
+        if self.alloc_short:
+            self.alloc_short_cycles += 1
+            self.events.emit(t_s, Severity.WARNING, "allocator", "alloc_short",
+                             "ALLOCATION SHORT ON BANK AXIS", rate_limited=True)
 
     def _lp_problem(self, t_s: float) -> tuple:
         """(schedule's need, arguments of controllability()) for the health the allocator uses."""
@@ -198,7 +220,6 @@ class FlightSoftware:
         V = nav.V_rel_mps
         v_B = nav.C_BN @ nav.vrel_N / V if V > 1.0 else None
         if v_B is None or not np.all(np.isfinite(v_B)):     # no flight condition yet: the trim direction
-            from .controllability import velocity_dir_B
             v_B = velocity_dir_B(a.alpha_trim_rad)
         A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta * d[0], a.C_malpha * d[1],
                                 a.C_nbeta * d[2])
@@ -260,6 +281,7 @@ class FlightSoftware:
         self._have_prev = False
         self.u_cal_B[:] = 0.0
         self.tau_alloc_B[:] = 0.0
+        self.alloc_short = False
         return self.driver.command(self._zero_u, False)
 
     # ---------------------------------------------------------------- RG2

@@ -21,6 +21,7 @@ import numpy as np
 
 from common.model import load_vehicle
 from fsw.allocation import Allocator, effective_model
+from fsw.allocation.model import spill_of
 from fsw.allocation.reference import solve_enumeration_many, solve_highs
 from fsw.allocation.tables import Workspace, build_tables
 from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
@@ -39,6 +40,7 @@ class Case:
     w: tuple[float, float, float] = (1.0, 1.0, 1.0)
     penalty_per_N: float = 0.01
     fault_tolerance: bool = True
+    spill_jets: float = 0.0   # box's wrong-sign allowance in largest single-jet torques; 0: sign box
 
 
 
@@ -71,6 +73,13 @@ def cases() -> list[Case]:
         Case("case1-zero-yaw-weight", JetHealth.of(failed=(1, 2, 17, 18)), w=(1.0, 1.0, 0.0)),
         Case("case2-heavy-penalty", JetHealth.of(stuck=(2, 3, 4, 5, 8, 9, 10)), penalty_per_N=1.0),
         Case("ft-off-with-case1-health", JetHealth.of(failed=(1, 2, 17, 18)), fault_tolerance=False),
+        # the spill box (wrong-sign torque within one largest jet per axis), nominal and after faults
+        # that remove the exactly cancelling pairs
+        Case("nominal-spill", JetHealth.of(), w=(3.0, 1.0, 1.0), spill_jets=1.0),
+        Case("case2-spill", JetHealth.of(stuck=(2, 3, 4, 5, 8, 9, 10)), w=(3.0, 1.0, 1.0), spill_jets=1.0),
+        Case("failed-7-16-18-degraded-1-3-8-spill", JetHealth.of(failed=(7, 16, 18), degraded=((1, .5), (3, .6), (8, .8))),
+             w=(3.0, 1.0, 1.0), spill_jets=1.0),
+        Case("mixed-f13-14-s15-spill-half", JetHealth.of(failed=(13, 14), stuck=(15,)), spill_jets=0.5),
     ]
     rng = np.random.default_rng(20110807)
     for i in range(3):                      # seeded random mixed faults
@@ -125,7 +134,8 @@ def demands(T: np.ndarray, thrust: np.ndarray, case: Case, n: int, seed: int) ->
 def params_for(case: Case) -> dict[str, float]:
     return {"allocator.w_roll": case.w[0], "allocator.w_pitch": case.w[1],
             "allocator.w_yaw": case.w[2], "allocator.penalty_per_N": case.penalty_per_N,
-            "allocator.fault_tolerance": float(case.fault_tolerance)}
+            "allocator.fault_tolerance": float(case.fault_tolerance),
+            "allocator.spill_jets": case.spill_jets}
 
 
 def rebuild_figures(T: np.ndarray, thrust: np.ndarray, reps: int = 9) -> dict:
@@ -142,7 +152,7 @@ def rebuild_figures(T: np.ndarray, thrust: np.ndarray, reps: int = 9) -> dict:
         cpu, wall = [], []
         for _ in range(reps):
             t0, c0 = time.perf_counter(), time.thread_time()
-            t = build_tables(usable, cols, bias, c, np.array(case.w), ws)
+            t = build_tables(usable, cols, bias, c, np.array(case.w), spill_of(T, case.spill_jets), ws)
             cpu.append(time.thread_time() - c0)
             wall.append(time.perf_counter() - t0)
         per_case.append({"case": case.name, "candidates": len(t.pen), "raw": t.n_raw,
@@ -210,7 +220,8 @@ def run(quick: bool) -> dict:
                                "rebuild_ms": al.rebuild_time_s * 1e3, "candidates": al.n_candidates})
             D = demands(T, thrust, case, n_per_case, seed=1000 + ci)
             U_e, obj_e, deg_e = solve_enumeration_many(T, thrust, case.health, np.array(case.w),
-                                                       case.penalty_per_N, D, case.fault_tolerance)
+                                                       case.penalty_per_N, D, case.fault_tolerance,
+                                                       spill_of(T, case.spill_jets))
             for i, d in enumerate(D):
                 t = time.perf_counter_ns()
                 u = al.solve(d)
@@ -225,7 +236,8 @@ def run(quick: bool) -> dict:
                     ours_obj, ours_deg = al.objective, al.degraded
                     t = time.perf_counter_ns()
                     _, obj_h, deg_h = solve_highs(T, thrust, case.health, np.array(case.w),
-                                                  case.penalty_per_N, d, case.fault_tolerance)
+                                                  case.penalty_per_N, d, case.fault_tolerance,
+                                                  spill_of(T, case.spill_jets))
                     highs_ns.append(time.perf_counter_ns() - t)
                     n_highs += 1
                     if abs(ours_obj - obj_h) > 1e-6 + 1e-9 * abs(obj_h) or ours_deg != deg_h:

@@ -400,6 +400,8 @@ def write_report(out: Path, R: Runs) -> Path:
         "- **Identification**: *oracle* — TEST MODE, the plant's fault log reaches FDIR at the fault time (the paper "
         "assumes perfect, instantaneous identification); *detect* — the product's FDIR finds the faults from "
         "chamber pressures.",
+        f"- **Allocation box**: {R[('case1', 'paper', 'detect')]['allocator'].get('box', 'sign box (paper)')} "
+        "(`allocator.spill_jets`; 0 flies the paper's sign box).",
         "- **Fault-attributable error**: e(t) − e_fault-free(t) for t ≥ 2.5 s, e_fault-free from the same scenario, "
         "seed, set-up and mode flown without faults. The plain max |e| after the fault is, in the paper set-up, the "
         "decay of the 5° initial error (nominal has it too) and says nothing about the faults.",

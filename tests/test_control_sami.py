@@ -348,3 +348,26 @@ def test_bad_parameters_are_rejected_and_leave_the_controller_unchanged():
     ctl.theta_hat[0] = ctl.h_hi[0]
     ctl.set_param("control.h_bound_frac", 0.1)
     assert ctl.h_hat[0] <= ctl.h_hi[0] + 1e-9
+
+
+def test_an_axis_short_of_its_command_teaches_neither_its_aero_factor_nor_the_inertia():
+    ctl = _controller(**{"control.deadzone": 0.0})
+    nav = _nav([0.002, -0.002, 0.002], [0.0, 0.0, 0.0], alpha=VEH.aero.alpha_trim_rad + 0.01, beta=0.01)
+    guid = _guid([0.0, 0.0, 0.0], [0.01, 0.005, 0.0], [0.002, 0.0, 0.0])   # a turning reference: inertia observable
+    ctl.update(nav, guid, None)
+    th = ctl.theta_hat.copy()
+    delivered = ctl.u_cal_B.copy()
+    assert np.all(np.abs(delivered) < ctl.u_sat_min_B)   # no axis saturated: only pitch will miss
+    delivered[1] -= 0.6 * ctl.u_sat_min_B[1]            # pitch: 1.2 largest pitch jets off the command
+    ctl.update(nav, guid, delivered)
+    assert ctl.short and not ctl.saturated and not ctl.rejected
+    assert ctl.theta_hat[7] == th[7]                              # pitch aero factor: not learnt
+    assert np.array_equal(ctl.theta_hat[0:6], th[0:6])           # inertia: not learnt
+    assert ctl.theta_hat[6] != th[6] and ctl.theta_hat[8] != th[8]   # roll and yaw factors learn
+    th = ctl.theta_hat.copy()
+    ctl.update(nav, guid, ctl.u_cal_B.copy())                     # delivered as commanded
+    assert not ctl.short and ctl.theta_hat[7] != th[7] and not np.array_equal(ctl.theta_hat[0:6], th[0:6])
+    # within one largest jet increment of the command is quantisation: everything learns
+    th = ctl.theta_hat.copy()
+    ctl.update(nav, guid, ctl.u_cal_B + 0.4 * ctl.u_sat_min_B)
+    assert not ctl.short and ctl.theta_hat[7] != th[7]

@@ -208,6 +208,7 @@ def test_delay_active_health_lags_isolated_health():
         changed = fdir.update(t, u, np.zeros(N_JETS))
         if t_det is None and fdir.health_isolated.state[16] == FAILED_OFF:
             t_det = t
+        assert fdir.reconfig_pending == (t_det is not None and t < t_det + 0.5 - 1e-9)
         if t_det is not None and t < t_det + 0.5 - 1e-9:
             assert fdir.health_active.state[16] == NOMINAL and not changed
         if t_det is not None and abs(t - (t_det + 0.5)) < 1e-9:

@@ -124,6 +124,7 @@ class FlightSoftware:
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
         self.alloc_short = False
         self.alloc_short_cycles = 0
+        self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
         self._omega_prev = np.zeros(3)
         self._tau_cmd_prev = np.zeros(3)
         self._have_prev = False
@@ -168,6 +169,7 @@ class FlightSoftware:
             self._apply_controllability(t_s, need, r)     # re-planned from now: the reference stays C2
         if self.entry is not None:
             self.entry.steer(nav)
+        self._hold_trim(nav.qbar_pa)
         self.guidance.update(nav)
         self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
         if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,
@@ -242,6 +244,22 @@ class FlightSoftware:
             self._lp_worker = _LpWorker()
         self._lp_worker.submit(need, args)
 
+    def _hold_trim(self, qbar_pa: float) -> None:
+        """The reference's alpha/beta offset that lets the aerodynamic moment absorb the part of
+        the stuck-on bias the jets cannot cancel (the LP's trim, fsw/controllability.py), instead
+        of SAMI fighting it with torque that does not exist. That residual torque is fixed and
+        the aerodynamic moment grows with dynamic pressure, so the offset is the LP's times
+        qbar_LP / qbar, held within guidance.trim_max_deg."""
+        g = self.guidance
+        tr = self._trim_ref
+        if tr is None:
+            g.trim_offset_alpha_rad = g.trim_offset_beta_rad = 0.0
+            return
+        k = tr[2] / qbar_pa if qbar_pa > 0.0 and math.isfinite(qbar_pa) else math.inf
+        k = min(k, math.radians(self.params["guidance.trim_max_deg"]) / max(abs(tr[0]), abs(tr[1])))
+        g.trim_offset_alpha_rad = tr[0] * k
+        g.trim_offset_beta_rad = tr[1] * k
+
     def _apply_controllability(self, t_s: float, need: float, r: Controllability) -> None:
         """Event and telemetry of the LP's answer; the guidance re-planned to the weaker way's
         authority times ``guidance.authority_use`` (the scenario's limit stays the ceiling), never
@@ -249,6 +267,9 @@ class FlightSoftware:
         tracking, not the reference, shows what the jets cannot do)."""
         self.controllability = r
         self.events.emit(t_s, Severity.NOTICE, "guidance", "controllability", r.text())
+        trim = (math.radians(r.trim_alpha_deg), math.radians(r.trim_beta_deg))
+        self._trim_ref = ((trim[0], trim[1], r.qbar_pa) if all(map(math.isfinite, (*trim, r.qbar_pa)))
+                          and max(map(abs, trim)) > 0.0 and r.qbar_pa > 0.0 else None)
         if not r.controllable:
             self.events.emit(t_s, Severity.WARNING, "guidance", "not_controllable",
                              f"NOT CONTROLLABLE: {r.reason}"[:50])

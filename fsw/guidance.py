@@ -213,7 +213,7 @@ def wind_rate(r_N, v_N, vrel_N, C_WN, a_N, omega_planet, out_W):
 
 
 @njit(cache=True)
-def _guidance_kernel(phi, phid, phidd, alpha, omega_planet, mu, r_N, v_N, vrel_N, C_WN, C_BN,
+def _guidance_kernel(phi, phid, phidd, alpha, beta, omega_planet, mu, r_N, v_N, vrel_N, C_WN, C_BN,
                      accel_B, sigma_BN, out):
     """out[0:3] sigma_RN, [3:6] sigma_r_dot, [6:9] sigma_r_ddot, [9:12] omega_RN_R,
     [12:15] domega_RN_R, [15:18] omega_WN_W."""
@@ -225,19 +225,20 @@ def _guidance_kernel(phi, phid, phidd, alpha, omega_planet, mu, r_N, v_N, vrel_N
         a_N[i] = C_BN[0, i] * accel_B[0] + C_BN[1, i] * accel_B[1] + C_BN[2, i] * accel_B[2] + g * r_N[i]
     wW = out[15:18]
     wind_rate(r_N, v_N, vrel_N, C_WN, a_N, omega_planet, wW)
-    # C_RW = R2(alpha) R1(phi)
+    # C_RW = R2(alpha) R3(-beta) R1(phi) (common/frames.py)
     ca, sa = math.cos(alpha), math.sin(alpha)
+    cb, sb = math.cos(beta), math.sin(beta)
     cp, sp = math.cos(phi), math.sin(phi)
     C_RW = np.empty((3, 3))
-    C_RW[0, 0] = ca
-    C_RW[0, 1] = sa * sp
-    C_RW[0, 2] = -sa * cp
-    C_RW[1, 0] = 0.0
-    C_RW[1, 1] = cp
-    C_RW[1, 2] = sp
-    C_RW[2, 0] = sa
-    C_RW[2, 1] = -ca * sp
-    C_RW[2, 2] = ca * cp
+    C_RW[0, 0] = ca * cb
+    C_RW[0, 1] = -ca * sb * cp + sa * sp
+    C_RW[0, 2] = -ca * sb * sp - sa * cp
+    C_RW[1, 0] = sb
+    C_RW[1, 1] = cb * cp
+    C_RW[1, 2] = cb * sp
+    C_RW[2, 0] = sa * cb
+    C_RW[2, 1] = -sa * sb * cp - ca * sp
+    C_RW[2, 2] = -sa * sb * sp + ca * cp
     C_RN = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
@@ -284,6 +285,10 @@ class Guidance:
             raise ValueError("Guidance.profile: must have evaluate(t) and replan(t, rate, accel) (a BankProfile)")
         self.profile = profile
         self.alpha_trim_rad = float(alpha_trim_rad)
+        # offsets of the reference's alpha and beta from the aerodynamic trim: the attitude at
+        # which the aerodynamic moment absorbs a stuck-on bias the jets cannot cancel
+        self.trim_offset_alpha_rad = 0.0
+        self.trim_offset_beta_rad = 0.0
         self.omega_planet_radps = float(omega_planet_radps)
         self.mu_m3ps2 = float(mu_m3ps2)
         self._out = np.zeros(18)
@@ -298,6 +303,7 @@ class Guidance:
     def update(self, nav) -> None:
         """Fill the reference for nav.t_s (nav: fsw.navigation.NavState)."""
         self.phi_r, self.phidot_r, self.phiddot_r = self.profile.evaluate(nav.t_s)
-        _guidance_kernel(self.phi_r, self.phidot_r, self.phiddot_r, self.alpha_trim_rad,
+        _guidance_kernel(self.phi_r, self.phidot_r, self.phiddot_r,
+                         self.alpha_trim_rad + self.trim_offset_alpha_rad, self.trim_offset_beta_rad,
                          self.omega_planet_radps, self.mu_m3ps2, nav.r_N, nav.v_N, nav.vrel_N, nav.C_WN,
                          nav.C_BN, nav.accel_B, nav.sigma_BN, self._out)

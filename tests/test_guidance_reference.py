@@ -159,3 +159,19 @@ def test_nearest_shadow_set_keeps_eps_continuous_through_a_180_deg_reference():
         sig_prev, eps_prev, sr_prev = s.copy(), eps, sr_principal
     assert max_sr_principal_step > 1.0        # the principal set does jump (non-vacuous)
     assert max_eps_step < 2e-3                # eps does not
+
+
+def test_a_trim_offset_moves_the_references_alpha_and_beta_and_keeps_its_bank(trajectory):
+    states, times, _ = trajectory
+    g = Guidance(_profile(), ALPHA, OMEGA, mu_m3ps2=MU)
+    x = states[round(times[0], 6)]
+    C_WN = frames.wind_dcm(x[:3], frames.v_rel_N(x[:3], x[3:], OMEGA))
+    nav = _nav(times[0], x, _C_RN(0.0, C_WN))
+    g.trim_offset_alpha_rad, g.trim_offset_beta_rad = math.radians(3.0), math.radians(-2.0)
+    g.update(nav)
+    # independent truth: the convention of common/frames.py, C_RN = R2(alpha) R3(-beta) R1(bank) C_WN
+    C_RN = mrp.to_dcm(np.array(g.sigma_RN))
+    want = frames.R2(ALPHA + math.radians(3.0)) @ frames.R3(math.radians(2.0)) @ frames.R1(g.phi_r) @ C_WN
+    np.testing.assert_allclose(C_RN, want, atol=1e-12)
+    a, b, phi = frames.aero_angles(C_RN, C_WN)
+    assert (a, b, phi) == pytest.approx((ALPHA + math.radians(3.0), math.radians(-2.0), g.phi_r), abs=1e-12)

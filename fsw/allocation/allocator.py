@@ -12,6 +12,13 @@ Method (exact by construction, see tests/test_allocation_*.py):
      are skipped), followed by a short scan of the score ties.
   3. If none is inside the box: an exhaustive scan of all candidates for the
      unconstrained objective (degraded).
+  Spill box (e != 0): the box is split at the demand into 8 sub-boxes (per axis: tau_i
+  below or above tau_d,i); inside each the objective is linear again, with the score of
+  the octant of the same signs, so every octant table holds ALL candidates. A query takes,
+  per sub-box, the first candidate inside it (blocks skipped by their component-wise
+  minimum and maximum, and a sub-box abandoned once its score cannot beat the best found),
+  the best of those, then the ties of every sub-box. With no candidate in the box, the
+  same query without the box (degraded).
 
 Non-finite demand: ``solve`` returns u = 0 (all usable jets off), sets ``rejected`` and
 leaves ``objective`` = NaN; it never raises in the cycle.
@@ -31,13 +38,14 @@ from numba import njit
 from fsw.health import FAILED_OFF, JetHealth
 from fsw.params import Param
 
-from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, validate_problem
+from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, spill_of, validate_problem
 from .rebuild import Rebuilder
 from .tables import BLOCK, Tables, Workspace, build_tables
 
 CACHE_MAX_CONFIGS = 16     # health configurations whose tables are kept
 STATUS_OK, STATUS_DEGRADED, STATUS_REJECTED = 0, 1, 2
 ZERO3 = np.zeros(N_AXES)
+N_OCTANTS = 8
 
 
 PARAMS: list[Param] = [
@@ -46,6 +54,9 @@ PARAMS: list[Param] = [
     Param("allocator.w_yaw", 0.0, 1e3, "-", "weight of the yaw-torque error in the objective"),
     Param("allocator.penalty_per_N", 0.0, 10.0, "N m/N",
           "firing penalty per newton of jet thrust: c_k = penalty_per_N * thrust_k"),
+    Param("allocator.spill_jets", 0.0, 18.0, "jets",
+          "box: wrong-sign or overshooting torque admitted per cycle on each axis, in largest "
+          "single-jet torques of that axis (0: the paper's sign box)"),
     Param("allocator.fault_tolerance", 0.0, 1.0, "-",
           "1: allocate with the FDIR jet health; 0: assume every jet nominal (paper fig. 5)",
           integer=True),
@@ -167,21 +178,103 @@ def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen,
 
 
 @njit(cache=True)
-def _solve_shifted_kernel(tau_d, w, cand_tau, cand_pen, cand_pat, scratch, forbid, delta,
-                          tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
-    """One allocation over the candidates with no bit of ``forbid``, whose torque is
-    cand_tau + delta (a bias the tables were not built with): exhaustive scan with the
-    sign box, else without it (degraded). Same tie-break and outputs as _solve_kernel."""
+def _in_sub_box(X, j, xlo, xhi, o):
+    return ((xlo[o, 0] <= X[j, 0]) & (X[j, 0] <= xhi[o, 0]) & (xlo[o, 1] <= X[j, 1])
+            & (X[j, 1] <= xhi[o, 1]) & (xlo[o, 2] <= X[j, 2]) & (X[j, 2] <= xhi[o, 2]))
+
+
+@njit(cache=True)
+def _objective(r, d0, d1, d2, w, cand_tau, cand_pen):
+    return (w[0] * abs(d0 - cand_tau[r, 0]) + w[1] * abs(d1 - cand_tau[r, 1])
+            + w[2] * abs(d2 - cand_tau[r, 2]) + cand_pen[r])
+
+
+@njit(cache=True)
+def _solve_spill_kernel(tau_d, w, spill, start, X, S, P, R, bstart, bmin, bmax, cand_tau, cand_pen,
+                        cand_pat, tol_box, tol_tie, tie_rel, tol_pen, xlo, xhi, C, first,
+                        u_out, tau_out, obj_out):
+    """One allocation in the spill box over tables whose every octant holds every
+    candidate (module docstring, spill box). Sub-box o (signs s_i of octant o): tau_i below
+    the demand where s_i = +1, above it where s_i = -1; in x = s tau it is
+    min(0, s_i d_i) - e_i <= x_i <= s_i d_i, where the objective is C_o - score with
+    C_o = sum_i w_i s_i d_i. Work arrays xlo, xhi (8, 3), C (8,), first (8,). Same tie-break
+    and outputs as _solve_kernel."""
     d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
     if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
         return _reject(u_out, obj_out)
-    lo0, hi0 = (-tol_box, d0 + tol_box) if d0 >= 0.0 else (d0 - tol_box, tol_box)
-    lo1, hi1 = (-tol_box, d1 + tol_box) if d1 >= 0.0 else (d1 - tol_box, tol_box)
-    lo2, hi2 = (-tol_box, d2 + tol_box) if d2 >= 0.0 else (d2 - tol_box, tol_box)
+    tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
+    o_dem = np.int64(d0 < 0.0) | (np.int64(d1 < 0.0) << 1) | (np.int64(d2 < 0.0) << 2)
+    status = 0
+    best = np.inf
+    for attempt in range(2):              # 0: inside the box; 1: anywhere (degraded)
+        for k in range(8):
+            o = o_dem ^ k                 # the demand's own octant first: its answer prunes the rest
+            C[o] = 0.0
+            for i in range(3):
+                si = -1.0 if (o >> i) & 1 else 1.0
+                sd = si * tau_d[i]
+                xhi[o, i] = sd
+                xlo[o, i] = min(0.0, sd) - spill[i] - tol_box if attempt == 0 else -np.inf
+                C[o] += w[i] * sd
+            first[o] = -1
+            for blk in range(bstart[o], bstart[o + 1]):
+                j0 = start[o] + (blk - bstart[o]) * BLOCK
+                if C[o] - S[j0] > best + tol:     # nothing further down this octant can tie
+                    break
+                if ((bmin[blk, 0] > xhi[o, 0]) | (bmin[blk, 1] > xhi[o, 1]) | (bmin[blk, 2] > xhi[o, 2])
+                        | (bmax[blk, 0] < xlo[o, 0]) | (bmax[blk, 1] < xlo[o, 1]) | (bmax[blk, 2] < xlo[o, 2])):
+                    continue
+                for j in range(j0, min(j0 + BLOCK, start[o + 1])):
+                    if _in_sub_box(X, j, xlo, xhi, o):
+                        first[o] = j
+                        v = _objective(R[j], d0, d1, d2, w, cand_tau, cand_pen)
+                        if v < best:
+                            best = v
+                        break
+                if first[o] >= 0:
+                    break
+        if best < np.inf:
+            break
+        status = 1
+    lim = best + tol
+    min_pen = np.inf
+    chosen = -1
+    for phase in range(2):                # ties: smallest penalty, then smallest bit pattern
+        for o in range(8):
+            j = first[o]
+            if j < 0:
+                continue
+            while j < start[o + 1] and C[o] - S[j] <= lim + tol:
+                if _in_sub_box(X, j, xlo, xhi, o):
+                    r = R[j]
+                    if _objective(r, d0, d1, d2, w, cand_tau, cand_pen) <= lim:
+                        if phase == 0:
+                            if P[j] < min_pen:
+                                min_pen = P[j]
+                        elif P[j] <= min_pen + tol_pen and (chosen < 0 or cand_pat[r] < cand_pat[chosen]):
+                            chosen = r
+                j += 1
+    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, ZERO3, u_out, tau_out, obj_out)
+    return status
+
+
+@njit(cache=True)
+def _solve_scan_kernel(tau_d, w, spill, cand_tau, cand_pen, cand_pat, scratch, forbid, delta,
+                       tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
+    """One allocation over the candidates with no bit of ``forbid``, whose torque is
+    cand_tau + delta (delta: a stuck-on bias the tables were not built with, else 0):
+    exhaustive scan with the box of allowance ``spill`` (3,), else without it (degraded).
+    Same tie-break and outputs as _solve_kernel."""
+    d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
+    if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
+        return _reject(u_out, obj_out)
+    lo0, hi0 = min(d0, 0.0) - spill[0] - tol_box, max(d0, 0.0) + spill[0] + tol_box
+    lo1, hi1 = min(d1, 0.0) - spill[1] - tol_box, max(d1, 0.0) + spill[1] + tol_box
+    lo2, hi2 = min(d2, 0.0) - spill[2] - tol_box, max(d2, 0.0) + spill[2] + tol_box
     tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
     m = cand_pen.shape[0]
     status = 0
-    for attempt in range(2):              # 0: inside the sign box; 1: anywhere (degraded)
+    for attempt in range(2):              # 0: inside the box; 1: anywhere (degraded)
         best_obj = np.inf
         for r in range(m):
             scratch[r] = np.inf
@@ -222,7 +315,7 @@ class Allocator:
       (``reconfig_pending`` is True, ``interim`` True for the answers meanwhile), ``solve``
       answers with the previous tables under a SAFE interim model: every jet whose treatment
       changed (newly failed, inhibited, stuck, degraded with another eta, or back from
-      stuck) is kept off, and the stuck-on bias is the new one (``_solve_shifted_kernel``
+      stuck) is kept off, and the stuck-on bias is the new one (``_solve_scan_kernel``
       when it differs). The interim answer never fires a jet the new health forbids, its
       tau_B and objective are those of the new model for the returned u, and it is the
       exact optimum (spec tie-break, sign box, degraded answer) over the previous
@@ -258,6 +351,10 @@ class Allocator:
         self.u = np.zeros(self.n_jets, dtype=np.uint8)     # reused output
         self.tau_B = np.zeros(N_AXES)                         # modelled achieved torque [N m]
         self._obj = np.zeros(1)
+        self._xlo = np.zeros((N_OCTANTS, N_AXES))          # spill-box query work arrays
+        self._xhi = np.zeros((N_OCTANTS, N_AXES))
+        self._C = np.zeros(N_OCTANTS)
+        self._first = np.zeros(N_OCTANTS, dtype=np.int64)
         self.objective = float("nan")
         self.degraded = False
         self.rejected = False
@@ -281,9 +378,13 @@ class Allocator:
         self.solve(np.array([100.0, -50.0, 0.0]))
         self.solve(np.array([np.nan, 0.0, 0.0]))
         t = self._tables
-        _solve_shifted_kernel(np.array([1.0, -2.0, 3.0]), t.w, t.tau, t.pen, t.pat, t.scratch,
-                              np.int64(1), np.ones(N_AXES), TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                              self.u, self.tau_B, self._obj)
+        _solve_scan_kernel(np.array([1.0, -2.0, 3.0]), t.w, t.spill, t.tau, t.pen, t.pat, t.scratch,
+                           np.int64(1), np.ones(N_AXES), TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                           self.u, self.tau_B, self._obj)
+        _solve_spill_kernel(np.array([1.0, -2.0, 3.0]), t.w, np.ones(N_AXES), t.start, t.X, t.S, t.P,
+                            t.R, t.bstart, t.bmin, t.bmax, t.tau, t.pen, t.pat, TOL_BOX_NM, TOL_TIE,
+                            TIE_REL, TOL_PEN, self._xlo, self._xhi, self._C, self._first,
+                            self.u, self.tau_B, self._obj)
         self.solve(np.array([100.0, -50.0, 0.0]))
         self.rejected = False
         self.async_rebuild = async_now
@@ -304,6 +405,8 @@ class Allocator:
         self.w = np.array([vals["allocator.w_roll"], vals["allocator.w_pitch"],
                            vals["allocator.w_yaw"]])
         self.penalty_per_N = vals["allocator.penalty_per_N"]
+        self.spill_jets = vals["allocator.spill_jets"]
+        self.spill = spill_of(self._T, self.spill_jets)
         self.fault_tolerance = bool(vals["allocator.fault_tolerance"])
         self._gen += 1
         self._cache.clear()
@@ -378,7 +481,7 @@ class Allocator:
 
     def _job(self, key, health):
         usable, cols, bias, c = effective_model(self._T, self._thrust, health, self.penalty_per_N)
-        return (key, usable, cols, bias, c, self.w.copy())
+        return (key, usable, cols, bias, c, self.w.copy(), self.spill.copy())
 
     def _queue_prebuilds(self) -> None:
         if not self.prebuild_single_faults or self._rebuilder is None:
@@ -456,7 +559,7 @@ class Allocator:
             self._adopt(key, tables, False)
             return
         # async: interim model on the active tables, the build in the background
-        _, usable, cols, bias, _, _ = job
+        _, usable, cols, bias, _, _, _ = job
         t = self._tables
         same = t.usable & usable & np.all(t.cols == cols, axis=0)
         changed = np.flatnonzero(t.usable & ~same)     # in the old patterns, now different
@@ -492,16 +595,23 @@ class Allocator:
             self._try_switch()
         t = self._tables
         self.interim = self.reconfig_pending
-        if not self._shifted or not self.reconfig_pending:
+        if self.reconfig_pending and (self._shifted or t.spill_box):
+            delta = self._delta if self._shifted else ZERO3
+            status = _solve_scan_kernel(tau_d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch,
+                                        self._forbid, delta,
+                                        TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                        self.u, self.tau_B, self._obj)
+        elif t.spill_box:
+            status = _solve_spill_kernel(tau_d, t.w, t.spill, t.start, t.X, t.S, t.P, t.R, t.bstart,
+                                         t.bmin, t.bmax, t.tau, t.pen, t.pat,
+                                         TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                         self._xlo, self._xhi, self._C, self._first,
+                                         self.u, self.tau_B, self._obj)
+        else:
             status = _solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
                                    t.tau, t.pen, t.pat, t.scratch,
                                    self._forbid, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
                                    self.u, self.tau_B, self._obj)
-        else:
-            status = _solve_shifted_kernel(tau_d, t.w, t.tau, t.pen, t.pat, t.scratch,
-                                           self._forbid, self._delta,
-                                           TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                                           self.u, self.tau_B, self._obj)
         if status == STATUS_REJECTED:
             if self.interim:
                 np.add(t.bias, self._delta, out=self.tau_B)

@@ -6,9 +6,18 @@ Problem, per control cycle, for demand tau_d (3,) [N m]:
     minimise   sum_i w_i |tau_d,i - tau_i| + sum_k c_k u_k          (c_k = penalty_per_N * F_k)
     over       u in {0,1}^p  (usable jets: nominal, or degraded with column eta_k T_k)
     where      tau = b + sum_k eta_k T_k u_k,  b = sum_{stuck-on} T_k
-    subject to 0 <= tau_i <= tau_d,i (tau_d,i >= 0),  tau_d,i <= tau_i <= 0 (tau_d,i < 0)
+    subject to min(0, tau_d,i) - e_i <= tau_i <= max(0, tau_d,i) + e_i
 
-If no u satisfies the sign box (possible only with a stuck-on bias) the same objective is
+The box: e = 0 is the paper's sign box (every axis between zero and its demand: no torque
+of the wrong sign, no overshoot). The spill box (e_i = allocator.spill_jets x the largest
+single-jet torque of axis i) admits a bounded wrong-sign or overshooting torque, which the
+vehicle's static aerodynamic stability (pitch, yaw) and the next cycles' feedback take
+out: once failures remove the jet pairs that cancel exactly, every jet that still turns
+the vehicle one way adds pitch or yaw (or a little roll), and the sign box then leaves
+almost no torque that way, or none that cancels a stuck-on bias. The objective is the
+same in both; spill costs its weighted error.
+
+If no u satisfies the box (possible only with a stuck-on bias) the same objective is
 minimised without it and the answer is flagged ``degraded``. Ties (objectives within the
 tie tolerance) are broken by the smaller penalty sum, then by the smaller jet-bit pattern
 sum_k u_k 2^(k-1) (jet 1 = bit 0). The constant penalty of stuck-on jets is not part of
@@ -33,6 +42,12 @@ TOL_BOX_NM = 1e-9          # allowed overshoot of a sign-box bound [N m]
 TOL_TIE = 1e-9             # absolute objective tie tolerance [N m]
 TIE_REL = 32 * np.finfo(float).eps   # per unit of sum_i w_i |tau_d,i|: rounding of huge demands
 TOL_PEN = 1e-9             # penalty tie tolerance [N m]
+
+
+def spill_of(T: np.ndarray, spill_jets: float) -> np.ndarray:
+    """The box's allowance e (3,) [N m]: spill_jets times the largest single-jet torque of
+    each axis (0: the sign box)."""
+    return float(spill_jets) * np.max(np.abs(np.asarray(T, dtype=float)), axis=1)
 
 
 

@@ -19,9 +19,17 @@ from fsw.lp import set_colwise_matrix
 from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, validate_problem
 
 
-def solve_highs(T, thrust, health, w, c, tau_d, fault_tolerance=True):
+def _spill3(spill) -> np.ndarray:
+    e = np.zeros(N_AXES) if spill is None else np.asarray(spill, dtype=float)
+    if e.shape != (N_AXES,) or not np.all(np.isfinite(e)) or np.any(e < 0):
+        raise ValueError(f"spill: expected 3 finite values >= 0 [N m], got {spill!r}")
+    return e
+
+
+def solve_highs(T, thrust, health, w, c, tau_d, fault_tolerance=True, spill=None):
     """Reference MILP via HiGHS (mip_rel_gap = 0, mip_abs_gap = 0, feasibility
-    tolerances = TOL_BOX_NM). ``c`` is the penalty per newton (c_k = c * thrust_k).
+    tolerances = TOL_BOX_NM). ``c`` is the penalty per newton (c_k = c * thrust_k);
+    ``spill`` (3,) the box's allowance [N m] (None: the sign box).
     Returns (u uint8[n], objective, degraded); objective evaluated from the returned u."""
     import highspy
 
@@ -29,6 +37,7 @@ def solve_highs(T, thrust, health, w, c, tau_d, fault_tolerance=True):
     tau_d = np.asarray(tau_d, dtype=float)
     if tau_d.shape != (N_AXES,) or not np.all(np.isfinite(tau_d)):
         raise ValueError(f"tau_d: expected 3 finite values, got {tau_d!r}")
+    spill = _spill3(spill)
     usable, cols, b, ck = effective_model(T, thrust, health, c, fault_tolerance)
     idx = np.flatnonzero(usable)
     A = cols[:, idx]
@@ -59,8 +68,8 @@ def solve_highs(T, thrust, health, w, c, tau_d, fault_tolerance=True):
             rows.append(np.concatenate([-A[i], e]))     # e_i - tau_i + b_i >= b_i - tau_d,i
             lower.append(b[i] - tau_d[i])
             upper.append(inf)
-            if box:                                     # sign box on tau_i = b_i + A_i u
-                lo_i, hi_i = (0.0, tau_d[i]) if tau_d[i] >= 0 else (tau_d[i], 0.0)
+            if box:                                     # box on tau_i = b_i + A_i u
+                lo_i, hi_i = min(tau_d[i], 0.0) - spill[i], max(tau_d[i], 0.0) + spill[i]
                 rows.append(np.concatenate([A[i], np.zeros(N_AXES)]))
                 lower.append(lo_i - b[i])
                 upper.append(hi_i - b[i])
@@ -117,10 +126,11 @@ def _enumeration_table(T, thrust, health, c, fault_tolerance):
 
 
 @njit(cache=True)
-def _enumeration_kernel(tau, pen, pat, w, D, tol_box, tol_tie, tie_rel, tol_pen,
+def _enumeration_kernel(tau, pen, pat, w, spill, D, tol_box, tol_tie, tie_rel, tol_pen,
                         out_pat, out_obj, out_deg):
-    """Brute force per demand over every pattern: feasible set, min objective, ties by
-    penalty then pattern; if nothing is feasible, the same without the sign box."""
+    """Brute force per demand over every pattern: feasible set (the box of allowance
+    spill), min objective, ties by penalty then pattern; if nothing is feasible, the same
+    without the box."""
     m = pen.shape[0]
     obj = np.empty(m)
     feas = np.empty(m, dtype=np.bool_)
@@ -132,9 +142,9 @@ def _enumeration_kernel(tau, pen, pat, w, D, tol_box, tol_tie, tie_rel, tol_pen,
             ok = True
             for i in range(3):
                 if d[i] >= 0.0:
-                    ok = ok and (-tol_box <= tau[r, i] <= d[i] + tol_box)
+                    ok = ok and (-spill[i] - tol_box <= tau[r, i] <= d[i] + spill[i] + tol_box)
                 else:
-                    ok = ok and (d[i] - tol_box <= tau[r, i] <= tol_box)
+                    ok = ok and (d[i] - spill[i] - tol_box <= tau[r, i] <= spill[i] + tol_box)
             feas[r] = ok
             any_feas = any_feas or ok
             obj[r] = (w[0] * abs(d[0] - tau[r, 0]) + w[1] * abs(d[1] - tau[r, 1])
@@ -159,9 +169,10 @@ def _enumeration_kernel(tau, pen, pat, w, D, tol_box, tol_tie, tie_rel, tol_pen,
         out_deg[q] = not any_feas
 
 
-def solve_enumeration_many(T, thrust, health, w, c, tau_d, fault_tolerance=True):
+def solve_enumeration_many(T, thrust, health, w, c, tau_d, fault_tolerance=True, spill=None):
     """The oracle for many demands tau_d (n, 3): (U uint8[n, jets], objective[n], degraded[n])."""
     T, thrust, w, c = validate_problem(T, thrust, w, c)
+    spill = _spill3(spill)
     D = np.ascontiguousarray(np.atleast_2d(np.asarray(tau_d, dtype=float)))
     if D.shape[1] != N_AXES or not np.all(np.isfinite(D)):
         raise ValueError("tau_d: expected finite demands of shape (n, 3)")
@@ -170,16 +181,17 @@ def solve_enumeration_many(T, thrust, health, w, c, tau_d, fault_tolerance=True)
     out_pat = np.empty(n, dtype=np.int64)
     out_obj = np.empty(n)
     out_deg = np.empty(n, dtype=np.bool_)
-    _enumeration_kernel(tau, pen, pat, w, D, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+    _enumeration_kernel(tau, pen, pat, w, spill, D, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
                         out_pat, out_obj, out_deg)
     U = ((out_pat[:, None] >> np.arange(T.shape[1])[None, :]) & 1).astype(np.uint8)
     return U, out_obj, out_deg
 
 
-def solve_enumeration(T, thrust, health, w, c, tau_d, fault_tolerance=True):
+def solve_enumeration(T, thrust, health, w, c, tau_d, fault_tolerance=True, spill=None):
     """The oracle: brute force over all 2^p patterns of the usable jets.
-    ``c`` is the penalty per newton. Returns (u uint8[n], objective, degraded)."""
+    ``c`` is the penalty per newton, ``spill`` the box's allowance (None: the sign box).
+    Returns (u uint8[n], objective, degraded)."""
     U, obj, deg = solve_enumeration_many(T, thrust, health, w, c,
                                          np.asarray(tau_d, dtype=float).reshape(1, N_AXES),
-                                         fault_tolerance)
+                                         fault_tolerance, spill)
     return U[0], float(obj[0]), bool(deg[0])

@@ -261,32 +261,33 @@ def _bucket_sort(ka, ia, lo, hi, kmin, kmax, kb, ib, count):
 
 
 @njit(cache=True, nogil=True)
-def _in_octant(o, t0, t1, t2, tol_box):
-    """Whether torque (t0, t1, t2) can lie in octant o's sign box: s_i t_i >= -tol_box."""
-    a0 = -t0 >= -tol_box if (o & 1) else t0 >= -tol_box
-    a1 = -t1 >= -tol_box if (o & 2) else t1 >= -tol_box
-    a2 = -t2 >= -tol_box if (o & 4) else t2 >= -tol_box
+def _in_octant(o, t0, t1, t2, lo):
+    """Whether torque (t0, t1, t2) can lie in octant o's box: s_i t_i >= -lo_i."""
+    a0 = -t0 >= -lo[0] if (o & 1) else t0 >= -lo[0]
+    a1 = -t1 >= -lo[1] if (o & 2) else t1 >= -lo[1]
+    a2 = -t2 >= -lo[2] if (o & 4) else t2 >= -lo[2]
     return a0 and a1 and a2
 
 
 @njit(cache=True, nogil=True)
-def _octant_members(tau, n, tol_box, octm):
+def _octant_members(tau, n, lo, octm):
     """Octant membership of candidates 0:n: a candidate belongs to octant o (bit i set:
-    tau_d,i < 0, s_i = -1) if it can lie in that octant's sign box, s_i tau_i >= -tol_box
-    on every axis; one with no (numerically) zero component belongs to exactly one.
+    tau_d,i < 0, s_i = -1) if it can lie in that octant's box, s_i tau_i >= -lo_i on every
+    axis (sign box: lo = tol_box; spill box: lo = inf, every candidate in every octant);
+    one with every |tau_i| > lo_i belongs to exactly one.
     Writes octm[r] (its octant, or -1 if several) and returns start (9,): octant o gets
     rows start[o]:start[o+1] of the tables."""
     start = np.zeros(9, dtype=np.int64)
     for r in range(n):
         t0, t1, t2 = tau[r, 0], tau[r, 1], tau[r, 2]
-        if abs(t0) > tol_box and abs(t1) > tol_box and abs(t2) > tol_box:
+        if abs(t0) > lo[0] and abs(t1) > lo[1] and abs(t2) > lo[2]:
             o = np.int64(t0 < 0.0) | (np.int64(t1 < 0.0) << 1) | (np.int64(t2 < 0.0) << 2)
             octm[r] = o
             start[o + 1] += 1
         else:                               # on or near a coordinate plane: several octants
             octm[r] = -1
             for o in range(8):
-                if _in_octant(o, t0, t1, t2, tol_box):
+                if _in_octant(o, t0, t1, t2, lo):
                     start[o + 1] += 1
     for o in range(8):
         start[o + 1] += start[o]
@@ -309,14 +310,14 @@ def _push_key(o, r, t0, t1, t2, pen_r, w, pos, ka, ia, kmin, kmax):
 
 
 @njit(cache=True, nogil=True)
-def _octant_fill(tau, pen, pat, n, w, tol_box, octm, start, ka, ia, kb, ib, count,
-                 tau_out, pen_out, pat_out, X, S, P, R, bstart, bmin):
+def _octant_fill(tau, pen, pat, n, w, lo, octm, start, ka, ia, kb, ib, count,
+                 tau_out, pen_out, pat_out, X, S, P, R, bstart, bmin, bmax):
     """The tables of one configuration from its n distinct candidates (tau, pen, pat) and
     their octant membership (_octant_members): candidates copied to tau/pen/pat_out, and
     per octant o, rows start[o]:start[o+1] of X (x = s * tau), S (score), P (penalty) and
     R (index into the candidates) sorted by descending score sum_i w_i s_i tau_i - pen
-    (stable: ties keep candidate order); bmin[bstart[o] + b] is the component-wise minimum
-    of x over block b (BLOCK rows) of octant o. Work buffers: ka, kb (float64) and ia, ib
+    (stable: ties keep candidate order); bmin/bmax[bstart[o] + b] are the component-wise
+    minimum/maximum of x over block b (BLOCK rows) of octant o. Work buffers: ka, kb (float64) and ia, ib
     (int64) of >= start[8] rows, count (int64) of SORT_BUCKETS_MAX + 1. The outputs are
     allocated by the caller (numpy memory is recycled, fresh pages cost more than the
     sort)."""
@@ -336,7 +337,7 @@ def _octant_fill(tau, pen, pat, n, w, tol_box, octm, start, ka, ia, kb, ib, coun
             _push_key(np.int64(o1), r, t0, t1, t2, pen[r], w, pos, ka, ia, kmin, kmax)
             continue
         for o in range(8):
-            if _in_octant(o, t0, t1, t2, tol_box):
+            if _in_octant(o, t0, t1, t2, lo):
                 _push_key(np.int64(o), r, t0, t1, t2, pen[r], w, pos, ka, ia, kmin, kmax)
     for o in range(8):
         _bucket_sort(ka, ia, start[o], start[o + 1], kmin[o], kmax[o], kb, ib, count)
@@ -345,6 +346,7 @@ def _octant_fill(tau, pen, pat, n, w, tol_box, octm, start, ka, ia, kb, ib, coun
         s1 = -1.0 if (o & 2) else 1.0
         s2 = -1.0 if (o & 4) else 1.0
         m0 = m1 = m2 = np.inf
+        M0 = M1 = M2 = -np.inf
         blk = bstart[o]
         for j in range(start[o], start[o + 1]):
             r = ib[j]
@@ -361,12 +363,19 @@ def _octant_fill(tau, pen, pat, n, w, tol_box, octm, start, ka, ia, kb, ib, coun
             m0 = min(m0, x0)
             m1 = min(m1, x1)
             m2 = min(m2, x2)
+            M0 = max(M0, x0)
+            M1 = max(M1, x1)
+            M2 = max(M2, x2)
             if (j - start[o]) % BLOCK == BLOCK - 1 or j == start[o + 1] - 1:
                 bmin[blk, 0] = m0
                 bmin[blk, 1] = m1
                 bmin[blk, 2] = m2
+                bmax[blk, 0] = M0
+                bmax[blk, 1] = M1
+                bmax[blk, 2] = M2
                 blk += 1
                 m0 = m1 = m2 = np.inf
+                M0 = M1 = M2 = -np.inf
 
 
 class Workspace:
@@ -418,27 +427,30 @@ class Workspace:
 class Tables:
     """Candidate tables of one configuration: the health model they were built for
     (usable, cols, bias), the objective (w, per-jet penalty c) and the octant tables."""
-    __slots__ = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "scratch",
-                 "bias", "usable", "cols", "w", "n_raw", "build_s")
+    __slots__ = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "bmax",
+                 "scratch", "bias", "usable", "cols", "w", "spill", "spill_box", "n_raw", "build_s")
 
-    def __init__(self, tau, pen, pat, start, X, S, P, R, bstart, bmin, usable, cols, bias, w,
-                 n_raw, build_s):
+    def __init__(self, tau, pen, pat, start, X, S, P, R, bstart, bmin, bmax, usable, cols, bias, w,
+                 spill, n_raw, build_s):
         self.tau, self.pen, self.pat = tau, pen, pat
         self.start, self.X, self.S, self.P, self.R = start, X, S, P, R
-        self.bstart, self.bmin = bstart, bmin
+        self.bstart, self.bmin, self.bmax = bstart, bmin, bmax
         self.scratch = np.empty(len(pen))     # objective buffer of the exhaustive scans
         self.usable, self.cols, self.bias, self.w = usable, cols, bias, w
+        self.spill = spill                    # box allowance [N m]
+        self.spill_box = bool(np.any(spill != 0.0))   # octants hold every candidate
         self.n_raw = n_raw                    # multiplicity vectors enumerated
         self.build_s = build_s                # build time [s]
 
     @property
     def nbytes(self) -> int:
         return sum(getattr(self, k).nbytes for k in ("tau", "pen", "pat", "start", "X", "S", "P",
-                                                      "R", "bstart", "bmin", "scratch"))
+                                                      "R", "bstart", "bmin", "bmax", "scratch"))
 
 
-def build_tables(usable, cols, bias, c, w, ws: Workspace) -> Tables:
-    """Groups of identical effective columns -> distinct torques -> octant tables. The
+def build_tables(usable, cols, bias, c, w, spill, ws: Workspace) -> Tables:
+    """Groups of identical effective columns -> distinct torques -> octant tables (of the
+    box; a spill box ``spill`` != 0 puts every candidate in every octant). The
     heavy work is in nogil kernels over the workspace ``ws`` (one per building thread)."""
     t0 = time.perf_counter()
     usable = np.ascontiguousarray(usable, dtype=np.bool_)
@@ -453,7 +465,9 @@ def build_tables(usable, cols, bias, c, w, ws: Workspace) -> Tables:
         if n >= 0:
             break
         ws.grow(min(n_raw, 4 * ws.rows))       # never more than n_raw distinct torques
-    start = _octant_members(ws.tau, n, TOL_BOX_NM, ws.octm)
+    spill = np.array(spill, dtype=np.float64)
+    lo = np.full(N_AXES, np.inf if np.any(spill != 0.0) else TOL_BOX_NM)
+    start = _octant_members(ws.tau, n, lo, ws.octm)
     total = int(start[8])
     ws.grow_octants(total)
     bstart = np.zeros(9, dtype=np.int64)
@@ -461,7 +475,9 @@ def build_tables(usable, cols, bias, c, w, ws: Workspace) -> Tables:
     tau, pen, pat = np.empty((n, N_AXES)), np.empty(n), np.empty(n, dtype=np.int64)
     X, S, P, R = np.empty((total, N_AXES)), np.empty(total), np.empty(total), np.empty(total, dtype=np.int64)
     bmin = np.empty((int(bstart[8]), N_AXES))
-    _octant_fill(ws.tau, ws.pen, ws.pat, n, w, TOL_BOX_NM, ws.octm, start, ws.ka, ws.ia, ws.kb,
-                 ws.ib, ws.count, tau, pen, pat, X, S, P, R, bstart, bmin)
-    return Tables(tau, pen, pat, start, X, S, P, R, bstart, bmin, usable.copy(), cols.copy(),
-                   bias.copy(), w.copy(), n_raw, time.perf_counter() - t0)
+    bmax = np.empty((int(bstart[8]), N_AXES))
+    _octant_fill(ws.tau, ws.pen, ws.pat, n, w, lo, ws.octm, start, ws.ka, ws.ia, ws.kb,
+                 ws.ib, ws.count, tau, pen, pat, X, S, P, R, bstart, bmin, bmax)
+    return Tables(tau, pen, pat, start, X, S, P, R, bstart, bmin, bmax, usable.copy(), cols.copy(),
+                   bias.copy(), w.copy(), spill, n_raw,
+                   time.perf_counter() - t0)

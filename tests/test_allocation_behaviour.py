@@ -14,9 +14,11 @@ VEH = load_vehicle("ellipsled")
 T, THRUST = VEH.torque_matrix_Nm, VEH.thrust_N
 
 
-def _params(w=(1.0, 1.0, 1.0), pen=0.01, ft=1):
+def _params(w=(1.0, 1.0, 1.0), pen=0.01, ft=1, spill_jets=0.0):
+    """The paper's sign box unless spill_jets says otherwise."""
     return {"allocator.w_roll": w[0], "allocator.w_pitch": w[1], "allocator.w_yaw": w[2],
-            "allocator.penalty_per_N": pen, "allocator.fault_tolerance": ft}
+            "allocator.penalty_per_N": pen, "allocator.fault_tolerance": ft,
+            "allocator.spill_jets": spill_jets}
 
 
 def _jets(u):
@@ -96,7 +98,7 @@ def test_paper_case2_stuck_jets_degrade_some_demands_and_highs_agrees():
     h = JetHealth()
     for j in (2, 3, 4, 5, 8, 9, 10):
         h.set(j, STUCK_ON)
-    al = Allocator(T, THRUST, load_params(Allocator.PARAMS))
+    al = Allocator(T, THRUST, {**load_params(Allocator.PARAMS), "allocator.spill_jets": 0.0})   # sign box
     al.set_health(h)
     bias = T[:, [1, 2, 3, 4, 7, 8, 9]].sum(axis=1)
     d = -bias                                         # straight against the stuck bias
@@ -124,7 +126,8 @@ def test_fault_tolerance_off_ignores_health():
     for d in rng.normal(0, 300, (300, 3)):
         u_off = off.solve(d).copy()
         assert np.array_equal(u_off, nominal.solve(d))
-        u_e, obj_e, _ = solve_enumeration(T, THRUST, h, off.w, off.penalty_per_N, d, fault_tolerance=False)
+        u_e, obj_e, _ = solve_enumeration(T, THRUST, h, off.w, off.penalty_per_N, d, fault_tolerance=False,
+                                          spill=off.spill)
         assert np.array_equal(u_off, u_e) and off.objective == pytest.approx(obj_e)
         differ += not np.array_equal(u_off, on.solve(d))
     assert differ > 100                  # the health really changes the answer when on

@@ -27,13 +27,13 @@ PARAMS = load_params(Allocator.PARAMS)
 
 def _brute_interim(tabs, forbid, delta, w, d):
     """The interim problem by brute force over the previous candidates (independent of the
-    kernels): allowed = no forbidden bit; torque = candidate + delta; spec objective, sign
-    box, degraded fallback, tie-break (objective, penalty, pattern)."""
+    kernels): allowed = no forbidden bit; torque = candidate + delta; spec objective, box
+    (the tables' spill), degraded fallback, tie-break (objective, penalty, pattern)."""
     ok = (tabs.pat & forbid) == 0
     tau = tabs.tau + delta
     obj = np.abs(d - tau) @ w + tabs.pen
-    lo = np.where(d >= 0, 0.0, d) - TOL_BOX_NM
-    hi = np.where(d >= 0, d, 0.0) + TOL_BOX_NM
+    lo = np.minimum(d, 0.0) - tabs.spill - TOL_BOX_NM
+    hi = np.maximum(d, 0.0) + tabs.spill + TOL_BOX_NM
     box = ok & np.all((tau >= lo) & (tau <= hi), axis=1)
     pool = box if box.any() else ok
     tol = TOL_TIE + TIE_REL * float(np.sum(w * np.abs(d)))
@@ -99,7 +99,7 @@ def test_async_interim_is_safe_exact_over_its_model_then_switches_to_the_sync_an
         usable, cols, b, ck = effective_model(T, THRUST, after, al.penalty_per_N)
         case = cases()[0]
         D = demands(T, THRUST, case, 150, seed=77)
-        _, obj_opt, deg_opt = solve_enumeration_many(T, THRUST, after, al.w, al.penalty_per_N, D)
+        _, obj_opt, deg_opt = solve_enumeration_many(T, THRUST, after, al.w, al.penalty_per_N, D, spill=al.spill)
         for i, d in enumerate(D):
             u = al.solve(d)
             ctx = f"{name} demand {i} {d!r}"
@@ -115,8 +115,8 @@ def test_async_interim_is_safe_exact_over_its_model_then_switches_to_the_sync_an
             assert int(sum(int(x) << k for k, x in enumerate(u))) == pat, ctx
             assert al.objective == pytest.approx(obj_b, abs=1e-7) and al.degraded == deg_b, ctx
             if not al.degraded:
-                lo = np.where(d >= 0, 0.0, d) - TOL_BOX_NM
-                hi = np.where(d >= 0, d, 0.0) + TOL_BOX_NM
+                lo = np.minimum(d, 0.0) - al.spill - TOL_BOX_NM
+                hi = np.maximum(d, 0.0) + al.spill + TOL_BOX_NM
                 assert np.all((tau >= lo) & (tau <= hi)), ctx
         al._rebuilder.release()
         assert al.wait_idle(10.0)

@@ -86,9 +86,9 @@ class Rebuilder:
             self._gate.wait()
             if self._stop:
                 return
-            key, usable, cols, bias, c, w = job
+            key, usable, cols, bias, c, w, spill = job
             try:
-                tables = build_tables(usable, cols, bias, c, w, self._ws)
+                tables = build_tables(usable, cols, bias, c, w, spill, self._ws)
             except Exception as e:  # noqa: BLE001 - handed to the allocator, never lost
                 tables = e
             with self._cv:

@@ -168,7 +168,9 @@ def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():
             assert not al.reconfig_pending and al.tables_from_cache
             assert not al.solve(np.array([300.0, -200.0, 100.0]))[jet - 1]
         mb = al.tables_nbytes["prebuilt"] / 2**20
-        assert mb < 40.0                            # 18 configurations of ~10,000 torques
+        # 18 configurations of ~10,000 torques; the spill box's octant tables hold every
+        # candidate in each of the 8 octants (~4 MB per configuration)
+        assert mb < (120.0 if al.spill.any() else 40.0)
         # a parameter change: previous tables and objective until the switch, then exact
         al._rebuilder.hold()
         new = {**PARAMS, "allocator.w_yaw": 2.0}

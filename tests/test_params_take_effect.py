@@ -258,6 +258,16 @@ def withhold(n: int):
     return obs
 
 
+def cycles_outside_the_sign_box(fl: Flight) -> int:
+    """Cycles whose allocated torque leaves [min(0, demand), max(0, demand)] on some axis."""
+    n = 0
+    for _ in range(200):
+        fl.fly(1)
+        d, t = fl.fsw.u_cal_B, fl.fsw.tau_alloc_B
+        n += bool(np.any((t < np.minimum(d, 0.0) - 1e-9) | (t > np.maximum(d, 0.0) + 1e-9)))
+    return n
+
+
 @dataclass
 class Case:
     name: str
@@ -295,6 +305,7 @@ CASES = [
     Case("allocator.w_pitch", 0.0, axis_error(1), ">"),
     Case("allocator.w_yaw", 0.0, axis_error(2), ">"),
     Case("allocator.penalty_per_N", 10.0, propellant_used, "<"),
+    Case("allocator.spill_jets", 0.0, cycles_outside_the_sign_box, "==", (0, None)),
     Case("allocator.fault_tolerance", 0.0, jet_pulses_after(JET), ">",
          setup=ground(("mark", str(JET), "failed_off"))),
     # FDIR jet monitor (faults injected in the plant from the ground, or a transducer offset)

@@ -93,8 +93,16 @@ def single_threaded_numerics() -> dict:
                         "its BLAS may already have started a thread pool")
     numba_threads = None
     if "numba" in sys.modules:          # imported already: its pool may be larger
+        import numba
+        from numba.core import config as numba_config
         try:
-            import numba
+            # numba re-reads the environment at every compile and refuses a NUMBA_NUM_THREADS
+            # that differs from its launched pool: take the new value in before the pool starts.
+            numba_config.reload_config()
+        except RuntimeError as e:       # the pool is already running at another size: keep it
+            os.environ["NUMBA_NUM_THREADS"] = str(numba_config.NUMBA_NUM_THREADS)
+            messages.append(f"numba pool already launched: {e}")
+        try:
             numba.set_num_threads(1)
             numba_threads = numba.get_num_threads()
         except Exception as e:          # e.g. NUMBA_NUM_THREADS fixed lower than requested

@@ -40,7 +40,10 @@ def test_fdir_finds_exactly_the_injected_jets(runs, case):
     assert found == injected
     assert len(s["fdir"]["detections"]) == len(injected)           # each once
     assert s["fdir"]["false_alarms"] == 0 and not s["fdir"]["missed"]
-    assert all(2.5 <= d["t_s"] <= 5.0 for d in s["fdir"]["detections"])
+    # a stuck-on jet shows in its chamber pressure at once; a failed-off or degraded one only
+    # when the allocator first fires it, which the spill box may not do for a while
+    assert all(d["t_s"] >= 2.5 for d in s["fdir"]["detections"])
+    assert all(d["t_s"] <= 5.0 for d in s["fdir"]["detections"] if d["kind"] == "stuck_on")
 
 
 def test_nominal_has_no_false_alarm(runs):

@@ -2,9 +2,10 @@
 and stopping a process by its pid with a timeout."""
 from __future__ import annotations
 
-import signal
 import socket
 import subprocess
+
+from ellipsled.procs import stop_process
 
 
 def free_udp() -> int:
@@ -16,10 +17,4 @@ def free_udp() -> int:
 
 def stop(p: subprocess.Popen, timeout_s: float = 15.0) -> None:
     """SIGTERM, then SIGKILL after ``timeout_s``; nothing if it has ended."""
-    if p.poll() is None:
-        p.send_signal(signal.SIGTERM)
-        try:
-            p.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait(5)
+    stop_process(p, timeout_s)

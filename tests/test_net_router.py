@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import stat
 import subprocess
 import sys
@@ -16,6 +15,7 @@ import pytest
 import zenoh
 
 from ellipsled.net import pki
+from ellipsled.procs import stop_process
 from interfaces import transport
 from interfaces.keys import keys
 
@@ -98,13 +98,7 @@ def router(tmp_path_factory):
             time.sleep(0.05)
         yield endpoint, d / "pki", d
     finally:
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait(5)
+        stop_process(p, 10)
         log.close()
     assert p.returncode == 0, (d / "router.log").read_text()
 

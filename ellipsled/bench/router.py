@@ -15,12 +15,13 @@ Every process is stopped by its pid (SIGTERM, then SIGKILL after a timeout).
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from ellipsled.procs import stop_process
 
 from .rows import NO_TARGET, Row, fmt, g, ratio, row
 
@@ -51,15 +52,7 @@ class _Procs:
             time.sleep(0.05)
 
     def stop(self, name: str, timeout_s: float = 10.0) -> int | None:
-        p = self.p[name]
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait(5)
-        return p.returncode
+        return stop_process(self.p[name], timeout_s)
 
     def close(self) -> None:
         for name in self.p:

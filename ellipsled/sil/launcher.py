@@ -28,6 +28,7 @@ from pathlib import Path
 
 from ellipsled.argtypes import positive_float
 from ellipsled.history import History, merge
+from ellipsled.procs import stop_process
 from ellipsled.runlib import (add_variant_arguments, fault_free_reference, format_summary, judge, prepare_args,
                               variant_argv)
 from ellipsled.terminal import ProgressFile, RunProgress, files_written
@@ -152,15 +153,8 @@ class Launcher:
         p = self.children.get(role)
         if p is None:
             return None
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(STOP_TIMEOUT_S)
-            except subprocess.TimeoutExpired:
-                self.say(f"{role} (pid {p.pid}) did not stop within {STOP_TIMEOUT_S:g} s: killing it")
-                p.kill()
-                p.wait(STOP_TIMEOUT_S)
-        return p.returncode
+        return stop_process(p, STOP_TIMEOUT_S, kill_wait_s=STOP_TIMEOUT_S, on_kill=lambda: self.say(
+            f"{role} (pid {p.pid}) did not stop within {STOP_TIMEOUT_S:g} s: killing it"))
 
     def run(self) -> int:
         old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -39,7 +39,7 @@ import numpy as np
 
 from .guidance import _S2_MAX
 from .health import STUCK_ON, JetHealth
-from .lp import set_colwise_matrix
+from .lp import set_colwise_matrix, solve_or_none
 
 # HiGHS feasibility tolerance on the torque rows [N m]: far below one jet's torque
 _TOL_NM = 1e-7
@@ -119,14 +119,7 @@ def _lp(cost, M, row_lo, row_hi, lo, hi):
     lp.row_lower_ = np.asarray(row_lo, float)
     lp.row_upper_ = np.asarray(row_hi, float)
     set_colwise_matrix(lp, M)
-    h.passModel(lp)
-    h.run()
-    status = h.getModelStatus()
-    if status == highspy.HighsModelStatus.kInfeasible:
-        return None
-    if status != highspy.HighsModelStatus.kOptimal:
-        raise RuntimeError(f"HiGHS: unexpected status {h.modelStatusToString(status)}")
-    return np.asarray(h.getSolution().col_value)
+    return solve_or_none(h, lp)
 
 
 def jet_columns(T_Nm: np.ndarray, health: JetHealth) -> tuple[np.ndarray, np.ndarray]:

@@ -19,3 +19,17 @@ def set_colwise_matrix(lp, M: np.ndarray) -> None:
     lp.a_matrix_.start_ = np.array(start, dtype=np.int32)
     lp.a_matrix_.index_ = np.array(index, dtype=np.int32)
     lp.a_matrix_.value_ = np.array(value, dtype=float)
+
+
+def solve_or_none(h, lp) -> np.ndarray | None:
+    """Pass ``lp`` to the highspy.Highs ``h`` and run it: the primal column values at the optimum,
+    None if the problem is infeasible; any other status is an error."""
+    import highspy
+    h.passModel(lp)
+    h.run()
+    status = h.getModelStatus()
+    if status == highspy.HighsModelStatus.kInfeasible:
+        return None
+    if status != highspy.HighsModelStatus.kOptimal:
+        raise RuntimeError(f"HiGHS: unexpected status {h.modelStatusToString(status)}")
+    return np.asarray(h.getSolution().col_value)

@@ -14,7 +14,7 @@ from collections import OrderedDict
 import numpy as np
 from numba import njit
 
-from fsw.lp import set_colwise_matrix
+from fsw.lp import set_colwise_matrix, solve_or_none
 
 from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, validate_problem
 
@@ -79,14 +79,8 @@ def solve_highs(T, thrust, health, w, c, tau_d, fault_tolerance=True, spill=None
         lp.row_upper_ = np.array(upper)
         set_colwise_matrix(lp, M)
         lp.integrality_ = [highspy.HighsVarType.kInteger] * p + [highspy.HighsVarType.kContinuous] * N_AXES
-        h.passModel(lp)
-        h.run()
-        status = h.getModelStatus()
-        if status == highspy.HighsModelStatus.kInfeasible:
-            return None
-        if status != highspy.HighsModelStatus.kOptimal:
-            raise RuntimeError(f"HiGHS: unexpected status {h.modelStatusToString(status)}")
-        return np.round(np.asarray(h.getSolution().col_value)[:p]).astype(np.uint8)
+        x = solve_or_none(h, lp)
+        return None if x is None else np.round(x[:p]).astype(np.uint8)
 
     degraded = False
     uu = run(box=True)

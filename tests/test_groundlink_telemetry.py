@@ -105,6 +105,62 @@ def test_attitude_and_entry_state_agree_with_the_plant_truth(rig):
     assert js.firing == fire and list(js.pulses) == [int(x) for x in rig.fsw.driver.pulses]
 
 
+def _truth_body_yaw(truth) -> float:
+    """Yaw of the body relative to local NED from the plant's truth, by the textbook MRP ->
+    DCM formula (C = I + (8 [s x]^2 - 4 (1 - s.s) [s x]) / (1 + s.s)^2) and the NED axes
+    from the truth latitude/longitude in the inertial frame."""
+    s = np.asarray(truth["sigma_BN"], dtype=float)
+    S = np.array([[0, -s[2], s[1]], [s[2], 0, -s[0]], [-s[1], s[0], 0]])
+    ss = float(s @ s)
+    C_BN = np.eye(3) + (8 * S @ S - 4 * (1 - ss) * S) / (1 + ss) ** 2
+    r = np.asarray(truth["r_N"], dtype=float)
+    up = r / np.linalg.norm(r)
+    lam = math.atan2(r[1], r[0])
+    east = np.array([-math.sin(lam), math.cos(lam), 0.0])
+    north = np.cross(up, east)
+    x_B = C_BN[0]                                   # body x axis in N
+    return math.atan2(float(x_B @ east), float(x_B @ north))
+
+
+def test_position_hud_altitude_and_time_agree_with_the_plant_truth(rig):
+    """GLOBAL_POSITION_INT, VFR_HUD, ALTITUDE, SYSTEM_TIME against sim.plant truth (latitude,
+    longitude, altitude, speed, flight-path angle, heading, body attitude) within the
+    navigation noise; the int16 cm/s velocities saturate at entry speed, never wrap."""
+    rig.gl.wall_clock = lambda: 1_700_000_000.25
+    rig.fly(100)
+    rig.fsw.control_step(rig.frame)                # navigation at the plant's present time
+    rig.clock.t += 1.0
+    rig.gl.tick(rig.frame)
+    rig.exchange(lambda: False, 0.1)
+    truth = rig.plant.truth()
+    st = rig.gcs.state.latest
+    gp, hud, alt, stime = st["GLOBAL_POSITION_INT"], st["VFR_HUD"], st["ALTITUDE"], st["SYSTEM_TIME"]
+    assert gp.lat * 1e-7 == pytest.approx(math.degrees(truth["lat_rad"]), abs=1e-3)
+    assert gp.lon * 1e-7 == pytest.approx(math.degrees(truth["lon_rad"]), abs=1e-3)
+    assert gp.alt * 1e-3 == pytest.approx(truth["h_m"], abs=200.0)
+    assert gp.relative_alt == gp.alt
+    V, gam, psi = truth["V_rel_mps"], truth["gamma_rad"], truth["psi_rad"]
+    v_ned = (V * math.cos(gam) * math.cos(psi), V * math.cos(gam) * math.sin(psi), -V * math.sin(gam))
+    for got, want in zip((gp.vx, gp.vy, gp.vz), v_ned):
+        if abs(want) > 330.0:
+            assert got == math.copysign(32767, want)          # saturated, right sign
+        else:
+            assert got * 0.01 == pytest.approx(want, abs=3.0)
+    assert abs(v_ned[0]) > 330.0 or abs(v_ned[1]) > 330.0      # this case does exercise the saturation
+    yaw = _truth_body_yaw(truth)
+    assert abs(math.remainder(math.radians(gp.hdg / 100.0) - yaw, 2 * math.pi)) < 0.02
+    assert 0 <= gp.hdg < 36000
+    assert hud.airspeed == pytest.approx(V, abs=2.0)
+    assert hud.groundspeed == pytest.approx(V * math.cos(gam), abs=2.0)
+    assert hud.climb == pytest.approx(V * math.sin(gam), abs=2.0)
+    assert hud.alt == pytest.approx(truth["h_m"], abs=200.0)
+    assert hud.heading == gp.hdg // 100
+    assert alt.altitude_amsl == pytest.approx(truth["h_m"], abs=200.0)
+    assert alt.altitude_relative == pytest.approx(alt.altitude_amsl) and alt.altitude_terrain < -1000
+    assert stime.time_unix_usec == 1_700_000_000_250_000
+    assert stime.time_boot_ms == int(rig.fsw.t_s * 1000)
+
+
 def test_loop_timing_from_the_executive_is_forwarded(rig):
     rig.gl.set_loop_timing(0, jitter_p50_us=12, jitter_p99_us=40, jitter_max_us=90, compute_p50_us=300,
                            compute_p99_us=700, compute_max_us=1500, cycle_slips=2)
@@ -135,7 +191,8 @@ def test_stock_pymavlink_common_client_sees_vehicle_attitude_and_statustext(tmp_
                 rig.frame = rig.plant.step(u)
                 while (m := conn.recv_match(blocking=True, timeout=0.02)) is not None:
                     seen.setdefault(m.get_type(), m)
-            assert {"HEARTBEAT", "ATTITUDE", "STATUSTEXT", "SYS_STATUS", "ATTITUDE_QUATERNION"} <= set(seen)
+            assert {"HEARTBEAT", "ATTITUDE", "STATUSTEXT", "SYS_STATUS", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT",
+                    "VFR_HUD", "ALTITUDE", "SYSTEM_TIME"} <= set(seen)
             assert seen["HEARTBEAT"].get_srcSystem() == 1 and seen["HEARTBEAT"].get_srcComponent() == 1
             assert seen["HEARTBEAT"].system_status == mav.MAV_STATE_ACTIVE
             assert math.isfinite(seen["ATTITUDE"].roll)

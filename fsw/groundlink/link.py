@@ -56,8 +56,13 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "ELLIPSLED_JET_STATUS": 5.0,
     "ELLIPSLED_CONTROL_STATUS": 5.0,
     "ELLIPSLED_LOOP_TIMING": 1.0,
+    "GLOBAL_POSITION_INT": 5.0,
+    "VFR_HUD": 5.0,
+    "ALTITUDE": 1.0,
+    "SYSTEM_TIME": 1.0,
 }
 ATTITUDE_GROUP = ("ATTITUDE", "ATTITUDE_QUATERNION", "ATTITUDE_TARGET", "NAMED_VALUE_FLOAT", "ELLIPSLED_ENTRY_STATE")
+POSITION_GROUP = ("GLOBAL_POSITION_INT", "VFR_HUD", "ALTITUDE")
 MAX_RATE_HZ = 100.0
 DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
 
@@ -81,16 +86,19 @@ class GroundLink:
     inject   callback forwarding a fault injection to the plant (may be None).
     rates    {stream: Hz} overriding DEFAULT_RATES_HZ.
     clock    monotonic time [s] for telemetry scheduling (tests pass a fake one).
+    wall_clock  Unix time [s] for SYSTEM_TIME.
     """
 
     def __init__(self, fsw, key: SigningKey, *, gcs: str = DEFAULT_GCS, bind: str = DEFAULT_BIND,
                  inject: InjectFn | None = None, rates: Mapping[str, float] | None = None,
-                 clock: Callable[[], float] = time.monotonic, max_rx_per_tick: int = 256,
+                 clock: Callable[[], float] = time.monotonic, wall_clock: Callable[[], float] = time.time,
+                 max_rx_per_tick: int = 256,
                  rx_budget_us: float = 2000.0, max_tx_per_tick: int = 64, peer_timeout_s: float = 10.0, max_peers: int = 4):
         if not isinstance(key, SigningKey):
             raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
         self.fsw = fsw
         self.clock = clock
+        self.wall_clock = wall_clock
         self.max_rx_per_tick = int(max_rx_per_tick)
         self.max_tx_per_tick = int(max_tx_per_tick)
         self.peer_timeout_s = float(peer_timeout_s)
@@ -349,11 +357,19 @@ class GroundLink:
         if self._due("SYS_STATUS", now):
             self._send(tm.sys_status(fsw, self._loop_timing, self.rejections, self.stats["kernel_drops"],
                                      self.stats["refused_early"]))
+        if self._due("SYSTEM_TIME", now):
+            self._send(tm.system_time(fsw, self.wall_clock()))
         if tm.nav_valid(fsw):
-            want = tuple(self._due(n, now) for n in ATTITUDE_GROUP)
-            if any(want):
-                for msg in tm.attitude(fsw, ms, want):
-                    self._send(msg)
+            want_att = tuple(self._due(n, now) for n in ATTITUDE_GROUP)
+            want_pos = tuple(self._due(n, now) for n in POSITION_GROUP)
+            if any(want_att) or any(want_pos):
+                C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
+                if any(want_att):
+                    for msg in tm.attitude(fsw, ms, C_LN, want_att):
+                        self._send(msg)
+                if any(want_pos):
+                    for msg in tm.position(fsw, ms, C_LN, want_pos):
+                        self._send(msg)
         if self._due("ACTUATOR_OUTPUT_STATUS", now):
             self._send(tm.actuator_output_status(fsw))
         if self._due("ELLIPSLED_JET_STATUS", now):

@@ -80,11 +80,11 @@ def nav_valid(fsw) -> bool:
     return fsw.k >= 0 and float(np.dot(fsw.nav.state.r_N, fsw.nav.state.r_N)) > 1.0
 
 
-def attitude(fsw, ms: int, want: tuple[bool, bool, bool, bool, bool]) -> Iterator:
-    """The attitude group relative to local NED: ATTITUDE, ATTITUDE_QUATERNION,
-    ATTITUDE_TARGET, the NAMED_VALUE_FLOATs, ELLIPSLED_ENTRY_STATE (those ``want`` selects)."""
+def attitude(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool, bool, bool]) -> Iterator:
+    """The attitude group relative to local NED (C_LN: ``local_ned_dcm`` at the vehicle):
+    ATTITUDE, ATTITUDE_QUATERNION, ATTITUDE_TARGET, the NAMED_VALUE_FLOATs,
+    ELLIPSLED_ENTRY_STATE (those ``want`` selects)."""
     nav, g = fsw.nav.state, fsw.guidance
-    C_LN = local_ned_dcm(nav.r_N)
     w = nav.omega_BN_B
     if want[0] or want[1]:
         C_BL = nav.C_BN @ C_LN.T
@@ -109,18 +109,78 @@ def attitude(fsw, ms: int, want: tuple[bool, bool, bool, bool, bool]) -> Iterato
         yield entry_state(fsw, ms, C_LN)
 
 
+def lat_lon(fsw) -> tuple[float, float]:
+    """(latitude, longitude) [rad] of the navigation position on the FSW's planet model, a
+    sphere, where planetocentric and planetodetic latitude coincide; N and the planet-fixed
+    frame coincide at t = 0, so longitude = atan2(y, x) - Omega t (as the plant reports it)."""
+    r_N = fsw.nav.state.r_N
+    r = math.sqrt(float(r_N[0] * r_N[0] + r_N[1] * r_N[1] + r_N[2] * r_N[2]))
+    lat = math.asin(max(-1.0, min(1.0, float(r_N[2]) / r)))
+    return lat, frames.wrap_pi(math.atan2(r_N[1], r_N[0]) - fsw.scenario.planet.omega_radps * fsw.t_s)
+
+
 def entry_state(fsw, ms: int, C_LN: np.ndarray):
     nav = fsw.nav.state
     north, east, down = C_LN
     V = max(nav.V_rel_mps, 1e-9)
     gamma = math.asin(max(-1.0, min(1.0, -float(nav.vrel_N @ down) / V)))
     psi = math.atan2(float(nav.vrel_N @ east), float(nav.vrel_N @ north))
-    r = float(np.linalg.norm(nav.r_N))
-    lat = math.asin(max(-1.0, min(1.0, nav.r_N[2] / r)))
-    lon = frames.wrap_pi(math.atan2(nav.r_N[1], nav.r_N[0]) - fsw.scenario.planet.omega_radps * fsw.t_s)
+    lat, lon = lat_lon(fsw)
     return mav.MAVLink_ellipsled_entry_state_message(
         ms, nav.h_m, nav.V_rel_mps, gamma, psi, lat, lon, nav.mach, nav.qbar_pa, nav.alpha_rad,
         nav.beta_rad, nav.bank_rad, fsw.guidance.phi_r)
+
+
+# ---------------------------------------------------------------- position group
+# Standard messages a stock ground station draws its map, HUD and altitude tape from. The
+# planet model is the FSW's own sphere (radius R): "altitude above the areoid" is the
+# navigation altitude h = |r| - R, and with no terrain model the surface is that sphere,
+# so the altitude relative to the ground (GLOBAL_POSITION_INT relative_alt, ALTITUDE
+# altitude_relative) is h as well.
+INT16_MAX = 0x7FFF
+UINT16_MAX = 0xFFFF
+
+
+def _sat_int(x: float, lo: int, hi: int) -> int:
+    return lo if x <= lo else hi if x >= hi else int(round(x))
+
+
+def heading_cdeg(yaw_rad: float) -> int:
+    """Yaw [rad] as MAVLink's heading, centidegrees in [0, 35999]."""
+    return int(round(math.degrees(yaw_rad) * 100.0)) % 36000
+
+
+def position(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool]) -> Iterator:
+    """GLOBAL_POSITION_INT, VFR_HUD and ALTITUDE (those ``want`` selects) from the navigation
+    state: position on the planet, planet-relative velocity in local NED, body yaw (3-2-1
+    from local NED, as ATTITUDE). GLOBAL_POSITION_INT's int16 cm/s velocities saturate at
+    +-327.67 m/s (entry speeds exceed it); VFR_HUD carries the speeds as floats."""
+    nav = fsw.nav.state
+    v_ned = C_LN @ nav.vrel_N
+    C_BL = nav.C_BN @ C_LN.T
+    yaw = math.atan2(C_BL[0, 1], C_BL[0, 0])           # euler321's yaw
+    h = float(nav.h_m)
+    if want[0]:
+        lat, lon = lat_lon(fsw)
+        yield mav.MAVLink_global_position_int_message(
+            ms, int(round(math.degrees(lat) * 1e7)), int(round(math.degrees(lon) * 1e7)),
+            _sat_int(h * 1e3, -0x80000000, 0x7FFFFFFF), _sat_int(h * 1e3, -0x80000000, 0x7FFFFFFF),
+            _sat_int(v_ned[0] * 100.0, -INT16_MAX, INT16_MAX), _sat_int(v_ned[1] * 100.0, -INT16_MAX, INT16_MAX),
+            _sat_int(v_ned[2] * 100.0, -INT16_MAX, INT16_MAX), heading_cdeg(yaw))
+    if want[1]:
+        ground = math.hypot(float(v_ned[0]), float(v_ned[1]))
+        yield mav.MAVLink_vfr_hud_message(float(nav.V_rel_mps), ground, heading_cdeg(yaw) // 100, 0, h,
+                                          -float(v_ned[2]))
+    if want[2]:
+        # no terrain model: terrain altitude unknown (< -1000 by the message's definition),
+        # no clearance measurement (negative)
+        yield mav.MAVLink_altitude_message(int(max(0.0, fsw.t_s) * 1e6), h, h, h, h, -1001.0, -1.0)
+
+
+def system_time(fsw, unix_s: float):
+    """SYSTEM_TIME: the FSW host's Unix time and the FSW's mission time (the time_boot_ms
+    of every other message)."""
+    return mav.MAVLink_system_time_message(int(unix_s * 1e6), int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF)
 
 
 def actuator_output_status(fsw):

@@ -156,8 +156,9 @@ def apply(cpus: list[int] | None = None, priority: int | None = None,
 
     cpus: CPU set for this process (None: leave). priority: SCHED_FIFO priority 1..99
     (None: stay SCHED_OTHER). lock_memory: mlockall(MCL_CURRENT | MCL_FUTURE).
+    Under SCHED_FIFO the GIL switch interval becomes GIL_SWITCH_S (see run_below_loop).
     Returns {affinity, sched_fifo, priority, mlockall, timer_slack_ns (read back: 0 for a
-    SCHED_FIFO thread), messages}; every
+    SCHED_FIFO thread), gil_switch_us, messages}; every
     refused step leaves the process as it was and adds a message (the warning to log).
     """
     messages: list[str] = []
@@ -191,8 +192,36 @@ def apply(cpus: list[int] | None = None, priority: int | None = None,
         prio = os.sched_getparam(0).sched_priority if fifo else None
     except OSError:
         fifo, prio = False, None
+    if fifo:            # background threads (run_below_loop) hand the GIL back this soon
+        sys.setswitchinterval(GIL_SWITCH_S)
     return {"affinity": affinity, "sched_fifo": fifo, "priority": prio, "mlockall": mlocked,
-            "timer_slack_ns": get_timer_slack_ns(), "messages": messages}
+            "timer_slack_ns": get_timer_slack_ns(), "gil_switch_us": sys.getswitchinterval() * 1e6,
+            "messages": messages}
+
+
+GIL_SWITCH_S = 250e-6     # longest wait of the loop for the GIL held by a background thread
+
+
+def run_below_loop() -> dict:
+    """Call first in a background thread (allocator rebuild, controllability, guidance).
+    When the process's main thread -- the control loop -- runs SCHED_FIFO, this thread gets
+    one priority below it: a thread of the loop's own priority is never preempted by it
+    (SCHED_FIFO has no time slices), so a background job of tens of milliseconds would hold
+    the loop's release back by that long. One below, the loop preempts it at each release,
+    and takes the GIL over within ``sys.getswitchinterval()`` (``apply`` shortens it). Under
+    SCHED_OTHER nothing changes. Returns {policy, priority} of this thread, read back."""
+    main = threading.main_thread().native_id
+    try:
+        if os.sched_getscheduler(main) == os.SCHED_FIFO:
+            p = os.sched_getparam(main).sched_priority
+            if p > 1:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(p - 1))
+            else:
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        fifo = os.sched_getscheduler(0) == os.SCHED_FIFO
+        return {"policy": "fifo" if fifo else "other", "priority": os.sched_getparam(0).sched_priority}
+    except (OSError, AttributeError) as e:      # not Linux, or not permitted: stay as created
+        return {"policy": None, "priority": None, "message": str(e)}
 
 
 def other_threads(cpus: list[int] | None, priority: int | None, python_priority: int | None = None) -> dict:
@@ -232,7 +261,9 @@ def other_threads(cpus: list[int] | None, priority: int | None, python_priority:
 
 
 def restore() -> None:
-    """Back to SCHED_OTHER, all CPUs, memory unlocked, GC enabled (for tests and teardown)."""
+    """Back to SCHED_OTHER, all CPUs, memory unlocked, GC enabled, the default GIL switch
+    interval (for tests and teardown)."""
+    sys.setswitchinterval(0.005)
     try:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except OSError:

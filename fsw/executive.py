@@ -169,8 +169,13 @@ class Executive:
     order); ``tick(frame, k)`` runs one base tick (lockstep: now; real time: at the next
     release); ``run(n_cycles, should_stop)`` loops ticks. Task exceptions are caught,
     counted and reported (rate-limited ERROR event) so one bad task does not stop the
-    loop, unless ``catch_task_errors=False``.
+    loop, unless ``catch_task_errors=False``. A late cycle is counted, reported (event naming
+    its longest task) and, for the first ``SLIP_RECORDS``, kept in ``slip_records`` with its
+    release jitter, every task's time and its cause: "late_release" when the loop started
+    late by more than it then computed, else "overrun".
     """
+
+    SLIP_RECORDS = 32
 
     def __init__(self, period_ns: int, clock: LockstepClock | RealTimeClock,
                  divisors: tuple[int, ...] = (1, 5, 50), *, events: EventLog | None = None,
@@ -197,6 +202,9 @@ class Executive:
         self.slips = 0
         self.task_errors = 0
         self.last_slip_k = -1
+        # what each of the first SLIP_RECORDS late cycles spent where (a slip is rare: the
+        # dict is built only then): the evidence a user needs to find its cause
+        self.slip_records: list[dict] = []
 
     @classmethod
     def from_params(cls, params: dict, period_ns: int, clock, **kw) -> "Executive":
@@ -267,9 +275,19 @@ class Executive:
         if late:
             self.slips += 1
             self.last_slip_k = k
+            worst = int(np.argmax(task_row))
+            if len(self.slip_records) < self.SLIP_RECORDS:
+                # the larger share decides: the loop started late (the CPU was elsewhere: a
+                # higher-priority thread, the host) or its own tasks ran long
+                cause = "late_release" if t_start - t_rel > t_end - t_start else "overrun"
+                self.slip_records.append({
+                    "k": int(k), "cause": cause, "late_us": (t_end - t_rel - self.deadline_ns) / 1e3,
+                    "jitter_us": (t_start - t_rel) / 1e3,
+                    "tasks_us": {name: task_row[j] / 1e3 for j, name in enumerate(self._names)
+                                 if task_row[j] >= 0}})
             self.events.emit(self._t_s(t_s, t_rel), Severity.WARNING, "executive", "cycle_slip",
-                             f"cycle slip k={k}: {(t_end - t_rel) / 1e6:.2f} > "
-                             f"{self.deadline_ns / 1e6:.2f} ms", rate_limited=True)
+                             f"slip k={k} {(t_end - t_rel) / 1e6:.1f}>{self.deadline_ns / 1e6:.0f}ms "
+                             f"{self._names[worst]} {task_row[worst] / 1e6:.1f}", rate_limited=True)
         return not late
 
     @staticmethod
@@ -302,6 +320,8 @@ class Executive:
         st = self.stats
         out = {"cycles": self.cycles, "slips": self.slips, "missed_releases": self.clock.missed,
                "task_errors": self.task_errors, "mode": self.clock.mode}
+        if self.slip_records:
+            out["slip_records"] = self.slip_records
         if st is None:
             return out
         for field in ("jitter_ns", "compute_ns"):

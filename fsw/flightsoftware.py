@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from common.events import EventLog, Severity
+from common import rt
 from common.frames import wrap_pi
 from common.model import Scenario
 from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult
@@ -476,6 +477,7 @@ class _LpWorker:
         return r
 
     def _run(self) -> None:
+        rt.run_below_loop()
         while True:
             with self._cv:
                 while self._job is None and not self._stop:

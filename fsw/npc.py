@@ -28,7 +28,7 @@ import time
 import numpy as np
 from numba import njit
 
-from common import atmosphere
+from common import atmosphere, rt
 from common.model import Scenario
 from common.events import EventLog, Severity
 from .params import Param
@@ -546,6 +546,7 @@ class EntryGuidance:
                 "ns": time.perf_counter_ns() - t0}
 
     def _worker(self) -> None:
+        rt.run_below_loop()
         while True:
             self._go.wait()
             self._go.clear()

@@ -99,9 +99,12 @@ def test_an_overrunning_task_is_a_cycle_slip_counted_and_reported_once():
     assert st.task_percentiles("control")["max"] == 25 * MS and st.task_percentiles("nav")["p50"] == 1 * MS
     slips = [e for e in events.history if e.code == "cycle_slip"]
     assert len(slips) == 1 and slips[0].severity == Severity.WARNING and slips[0].source == "executive"
-    assert "k=7" in slips[0].text and len(slips[0].text) <= 50
+    assert "k=7" in slips[0].text and "control 25.0" in slips[0].text and len(slips[0].text) <= 50
     tm = ex.telemetry()
     assert tm["slips"] == 1 and tm["compute_max_us"] == 26_000 and tm["jitter_max_us"] == 6_000
+    # the late cycle's own record: where its time went
+    assert tm["slip_records"] == [{"k": 7, "cause": "overrun", "late_us": 6_000.0, "jitter_us": 0.0,
+                                   "tasks_us": {"nav": 1_000.0, "control": 25_000.0}}]
 
 
 def test_overrun_beyond_a_period_skips_missed_releases_and_keeps_the_phase():
@@ -122,6 +125,27 @@ def test_overrun_beyond_a_period_skips_missed_releases_and_keeps_the_phase():
     assert ex.missed_releases == 1 and ex.slips == 1
     assert ex.stats.jitter_ns[4] == period // 2
     assert [e.code for e in events.history] == ["cycle_slip", "release_missed"]
+
+
+def test_a_cycle_released_late_by_the_host_is_a_slip_of_its_own_cause():
+    """The loop woke 21 ms after its release (the CPU was elsewhere) and computed 1 ms: a
+    slip, recorded as a late release, not as the tasks' overrun."""
+    ft = FakeTime()
+    period = 20 * MS
+    stalls = {3: 21 * MS}
+
+    def sleep_until(t):
+        ft.sleep_until(t)
+        ft.t += stalls.pop(len(ft.sleeps) - 1, 0)
+    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=sleep_until)
+    ex = Executive(period, clock, (1,))
+    ex.add(1, "control", lambda c: setattr(ft, "t", ft.t + MS))
+    clock.start(ft.t)
+    for _ in range(6):
+        ex.tick()
+    assert ex.slips == 1
+    (rec,) = ex.telemetry()["slip_records"]
+    assert rec["cause"] == "late_release" and rec["jitter_us"] == 21_000 and rec["tasks_us"] == {"control": 1_000}
 
 
 def test_joining_a_running_plant_at_step_k0_misses_nothing_and_keeps_the_phase():

@@ -128,7 +128,7 @@ ses.close()
 @pytest.mark.skipif(not _can_rt(), reason="needs root (CAP_SYS_NICE)")
 def test_other_threads_get_io_priority_and_python_threads_their_own():
     """SIL nodes put Zenoh's native threads one FIFO priority above the main loop and our
-    Python threads (they take the GIL) at the loop's; checked in /proc for every thread."""
+    Python threads (background jobs: they take the GIL) one below it; checked in /proc for every thread."""
     out = subprocess.run([sys.executable, "-c", THREADS_CHILD], cwd=ROOT, capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
@@ -140,3 +140,49 @@ def test_other_threads_get_io_priority_and_python_threads_their_own():
     for tid, (name, prio, (policy, kprio, cpus)) in r["threads"].items():
         want = 11 if int(tid) == r["py"] else 12
         assert prio == want == kprio and policy == 1 and cpus == "0", (name, prio, kprio, policy, cpus)
+
+
+BACKGROUND_CHILD = r"""
+import hashlib, json, os, sys, threading, time
+from common import rt
+rep = rt.apply(cpus=[0], priority=20, lock_memory=False)
+below = sys.argv[1] == "below"
+blob = bytes(64 << 20)
+go, seen = threading.Event(), {}
+def job():
+    # a background job that computes for tens of ms at a time outside the GIL (as numba's
+    # nogil kernels and HiGHS do), with Python between its calls (as a table rebuild)
+    seen.update(rt.run_below_loop() if below else {"policy": "fifo", "priority": 20})
+    go.wait()
+    for _ in range(4):                   # bounded: at the loop's priority it starves the loop
+        hashlib.sha256(blob).digest()
+t = threading.Thread(target=job, daemon=True)
+t.start()
+late = []
+for i in range(40):                      # the loop: 10-ms releases; the job starts at the 3rd
+    if i == 2:
+        go.set()
+    due = time.monotonic_ns() + 10_000_000
+    rt.sleep_until_ns(due)
+    late.append((time.monotonic_ns() - due) / 1e3)
+t.join(30)
+print(json.dumps({"late_us": late, "job": seen, "switch_us": rep["gil_switch_us"], "fifo": rep["sched_fifo"]}))
+"""
+
+
+@pytest.mark.skipif(not _can_rt(), reason="needs root (CAP_SYS_NICE)")
+def test_a_background_job_below_the_loop_cannot_hold_its_release_back():
+    """One CPU, a SCHED_FIFO loop and a background thread computing in long GIL-free calls:
+    at the loop's own priority the job is never preempted (FIFO has no time slices) and
+    releases come tens of ms late; run_below_loop puts it one priority down, and the loop
+    wakes within a GIL switch interval of its release. The same-priority run is the
+    control: it shows the harm is real on this machine."""
+    def fly(mode):
+        out = subprocess.run([sys.executable, "-c", BACKGROUND_CHILD, mode], cwd=ROOT, capture_output=True,
+                             text=True, timeout=120)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return json.loads(out.stdout.strip().splitlines()[-1])
+    same, below = fly("same"), fly("below")
+    assert below["fifo"] and below["job"] == {"policy": "fifo", "priority": 19} and below["switch_us"] == 250
+    assert max(same["late_us"]) > 20_000, same["late_us"]          # a hash of 64 MB: ~30-100 ms
+    assert sorted(below["late_us"])[-2] < 2_000, below["late_us"]  # generous: one outlier allowed

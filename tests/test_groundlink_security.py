@@ -180,3 +180,18 @@ def test_oversized_datagram_does_not_break_the_link(rig):
         s.close()
     settle(rig)
     assert rig.command("ft", "off") == mav.MAV_RESULT_ACCEPTED
+
+
+def test_a_tick_without_slack_before_the_cycle_deadline_leaves_datagrams_waiting(rig):
+    """Real time: whatever ran late before the link in a cycle, the link does not receive
+    past the cycle's deadline; what waits in the socket is read on a later tick."""
+    for _ in range(5):
+        send_raw(rig, b"\x00" * 40)
+    time.sleep(0.02)
+    before = dict(rig.gl.stats)
+    rig.gl.tick(rig.frame, deadline_ns=time.monotonic_ns() - 1)           # the deadline is past
+    assert rig.gl.stats["rx_deferred"] == before["rx_deferred"] + 1
+    assert rig.gl.stats["rx_datagrams"] == before["rx_datagrams"]
+    rig.gl.tick(rig.frame, deadline_ns=time.monotonic_ns() + 50_000_000)  # 50 ms of slack
+    assert rig.gl.stats["rx_datagrams"] == before["rx_datagrams"] + 5
+    assert rig.gl.stats["rx_deferred"] == before["rx_deferred"] + 1

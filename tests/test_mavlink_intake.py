@@ -115,6 +115,26 @@ def test_one_call_stops_when_its_time_budget_is_spent():
         b.close()
 
 
+def test_a_calls_own_budget_caps_the_configured_one_and_none_left_reads_nothing():
+    t = [0]
+
+    def clock_ns():
+        t[0] += 300_000                         # each reading of the clock: 0.3 ms later
+        return t[0]
+
+    b = Bench(budget_us=1e6, clock_ns=clock_ns)
+    try:
+        for _ in range(100):
+            b.send(b"\x00" * 30)
+        time.sleep(0.01)
+        assert b.intake.poll(lambda m, a: None, budget_ns=0) == 0          # the caller's slack is gone
+        n = b.intake.poll(lambda m, a: None, budget_ns=1_000_000)
+        assert 1 <= n <= 4 and b.intake.stats["budget_hits"] == 2
+        assert b.intake.poll(lambda m, a: None) == 100 - n                 # the configured budget: all
+    finally:
+        b.close()
+
+
 def test_a_full_queue_is_bounded_by_the_receive_buffer_and_its_drops_are_counted():
     b = Bench(max_datagrams=64)
     try:

@@ -27,6 +27,7 @@ from interfaces.codec import Codec
 from interfaces.keys import keys
 
 from . import netns
+from .deadlines import own_overruns
 
 pytestmark = pytest.mark.slow
 
@@ -255,7 +256,7 @@ def test_realtime_through_the_router_keeps_its_deadlines(net):
     print(f"through the router: latency p50 {sim['latency_p50_us']:.0f} us p99 {sim['latency_p99_us']:.0f} us, "
           f"jitter p99 {fsw['jitter_p99_us']:.0f} us, slips {fsw['cycle_slips']}")
     assert sim["end_reason"] in ("duration", "timeout") or sim["t_end_s"] >= 19.99, sim
-    assert fsw["cycle_slips"] == 0
+    assert own_overruns(fsw) == [], fsw["executive"]            # host stalls are recorded, not the FSW's
     assert sim["latency_samples"] >= 0.95 * 1000, sim
     assert sim["latency_p99_us"] < 20000
 

@@ -88,13 +88,13 @@ def open_node(role: str, args, rt_report: dict | None = None):
     every other thread of the process — Zenoh's I/O threads, the runtime threads its binding
     starts at import — goes to this node's CPU one priority above the loop, so an arriving
     sample preempts the loop's spin-wait instead of queueing behind it; our own Python
-    threads (they take the GIL) stay at the loop's priority."""
+    threads (background jobs: they take the GIL) one below the loop (common.rt.run_below_loop)."""
     session = transport.open_session(role, args.listen, args.connect, args.zenoh_config,
                                      lowlatency=bool(getattr(args, "zenoh_lowlatency", True)))
     if rt_in_force(rt_report):
         from common import rt
         others = rt.other_threads([args.cpu] if args.cpu is not None else None, rt_report["io_priority"],
-                                  python_priority=int(args.rt_priority))
+                                  python_priority=int(args.rt_priority) - 1)
         rt_report["threads"] = [f"{name}:{prio}" for _, name, prio, _ in others["threads"]]
         rt_report["messages"] += others["messages"]
         say(role, f"real-time: loop SCHED_FIFO {rt_report['priority']}, I/O threads {rt_report['io_priority']}, "

@@ -109,7 +109,13 @@ class FswNode:
         self.topo.add(2, "events", self._publish_events)
         self.link = self._ground_link()
         if self.link is not None:
-            self.topo.add(2, "groundlink", lambda c: self.link.tick(self.frame))
+            # real time: the link's receiving stops short of the cycle's deadline (lockstep
+            # keeps only the link's own budget: its cycles have no wall-clock deadline)
+            ex = self.topo.executive
+            if args.mode == "realtime":
+                self.topo.add(2, "groundlink", lambda c: self.link.tick(self.frame, c.t_release_ns + ex.deadline_ns))
+            else:
+                self.topo.add(2, "groundlink", lambda c: self.link.tick(self.frame))
 
     # ------------------------------------------------------------------ inputs
     def _rejected(self, reason: str, detail: str) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 import threading
 from collections import deque
 
+from common import rt
+
 from .tables import Workspace, build_tables
 
 
@@ -70,8 +72,7 @@ class Rebuilder:
         return self._thread.is_alive()
 
     def _run(self) -> None:
-        # same OS priority as the caller on purpose: a deprioritised thread can be preempted
-        # while it briefly holds the GIL between kernels, stalling the control thread
+        rt.run_below_loop()
         while True:
             with self._cv:
                 while not self._stop and self._request is None and not self._queue:

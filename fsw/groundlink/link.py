@@ -89,6 +89,8 @@ class GroundLink:
     wall_clock  Unix time [s] for SYSTEM_TIME.
     """
 
+    SEND_MARGIN_NS = 1_000_000       # kept free before the deadline beyond the send side's peak
+
     def __init__(self, fsw, key: SigningKey, *, gcs: str = DEFAULT_GCS, bind: str = DEFAULT_BIND,
                  inject: InjectFn | None = None, rates: Mapping[str, float] | None = None,
                  clock: Callable[[], float] = time.monotonic, wall_clock: Callable[[], float] = time.time,
@@ -134,8 +136,9 @@ class GroundLink:
         self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
         self.stats = {"rx_datagrams": 0, "rx_bytes": 0, "rx_messages": 0, "tx_frames": 0,
                       "tx_bytes": 0, "tx_errors": 0, "refused_early": 0, "kernel_drops": 0,
-                      "rx_budget_hits": 0, "rx_poll_max_us": 0.0}
+                      "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0}
         self.tick_ns_max = 0
+        self.send_ns_peak = 0
 
     # -------------------------------------------------------------- configuration
     @staticmethod
@@ -185,14 +188,30 @@ class GroundLink:
                                               compute_p99_us, compute_max_us, int(cycle_slips))
 
     # -------------------------------------------------------------- the tick
-    def tick(self, sensors=None) -> None:
+    def tick(self, sensors=None, deadline_ns: int | None = None) -> None:
         """Call from RG2: receive and answer (bounded), then send what is due.
-        ``sensors``: the latest SENSORS record (for "firing" from the chamber pressures)."""
+        ``sensors``: the latest SENSORS record (for "firing" from the chamber pressures).
+        ``deadline_ns`` (time.monotonic_ns): the cycle's deadline. Receiving then also stops
+        where the time left would no longer cover this tick's sending (the longest send
+        recently, plus SEND_MARGIN_NS): whatever ran late before the link in this cycle, the
+        ground's datagrams wait in the socket rather than push the cycle past its deadline.
+        A tick whose slack is already gone receives nothing (counted: rx_deferred)."""
         t0 = time.perf_counter_ns()
         try:
-            self.poll()
+            budget = None
+            if deadline_ns is not None:
+                budget = deadline_ns - time.monotonic_ns() - self.send_ns_peak - self.SEND_MARGIN_NS
+            if budget is None or budget > 0:
+                self.poll(budget)
+            else:
+                self.stats["rx_deferred"] += 1
             self._sample_allocator()
+            t_send = time.perf_counter_ns()
             self.send_due(sensors)
+            sent_ns = time.perf_counter_ns() - t_send
+            # a peak that decays (x0.9 a tick: one outlier is forgotten within seconds), so
+            # one slow send cannot keep the receive side shut
+            self.send_ns_peak = max(sent_ns, int(self.send_ns_peak * 0.9))
         except Exception:                       # the link must never take the FSW down
             log.exception("ground link tick failed")
         self.tick_ns_max = max(self.tick_ns_max, time.perf_counter_ns() - t0)
@@ -215,9 +234,10 @@ class GroundLink:
             self.fsw, self._next_due, self._event_index, self.link.signer.seq = saved
             self._pack_only = False
 
-    def poll(self) -> int:
-        """Receive within the tick's budget without blocking; returns the datagrams read."""
-        n = self.intake.poll(self._handle_one)
+    def poll(self, budget_ns: int | None = None) -> int:
+        """Receive within the tick's budget (or ``budget_ns``, if less) without blocking;
+        returns the datagrams read."""
+        n = self.intake.poll(self._handle_one, budget_ns)
         st, ist = self.stats, self.intake.stats
         st["rx_datagrams"], st["rx_bytes"] = ist["datagrams"], ist["bytes"]
         st["refused_early"], st["kernel_drops"] = ist["refused_early"], ist["kernel_drops"]

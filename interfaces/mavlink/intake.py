@@ -84,10 +84,12 @@ class DatagramIntake:
             self.stats["refused_early"] += count
             self.link.verifier.reject(Rejection(reason, sysid, compid, msgid, -1, detail, count))
 
-    def poll(self, handle: Callable[[object, tuple[str, int]], None]) -> int:
+    def poll(self, handle: Callable[[object, tuple[str, int]], None], budget_ns: int | None = None) -> int:
         """Read and pass on what the budget allows; ``handle(msg, addr)`` gets every
-        verified, decoded message. Returns the number of datagrams read."""
+        verified, decoded message. ``budget_ns``: this call's time, if less than the
+        configured budget (the caller's slack). Returns the number of datagrams read."""
         t0 = self.clock_ns()
+        budget = self.budget_ns if budget_ns is None else min(self.budget_ns, int(budget_ns))
         n = 0
         st = self.stats
         buf, view = self._buf, self._view
@@ -100,7 +102,7 @@ class DatagramIntake:
             else:
                 r[0] += 1
         while True:
-            if n >= self.max_datagrams or self.clock_ns() - t0 >= self.budget_ns:
+            if n >= self.max_datagrams or self.clock_ns() - t0 >= budget:
                 st["budget_hits"] += 1
                 break
             try:

@@ -151,3 +151,35 @@ def test_first_reconfiguration_after_start_sanity_bound():
     r = reconfig._first_in_subprocess(spec)
     assert not r["from_cache"]
     assert 0.0 < r["reconfig_ms"] < 200.0, r
+
+
+def _row(res, start):
+    return next(r for r in suite.rows(res) if r[0].startswith(start))
+
+
+def test_absolute_targets_judged_also_at_machine_speed_and_verdict_names_the_failure():
+    """Absolute targets are also judged on the figure scaled by the same run's machine speed
+    (bytes() p50 against the README machine's); the verdict names what failed."""
+    def res(factor, p99, speedup, rtf):
+        return {"machine": {"speed_factor": factor},
+                "allocator": {"p50_us": 10.0, "p99_us": p99, "max_us": 300.0, "speedup": speedup, "mismatches": 0},
+                "batch": {"realtime_factor": rtf}}
+    slow = res(2.0, 150.0, 300.0, 150.0)          # 2x slow machine: 150 us is 75 at reference speed
+    r = _row(slow, "allocator solve")
+    assert r[5] == "**FAIL** (absolute)" and "at reference speed 75.0 (machine x2.00)" in r[3]
+    assert _row(slow, "batch real-time")[5] == "**FAIL** (absolute)"        # 150x is 300x at speed
+    both = res(2.0, 250.0, 300.0, 90.0)
+    assert _row(both, "allocator solve")[5] == "**FAIL** (absolute, machine-scaled)"
+    assert _row(both, "batch real-time")[5] == "**FAIL** (absolute, machine-scaled)"
+    fast = res(0.5, 80.0, 100.0, 250.0)           # a fast machine does not hide a regression
+    assert _row(fast, "allocator solve")[5] == "**FAIL** (ratio, machine-scaled)"
+    assert _row(fast, "batch real-time")[5] == "**FAIL** (machine-scaled)"
+    assert _row(res(1.0, 50.0, 300.0, 250.0), "allocator solve")[5] == "pass"
+    unknown = res(None, 50.0, 300.0, 250.0)
+    assert _row(unknown, "allocator solve")[5] == "pass (machine-scaled n/m)"
+    assert "machine speed n/m" in _row(unknown, "allocator solve")[3]
+
+
+def test_machine_section_measures_its_speed_baseline():
+    m = suite.machine(True)
+    assert m["speed_bytes_p50_us"] > 0 and m["speed_factor"] == m["speed_bytes_p50_us"] / suite.REFERENCE_BYTES_P50_US

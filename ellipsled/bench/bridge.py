@@ -26,7 +26,7 @@ import rerun as rr
 from gse.viz.logger import SCALAR_CHANNELS, SOURCE_FIELDS, RerunLogger
 from gse.viz.sinks import open_sinks
 
-from .rows import Row, all_, fmt, le, row
+from .rows import Row, fmt, le, row, speed
 
 RATE_HZ = 50.0
 FULL_ENTRY_STEPS = 22_500
@@ -203,7 +203,7 @@ def rows(res: dict) -> list[Row]:
                    if web is not None else ""),
                 f"{fmt(br.get('speedup_batched_vs_per_signal'))}x",
                 f"<= {cpu_max:g} %, memory flat (<= {fmt(mem_max)} MB per 10k steps, file sink)",
-                all_(le(br.get("cpu_pct"), cpu_max), mem_ok))]
+                mem_ok, absolute=(br.get("cpu_pct"), cpu_max, "<="), machine=speed(res))]
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ import time
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing import Signer, SigningKey
 
-from .rows import NO_TARGET, Row, fmt, g, le, ratio, row
+from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
 TARGETS = {"slips": 0, "groundlink_max_us_max": 20_000.0}   # a ground-link tick within one period
 
@@ -276,7 +276,8 @@ def rows(res: dict) -> list[Row]:
                 f"{fmt(fl.get('flood_groundlink_p99_us'))} / {fmt(fl.get('flood_groundlink_max_us'))}",
                 f"quiet {fmt(fl.get('quiet_groundlink_p99_us'))} / {fmt(fl.get('quiet_groundlink_max_us'))}",
                 f"{fmt(ratio(fl.get('flood_groundlink_max_us'), gl_max))}x period (max)",
-                f"max < {gl_max:,.0f} (a period)", le(fl.get("flood_groundlink_max_us"), gl_max)),
+                f"max < {gl_max:,.0f} (a period)", NO_TARGET,
+                absolute=(fl.get("flood_groundlink_max_us"), gl_max, "<="), machine=speed(res)),
             row("  receive work per tick, in process, flood: intake / previous path p99 [us]",
                 f"{fmt(g(rc, 'flood_intake', 'p99_us'))} / {fmt(g(rc, 'flood_previous', 'p99_us'))}",
                 f"quiet {fmt(g(rc, 'quiet', 'p99_us'))}; genuine commands through: "

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from .jitter import jitter_verdict
-from .rows import NO_TARGET, Row, fmt, g, ge, le, ratio, row
+from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
 LOCKSTEP_TARGETS = {"realtime_factor_min": 20.0}
 REALTIME_TARGETS = {"latency_p99_us_max": 1000.0, "slips": 0}   # jitter: as the in-process loop (jitter.py)
@@ -140,7 +140,8 @@ def lockstep_rows(res: dict) -> list[Row]:
         return []
     m = LOCKSTEP_TARGETS["realtime_factor_min"]
     return [row("lockstep SIL real-time factor (multi-process, Zenoh)", f"{fmt(sl.get('realtime_factor'))}x",
-                f"simulated {fmt(sl.get('baseline_simulated_s'))} s", "", f">= {m:g}x", ge(sl.get("realtime_factor"), m))]
+                f"simulated {fmt(sl.get('baseline_simulated_s'))} s", "", f">= {m:g}x", NO_TARGET,
+                absolute=(sl.get("realtime_factor"), m, ">="), machine=speed(res))]
 
 
 def realtime_rows(res: dict) -> list[Row]:
@@ -151,17 +152,19 @@ def realtime_rows(res: dict) -> list[Row]:
         if not s:
             continue
         ct99 = g(res, "jitter", regime, "cyclictest_p99_us")
-        target, ok = jitter_verdict(regime, s.get("jitter_p99_us"), s.get("jitter_max_us"), ct99)
+        target, ok, absolute = jitter_verdict(regime, s.get("jitter_p99_us"), s.get("jitter_max_us"), ct99)
         R.append(row(f"real-time SIL jitter {regime} p50 / p99 / max [us]",
                      f"{fmt(s.get('jitter_p50_us'))} / {fmt(s.get('jitter_p99_us'))} / {fmt(s.get('jitter_max_us'))}",
-                     f"cyclictest p99 {fmt(ct99)}", f"{fmt(ratio(s.get('jitter_p99_us'), ct99))}x (p99)", target, ok))
+                     f"cyclictest p99 {fmt(ct99)}", f"{fmt(ratio(s.get('jitter_p99_us'), ct99))}x (p99)", target, ok,
+                     absolute=absolute, machine=speed(res)))
         R.append(row(f"real-time SIL cycle slips {regime} ({fmt(s.get('duration_s'))} s)", fmt(s.get("slips")), "", "",
                      f"{slips}", None if s.get("slips") is None else s.get("slips") == slips))
         udp = g(res, "latency", "udp_p99_us")
         R.append(row(f"sensor-to-actuator latency {regime} p50 / p99 [us]",
                      f"{fmt(s.get('latency_p50_us'))} / {fmt(s.get('latency_p99_us'))}",
                      f"UDP round trip p99 {fmt(udp)}", f"{fmt(ratio(s.get('latency_p99_us'), udp))}x (p99)",
-                     f"p99 <= {lat_max:g} us", le(s.get("latency_p99_us"), lat_max)))
+                     f"p99 <= {lat_max:g} us", NO_TARGET, absolute=(s.get("latency_p99_us"), lat_max, "<="),
+                     machine=speed(res)))
     s = g(res, "sil_realtime", "idle_standard_transport") or {}
     if s:
         low = g(res, "sil_realtime", "idle", "latency_p99_us")

@@ -30,7 +30,7 @@ from .rows import Row, fmt
 
 # Figures every consumer may rely on: present in the JSON, a number or null + reason.
 REQUIRED: dict[str, tuple[str, ...]] = {
-    "machine": ("nproc", "load", "python", "versions"),
+    "machine": ("nproc", "load", "python", "versions", "speed_bytes_p50_us", "speed_factor"),
     "codec": ("sensors_roundtrip_p99_us", "jets_roundtrip_p99_us"),
     "allocator": ("p50_us", "p99_us", "max_us", "highs_p99_us", "speedup", "mismatches"),
     "plant": ("step_p50_us", "step_p99_us", "entry_real_time_factor"),
@@ -61,6 +61,30 @@ ORDER = ("machine", "codec", "allocator", "reconfig", "plant", "cycle", "batch",
 
 
 # --------------------------------------------------------------------------- sections
+# Machine speed: bytes() of a SENSORS record -- a copy behind one Python call, so it tracks
+# what the FSW's Python hot paths get from this CPU now, contention included. Its p50 on the
+# machine of the README's table (the codec row's baseline) is the reference; speed_factor =
+# this run's p50 / that. Absolute targets are also judged on figures scaled by it (rows.py).
+REFERENCE_BYTES_P50_US = 2.05
+
+
+def machine_speed_us(n: int) -> float:
+    """p50 [us] of bytes() of a SENSORS record over ``n`` calls, after a short warm-up."""
+    import numpy as np
+
+    from interfaces import records
+    rec = records.new(records.SENSORS)
+    clock = time.perf_counter_ns
+    t = np.empty(n, np.int64)
+    for _ in range(200):
+        bytes(rec)
+    for i in range(n):
+        t0 = clock()
+        bytes(rec)
+        t[i] = clock() - t0
+    return float(np.percentile(t, 50)) * 1e-3
+
+
 def machine(quick: bool) -> dict:
     import importlib.metadata as md
     versions = {}
@@ -79,7 +103,11 @@ def machine(quick: bool) -> dict:
         affinity = sorted(os.sched_getaffinity(0))
     except OSError:
         affinity = None
-    return {"nproc": os.cpu_count(), "affinity": affinity, "load": list(os.getloadavg()),
+    speed_us = machine_speed_us(2_000 if quick else 20_000)
+    return {"speed_bytes_p50_us": speed_us, "speed_factor": speed_us / REFERENCE_BYTES_P50_US,
+            "speed_reference": f"bytes() of a SENSORS record, p50 {REFERENCE_BYTES_P50_US} us on the machine "
+                               "of the README's table (its codec baseline)",
+            "nproc": os.cpu_count(), "affinity": affinity, "load": list(os.getloadavg()),
             "python": sys.version.split()[0], "implementation": platform.python_implementation(),
             "kernel": platform.release(), "cpu": cpu, "versions": versions,
             "euid": os.geteuid(), "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
@@ -256,6 +284,9 @@ def table(res: dict) -> str:
     head = (f"Benchmark ({'quick' if res.get('quick') else 'full'}) on {m.get('nproc')} CPUs "
             f"({m.get('cpu')}), load {', '.join(f'{x:.2f}' for x in (m.get('load') or []))}, "
             f"Python {m.get('python')}, {m.get('time_utc')}; total {fmt(res.get('wall_s'))} s. "
+            f"Machine speed: bytes() of a SENSORS record p50 {fmt(m.get('speed_bytes_p50_us'))} us, "
+            f"x{fmt(m.get('speed_factor'))} the README table's machine ({REFERENCE_BYTES_P50_US} us); absolute "
+            "targets are judged as measured and at that machine's speed, the verdict names which failed. "
             "n/m = not measured (reason in the JSON).")
     lines = [head, "", "| figure | measured | baseline (same run) | ratio | target | verdict |",
              "|---|---|---|---|---|---|"]

@@ -18,30 +18,19 @@ from gse.client import GroundClient
 from gse.commands import make_request
 from gse.tlog import TlogWriter, read_records
 from interfaces.mavlink.framing import parse_header
-from interfaces.mavlink.signing import SigningKey
 
 from tests.deadlines import own_overruns
-from tests.ground_procs import free_udp, stop
+from tests.ground_procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.timing]
-PY = [sys.executable, "-m", "ellipsled.cli"]
 RATE, FLOOD_S = 2500.0, 12.0
 
 
 
 
 def test_a_ground_flood_costs_no_deadline_and_genuine_commands_still_pass(tmp_path):
-    key_file = tmp_path / "keys" / "signing.key"
-    key_file.parent.mkdir()
-    key = SigningKey.generate()
-    key.write_file(str(key_file))
-    vehicle, gcs = free_udp(), free_udp()
-    out = tmp_path / "run"
-    log = open(tmp_path / "run.log", "w")
-    run = subprocess.Popen(PY + ["run", "nominal", "--realtime", "--duration", "40", "--out", str(out),
-                                 "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
-                                 "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
-                           stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    sil = start_ground_sil(tmp_path)
+    run, key, vehicle, gcs, out = sil.run, sil.key, sil.vehicle, sil.gcs, sil.out
     client = GroundClient(key, listen=f"udp:127.0.0.1:{gcs}", vehicle=f"udp:127.0.0.1:{vehicle}",
                           tlog=str(tmp_path / "ground.tlog"))
     flood = None
@@ -66,8 +55,8 @@ def test_a_ground_flood_costs_no_deadline_and_genuine_commands_still_pass(tmp_pa
 
     try:
         end = time.monotonic() + 120
-        while "first jet command" not in (tmp_path / "run.log").read_text():
-            assert run.poll() is None and time.monotonic() < end, (tmp_path / "run.log").read_text()
+        while "first jet command" not in sil.log():
+            assert run.poll() is None and time.monotonic() < end, sil.log()
             time.sleep(0.2)
         pump(2.0)
         assert command(("arm", "on")) == 0                      # before: the link works
@@ -91,13 +80,12 @@ def test_a_ground_flood_costs_no_deadline_and_genuine_commands_still_pass(tmp_pa
         after = command(("arm", "on"))                           # after it
         pump(2.0)
         sys_status = client.state.latest["SYS_STATUS"]
-        assert run.wait(120) == 0, (tmp_path / "run.log").read_text()
+        assert run.wait(120) == 0, sil.log()
     finally:
         client.close()
         if flood is not None:
             stop(flood)
         stop(run)
-        log.close()
 
     assert sent["rate_per_s"] >= 2000 and sent["seconds"] >= 10, sent
     assert during == 0 and after == 0, (during, after)

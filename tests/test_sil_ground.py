@@ -14,9 +14,8 @@ import pytest
 from gse.client import GroundClient
 from gse.console import GroundConsole
 from gse.tlog import read_records
-from interfaces.mavlink.signing import SigningKey
 
-from tests.ground_procs import free_udp, stop
+from tests.ground_procs import start_ground_sil, stop
 
 pytestmark = pytest.mark.slow
 PY = [sys.executable, "-m", "ellipsled.cli"]
@@ -24,20 +23,11 @@ PY = [sys.executable, "-m", "ellipsled.cli"]
 
 
 def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path):
-    key_file = tmp_path / "keys" / "signing.key"
-    key_file.parent.mkdir()
-    key = SigningKey.generate()
-    key.write_file(str(key_file))
-    vehicle, gcs = free_udp(), free_udp()
-    out = tmp_path / "run"
-    log = open(tmp_path / "run.log", "w")
-    run = subprocess.Popen(PY + ["run", "nominal", "--realtime", "--rt", "--duration", "40", "--out", str(out),
-                                 "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
-                                 "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
-                           stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    sil = start_ground_sil(tmp_path)
+    run, key, key_file, vehicle, gcs, out = sil.run, sil.key, sil.key_file, sil.vehicle, sil.gcs, sil.out
     client = GroundClient(key, listen=f"udp:127.0.0.1:{gcs}", vehicle=f"udp:127.0.0.1:{vehicle}",
                           tlog=str(tmp_path / "ground.tlog"))
-    log_text = lambda: (tmp_path / "run.log").read_text()  # noqa: E731
+    log_text = sil.log
 
     async def console_session():
         """The operator's console (Textual, headless pilot) during the real-time run."""
@@ -93,7 +83,6 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
     finally:
         client.close()
         stop(run)
-        log.close()
     import json
     s = json.loads((out / "summary.json").read_text())
     assert s["completed"]

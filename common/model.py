@@ -12,7 +12,7 @@ import numpy as np
 
 from interfaces.vocabulary import FAULT_KINDS, N_JETS
 
-from .config import ConfigError, Table, load_toml, resolve
+from .config import Table, load_toml, resolve
 
 INERTIA_KEYS = ("I11", "I22", "I33", "I12", "I13", "I23")
 

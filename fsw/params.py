@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from common.config import DATA_DIR, ConfigError, Table, load_toml
+from common.config import DATA_DIR, ConfigError, load_toml
 
 
 @dataclass(frozen=True)

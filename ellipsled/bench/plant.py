@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from common.model import load_scenario
+from interfaces.vocabulary import N_JETS
 from sim.openloop import fly
 from sim.plant import Plant
 
@@ -26,7 +27,7 @@ from .rows import NO_TARGET, Row, fmt, ratio, row
 def _step_costs_us(n: int, scenario) -> np.ndarray:
     plant = Plant(scenario, seed=1)
     rng = np.random.default_rng(0)
-    cmds = rng.integers(0, 2, (n, 18)).astype(np.uint8)
+    cmds = rng.integers(0, 2, (n, N_JETS)).astype(np.uint8)
     for i in range(200):            # warm-up (numba dispatch, caches)
         plant.step(cmds[i])
     plant = Plant(scenario, seed=1)

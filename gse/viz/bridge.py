@@ -23,12 +23,11 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 
 from common.events import Event, EventLog, Severity
 from gse.viz.logger import RerunLogger
 from gse.viz.sinks import open_sinks
-from interfaces import codec, records
+from interfaces import codec
 from interfaces import keys as keymod
 
 

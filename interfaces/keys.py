@@ -21,6 +21,10 @@ ALIVE = "alive"             # liveliness tokens: alive/<role>
 
 ROLES = ("sim", "fsw", "bridge", "console")
 
+# The prefix every process uses when not told otherwise (sim, fsw, the launcher, the viewer):
+# processes started by hand with their defaults find each other
+DEFAULT_PREFIX = f"{ROOT}/ellipsled"
+
 # A vehicle / run name is one key chunk: no '/', no wildcard or special characters.
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
 

@@ -40,3 +40,19 @@ def test_help_imports_no_subcommand_module():
 def test_chosen_subcommand_is_parsed_in_full():
     a = cli.build_parser(["batch", "case1", "--out", "x"]).parse_args(["batch", "case1", "--out", "x"])
     assert a.cmd == "batch" and a.scenario == "case1" and a.out == "x" and callable(a.func)
+
+
+def test_every_process_started_by_hand_defaults_to_the_same_key_prefix():
+    """sim, fsw, the launcher and the viewer, each with its defaults, meet on one prefix."""
+    import argparse
+
+    from ellipsled.sil import launcher
+    from ellipsled.sil.common import add_common_arguments
+    from gse.viz.bridge import add_arguments
+    from interfaces.keys import DEFAULT_PREFIX
+    prefixes = set()
+    for add in (add_common_arguments, add_arguments, launcher.add_arguments):
+        p = argparse.ArgumentParser()
+        add(p)
+        prefixes.add(p.get_default("prefix"))
+    assert prefixes == {DEFAULT_PREFIX}

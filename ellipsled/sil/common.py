@@ -9,9 +9,8 @@ import time
 
 from ellipsled.argtypes import positive_float
 from interfaces import transport
-from interfaces.keys import keys
+from interfaces.keys import DEFAULT_PREFIX, keys
 
-DEFAULT_PREFIX = "ellipsled/ellipsled"
 
 
 def add_common_arguments(p: argparse.ArgumentParser) -> None:

@@ -29,6 +29,7 @@ from gse.viz.logger import RerunLogger
 from gse.viz.sinks import open_sinks
 from interfaces import codec
 from interfaces import keys as keymod
+from interfaces.keys import DEFAULT_PREFIX
 
 
 def make_codecs(on_reject=None) -> dict[str, codec.Codec]:
@@ -116,7 +117,8 @@ class Bridge:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``ellipsled viz`` (the lead's cli.py adds them to its sub-parser)."""
-    p.add_argument("--prefix", default="ellipsled-1", help="vehicle name or key prefix (interfaces/keys.py)")
+    p.add_argument("--prefix", default=DEFAULT_PREFIX,
+                   help=f"vehicle name or key prefix (interfaces/keys.py; default {DEFAULT_PREFIX}, as sim and fsw)")
     p.add_argument("--connect", action="append", default=None, help="zenoh endpoint to connect to (repeatable)")
     p.add_argument("--listen", action="append", default=None, help="zenoh endpoint to listen on (repeatable)")
     p.add_argument("--zenoh-config", default=None, help="zenoh JSON5 configuration file")

@@ -40,26 +40,41 @@ def _eval_quintic(c: tuple, T: float, x: float) -> tuple[float, float, float]:
     return phi, d1, d2
 
 
-_X_SAMPLES = np.linspace(0.0, 1.0, 201)
-
-
-def _continuation(phi0: float, v0: float, a0: float, phi1: float, rate_limit: float, accel_limit: float) -> tuple:
-    """(T, coefficients): the shortest quintic from a moving state to phi1 at rest whose rate
-    and acceleration stay within the limits (or within the state's own, when it already
-    exceeds them: rate and acceleration are continuous). T grows by 2 % steps from the
-    rest-to-rest duration of the same distance."""
-    d = abs(phi1 - phi0)
-    T = max(_S1_MAX * d / rate_limit, math.sqrt(_S2_MAX * d / accel_limit), 1e-3)
-    r_cap, a_cap = max(rate_limit, abs(v0)) * (1 + 1e-9), max(accel_limit, abs(a0)) * (1 + 1e-9)
-    x = _X_SAMPLES
-    for _ in range(400):
-        c = _quintic(phi0, v0, a0, phi1, T)
-        d1 = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / T
-        d2 = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (T * T)
-        if np.max(np.abs(d1)) <= r_cap and np.max(np.abs(d2)) <= a_cap:
-            break
-        T *= 1.02
-    return T, c
+def _bang_bang(phi0: float, v0: float, phi1: float, rate_limit: float, accel_limit: float) -> list:
+    """Pieces (T, phi, phidot, phiddot) of constant acceleration: the time-optimal path from the
+    moving state (phi0, v0) to phi1 at rest with |phiddot| = accel_limit, the rate held within
+    rate_limit (a state already faster first brakes to it). Accelerate (or brake) to the peak
+    rate, cruise if the rate limit caps it, brake to rest on phi1; when the state cannot stop
+    before phi1 (v0^2 / 2A beyond it) the path passes phi1 by exactly that much and comes back.
+    The rate is continuous; the acceleration steps between the pieces (and from the state's
+    own at the start)."""
+    A, R = accel_limit, rate_limit
+    d = phi1 - phi0
+    e = d - v0 * abs(v0) / (2.0 * A)          # distance left after braking at once
+    if e == 0.0 and v0 == 0.0:
+        return []
+    sg = math.copysign(1.0, e) if e != 0.0 else math.copysign(1.0, v0)
+    # peak rate of accelerate-then-brake (accel sg*A, then -sg*A): 2 vp^2 - v0^2 = 2 sg A d
+    vp = sg * math.sqrt(max(sg * A * d + 0.5 * v0 * v0, 0.0))
+    cruise = abs(vp) > R
+    if cruise:
+        vp = sg * R
+    pieces = []
+    phi, v = phi0, v0
+    if vp != v0:
+        a1 = math.copysign(A, vp - v0)
+        T1 = abs(vp - v0) / A
+        pieces.append((T1, phi, v, a1))
+        phi, v = phi + v * T1 + 0.5 * a1 * T1 * T1, vp
+    T3 = abs(vp) / A
+    if cruise:
+        Tc = ((phi1 - phi) - 0.5 * vp * T3) / vp   # >= 0 by the choice of sg
+        if Tc > 0.0:
+            pieces.append((Tc, phi, vp, 0.0))
+            phi = phi + vp * Tc
+    if T3 > 0.0:
+        pieces.append((T3, phi, vp, -math.copysign(A, vp)))
+    return pieces
 
 
 class BankProfile:
@@ -79,9 +94,12 @@ class BankProfile:
     C2; the price is a lag, reported by ``lag_s``).
 
     ``replan`` gives new limits to the transitions not yet started and to the one running: that
-    one continues from its current bank, rate and acceleration by a quintic to the same target
-    (still C2), so a transition begun before an actuator failure is not flown on limits the
-    vehicle no longer has.
+    one continues from its current bank and rate to the same target by the time-optimal path
+    under the new limits (``_bang_bang``), so a transition begun before an actuator failure is
+    not flown on limits the vehicle no longer has. Such a continuation is C1: its acceleration
+    steps at the re-plan and between its pieces. (No single quintic can do this: from a fast
+    state with a much lower acceleration limit, every quintic to rest at the target either
+    overshoots far beyond it or breaks the limits.)
     """
 
     def __init__(self, schedule: Sequence[tuple[float, float]], rate_limit_radps: float,
@@ -110,7 +128,9 @@ class BankProfile:
         self.rate_limit_radps = float(rate_limit_radps)
         self.accel_limit_radps2 = float(accel_limit_radps2)
         self.phi0_rad = steps[0][1]
-        # segments: (t_start, duration, quintic coefficients, phi_from, phi_to, transition index)
+        # segments: (t_start, duration, quintic coefficients in x = (t - t_start)/duration,
+        # phi_from, phi_to, transition index, ends at rest on phi_to); a transition is one
+        # segment, or several when continued after a re-plan (only the last ends at rest)
         self._starts, self._segs = [], []
         self.lag_s = 0.0   # largest delay of a transition start behind its step time
         self._plan(0.0)
@@ -123,11 +143,17 @@ class BankProfile:
         previous target."""
         kept = [seg for seg in self._segs if seg[0] < t_keep]
         lag = self.lag_s if kept else 0.0
-        if continue_running and kept and kept[-1][0] + kept[-1][1] > t_keep:
-            t0, T, c, _, b, j = kept[-1]
-            phi, v, a = _eval_quintic(c, T, (t_keep - t0) / T)
-            Tc, cc = _continuation(phi, v, a, b, self.rate_limit_radps, self.accel_limit_radps2)
-            kept.append((t_keep, Tc, cc, phi, b, j))
+        if continue_running and kept and (kept[-1][0] + kept[-1][1] > t_keep or not kept[-1][6]):
+            t0, T, c, _, b, j, _ = kept[-1]
+            phi, v, _ = _eval_quintic(c, T, (t_keep - t0) / T)
+            pieces = _bang_bang(phi, v, b, self.rate_limit_radps, self.accel_limit_radps2)
+            if not pieces:        # exactly at rest on the target: hold it
+                pieces = [(1e-3, b, 0.0, 0.0)]
+            ts = t_keep
+            for i, (Tp, p0, v0, a0) in enumerate(pieces):
+                kept.append((ts, Tp, (p0, v0 * Tp, 0.5 * a0 * Tp * Tp, 0.0, 0.0, 0.0), phi, b, j,
+                             i == len(pieces) - 1))
+                ts += Tp
         starts, segs = [seg[0] for seg in kept], list(kept)
         t_free = kept[-1][0] + kept[-1][1] if kept else 0.0
         n_kept = kept[-1][5] + 1 if kept else 0
@@ -144,7 +170,7 @@ class BankProfile:
             t0 = max(t, t_free, t_keep if kept or t_keep > 0 else 0.0)
             lag = max(lag, t0 - t)
             starts.append(t0)
-            segs.append((t0, T, _quintic(phi, 0.0, 0.0, b, T), phi, b, j))
+            segs.append((t0, T, _quintic(phi, 0.0, 0.0, b, T), phi, b, j, True))
             t_free, phi = t0 + T, b
             j += 1
         self._starts = starts
@@ -167,16 +193,22 @@ class BankProfile:
     def transitions(self) -> list[tuple[float, float, float, float]]:
         """(t_start, duration, phi_from, phi_to) of each transition (a continuation after a
         re-plan is listed as its own entry, from the bank it continued from)."""
-        return [(t0, T, p, b) for t0, T, _, p, b, _ in self._segs]
+        out, first = [], None
+        for seg in self._segs:
+            first = first or seg
+            if seg[6]:
+                out.append((first[0], seg[0] + seg[1] - first[0], first[3], seg[4]))
+                first = None
+        return out
 
     def evaluate(self, t_s: float) -> tuple[float, float, float]:
         """(phi_r [rad], phidot_r [rad/s], phiddot_r [rad/s^2]) at time t_s."""
         i = bisect.bisect_right(self._starts, t_s) - 1
         if i < 0:
             return self.phi0_rad, 0.0, 0.0
-        t0, T, c, _, b, _ = self._segs[i]
+        t0, T, c, _, b, _, rest = self._segs[i]
         x = (t_s - t0) / T
-        if x >= 1.0:
+        if x >= 1.0 and rest:
             return b, 0.0, 0.0
         return _eval_quintic(c, T, x)
 

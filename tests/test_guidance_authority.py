@@ -9,7 +9,7 @@ import pytest
 
 from common.model import load_scenario
 from fsw.flightsoftware import FlightSoftware
-from fsw.guidance import BankProfile
+from fsw.guidance import BankProfile, _bang_bang
 from fsw.health import JetHealth
 
 SC = load_scenario("case2")
@@ -41,6 +41,66 @@ def test_replan_between_transitions_reshapes_the_later_ones():
     _check_c2_within(p, 110.0, math.radians(0.5))
 
 
+def _time_optimal_by_feedback(x, v, x1, rate_limit, accel_limit, dt=1e-3):
+    """Independent truth for the continuation: fly a double integrator (|a| <= A) on the
+    braking-curve feedback v_cmd = sign(e) min(R, sqrt(2 A |e|)) until it rests on x1;
+    (arrival time, highest and lowest x)."""
+    t, hi, lo = 0.0, x, x
+    while t < 1000.0:
+        e = x1 - x
+        a = min(accel_limit, max(-accel_limit, (math.copysign(min(rate_limit, math.sqrt(2 * accel_limit * abs(e))), e)
+                                                - v) / dt))
+        x, v, t = x + v * dt + 0.5 * a * dt * dt, v + a * dt, t + dt
+        hi, lo = max(hi, x), min(lo, x)
+        if abs(x1 - x) < 1e-4 and abs(v) < 1e-3:
+            break
+    return t, hi, lo
+
+
+D = math.radians
+
+
+@pytest.mark.parametrize("phi, rate, target, rate_limit, accel_limit", [
+    (D(-43.4), D(6.3), D(60.0), D(8.0), D(0.42)),     # campaign run 19's reversal at its reconfiguration
+    (0.0, D(10.0), D(100.0), D(8.0), D(0.5)),         # faster than the rate limit, room to brake
+    (0.0, D(-3.0), D(20.0), D(8.0), D(0.5)),          # moving away from the target
+    (0.0, D(5.0), D(10.0), D(8.0), D(0.5)),           # cannot stop before the target: passes it by 15 deg
+    (0.0, 0.0, D(30.0), D(2.0), D(1.0)),              # at rest, the rate limit active
+    (D(20.0), D(-12.0), D(-80.0), D(8.0), D(1.0)),    # negative way, above the rate limit
+])
+def test_continuation_from_a_moving_state_is_the_time_optimal_path(phi, rate, target, rate_limit, accel_limit):
+    pieces = _bang_bang(phi, rate, target, rate_limit, accel_limit)
+    T = sum(pc[0] for pc in pieces)
+    ts = np.concatenate([np.linspace(0.0, pc[0], 400) + sum(q[0] for q in pieces[:i]) for i, pc in enumerate(pieces)])
+    x = np.array([_eval_piece(pieces, t) for t in ts])
+    end = _eval_piece(pieces, T)
+    assert end[0] == pytest.approx(target, abs=1e-12) and end[1] == pytest.approx(0.0, abs=1e-12)
+    # rate continuous (pieces join), acceleration within the limit, rate within the state's or the limit
+    for i in range(1, len(pieces)):
+        t_j = sum(q[0] for q in pieces[:i])
+        assert pieces[i][2] == pytest.approx(pieces[i - 1][2] + pieces[i - 1][3] * pieces[i - 1][0], abs=1e-12)
+        assert pieces[i][1] == pytest.approx(_eval_piece(pieces[:i], t_j)[0], abs=1e-12)
+    assert np.max(np.abs(x[:, 2])) <= accel_limit * (1 + 1e-12)
+    assert np.max(np.abs(x[:, 1])) <= max(rate_limit, abs(rate)) * (1 + 1e-12)
+    # overshoot: only what braking at once from this rate forces (v^2 / 2A past the target)
+    forced = max(0.0, math.copysign(1.0, rate) * (phi + rate * abs(rate) / (2 * accel_limit) - target)) if rate else 0.0
+    beyond = np.max(np.sign(target - phi) * (x[:, 0] - target)) if target != phi else 0.0
+    assert beyond <= forced + 1e-9
+    t_fb, hi, lo = _time_optimal_by_feedback(phi, rate, target, rate_limit, accel_limit)
+    assert T == pytest.approx(t_fb, abs=0.3)                # same arrival (the feedback's lag is < 0.3 s)
+    assert np.max(x[:, 0]) == pytest.approx(hi, abs=1e-3) and np.min(x[:, 0]) == pytest.approx(lo, abs=1e-3)
+
+
+def _eval_piece(pieces, t):
+    t0 = 0.0
+    for i, (T, p, v, a) in enumerate(pieces):
+        if t <= t0 + T or i == len(pieces) - 1:
+            tau = t - t0
+            return p + v * tau + 0.5 * a * tau * tau, v + a * tau, a
+        t0 += T
+    return None
+
+
 def test_replan_continues_the_running_transition_from_its_state_within_the_new_limits():
     p, ref = _profile(), _profile()
     t0, T, a, b = ref.transitions()[0]
@@ -48,17 +108,58 @@ def test_replan_continues_the_running_transition_from_its_state_within_the_new_l
     phi, rate, acc = ref.evaluate(t_now)
     assert abs(rate) > math.radians(1.0)
     lim = math.radians(0.6)
-    assert abs(acc) < lim                                  # so the new limit can hold from t_now on
     assert p.replan(t_now, SC.bank_rate_limit_radps, lim)
     tr = p.transitions()
     assert tr[0] == ref.transitions()[0]                   # flown before t_now: unchanged
     assert tr[1][0] == t_now and tr[1][2] == pytest.approx(phi) and tr[1][3] == b
     assert p.evaluate(t_now - 1e-9)[1] == pytest.approx(rate, rel=1e-6)
-    ts, v = _check_c2_within(p, t_now, lim)
+    _check_continuation(p, t_now, lim, (a, b), rate)
     # every later step is still reached, in order
     for t_start, dur, _, target in tr[1:]:
         assert p.evaluate(t_start + dur + 1e-6)[0] == pytest.approx(target)
-    assert tr[1][1] > T * 0.7                              # slower than the rest of the old transition
+    assert tr[1][1] == pytest.approx(sum(pc[0] for pc in _bang_bang(phi, rate, b, SC.bank_rate_limit_radps, lim)))
+
+
+@pytest.mark.parametrize("frac, lim_deg", [(0.3, 0.05), (0.5, 0.05), (0.7, 0.02), (0.5, 5.0)])
+def test_replan_mid_reversal_at_a_far_lower_limit_stays_bounded(frac, lim_deg):
+    """A reversal running fast when the new limit is a small fraction of the old (a single
+    quintic to rest has no feasible duration there): the reference still ends on the same
+    target, no further past it than braking at the new limit forces, and within the limits."""
+    p, ref = _profile(), _profile()
+    t0, T, a, b = ref.transitions()[0]
+    t_now = t0 + frac * T
+    phi, rate, acc = ref.evaluate(t_now)
+    lim = math.radians(lim_deg)
+    assert p.replan(t_now, SC.bank_rate_limit_radps, lim)
+    _check_continuation(p, t_now, lim, (a, b), rate)
+    # replanned again inside the continuation (back to the old limit): continues from there
+    t_mid = t_now + 0.4 * p.transitions()[1][1]
+    mid = p.evaluate(t_mid)
+    assert p.replan(t_mid, SC.bank_rate_limit_radps, SC.bank_accel_limit_radps2)
+    assert p.evaluate(t_mid)[:2] == pytest.approx(mid[:2])
+    _check_continuation(p, t_mid, SC.bank_accel_limit_radps2, (a, b), mid[1])
+
+
+def _check_continuation(p, t_from, accel_limit, ab, rate, t_end=1500.0):
+    """C1 everywhere (the acceleration steps only inside a continuation), within the limits from
+    t_from, never further past the target than braking at once from ``rate`` forces, and at rest
+    on the target at the end of the continuation."""
+    a, b = ab
+    ts = np.arange(0.0, t_end, 0.005)
+    v = np.array([p.evaluate(t) for t in ts])
+    assert np.max(np.abs(np.diff(v[:, 0]))) < 1e-3
+    assert np.max(np.abs(np.diff(v[:, 1]))) <= max(accel_limit, SC.bank_accel_limit_radps2) * 0.005 * (1 + 1e-6)
+    late = ts >= t_from
+    assert np.max(np.abs(v[late, 2])) <= accel_limit * (1 + 1e-9)
+    assert np.max(np.abs(v[:, 1])) <= SC.bank_rate_limit_radps * (1 + 1e-9)
+    sg, phi = math.copysign(1.0, b - a), p.evaluate(t_from)[0]
+    forced = max(0.0, sg * (phi + rate * abs(rate) / (2 * accel_limit) - b), sg * (phi - b))
+    cont = p.transitions()[1]
+    during = late & (ts <= cont[0] + cont[1])
+    assert np.max(sg * (v[during, 0] - b)) <= forced + 1e-9
+    assert p.evaluate(cont[0] + cont[1] + 1e-9)[:2] == pytest.approx((b, 0.0), abs=1e-9)
+    bound = max(abs(x) for _, x in SC.bank_schedule) + forced
+    assert np.max(np.abs(v[:, 0])) <= bound + 1e-9
 
 
 def test_replan_with_the_same_limits_changes_nothing():

@@ -65,10 +65,7 @@ def test_controllable_runs_are_labelled_so(flown, rid):
     assert min(c["authority_pos_degps2"], c["authority_neg_degps2"]) >= c["need_degps2"] > 0.0
 
 
-@pytest.mark.parametrize("rid", (9, pytest.param(19, marks=pytest.mark.xfail(
-    reason="the guidance re-plans the reversal running at the reconfiguration (143 s) into a bank reference "
-           "that turns without bound (thousands of degrees by 300 s), on main without the spill box too",
-    strict=False)), 54))
+@pytest.mark.parametrize("rid", (9, 19, 54))
 def test_controllable_runs_fly_within_five_degrees(flown, rid):
     s = flown[rid]
     assert s["completed"] and not s["nonfinite"]

@@ -34,7 +34,7 @@ from interfaces.mavlink import dialect as mav
 from interfaces.vocabulary import N_JETS, JetState, Mode, Severity
 
 from .client import GroundClient, PendingCommand, result_name
-from .commands import make_request, parse_line
+from .commands import parse_line
 
 # how each jet state and severity is drawn (the names and codes: interfaces/vocabulary.py)
 HEALTH_STYLE = {JetState.NOMINAL: "green", JetState.FAILED_OFF: "bold red", JetState.STUCK_ON: "bold magenta",
@@ -83,11 +83,14 @@ class GroundConsole(App):
         Binding("c", "prefill('clear ')", "clear"),
         Binding("k", "prefill('mark ')", "mark"),
         Binding("p", "prefill('param set ')", "param"),
+        # keys that change the vehicle's state only write their command on the command line:
+        # Enter sends it. A key pressed while the command line is not yet focused (typing
+        # fast after ':') then costs nothing, and an operator sees what will go out
         Binding("a", "toggle_arm", "arm/disarm"),
         Binding("f", "toggle_ft", "fault tol."),
-        Binding("1", "mode('standby')", "STANDBY"),
-        Binding("2", "mode('entry')", "ENTRY"),
-        Binding("3", "mode('safe')", "SAFE"),
+        Binding("1", "prefill('mode standby')", "STANDBY"),
+        Binding("2", "prefill('mode entry')", "ENTRY"),
+        Binding("3", "prefill('mode safe')", "SAFE"),
     ]
 
     def __init__(self, client: GroundClient, *, timeout_s: float = 1.0, retries: int = 3,
@@ -209,15 +212,13 @@ class GroundConsole(App):
         inp.focus()
 
     def action_toggle_arm(self) -> None:
+        """The command line gets the opposite of the jets' state now (Enter sends it)."""
         hb = self.client.state.latest.get("HEARTBEAT")
         armed = bool(hb and hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
-        self._send(make_request("arm", "off" if armed else "on"))
+        self.action_prefill("arm off" if armed else "arm on")
 
     def action_toggle_ft(self) -> None:
-        self._send(make_request("ft", "off" if self.ft_on else "on"))
-
-    def action_mode(self, name: str) -> None:
-        self._send(make_request("mode", name))
+        self.action_prefill("ft off" if self.ft_on else "ft on")
 
     # ---------------------------------------------------------------- view
     def refresh_view(self) -> None:

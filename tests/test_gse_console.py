@@ -46,9 +46,14 @@ def test_console_shows_state_and_injects_with_ack(rig):
             await pump()
             assert rig.injected and rig.injected[-1] == (17, "off", 1.0), app.ack_lines
             assert "inject jet 17 off: ACCEPTED" in app.ack_lines
-            # keys: Escape leaves the command line, "1" requests STANDBY
+            # keys: Escape leaves the command line; "1" writes the STANDBY request on it, sent
+            # by Enter only
             await pilot.press("escape")
             await pilot.press("1")
+            await pump()
+            assert not any(a.startswith("mode standby") for a in app.ack_lines) and int(rig.fsw.modes.mode) == 1
+            assert app.query_one("#cmdline").value == "mode standby"
+            await pilot.press("enter")
             await pump()
             assert "mode standby: ACCEPTED" in app.ack_lines and int(rig.fsw.modes.mode) == 0
             # a bad line is explained, not sent

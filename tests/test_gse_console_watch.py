@@ -40,7 +40,8 @@ def test_view_only_console_shows_the_vehicle_and_sends_nothing(tmp_path):
                 assert "ELLIPSLED_ENTRY_STATE" in viewer.state.latest
                 rx_before = rig.gl.stats["rx_datagrams"]
                 await _type(pilot, "inject 17 off")
-                await pilot.press("3")                 # SAFE by key: refused too
+                await pilot.press("3")                 # SAFE by key (and Enter): refused too
+                await pilot.press("enter")
                 for _ in range(4):
                     rig.fly(5)
                     await pilot.pause(0.06)

@@ -8,6 +8,7 @@ longitude, bank), pymavlink's own quaternion-to-Euler conversion, and counting.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -65,6 +66,17 @@ def test_every_event_becomes_one_statustext_with_its_severity(rig):
     got = [(e.severity, e.text) for e in rig.gcs.state.events]
     assert got == [(int(e.severity), e.text[:50]) for e in hist]
     assert ("MODE STANDBY->ENTRY (start)" in [t for _, t in got])
+
+
+def test_events_after_the_last_tick_are_flushed_at_shutdown(rig):
+    rig.fly(20)
+    rig.exchange(lambda: False, 0.1)
+    rig.fsw.events.emit(rig.fsw.t_s, 4, "test", "last", "LAST WORDS")      # after the last tick
+    rig.gl.flush_events()
+    end = time.monotonic() + 2.0
+    while "LAST WORDS" not in [e.text for e in rig.gcs.state.events] and time.monotonic() < end:
+        rig.gcs.poll(0.02)
+    assert [e.text for e in rig.gcs.state.events][-1] == "LAST WORDS"
 
 
 def test_attitude_and_entry_state_agree_with_the_plant_truth(rig):

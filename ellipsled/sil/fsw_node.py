@@ -361,6 +361,7 @@ class FswNode:
     def close(self) -> None:
         self.fsw.close()
         if self.link is not None:
+            self.link.flush_events()
             self.link.close()
         transport.close(self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
                         self.pub_faults, self.sub_fault_log, self.session)

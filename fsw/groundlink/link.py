@@ -405,6 +405,14 @@ class GroundLink:
             budget -= 1
         self._send_events(budget)
 
+    def flush_events(self, max_frames: int = 256) -> None:
+        """Send the events not sent yet (at most ``max_frames``): at shutdown, so what the
+        FSW reported after its last tick reaches the ground too."""
+        try:
+            self._send_events(max_frames)
+        except Exception:                       # shutting down: never raise from here
+            log.exception("ground link: flushing events failed")
+
     def _send_events(self, budget: int) -> None:
         """Every event of ``fsw.events.history`` as a STATUSTEXT (read by index, so another
         consumer may ``drain()`` the queue)."""

@@ -12,18 +12,20 @@ Method (exact by construction, see tests/test_allocation_*.py):
      are skipped), followed by a short scan of the score ties.
   3. If none is inside the box: an exhaustive scan of all candidates for the
      unconstrained objective (degraded).
-  Spill box (e != 0): the box is split at the demand into 8 sub-boxes (per axis: tau_i
-  below or above tau_d,i); inside each the objective is linear again, with the score of
-  the octant of the same signs, so every octant table holds ALL candidates. A query takes,
-  per sub-box, the first candidate inside it (blocks skipped by their component-wise
-  minimum and maximum, and a sub-box abandoned once its score cannot beat the best found),
-  the best of those, then the ties of every sub-box. With no candidate in the box, the
-  same query without the box (degraded).
+  Spill box (e != 0): the objective is no longer linear in the box, so the candidates
+  are held in a balanced k-d tree (fsw/allocation/tables.py) and a query is a depth-first
+  branch and bound on the objective itself: a node's bound is the weighted distance from
+  the demand to its bounding box clipped to the box, plus its smallest penalty; nearer
+  child first; a node is pruned once its bound exceeds the best objective + the tie
+  tolerance, so every tie is visited and the spec tie-break is applied to them. With no
+  candidate in the box, the same search without the box (degraded). The tree does not
+  depend on the demand's octant (one tree, not 8 sorted tables), and the interim model of
+  an asynchronous reconfiguration (forbidden jets, shifted bias) is the same search.
 
 Non-finite demand: ``solve`` returns u = 0 (all usable jets off), sets ``rejected`` and
 leaves ``objective`` = NaN; it never raises in the cycle.
 
-One job in one file (~520 lines): the query kernels and the class that switches the tables
+One job in one file (~600 lines): the query kernels and the class that switches the tables
 they scan change together (the interim model of an asynchronous reconfiguration lives in both).
 """
 from __future__ import annotations
@@ -45,7 +47,7 @@ from .tables import BLOCK, Tables, Workspace, build_tables
 CACHE_MAX_CONFIGS = 16     # health configurations whose tables are kept
 STATUS_OK, STATUS_DEGRADED, STATUS_REJECTED = 0, 1, 2
 ZERO3 = np.zeros(N_AXES)
-N_OCTANTS = 8
+TREE_STACK = 128          # >= 2 x the k-d tree's depth + 2 (depth <= 16 for 2^18 candidates)
 
 
 PARAMS: list[Param] = [
@@ -178,83 +180,105 @@ def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen,
 
 
 @njit(cache=True)
-def _in_sub_box(X, j, xlo, xhi, o):
-    return ((xlo[o, 0] <= X[j, 0]) & (X[j, 0] <= xhi[o, 0]) & (xlo[o, 1] <= X[j, 1])
-            & (X[j, 1] <= xhi[o, 1]) & (xlo[o, 2] <= X[j, 2]) & (X[j, 2] <= xhi[o, 2]))
+def _node_bound(k, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2):
+    """A lower bound of the objective over the candidates under tree node k whose torque
+    (+ delta) lies in the box [lo, hi]; inf if none can. Rounding is monotone, so the bound
+    never exceeds an objective computed as in the leaves."""
+    a0, b0 = max(nlo[k, 0] + delta[0], lo0), min(nhi[k, 0] + delta[0], hi0)
+    a1, b1 = max(nlo[k, 1] + delta[1], lo1), min(nhi[k, 1] + delta[1], hi1)
+    a2, b2 = max(nlo[k, 2] + delta[2], lo2), min(nhi[k, 2] + delta[2], hi2)
+    if (a0 > b0) | (a1 > b1) | (a2 > b2):
+        return np.inf
+    e0 = a0 - d0 if d0 < a0 else (d0 - b0 if d0 > b0 else 0.0)
+    e1 = a1 - d1 if d1 < a1 else (d1 - b1 if d1 > b1 else 0.0)
+    e2 = a2 - d2 if d2 < a2 else (d2 - b2 if d2 > b2 else 0.0)
+    return w[0] * e0 + w[1] * e1 + w[2] * e2 + nminpen[k]
 
 
 @njit(cache=True)
-def _objective(r, d0, d1, d2, w, cand_tau, cand_pen):
-    return (w[0] * abs(d0 - cand_tau[r, 0]) + w[1] * abs(d1 - cand_tau[r, 1])
-            + w[2] * abs(d2 - cand_tau[r, 2]) + cand_pen[r])
-
-
-@njit(cache=True)
-def _solve_spill_kernel(tau_d, w, spill, start, X, S, P, R, bstart, bmin, bmax, cand_tau, cand_pen,
-                        cand_pat, tol_box, tol_tie, tie_rel, tol_pen, xlo, xhi, C, first,
-                        u_out, tau_out, obj_out):
-    """One allocation in the spill box over tables whose every octant holds every
-    candidate (module docstring, spill box). Sub-box o (signs s_i of octant o): tau_i below
-    the demand where s_i = +1, above it where s_i = -1; in x = s tau it is
-    min(0, s_i d_i) - e_i <= x_i <= s_i d_i, where the objective is C_o - score with
-    C_o = sum_i w_i s_i d_i. Work arrays xlo, xhi (8, 3), C (8,), first (8,). Same tie-break
-    and outputs as _solve_kernel."""
+def _solve_tree_kernel(tau_d, w, spill, nlo, nhi, nminpen, nstart, nend, n_internal, cand_tau,
+                       cand_pen, cand_pat, ties, tie_obj, forbid, delta, tol_box, tol_tie, tie_rel,
+                       tol_pen, stack_k, stack_lb, u_out, tau_out, obj_out):
+    """One allocation in the spill box over the candidates with no bit of ``forbid`` whose
+    torque is cand_tau + delta (module docstring, spill box): depth-first branch and bound
+    over the k-d tree, nearer child first, a node pruned when its bound exceeds the best
+    objective found + the tie tolerance; every candidate within that tolerance is kept
+    (ties, tie_obj: work buffers of n rows) for the spec tie-break. With no candidate in the
+    box, the same search without it (degraded). Same outputs as _solve_kernel; stack_k,
+    stack_lb: work buffers of >= 2 x tree depth + 2 entries. No allocation."""
     d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
     if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
         return _reject(u_out, obj_out)
     tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
-    o_dem = np.int64(d0 < 0.0) | (np.int64(d1 < 0.0) << 1) | (np.int64(d2 < 0.0) << 2)
     status = 0
     best = np.inf
+    nt = 0
     for attempt in range(2):              # 0: inside the box; 1: anywhere (degraded)
-        for k in range(8):
-            o = o_dem ^ k                 # the demand's own octant first: its answer prunes the rest
-            C[o] = 0.0
-            for i in range(3):
-                si = -1.0 if (o >> i) & 1 else 1.0
-                sd = si * tau_d[i]
-                xhi[o, i] = sd
-                xlo[o, i] = min(0.0, sd) - spill[i] - tol_box if attempt == 0 else -np.inf
-                C[o] += w[i] * sd
-            first[o] = -1
-            for blk in range(bstart[o], bstart[o + 1]):
-                j0 = start[o] + (blk - bstart[o]) * BLOCK
-                if C[o] - S[j0] > best + tol:     # nothing further down this octant can tie
-                    break
-                if ((bmin[blk, 0] > xhi[o, 0]) | (bmin[blk, 1] > xhi[o, 1]) | (bmin[blk, 2] > xhi[o, 2])
-                        | (bmax[blk, 0] < xlo[o, 0]) | (bmax[blk, 1] < xlo[o, 1]) | (bmax[blk, 2] < xlo[o, 2])):
-                    continue
-                for j in range(j0, min(j0 + BLOCK, start[o + 1])):
-                    if _in_sub_box(X, j, xlo, xhi, o):
-                        first[o] = j
-                        v = _objective(R[j], d0, d1, d2, w, cand_tau, cand_pen)
+        if attempt == 0:
+            lo0, hi0 = min(d0, 0.0) - spill[0] - tol_box, max(d0, 0.0) + spill[0] + tol_box
+            lo1, hi1 = min(d1, 0.0) - spill[1] - tol_box, max(d1, 0.0) + spill[1] + tol_box
+            lo2, hi2 = min(d2, 0.0) - spill[2] - tol_box, max(d2, 0.0) + spill[2] + tol_box
+        else:
+            status = 1
+            lo0 = lo1 = lo2 = -np.inf
+            hi0 = hi1 = hi2 = np.inf
+        best = np.inf
+        nt = 0
+        sp = 0
+        lb = _node_bound(0, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2)
+        if lb < np.inf:
+            stack_k[0] = 0
+            stack_lb[0] = lb
+            sp = 1
+        while sp > 0:
+            sp -= 1
+            if stack_lb[sp] > best + tol:
+                continue
+            k = stack_k[sp]
+            if k >= n_internal:
+                for j in range(nstart[k], nend[k]):
+                    if forbid != 0 and (cand_pat[j] & forbid) != 0:
+                        continue
+                    t0 = cand_tau[j, 0] + delta[0]
+                    t1 = cand_tau[j, 1] + delta[1]
+                    t2 = cand_tau[j, 2] + delta[2]
+                    if not ((lo0 <= t0) & (t0 <= hi0) & (lo1 <= t1) & (t1 <= hi1)
+                            & (lo2 <= t2) & (t2 <= hi2)):
+                        continue
+                    v = w[0] * abs(d0 - t0) + w[1] * abs(d1 - t1) + w[2] * abs(d2 - t2) + cand_pen[j]
+                    if v <= best + tol:
+                        ties[nt] = j
+                        tie_obj[nt] = v
+                        nt += 1
                         if v < best:
                             best = v
-                        break
-                if first[o] >= 0:
-                    break
-        if best < np.inf:
-            break
-        status = 1
-    lim = best + tol
-    min_pen = np.inf
-    chosen = -1
-    for phase in range(2):                # ties: smallest penalty, then smallest bit pattern
-        for o in range(8):
-            j = first[o]
-            if j < 0:
                 continue
-            while j < start[o + 1] and C[o] - S[j] <= lim + tol:
-                if _in_sub_box(X, j, xlo, xhi, o):
-                    r = R[j]
-                    if _objective(r, d0, d1, d2, w, cand_tau, cand_pen) <= lim:
-                        if phase == 0:
-                            if P[j] < min_pen:
-                                min_pen = P[j]
-                        elif P[j] <= min_pen + tol_pen and (chosen < 0 or cand_pat[r] < cand_pat[chosen]):
-                            chosen = r
-                j += 1
-    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, ZERO3, u_out, tau_out, obj_out)
+            c1 = 2 * k + 1
+            l1 = _node_bound(c1, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2)
+            l2 = _node_bound(c1 + 1, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2)
+            near, far, l_near, l_far = (c1, c1 + 1, l1, l2) if l1 <= l2 else (c1 + 1, c1, l2, l1)
+            lim = best + tol
+            if l_far <= lim:
+                stack_k[sp] = far
+                stack_lb[sp] = l_far
+                sp += 1
+            if l_near <= lim:
+                stack_k[sp] = near
+                stack_lb[sp] = l_near
+                sp += 1
+        if nt > 0:
+            break
+    lim = best + tol                      # ties: smallest penalty, then smallest bit pattern
+    min_pen = np.inf
+    for q in range(nt):
+        if tie_obj[q] <= lim and cand_pen[ties[q]] < min_pen:
+            min_pen = cand_pen[ties[q]]
+    chosen = -1
+    for q in range(nt):
+        j = ties[q]
+        if tie_obj[q] <= lim and cand_pen[j] <= min_pen + tol_pen and (chosen < 0 or cand_pat[j] < cand_pat[chosen]):
+            chosen = j
+    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out)
     return status
 
 
@@ -316,7 +340,7 @@ class Allocator:
       answers with the previous tables under a SAFE interim model: every jet whose treatment
       changed (newly failed, inhibited, stuck, degraded with another eta, or back from
       stuck) is kept off, and the stuck-on bias is the new one (``_solve_scan_kernel``
-      when it differs). The interim answer never fires a jet the new health forbids, its
+      when it differs; the spill box's tree search takes both). The interim answer never fires a jet the new health forbids, its
       tau_B and objective are those of the new model for the returned u, and it is the
       exact optimum (spec tie-break, sign box, degraded answer) over the previous
       configuration's candidates that avoid the changed jets. It is NOT necessarily the
@@ -351,10 +375,8 @@ class Allocator:
         self.u = np.zeros(self.n_jets, dtype=np.uint8)     # reused output
         self.tau_B = np.zeros(N_AXES)                         # modelled achieved torque [N m]
         self._obj = np.zeros(1)
-        self._xlo = np.zeros((N_OCTANTS, N_AXES))          # spill-box query work arrays
-        self._xhi = np.zeros((N_OCTANTS, N_AXES))
-        self._C = np.zeros(N_OCTANTS)
-        self._first = np.zeros(N_OCTANTS, dtype=np.int64)
+        self._stack_k = np.zeros(TREE_STACK, dtype=np.int64)   # spill-box query work arrays
+        self._stack_lb = np.zeros(TREE_STACK)
         self.objective = float("nan")
         self.degraded = False
         self.rejected = False
@@ -374,17 +396,7 @@ class Allocator:
         self._tables: Tables | None = None
         async_now, self.async_rebuild = self.async_rebuild, False   # first tables: built here
         self.set_params(params)
-        # warm-up: compile/load the kernels and run every branch once
-        self.solve(np.array([100.0, -50.0, 0.0]))
-        self.solve(np.array([np.nan, 0.0, 0.0]))
-        t = self._tables
-        _solve_scan_kernel(np.array([1.0, -2.0, 3.0]), t.w, t.spill, t.tau, t.pen, t.pat, t.scratch,
-                           np.int64(1), np.ones(N_AXES), TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                           self.u, self.tau_B, self._obj)
-        _solve_spill_kernel(np.array([1.0, -2.0, 3.0]), t.w, np.ones(N_AXES), t.start, t.X, t.S, t.P,
-                            t.R, t.bstart, t.bmin, t.bmax, t.tau, t.pen, t.pat, TOL_BOX_NM, TOL_TIE,
-                            TIE_REL, TOL_PEN, self._xlo, self._xhi, self._C, self._first,
-                            self.u, self.tau_B, self._obj)
+        self._warm_kernels()
         self.solve(np.array([100.0, -50.0, 0.0]))
         self.rejected = False
         self.async_rebuild = async_now
@@ -392,6 +404,29 @@ class Allocator:
             self._rebuilder = Rebuilder()
             self._finalizer = weakref.finalize(self, self._rebuilder.close, 1.0)
             self._queue_prebuilds()
+
+    def _warm_kernels(self) -> None:
+        """Compile (or load) every build and query kernel of both boxes and run each branch
+        once, on two-jet tables, so neither a later parameter change nor the background
+        builder meets a cold kernel."""
+        usable = np.zeros(self.n_jets, dtype=bool)
+        usable[:2] = True
+        cols = np.where(usable[None, :], self._T, 0.0)
+        c = self.penalty_per_N * self._thrust
+        u, tau, obj = self.u.copy(), np.zeros(N_AXES), np.zeros(1)
+        for spill in (np.zeros(N_AXES), self.spill + 1.0):
+            t = build_tables(usable, cols, ZERO3, c, self.w, spill, self._ws)
+            for d in (np.array([100.0, -50.0, 0.0]), np.array([np.nan, 0.0, 0.0]), np.full(N_AXES, 1e9)):
+                if t.spill_box:
+                    _solve_tree_kernel(d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
+                                       t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch, 1, ZERO3,
+                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, self._stack_k, self._stack_lb,
+                                       u, tau, obj)
+                else:
+                    _solve_kernel(d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen,
+                                  t.pat, t.scratch, 1, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u, tau, obj)
+                    _solve_scan_kernel(d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch, 1, ZERO3,
+                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u, tau, obj)
 
     # -- configuration (not in the cycle's hot path)
     def set_params(self, params: dict[str, float]) -> None:
@@ -595,18 +630,17 @@ class Allocator:
             self._try_switch()
         t = self._tables
         self.interim = self.reconfig_pending
-        if self.reconfig_pending and (self._shifted or t.spill_box):
-            delta = self._delta if self._shifted else ZERO3
+        if t.spill_box:
+            status = _solve_tree_kernel(tau_d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
+                                        t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch,
+                                        self._forbid, self._delta if self._shifted else ZERO3,
+                                        TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                        self._stack_k, self._stack_lb, self.u, self.tau_B, self._obj)
+        elif self.reconfig_pending and self._shifted:
             status = _solve_scan_kernel(tau_d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch,
-                                        self._forbid, delta,
+                                        self._forbid, self._delta,
                                         TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
                                         self.u, self.tau_B, self._obj)
-        elif t.spill_box:
-            status = _solve_spill_kernel(tau_d, t.w, t.spill, t.start, t.X, t.S, t.P, t.R, t.bstart,
-                                         t.bmin, t.bmax, t.tau, t.pen, t.pat,
-                                         TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                                         self._xlo, self._xhi, self._C, self._first,
-                                         self.u, self.tau_B, self._obj)
         else:
             status = _solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
                                    t.tau, t.pen, t.pat, t.scratch,

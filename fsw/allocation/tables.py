@@ -5,8 +5,9 @@ groups is enumerated (choosing the cheapest, then lowest-numbered members of a g
 identical torque vectors are merged keeping the smallest (penalty, pattern). Nominal
 matrix: 46,656 combinations -> ~13,000 distinct achievable torques. Torque vectors are
 merged when they agree to KEY_QUANTUM_NM on every axis (distinct achievable torques are far
-further apart). The candidates are then laid out per octant, sorted by score, for the
-query (fsw/allocation/allocator.py).
+further apart). The candidates are then laid out for the
+query (fsw/allocation/allocator.py): sorted per octant for the sign box, a k-d tree
+for the spill box.
 
 The tables are rebuilt on every new health configuration, by nogil numba kernels over
 preallocated work buffers (a background thread can run them while the control thread
@@ -17,9 +18,12 @@ keeps solving):
    column shifts phi by a constant, so each group is a sequential merge of sorted lists,
    and torques equal on the KEY_QUANTUM_NM grid, whose phi differ by less than a small
    window, are found (and merged) by comparing the keys of the few phi-neighbours;
- - per octant a stable sort by score: one counting pass into about 2 buckets per row
-   (a monotone fixed-point image of the score), each bucket then finished exactly by an
-   insertion sort on the float score (buckets hold ~1 row; a crowded one is merge sorted).
+ - sign box: per octant a stable sort by score: one counting pass into about 2 buckets per
+   row (a monotone fixed-point image of the score), each bucket then finished exactly by an
+   insertion sort on the float score (buckets hold ~1 row; a crowded one is merge sorted);
+ - spill box: a balanced k-d tree (median splits by quickselect on the widest axis, leaves
+   of KD_LEAF rows) with each node's bounding box and smallest penalty: O(n log n), and
+   n rows instead of the 8 n a per-octant layout of every candidate would take.
 """
 from __future__ import annotations
 
@@ -32,6 +36,7 @@ from .model import N_AXES, TOL_BOX_NM, TOL_PEN
 
 KEY_QUANTUM_NM = 1e-7      # grid on which identical torque vectors are merged [N m]
 BLOCK = 16                 # rows per block of the block-skipping scan
+KD_LEAF = 8                # rows per leaf of the spill box's k-d tree
 PHI_DIR = (1.0, 0.7548776662466927, 0.5698402909980532)   # generic direction for phi = a . tau
 SORT_BUCKETS_MAX = 1 << 17  # buckets of the octant tables' one-pass bucket sort
 WORKSPACE_ROWS = 49152     # initial work buffers: >= the nominal 46,656 combinations, so the
@@ -273,7 +278,7 @@ def _in_octant(o, t0, t1, t2, lo):
 def _octant_members(tau, n, lo, octm):
     """Octant membership of candidates 0:n: a candidate belongs to octant o (bit i set:
     tau_d,i < 0, s_i = -1) if it can lie in that octant's box, s_i tau_i >= -lo_i on every
-    axis (sign box: lo = tol_box; spill box: lo = inf, every candidate in every octant);
+    axis (lo = tol_box, the sign box);
     one with every |tau_i| > lo_i belongs to exactly one.
     Writes octm[r] (its octant, or -1 if several) and returns start (9,): octant o gets
     rows start[o]:start[o+1] of the tables."""
@@ -378,6 +383,100 @@ def _octant_fill(tau, pen, pat, n, w, lo, octm, start, ka, ia, kb, ib, count,
                 M0 = M1 = M2 = -np.inf
 
 
+@njit(cache=True, nogil=True)
+def _select(perm, tau, ax, a, b, kth):
+    """Reorder perm[a:b] so that the row at kth has its axis-ax torque in sorted position:
+    rows a:kth are <= it, rows kth+1:b >= it (quickselect, median-of-three pivot)."""
+    lo, hi = a, b - 1
+    while hi > lo:
+        m = (lo + hi) // 2
+        x, y, z = tau[perm[lo], ax], tau[perm[m], ax], tau[perm[hi], ax]
+        p = max(min(x, y), min(max(x, y), z))
+        i, j = lo, hi
+        while i <= j:
+            while tau[perm[i], ax] < p:
+                i += 1
+            while tau[perm[j], ax] > p:
+                j -= 1
+            if i <= j:
+                perm[i], perm[j] = perm[j], perm[i]
+                i += 1
+                j -= 1
+        if kth <= j:
+            hi = j
+        elif kth >= i:
+            lo = i
+        else:
+            return
+
+
+@njit(cache=True, nogil=True)
+def _kd_fill(tau, pen, pat, n, perm, tau_out, pen_out, pat_out, nlo, nhi, nminpen, nstart, nend):
+    """A balanced k-d tree over the n candidates (tau, pen, pat), the spill box's query
+    structure: node k (children 2k+1, 2k+2) holds rows nstart[k]:nend[k] of tau/pen/pat_out
+    (the candidates in tree order), split at the middle row on its widest axis; nlo/nhi
+    (N, 3) bound the torques under each node and nminpen its smallest penalty (an empty
+    leaf: lo = +inf, hi = -inf). The leaves are the last (N + 1) / 2 nodes."""
+    N = nlo.shape[0]
+    n_internal = (N - 1) // 2
+    for j in range(n):
+        perm[j] = j
+    nstart[0] = 0
+    nend[0] = n
+    for k in range(n_internal):
+        a, b = nstart[k], nend[k]
+        mid = (a + b) // 2
+        nstart[2 * k + 1], nend[2 * k + 1] = a, mid
+        nstart[2 * k + 2], nend[2 * k + 2] = mid, b
+        if b - a < 2:
+            continue
+        ax = 0
+        spread = -1.0
+        for i in range(3):
+            lo_i, hi_i = np.inf, -np.inf
+            for j in range(a, b):
+                x = tau[perm[j], i]
+                lo_i = min(lo_i, x)
+                hi_i = max(hi_i, x)
+            if hi_i - lo_i > spread:
+                spread = hi_i - lo_i
+                ax = i
+        _select(perm, tau, ax, a, b, mid)
+    for j in range(n):
+        r = perm[j]
+        tau_out[j, 0] = tau[r, 0]
+        tau_out[j, 1] = tau[r, 1]
+        tau_out[j, 2] = tau[r, 2]
+        pen_out[j] = pen[r]
+        pat_out[j] = pat[r]
+    for k in range(N - 1, -1, -1):
+        if k >= n_internal:
+            for i in range(3):
+                nlo[k, i] = np.inf
+                nhi[k, i] = -np.inf
+            nminpen[k] = np.inf
+            for j in range(nstart[k], nend[k]):
+                for i in range(3):
+                    nlo[k, i] = min(nlo[k, i], tau_out[j, i])
+                    nhi[k, i] = max(nhi[k, i], tau_out[j, i])
+                nminpen[k] = min(nminpen[k], pen_out[j])
+        else:
+            c1, c2 = 2 * k + 1, 2 * k + 2
+            for i in range(3):
+                nlo[k, i] = min(nlo[c1, i], nlo[c2, i])
+                nhi[k, i] = max(nhi[c1, i], nhi[c2, i])
+            nminpen[k] = min(nminpen[c1], nminpen[c2])
+
+
+def tree_nodes(n: int) -> int:
+    """Nodes of the k-d tree over n candidates: the shallowest complete binary tree whose
+    leaves hold at most KD_LEAF rows."""
+    depth = 0
+    while -(-n // (1 << depth)) > KD_LEAF:
+        depth += 1
+    return (2 << depth) - 1
+
+
 class Workspace:
     """Work buffers of the table build, kept between builds (grown on demand), so a rebuild
     touches memory that is already mapped. One per building thread."""
@@ -400,7 +499,8 @@ class Workspace:
         self.pen = np.zeros(rows)
         self.pat = np.zeros(rows, dtype=np.int64)
         self.octm = np.zeros(rows, dtype=np.int8)
-        for a in (self.ra, self.rb, self.rc, self.tau, self.pen, self.pat, self.octm, self.count):
+        self.perm = np.zeros(rows, dtype=np.int64)
+        for a in (self.ra, self.rb, self.rc, self.tau, self.pen, self.pat, self.octm, self.perm, self.count):
             a.fill(0)                         # map the pages now, not inside a timed build
         self.rows = rows
         self.grow_octants(rows + rows // 4)
@@ -421,37 +521,41 @@ class Workspace:
     @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self.ra, self.rb, self.rc, self.tau, self.pen, self.pat,
-                                      self.octm, self.ka, self.kb, self.ia, self.ib, self.count))
+                                      self.octm, self.perm, self.ka, self.kb, self.ia, self.ib, self.count))
 
 
 class Tables:
     """Candidate tables of one configuration: the health model they were built for
-    (usable, cols, bias), the objective (w, per-jet penalty c) and the octant tables."""
+    (usable, cols, bias), the objective (w, per-jet penalty c) and the query structure:
+    octant tables for the sign box, a k-d tree for the spill box (the other's arrays empty)."""
     __slots__ = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "bmax",
-                 "scratch", "bias", "usable", "cols", "w", "spill", "spill_box", "n_raw", "build_s")
+                 "nlo", "nhi", "nminpen", "nstart", "nend", "n_internal",
+                 "scratch", "ties", "bias", "usable", "cols", "w", "spill", "spill_box", "n_raw", "build_s")
+    _ARRAYS = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "bmax",
+               "nlo", "nhi", "nminpen", "nstart", "nend", "scratch", "ties")
 
-    def __init__(self, tau, pen, pat, start, X, S, P, R, bstart, bmin, bmax, usable, cols, bias, w,
-                 spill, n_raw, build_s):
+    def __init__(self, tau, pen, pat, octants, tree, usable, cols, bias, w, spill, n_raw, build_s):
         self.tau, self.pen, self.pat = tau, pen, pat
-        self.start, self.X, self.S, self.P, self.R = start, X, S, P, R
-        self.bstart, self.bmin, self.bmax = bstart, bmin, bmax
-        self.scratch = np.empty(len(pen))     # objective buffer of the exhaustive scans
+        (self.start, self.X, self.S, self.P, self.R, self.bstart, self.bmin, self.bmax) = octants
+        self.nlo, self.nhi, self.nminpen, self.nstart, self.nend = tree
+        self.n_internal = (len(self.nminpen) - 1) // 2
+        self.scratch = np.empty(len(pen))     # objective buffer of the exhaustive scans and ties
+        self.ties = np.empty(len(pen), dtype=np.int64)   # tied rows of a tree query
         self.usable, self.cols, self.bias, self.w = usable, cols, bias, w
         self.spill = spill                    # box allowance [N m]
-        self.spill_box = bool(np.any(spill != 0.0))   # octants hold every candidate
+        self.spill_box = bool(np.any(spill != 0.0))   # queried through the k-d tree
         self.n_raw = n_raw                    # multiplicity vectors enumerated
         self.build_s = build_s                # build time [s]
 
     @property
     def nbytes(self) -> int:
-        return sum(getattr(self, k).nbytes for k in ("tau", "pen", "pat", "start", "X", "S", "P",
-                                                      "R", "bstart", "bmin", "bmax", "scratch"))
+        return sum(getattr(self, k).nbytes for k in self._ARRAYS)
 
 
 def build_tables(usable, cols, bias, c, w, spill, ws: Workspace) -> Tables:
-    """Groups of identical effective columns -> distinct torques -> octant tables (of the
-    box; a spill box ``spill`` != 0 puts every candidate in every octant). The
-    heavy work is in nogil kernels over the workspace ``ws`` (one per building thread)."""
+    """Groups of identical effective columns -> distinct torques -> the sign box's octant
+    tables, or the spill box's k-d tree. The heavy work is in nogil kernels over the
+    workspace ``ws`` (one per building thread)."""
     t0 = time.perf_counter()
     usable = np.ascontiguousarray(usable, dtype=np.bool_)
     cols = np.ascontiguousarray(cols, dtype=np.float64)
@@ -466,18 +570,29 @@ def build_tables(usable, cols, bias, c, w, spill, ws: Workspace) -> Tables:
             break
         ws.grow(min(n_raw, 4 * ws.rows))       # never more than n_raw distinct torques
     spill = np.array(spill, dtype=np.float64)
-    lo = np.full(N_AXES, np.inf if np.any(spill != 0.0) else TOL_BOX_NM)
-    start = _octant_members(ws.tau, n, lo, ws.octm)
-    total = int(start[8])
-    ws.grow_octants(total)
-    bstart = np.zeros(9, dtype=np.int64)
-    bstart[1:] = np.cumsum((np.diff(start) + BLOCK - 1) // BLOCK)
     tau, pen, pat = np.empty((n, N_AXES)), np.empty(n), np.empty(n, dtype=np.int64)
-    X, S, P, R = np.empty((total, N_AXES)), np.empty(total), np.empty(total), np.empty(total, dtype=np.int64)
-    bmin = np.empty((int(bstart[8]), N_AXES))
-    bmax = np.empty((int(bstart[8]), N_AXES))
-    _octant_fill(ws.tau, ws.pen, ws.pat, n, w, lo, ws.octm, start, ws.ka, ws.ia, ws.kb,
-                 ws.ib, ws.count, tau, pen, pat, X, S, P, R, bstart, bmin, bmax)
-    return Tables(tau, pen, pat, start, X, S, P, R, bstart, bmin, bmax, usable.copy(), cols.copy(),
-                   bias.copy(), w.copy(), spill, n_raw,
-                   time.perf_counter() - t0)
+    if np.any(spill != 0.0):
+        N = tree_nodes(n)
+        tree = (np.empty((N, N_AXES)), np.empty((N, N_AXES)), np.empty(N),
+                np.empty(N, dtype=np.int64), np.empty(N, dtype=np.int64))
+        _kd_fill(ws.tau, ws.pen, ws.pat, n, ws.perm, tau, pen, pat, *tree)
+        octants = (np.zeros(9, dtype=np.int64), np.empty((0, N_AXES)), np.empty(0), np.empty(0),
+                   np.empty(0, dtype=np.int64), np.zeros(9, dtype=np.int64), np.empty((0, N_AXES)),
+                   np.empty((0, N_AXES)))
+    else:
+        lo = np.full(N_AXES, TOL_BOX_NM)
+        start = _octant_members(ws.tau, n, lo, ws.octm)
+        total = int(start[8])
+        ws.grow_octants(total)
+        bstart = np.zeros(9, dtype=np.int64)
+        bstart[1:] = np.cumsum((np.diff(start) + BLOCK - 1) // BLOCK)
+        X, S, P, R = np.empty((total, N_AXES)), np.empty(total), np.empty(total), np.empty(total, dtype=np.int64)
+        bmin = np.empty((int(bstart[8]), N_AXES))
+        bmax = np.empty((int(bstart[8]), N_AXES))
+        _octant_fill(ws.tau, ws.pen, ws.pat, n, w, lo, ws.octm, start, ws.ka, ws.ia, ws.kb,
+                     ws.ib, ws.count, tau, pen, pat, X, S, P, R, bstart, bmin, bmax)
+        octants = (start, X, S, P, R, bstart, bmin, bmax)
+        tree = (np.empty((0, N_AXES)), np.empty((0, N_AXES)), np.empty(0),
+                np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))
+    return Tables(tau, pen, pat, octants, tree, usable.copy(), cols.copy(), bias.copy(), w.copy(),
+                  spill, n_raw, time.perf_counter() - t0)

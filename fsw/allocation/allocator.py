@@ -13,7 +13,7 @@ Method (exact by construction, see tests/test_allocation_*.py):
   3. If none is inside the box: an exhaustive scan of all candidates for the
      unconstrained objective (degraded).
   Spill box (e != 0): the objective is no longer linear in the box, so the candidates
-  are held in a balanced k-d tree (fsw/allocation/tables.py) and a query is a depth-first
+  are held in a bounding-box tree (fsw/allocation/tables.py) and a query is a depth-first
   branch and bound on the objective itself: a node's bound is the weighted distance from
   the demand to its bounding box clipped to the box, plus its smallest penalty; nearer
   child first; a node is pruned once its bound exceeds the best objective + the tie
@@ -47,7 +47,7 @@ from .tables import BLOCK, Tables, Workspace, build_tables
 CACHE_MAX_CONFIGS = 16     # health configurations whose tables are kept
 STATUS_OK, STATUS_DEGRADED, STATUS_REJECTED = 0, 1, 2
 ZERO3 = np.zeros(N_AXES)
-TREE_STACK = 128          # >= 2 x the k-d tree's depth + 2 (depth <= 16 for 2^18 candidates)
+TREE_STACK = 128          # >= 2 x the tree's depth + 2 (depth <= 16 for 2^18 candidates)
 
 
 PARAMS: list[Param] = [
@@ -201,7 +201,7 @@ def _solve_tree_kernel(tau_d, w, spill, nlo, nhi, nminpen, nstart, nend, n_inter
                        tol_pen, stack_k, stack_lb, u_out, tau_out, obj_out):
     """One allocation in the spill box over the candidates with no bit of ``forbid`` whose
     torque is cand_tau + delta (module docstring, spill box): depth-first branch and bound
-    over the k-d tree, nearer child first, a node pruned when its bound exceeds the best
+    over the candidates' tree, nearer child first, a node pruned when its bound exceeds the best
     objective found + the tie tolerance; every candidate within that tolerance is kept
     (ties, tie_obj: work buffers of n rows) for the spec tie-break. With no candidate in the
     box, the same search without it (degraded). Same outputs as _solve_kernel; stack_k,

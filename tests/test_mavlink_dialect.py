@@ -47,14 +47,29 @@ def test_dialect_includes_common_and_nothing_else():
     assert [i.text.strip() for i in _ours().iter("include")] == ["common.xml"]
 
 
+# Upstream common.xml messages that pymavlink 2.4.50's common.xml lacks, defined in the
+# dialect as upstream defines them; CRC_EXTRA as published in the upstream C headers
+# (mavlink/c_library_v2 common: MAVLINK_MSG_ID_PROTOCOL_VERSION_CRC 217,
+# MAVLINK_MSG_ID_COMPONENT_METADATA_CRC 182).
+UPSTREAM_COMMON = {300: ("PROTOCOL_VERSION", 217), 397: ("COMPONENT_METADATA", 182)}
+
+
+def test_upstream_common_messages_match_the_published_crc_extra():
+    for mid, (name, crc_extra) in UPSTREAM_COMMON.items():
+        xml_msg = next(m for m in _ours().iter("message") if m.get("id") == str(mid))
+        assert xml_msg.get("name") == name
+        assert _crc_extra(name, _fields(xml_msg)) == crc_extra          # independent derivation
+        assert mav.mavlink_map[mid].crc_extra == crc_extra
+
+
 def test_message_ids_are_mavlink2_range_and_unused_by_every_shipped_dialect():
-    ours = _message_ids(_ours())
+    ours = _message_ids(_ours()) - set(UPSTREAM_COMMON)
     assert ours == {44000, 44001, 44002, 44003}
     assert all(256 <= i <= 16_777_215 for i in ours)      # > 255 needs MAVLink 2 (24-bit id)
     shipped = [p for p in STOCK.glob("*.xml")]
     assert any(p.name == "common.xml" for p in shipped)
     for p in shipped:
-        clash = ours & _message_ids(_root(p))
+        clash = (ours | set(UPSTREAM_COMMON)) & _message_ids(_root(p))
         assert not clash, f"{p.name} already uses message ids {sorted(clash)}"
 
 
@@ -87,6 +102,8 @@ def test_every_field_has_units_or_is_dimensionless_by_design():
     dimensionless = {"mach", "theta_hat", "eta_hat", "health", "pulses", "commanded", "firing",
                      "alloc_solves", "alloc_degraded", "cycle_slips", "rate_group"}
     for m in _ours().iter("message"):
+        if int(m.get("id")) in UPSTREAM_COMMON:       # upstream's text, kept verbatim
+            continue
         for f in m.iter("field"):
             assert f.get("units") or f.get("name") in dimensionless, (m.get("name"), f.get("name"))
 

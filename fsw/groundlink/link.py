@@ -35,6 +35,8 @@ from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, S
 
 from . import telemetry as tm
 from .commands import CommandTranslator, InjectFn, ParamProtocol
+from .services import COMMANDS as LINK_COMMANDS
+from .services import LinkServices
 
 log = logging.getLogger(__name__)
 
@@ -63,16 +65,20 @@ DEFAULT_RATES_HZ: dict[str, float] = {
 }
 ATTITUDE_GROUP = ("ATTITUDE", "ATTITUDE_QUATERNION", "ATTITUDE_TARGET", "NAMED_VALUE_FLOAT", "ELLIPSLED_ENTRY_STATE")
 POSITION_GROUP = ("GLOBAL_POSITION_INT", "VFR_HUD", "ALTITUDE")
+# streams of one message type each, built one by one (the groups share their geometry)
+SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STATUS", "ELLIPSLED_JET_STATUS",
+                  "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING")
 MAX_RATE_HZ = 100.0
 DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
 
-# What a ground station may send unsigned: its presence and the parameter reads (they
-# change nothing, so a stock ground station without the key can list parameters).
+# What a ground station may send unsigned: its presence and the parameter and mission-list
+# reads (they change nothing, so a stock ground station without the key can list them).
 ALLOW_UNSIGNED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
-                            mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ})
+                            mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ, mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST})
 # What the link acts on besides HEARTBEAT (messages with a target system and component).
-_ADDRESSED = frozenset({mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
-                        mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ, mav.MAVLINK_MSG_ID_PARAM_SET})
+_ADDRESSED = frozenset({mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMMAND_INT,
+                        mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST, mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
+                        mav.MAVLINK_MSG_ID_PARAM_SET, mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST})
 
 
 class GroundLink:
@@ -106,6 +112,9 @@ class GroundLink:
         self.peer_timeout_s = float(peer_timeout_s)
         self.max_peers = int(max_peers)
         self.rates_hz = self._check_rates(rates)
+        # no stream can go out more often than the link ticks (RG2): the fastest rate a
+        # ground station may ask for
+        self.max_rate_hz = min(MAX_RATE_HZ, 1.0 / (fsw.dt_s * fsw.params["executive.rg2_divisor"]))
         self.gcs = parse_udp(gcs, "gcs")
         bind_addr = parse_udp(bind, "bind")
         self.commands_in = CommandTranslator(fsw, inject)
@@ -127,6 +136,8 @@ class GroundLink:
         self.peers: dict[tuple[str, int], float] = {}                     # addr -> last signed rx
         self._param_queue: deque[str] = deque()
         self._next_due = {name: 0.0 for name in self.rates_hz}
+        self._sensors = None                           # latest sensor frame given to tick()
+        self.services = LinkServices(self)
         self._event_index = 0                          # the start-up events go out too
         self._pack_only = False                        # warm_up packs without sending
         self._loop_timing: dict[int, tuple] = {}
@@ -228,6 +239,10 @@ class GroundLink:
             self.send_due(sensors)
             self._send(self.params_in.value_msg(self.params_in.names[0]))
             self._send(tm.statustext(Severity.INFO, "warm-up"))
+            for msg in (mav.MAVLink_command_ack_message(0, 0, 0, 0, 0, 0), self.services.autopilot_version(),
+                        self.services.protocol_version(), mav.MAVLink_message_interval_message(0, 0),
+                        mav.MAVLink_mission_count_message(0, 0, 0, 0)):
+                self._send(msg)
         except Exception:                       # a warm-up failure must not stop the FSW
             log.exception("ground link warm-up failed")
         finally:
@@ -280,7 +295,14 @@ class GroundLink:
         elif mid not in _ADDRESSED or not self._for_me(msg):
             return
         elif mid == mav.MAVLINK_MSG_ID_COMMAND_LONG and signed:
-            self._command(msg, addr)
+            self._command(msg, addr, [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
+                                      msg.param7])
+        elif mid == mav.MAVLINK_MSG_ID_COMMAND_INT and signed:
+            # no command of this vehicle takes a position: x, y are passed on as numbers
+            self._command(msg, addr, [msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y),
+                                      msg.z])
+        elif mid == mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST:
+            self._send(self.services.mission_count(msg), only=addr)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
             self._param_queue.extend(n for n in self.params_in.names if n not in self._param_queue)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
@@ -313,17 +335,22 @@ class GroundLink:
     def _refuse(self, code: str, text: str) -> None:
         self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", code, text[:tm.STATUSTEXT_LEN])
 
-    def _command(self, msg, addr) -> None:
-        p = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7]
-        result, why = self.commands_in.execute(msg.command, p)
+    def _command(self, msg, addr, p: list[float]) -> None:
+        replies, broadcast = [], False
+        if msg.command in LINK_COMMANDS:
+            result, why, replies, broadcast = self.services.execute(msg.command, p)
+        else:
+            result, why = self.commands_in.execute(msg.command, p)
         if result != CommandResult.ACCEPTED and why:
             self._refuse("cmd_refused", why)
         self.commands[result] = self.commands.get(result, 0) + 1
         ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent())
         # to the requester only: another ground station waiting on the same command id
-        # must not take this answer for its own
+        # must not take this answer for its own; what was asked for follows the ACK
         self._send(ack, only=addr)
+        for reply in replies:
+            self._send(reply, only=None if broadcast else addr)
 
     # -------------------------------------------------------------- send side
     def _destinations(self, extra=None) -> list[tuple[str, int]]:
@@ -364,21 +391,55 @@ class GroundLink:
         self._next_due[name] = nxt if nxt > now else now + period
         return True
 
+    def schedule_now(self, name: str) -> None:
+        """Stream ``name`` is due at the next tick (its rate was just changed)."""
+        self._next_due[name] = 0.0
+
     def system_status(self) -> int:
         return tm.system_status(self.fsw)
+
+    def stream_messages(self, name: str) -> list:
+        """The messages of stream ``name`` now, outside its schedule (a one-shot request);
+        empty while what it reports does not exist yet (no navigation, no timing)."""
+        fsw = self.fsw
+        ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
+        if name in SINGLE_STREAMS:
+            return list(self._single(name, ms))
+        if not tm.nav_valid(fsw):
+            return []
+        C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
+        if name in ATTITUDE_GROUP:
+            return list(tm.attitude(fsw, ms, C_LN, tuple(n == name for n in ATTITUDE_GROUP)))
+        return list(tm.position(fsw, ms, C_LN, tuple(n == name for n in POSITION_GROUP)))
+
+    def _single(self, name: str, ms: int):
+        fsw = self.fsw
+        if name == "HEARTBEAT":
+            yield tm.heartbeat(fsw)
+        elif name == "SYS_STATUS":
+            yield tm.sys_status(fsw, self._loop_timing, self.rejections, self.stats["kernel_drops"],
+                                self.stats["refused_early"])
+        elif name == "SYSTEM_TIME":
+            yield tm.system_time(fsw, self.wall_clock())
+        elif name == "ACTUATOR_OUTPUT_STATUS":
+            yield tm.actuator_output_status(fsw)
+        elif name == "ELLIPSLED_JET_STATUS":
+            yield tm.jet_status(fsw, ms, self._sensors)
+        elif name == "ELLIPSLED_CONTROL_STATUS":
+            yield tm.control_status(fsw, ms, self._alloc_ns, self._alloc_degraded)
+        elif name == "ELLIPSLED_LOOP_TIMING":
+            yield from tm.loop_timing(ms, self._loop_timing)
 
     def send_due(self, sensors=None) -> None:
         """Send every telemetry stream that is due, queued parameters and new events."""
         now = self.clock()
         fsw = self.fsw
+        self._sensors = sensors
         ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
-        if self._due("HEARTBEAT", now):
-            self._send(tm.heartbeat(fsw))
-        if self._due("SYS_STATUS", now):
-            self._send(tm.sys_status(fsw, self._loop_timing, self.rejections, self.stats["kernel_drops"],
-                                     self.stats["refused_early"]))
-        if self._due("SYSTEM_TIME", now):
-            self._send(tm.system_time(fsw, self.wall_clock()))
+        for name in SINGLE_STREAMS:
+            if self._due(name, now):
+                for msg in self._single(name, ms):
+                    self._send(msg)
         if tm.nav_valid(fsw):
             want_att = tuple(self._due(n, now) for n in ATTITUDE_GROUP)
             want_pos = tuple(self._due(n, now) for n in POSITION_GROUP)
@@ -390,15 +451,6 @@ class GroundLink:
                 if any(want_pos):
                     for msg in tm.position(fsw, ms, C_LN, want_pos):
                         self._send(msg)
-        if self._due("ACTUATOR_OUTPUT_STATUS", now):
-            self._send(tm.actuator_output_status(fsw))
-        if self._due("ELLIPSLED_JET_STATUS", now):
-            self._send(tm.jet_status(fsw, ms, sensors))
-        if self._due("ELLIPSLED_CONTROL_STATUS", now):
-            self._send(tm.control_status(fsw, ms, self._alloc_ns, self._alloc_degraded))
-        if self._due("ELLIPSLED_LOOP_TIMING", now):
-            for msg in tm.loop_timing(ms, self._loop_timing):
-                self._send(msg)
         budget = self.max_tx_per_tick
         while self._param_queue and budget > 0:
             self._send(self.params_in.value_msg(self._param_queue.popleft()))

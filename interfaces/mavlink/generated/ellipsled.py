@@ -6406,6 +6406,8 @@ enums["MAV_COMPONENT"][251] = EnumEntry("MAV_COMPONENT_ENUM_END", """""")
 # message IDs
 MAVLINK_MSG_ID_BAD_DATA = -1
 MAVLINK_MSG_ID_UNKNOWN = -2
+MAVLINK_MSG_ID_PROTOCOL_VERSION = 300
+MAVLINK_MSG_ID_COMPONENT_METADATA = 397
 MAVLINK_MSG_ID_ELLIPSLED_ENTRY_STATE = 44000
 MAVLINK_MSG_ID_ELLIPSLED_JET_STATUS = 44001
 MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS = 44002
@@ -6620,6 +6622,93 @@ MAVLINK_MSG_ID_HYGROMETER_SENSOR = 12920
 MAVLINK_MSG_ID_GLOBAL_POSITION_INT = 33
 MAVLINK_MSG_ID_AUTOPILOT_VERSION = 148
 MAVLINK_MSG_ID_HEARTBEAT = 0
+
+
+class MAVLink_protocol_version_message(MAVLink_message):
+    """
+    Version and capability of protocol version (upstream common.xml).
+    Requested with MAV_CMD_REQUEST_MESSAGE; part of the MAVLink
+    version handshake.
+    """
+
+    id = MAVLINK_MSG_ID_PROTOCOL_VERSION
+    msgname = "PROTOCOL_VERSION"
+    fieldnames = ["version", "min_version", "max_version", "spec_version_hash", "library_version_hash"]
+    ordered_fieldnames = ["version", "min_version", "max_version", "spec_version_hash", "library_version_hash"]
+    fieldtypes = ["uint16_t", "uint16_t", "uint16_t", "uint8_t", "uint8_t"]
+    fielddisplays_by_name: Dict[str, str] = {}
+    fieldenums_by_name: Dict[str, str] = {}
+    fieldunits_by_name: Dict[str, str] = {}
+    native_format = bytearray(b"<HHHBB")
+    orders = [0, 1, 2, 3, 4]
+    lengths = [1, 1, 1, 8, 8]
+    array_lengths = [0, 0, 0, 8, 8]
+    crc_extra = 217
+    unpacker = struct.Struct("<HHH8B8B")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, version: int, min_version: int, max_version: int, spec_version_hash: Sequence[int], library_version_hash: Sequence[int]):
+        MAVLink_message.__init__(self, MAVLink_protocol_version_message.id, MAVLink_protocol_version_message.msgname)
+        self._fieldnames = MAVLink_protocol_version_message.fieldnames
+        self._instance_field = MAVLink_protocol_version_message.instance_field
+        self._instance_offset = MAVLink_protocol_version_message.instance_offset
+        self.version = version
+        self.min_version = min_version
+        self.max_version = max_version
+        self.spec_version_hash = spec_version_hash
+        self.library_version_hash = library_version_hash
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.version, self.min_version, self.max_version, self.spec_version_hash[0], self.spec_version_hash[1], self.spec_version_hash[2], self.spec_version_hash[3], self.spec_version_hash[4], self.spec_version_hash[5], self.spec_version_hash[6], self.spec_version_hash[7], self.library_version_hash[0], self.library_version_hash[1], self.library_version_hash[2], self.library_version_hash[3], self.library_version_hash[4], self.library_version_hash[5], self.library_version_hash[6], self.library_version_hash[7]), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_protocol_version_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_component_metadata_message(MAVLink_message):
+    """
+    Component metadata message (upstream common.xml), requested with
+    MAV_CMD_REQUEST_MESSAGE: the MAVLink FTP URI and CRC of the
+    component's general metadata file.
+    """
+
+    id = MAVLINK_MSG_ID_COMPONENT_METADATA
+    msgname = "COMPONENT_METADATA"
+    fieldnames = ["time_boot_ms", "file_crc", "uri"]
+    ordered_fieldnames = ["time_boot_ms", "file_crc", "uri"]
+    fieldtypes = ["uint32_t", "uint32_t", "char"]
+    fielddisplays_by_name: Dict[str, str] = {}
+    fieldenums_by_name: Dict[str, str] = {}
+    fieldunits_by_name: Dict[str, str] = {"time_boot_ms": "ms"}
+    native_format = bytearray(b"<IIc")
+    orders = [0, 1, 2]
+    lengths = [1, 1, 1]
+    array_lengths = [0, 0, 100]
+    crc_extra = 182
+    unpacker = struct.Struct("<II100s")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, time_boot_ms: int, file_crc: int, uri: bytes):
+        MAVLink_message.__init__(self, MAVLink_component_metadata_message.id, MAVLink_component_metadata_message.msgname)
+        self._fieldnames = MAVLink_component_metadata_message.fieldnames
+        self._instance_field = MAVLink_component_metadata_message.instance_field
+        self._instance_offset = MAVLink_component_metadata_message.instance_offset
+        self.time_boot_ms = time_boot_ms
+        self.file_crc = file_crc
+        self._uri_raw = uri
+        self.uri = uri.split(b"\x00", 1)[0].decode("ascii", errors="replace")
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.time_boot_ms, self.file_crc, self._uri_raw), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_component_metadata_message, "name", mavlink_msg_deprecated_name_property())
 
 
 class MAVLink_ellipsled_entry_state_message(MAVLink_message):
@@ -16880,6 +16969,8 @@ setattr(MAVLink_heartbeat_message, "name", mavlink_msg_deprecated_name_property(
 
 
 mavlink_map: Dict[int, Type[MAVLink_message]] = {
+    MAVLINK_MSG_ID_PROTOCOL_VERSION: MAVLink_protocol_version_message,
+    MAVLINK_MSG_ID_COMPONENT_METADATA: MAVLink_component_metadata_message,
     MAVLINK_MSG_ID_ELLIPSLED_ENTRY_STATE: MAVLink_ellipsled_entry_state_message,
     MAVLINK_MSG_ID_ELLIPSLED_JET_STATUS: MAVLink_ellipsled_jet_status_message,
     MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS: MAVLink_ellipsled_control_status_message,
@@ -17489,6 +17580,62 @@ class MAVLink(object):
         m._crc = crc
         m._header = MAVLink_header(msgId, incompat_flags, compat_flags, mlen, seq, srcSystem, srcComponent)
         return m
+
+    def protocol_version_encode(self, version: int, min_version: int, max_version: int, spec_version_hash: Sequence[int], library_version_hash: Sequence[int]) -> MAVLink_protocol_version_message:
+        """
+        Version and capability of protocol version (upstream common.xml).
+        Requested with MAV_CMD_REQUEST_MESSAGE; part of the MAVLink
+        version handshake.
+
+        version                   : Currently active MAVLink version number * 100: v1.0 is 100, v2.0 is 200, etc. (type:uint16_t)
+        min_version               : Minimum MAVLink version supported (type:uint16_t)
+        max_version               : Maximum MAVLink version supported (set to the same value as version by default) (type:uint16_t)
+        spec_version_hash         : The first 8 bytes (not characters printed in hex!) of the git hash. (type:uint8_t)
+        library_version_hash        : The first 8 bytes (not characters printed in hex!) of the git hash. (type:uint8_t)
+
+        """
+        return MAVLink_protocol_version_message(version, min_version, max_version, spec_version_hash, library_version_hash)
+
+    def protocol_version_send(self, version: int, min_version: int, max_version: int, spec_version_hash: Sequence[int], library_version_hash: Sequence[int], force_mavlink1: bool = False) -> None:
+        """
+        Version and capability of protocol version (upstream common.xml).
+        Requested with MAV_CMD_REQUEST_MESSAGE; part of the MAVLink
+        version handshake.
+
+        version                   : Currently active MAVLink version number * 100: v1.0 is 100, v2.0 is 200, etc. (type:uint16_t)
+        min_version               : Minimum MAVLink version supported (type:uint16_t)
+        max_version               : Maximum MAVLink version supported (set to the same value as version by default) (type:uint16_t)
+        spec_version_hash         : The first 8 bytes (not characters printed in hex!) of the git hash. (type:uint8_t)
+        library_version_hash        : The first 8 bytes (not characters printed in hex!) of the git hash. (type:uint8_t)
+
+        """
+        self.send(self.protocol_version_encode(version, min_version, max_version, spec_version_hash, library_version_hash), force_mavlink1=force_mavlink1)
+
+    def component_metadata_encode(self, time_boot_ms: int, file_crc: int, uri: bytes) -> MAVLink_component_metadata_message:
+        """
+        Component metadata message (upstream common.xml), requested with
+        MAV_CMD_REQUEST_MESSAGE: the MAVLink FTP URI and CRC of the
+        component's general metadata file.
+
+        time_boot_ms              : Timestamp (time since system boot). [ms] (type:uint32_t)
+        file_crc                  : CRC32 of the general metadata file. (type:uint32_t)
+        uri                       : MAVLink FTP URI for the general metadata file (COMP_METADATA_TYPE_GENERAL), which may be compressed with xz. The string needs to be zero terminated. (type:char)
+
+        """
+        return MAVLink_component_metadata_message(time_boot_ms, file_crc, uri)
+
+    def component_metadata_send(self, time_boot_ms: int, file_crc: int, uri: bytes, force_mavlink1: bool = False) -> None:
+        """
+        Component metadata message (upstream common.xml), requested with
+        MAV_CMD_REQUEST_MESSAGE: the MAVLink FTP URI and CRC of the
+        component's general metadata file.
+
+        time_boot_ms              : Timestamp (time since system boot). [ms] (type:uint32_t)
+        file_crc                  : CRC32 of the general metadata file. (type:uint32_t)
+        uri                       : MAVLink FTP URI for the general metadata file (COMP_METADATA_TYPE_GENERAL), which may be compressed with xz. The string needs to be zero terminated. (type:char)
+
+        """
+        self.send(self.component_metadata_encode(time_boot_ms, file_crc, uri), force_mavlink1=force_mavlink1)
 
     def ellipsled_entry_state_encode(self, time_boot_ms: int, altitude: float, speed: float, flight_path_angle: float, heading: float, latitude: float, longitude: float, mach: float, qbar: float, alpha: float, beta: float, bank: float, bank_ref: float) -> MAVLink_ellipsled_entry_state_message:
         """

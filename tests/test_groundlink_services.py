@@ -16,7 +16,7 @@ import pytest
 from fsw.groundlink import DEFAULT_RATES_HZ
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import Rig
+from tests.test_groundlink_commands import Rig, rig  # noqa: F401  (the shared fixture)
 
 ACCEPTED, DENIED, TEMP = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED, mav.MAV_RESULT_TEMPORARILY_REJECTED
 REQ, SET_IV, GET_IV = mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAV_CMD_GET_MESSAGE_INTERVAL
@@ -24,14 +24,6 @@ REQ, SET_IV, GET_IV = mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTER
 
 def msg_id(name: str) -> int:
     return getattr(mav, "MAVLINK_MSG_ID_" + name)
-
-
-@pytest.fixture
-def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(10)
-    yield r
-    r.close()
 
 
 @pytest.fixture

@@ -33,8 +33,10 @@ from interfaces.mavlink.intake import DatagramIntake
 from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, Severity, parse_udp
 
+from . import metadata
 from . import telemetry as tm
 from .commands import CommandTranslator, InjectFn, ParamProtocol
+from .ftp import FtpServer
 from .services import COMMANDS as LINK_COMMANDS
 from .services import LinkServices
 
@@ -78,7 +80,9 @@ ALLOW_UNSIGNED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_PAR
 # What the link acts on besides HEARTBEAT (messages with a target system and component).
 _ADDRESSED = frozenset({mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMMAND_INT,
                         mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST, mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
-                        mav.MAVLINK_MSG_ID_PARAM_SET, mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST})
+                        mav.MAVLINK_MSG_ID_PARAM_SET, mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST,
+                        mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL})
+FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends (~1.5 ms of packing)
 
 
 class GroundLink:
@@ -137,7 +141,10 @@ class GroundLink:
         self._param_queue: deque[str] = deque()
         self._next_due = {name: 0.0 for name in self.rates_hz}
         self._sensors = None                           # latest sensor frame given to tick()
-        self.services = LinkServices(self)
+        self.files = metadata.build(fsw.registry, fsw.scenario.vehicle.name)
+        self.ftp = FtpServer(self.files)
+        self._ftp_budget = FTP_REPLIES_PER_TICK
+        self.services = LinkServices(self, {mav.MAVLINK_MSG_ID_COMPONENT_METADATA: lambda: [self.component_metadata()]})
         self._event_index = 0                          # the start-up events go out too
         self._pack_only = False                        # warm_up packs without sending
         self._loop_timing: dict[int, tuple] = {}
@@ -147,7 +154,7 @@ class GroundLink:
         self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
         self.stats = {"rx_datagrams": 0, "rx_bytes": 0, "rx_messages": 0, "tx_frames": 0,
                       "tx_bytes": 0, "tx_errors": 0, "refused_early": 0, "kernel_drops": 0,
-                      "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0}
+                      "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0, "ftp_deferred": 0}
         self.tick_ns_max = 0
         self.send_ns_peak = 0
 
@@ -241,6 +248,7 @@ class GroundLink:
             self._send(tm.statustext(Severity.INFO, "warm-up"))
             for msg in (mav.MAVLink_command_ack_message(0, 0, 0, 0, 0, 0), self.services.autopilot_version(),
                         self.services.protocol_version(), mav.MAVLink_message_interval_message(0, 0),
+                        self.component_metadata(), mav.MAVLink_file_transfer_protocol_message(0, 0, 0, [0] * 251),
                         mav.MAVLink_mission_count_message(0, 0, 0, 0)):
                 self._send(msg)
         except Exception:                       # a warm-up failure must not stop the FSW
@@ -303,6 +311,8 @@ class GroundLink:
                                       msg.z])
         elif mid == mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST:
             self._send(self.services.mission_count(msg), only=addr)
+        elif mid == mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL and signed:
+            self._ftp(msg, addr)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
             self._param_queue.extend(n for n in self.params_in.names if n not in self._param_queue)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
@@ -334,6 +344,25 @@ class GroundLink:
 
     def _refuse(self, code: str, text: str) -> None:
         self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", code, text[:tm.STATUSTEXT_LEN])
+
+    def _ftp(self, msg, addr) -> None:
+        """One MAVLink FTP request; what this tick can no longer send is dropped unanswered
+        (the client retries)."""
+        if self._ftp_budget <= 0:
+            self.stats["ftp_deferred"] += 1
+            return
+        replies = self.ftp.handle(msg.payload, self._ftp_budget)
+        self._ftp_budget -= len(replies)
+        for payload in replies:
+            self._send(mav.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(),
+                                                                  list(payload)), only=addr)
+
+    def component_metadata(self):
+        """COMPONENT_METADATA: where the general metadata file is, and its CRC."""
+        general = self.files[metadata.GENERAL_PATH]
+        return mav.MAVLink_component_metadata_message(int(max(0.0, self.fsw.t_s) * 1000.0) & 0xFFFFFFFF,
+                                                      metadata.crc32(general),
+                                                      metadata.mftp_uri(metadata.GENERAL_PATH).encode("ascii"))
 
     def _command(self, msg, addr, p: list[float]) -> None:
         replies, broadcast = [], False
@@ -435,6 +464,7 @@ class GroundLink:
         now = self.clock()
         fsw = self.fsw
         self._sensors = sensors
+        self._ftp_budget = FTP_REPLIES_PER_TICK
         ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
         for name in SINGLE_STREAMS:
             if self._due(name, now):

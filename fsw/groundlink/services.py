@@ -28,11 +28,13 @@ MSG_ID_MAX = 0xFFFFFF                    # message ids are 24 bits
 
 # What the link implements, and nothing else (MAV_PROTOCOL_CAPABILITY). PARAM_FLOAT and
 # PARAM_ENCODE_C_CAST: every parameter is MAV_PARAM_TYPE_REAL32 and its value is sent as
-# that float (integers cast); COMMAND_INT: handled as COMMAND_LONG is. No MISSION_*: the
+# that float (integers cast); COMMAND_INT: handled as COMMAND_LONG is; FTP: the read-only
+# subset that serves the component metadata (ftp.py). No MISSION_*: the
 # vehicle flies no missions (it answers a list request with 0 items). MAVLink signing has
 # no capability bit; the link requires it for commands and writes.
 CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-                | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT)
+                | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | mav.MAV_PROTOCOL_CAPABILITY_FTP)
 
 COMMANDS = frozenset({mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTERVAL,
                       mav.MAV_CMD_GET_MESSAGE_INTERVAL, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,

@@ -7,6 +7,7 @@ MAVFTP, signed) lists and downloads the files from a live ground link.
 Independent truth: the registry's describe() rows, zlib's CRC32, json parsing, the key
 sets of the upstream schemas (mavlink/component_metadata/*.schema.json) written out here.
 """
+# ruff: noqa: F811  (the shared `rig` fixture is imported, then named as a test argument)
 from __future__ import annotations
 
 import io

@@ -6,6 +6,7 @@ MISSION_COUNT 0; bad requests DENIED, counted, reported, never a crash.
 Independent truth: counting messages at the ground against a fake clock, the capability
 bits named in common.xml, the rates configured.
 """
+# ruff: noqa: F811  (the shared `rig` fixture is imported, then named as a test argument)
 from __future__ import annotations
 
 import math

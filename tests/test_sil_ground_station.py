@@ -15,8 +15,6 @@ from __future__ import annotations
 import json
 import math
 import struct
-import subprocess
-import sys
 import time
 import zlib
 
@@ -25,12 +23,9 @@ import pytest
 from pymavlink import mavftp, mavutil
 
 from ellipsled.history import History
-from interfaces.mavlink.signing import SigningKey
-
-from tests.ground_procs import free_udp, stop
+from tests.ground_procs import start_ground_sil, stop
 
 pytestmark = pytest.mark.slow
-PY = [sys.executable, "-m", "ellipsled.cli"]
 MSG_PROTOCOL_VERSION, MSG_COMPONENT_METADATA = 300, 397
 
 
@@ -78,21 +73,11 @@ def _rate(conn, name: str, seconds: float) -> float:
 
 def test_a_stock_ground_station_sees_position_identity_rates_and_parameter_metadata(tmp_path, monkeypatch):
     monkeypatch.setenv("MAVLINK20", "1")                 # a MAVLink 2 ground station (v1 is refused)
-    key_file = tmp_path / "keys" / "signing.key"
-    key_file.parent.mkdir()
-    SigningKey.generate().write_file(str(key_file))
-    key = SigningKey.from_file(str(key_file))
-    vehicle, gcs = free_udp(), free_udp()
-    out = tmp_path / "run"
-    log = open(tmp_path / "run.log", "w")
-    run = subprocess.Popen(PY + ["run", "nominal", "--realtime", "--duration", "45", "--out", str(out),
-                                 "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
-                                 "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
-                           stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    sil = start_ground_sil(tmp_path, duration_s=45.0)
+    run, key, gcs, out, log_text = sil.run, sil.key, sil.gcs, sil.out, sil.log
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{gcs}", dialect="common", source_system=255,
                                       source_component=190)
     conn.setup_signing(key.secret, sign_outgoing=True)
-    log_text = lambda: (tmp_path / "run.log").read_text()  # noqa: E731
     seen: list = []
     try:
         hb = _recv(conn, "HEARTBEAT", 120)
@@ -185,7 +170,6 @@ def test_a_stock_ground_station_sees_position_identity_rates_and_parameter_metad
     finally:
         conn.close()
         stop(run)
-        log.close()
 
     # --- position against the plant's truth at the message's time (VFR_HUD carries no
     # time: it leaves in the same tick as the GLOBAL_POSITION_INT just before it)

@@ -9,6 +9,7 @@ bits named in common.xml, the rates configured.
 # ruff: noqa: F811  (the shared `rig` fixture is imported, then named as a test argument)
 from __future__ import annotations
 
+import json
 import math
 import socket
 
@@ -56,6 +57,9 @@ def test_autopilot_version_claims_only_what_the_link_does(quiet):
         assert not caps & bit, bit
     av = quiet.gcs.state.latest["AUTOPILOT_VERSION"]
     assert any(av.flight_custom_version)                 # the build's source digest
+    v = av.flight_sw_version
+    assert f"{v >> 24}.{v >> 16 & 0xFF}.{v >> 8 & 0xFF}" == json.loads(
+        quiet.gl.files["metadata/general.json"])["firmwareVersion"]      # one version, both places
     del quiet.gcs.state.latest["AUTOPILOT_VERSION"]
     assert quiet.raw_command(REQ, msg_id("AUTOPILOT_VERSION")) == ACCEPTED
     assert arrived(quiet, "AUTOPILOT_VERSION")

@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import hashlib
 import math
-from importlib import metadata
 from pathlib import Path
 
 from interfaces.mavlink import dialect as mav
 from interfaces.vocabulary import CommandResult
+
+from .metadata import firmware_version
 
 MAVLINK_VERSION = 200                    # MAVLink 2 only: the intake refuses MAVLink 1 frames
 MSG_ID_MAX = 0xFFFFFF                    # message ids are 24 bits
@@ -52,13 +53,9 @@ def _int_in(x: float, lo: int, hi: int) -> bool:
 
 def flight_sw_version() -> int:
     """AUTOPILOT_VERSION.flight_sw_version: major << 24 | minor << 16 | patch << 8 | type,
-    from the installed package's version (0 when it is not installed)."""
-    try:
-        parts = [int(p) for p in metadata.version("ellipsled").split(".")[:3]]
-    except (metadata.PackageNotFoundError, ValueError):
-        return 0
-    major, minor, patch = (parts + [0, 0, 0])[:3]
-    return (major & 0xFF) << 24 | (minor & 0xFF) << 16 | (patch & 0xFF) << 8 | mav.FIRMWARE_VERSION_TYPE_DEV
+    of the version the metadata gives (metadata.firmware_version)."""
+    major, minor, patch = (int(x) & 0xFF for x in firmware_version().split("."))
+    return major << 24 | minor << 16 | patch << 8 | mav.FIRMWARE_VERSION_TYPE_DEV
 
 
 def source_digest() -> bytes:

@@ -66,7 +66,8 @@ PARAMS = [
 C_MU, C_RE, C_OM, C_RHO_MODEL, C_RHO0, C_H, C_KRHO, C_KLD = 0, 1, 2, 3, 4, 5, 6, 7
 C_S_M, C_CL, C_CD, C_MACH_F, C_V_F, C_H_FLOOR, C_H_CEIL, C_T_MAX = 8, 9, 10, 11, 12, 13, 14, 15
 C_G0, C_RN, C_SG = 16, 17, 18
-N_C = 19
+C_NLIM, C_QLIM, C_HTAU, C_HGAIN = 19, 20, 21, 22   # path-limit feedback (0 limits: off)
+N_C = 23
 # predictor outputs
 O_R = 0                     # 3: final position, planet-fixed [m]
 O_T, O_NMAX, O_QMAX, O_H, O_V, O_FLAG = 3, 4, 5, 6, 7, 8
@@ -74,6 +75,28 @@ N_O = 9
 REACHED, SKIPPED, GROUND, TIMEOUT = 0, 1, 2, 3
 T_PRED_MAX_S = 1500.0             # a prediction longer than this is a skip-out
 SUTTON_GRAVES_MARS = 1.9027e-4     # k of q = k sqrt(rho / R_n) V^3 [SI] (spec 60-guidance.md)
+
+
+@njit(cache=True, nogil=True)
+def path_limited_bank(bank_mag: float, h: float, hdot: float, n_g: float, q_wm2: float, n_lim: float,
+                      q_lim: float, H_m: float, tau_s: float, gain: float) -> float:
+    """Bank magnitude after altitude-rate feedback on the path limits (Lu 2014): with an
+    exponential atmosphere the load factor (~rho) and heat rate (~sqrt(rho)) would reach
+    their limits at h_lim = h + H ln(n/n_lim), resp. h + 2H ln(q/q_lim), at today's speed.
+    The vehicle may close on h_lim at hdot_ref = -(h - h_lim)/tau; descending faster than
+    that raises cos(bank) (more lift up) by gain (hdot_ref - hdot). Compiled: the predictor
+    flies the same law."""
+    c0 = math.cos(bank_mag)
+    c = c0
+    for k in range(2):
+        val, lim, sh = (n_g, n_lim, H_m) if k == 0 else (q_wm2, q_lim, 2.0 * H_m)
+        if val <= 0.0 or lim <= 0.0:
+            continue
+        h_lim = h + sh * math.log(val / lim)
+        hdot_ref = -(h - h_lim) / tau_s
+        if hdot < hdot_ref:
+            c = max(c, c0 + gain * (hdot_ref - hdot))
+    return math.acos(min(1.0, max(-1.0, c)))
 
 
 @njit(cache=True, nogil=True)
@@ -97,11 +120,18 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
     q = 0.5 * rho * V * V * c[C_S_M]
     D = q * c[C_CD]
     L = q * c[C_CL] * c[C_KLD]
-    # bank magnitude linear in energy e = mu/r - V^2/2 (spec 60-guidance.md, longitudinal)
+    # bank magnitude linear in energy e = mu/r - V^2/2 (spec 60-guidance.md, longitudinal),
+    # then the same altitude-rate path-limit feedback the vehicle flies (EntryGuidance.steer):
+    # without it the prediction misses the lift-up the feedback adds near peak load, and the
+    # corrector learns of that range only after it is flown
     e = mu / r - 0.5 * V * V
     f = (e - e0) / (ef - e0) if ef != e0 else 1.0
     f = min(1.0, max(0.0, f))
-    bank = sign * (b0 + (bf - b0) * f)
+    n_g = math.sqrt(D * D + L * L) / c[C_G0]
+    q_heat = c[C_SG] * math.sqrt(rho / c[C_RN]) * V * V * V
+    hdot = (rx * vx + ry * vy + rz * vz) / r
+    bank = sign * path_limited_bank(b0 + (bf - b0) * f, h, hdot, n_g, q_heat, c[C_NLIM], c[C_QLIM], c[C_H],
+                                    c[C_HTAU], c[C_HGAIN])
     e1x, e1y, e1z = vx / V, vy / V, vz / V
     hx, hy, hz = vy * rz - vz * ry, vz * rx - vx * rz, vx * ry - vy * rx
     hn = math.sqrt(hx * hx + hy * hy + hz * hz)
@@ -116,8 +146,8 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
     dx[5] = kg * rz - D * e1z + L * lz
     aux[0] = h
     aux[1] = V
-    aux[2] = math.sqrt(D * D + L * L) / c[C_G0]
-    aux[3] = c[C_SG] * math.sqrt(rho / c[C_RN]) * V * V * V
+    aux[2] = n_g
+    aux[3] = q_heat
 
 
 @njit(cache=True, nogil=True)
@@ -129,11 +159,13 @@ def _end_metric(h, V, c):
 
 
 @njit(cache=True, nogil=True)
-def predict(x0, c, b0, bf, e0, ef, sign, dt, out):
+def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     """Fly the 3-DOF model from x0 until the deploy condition (or skip, ground, timeout).
-    out: final position (3) [m, planet-fixed], time of flight [s], peak load [g], peak heat
-    rate [W/m^2], final altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT).
-    The last step is cut back linearly to the deploy condition."""
+    The bank's sign is ``sign``, or ``-sign`` before ``t_flip`` [s] (a reversal that takes
+    effect then: the lateral mid-point of the shaped transition). out: final position (3)
+    [m, planet-fixed], time of flight [s], peak load [g], peak heat rate [W/m^2], final
+    altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT). The last step is
+    cut back linearly to the deploy condition."""
     x = x0.copy()
     xp = np.empty(6)
     k1 = np.empty(6)
@@ -151,20 +183,21 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out):
     frac = 1.0
     while t < c[C_T_MAX]:
         xp[:] = x
-        _deriv(x, c, b0, bf, e0, ef, sign, k1, aux)
+        sg = -sign if t < t_flip else sign
+        _deriv(x, c, b0, bf, e0, ef, sg, k1, aux)
         if aux[2] > nmax:
             nmax = aux[2]
         if aux[3] > qmax:
             qmax = aux[3]
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k1[i]
-        _deriv(xt, c, b0, bf, e0, ef, sign, k2, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k2, aux)
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k2[i]
-        _deriv(xt, c, b0, bf, e0, ef, sign, k3, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k3, aux)
         for i in range(6):
             xt[i] = x[i] + dt * k3[i]
-        _deriv(xt, c, b0, bf, e0, ef, sign, k4, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k4, aux)
         for i in range(6):
             x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         t += dt
@@ -232,6 +265,18 @@ def heading_error(x: np.ndarray, target_u: np.ndarray) -> tuple[float, float]:
     d = target_u - float(target_u @ up) * up          # direction to the target, in the local plane
     bearing = math.atan2(float(d @ east), float(d @ north))
     return math.remainder(psi - bearing, 2.0 * math.pi), central_angle(r, target_u)
+
+
+def crossrange(r_now: np.ndarray, target_u: np.ndarray, r_f: np.ndarray, radius_m: float) -> float:
+    """Signed distance [m] of the point r_f off the great circle from r_now to the target,
+    positive to the left of that path (atan2 form of the angle off the circle's plane)."""
+    n = np.cross(r_now, target_u)
+    nn = math.sqrt(float(n @ n))
+    if nn == 0.0:
+        return 0.0
+    rf = math.sqrt(float(r_f @ r_f))
+    s = float(r_f @ n) / (nn * rf)
+    return math.asin(min(1.0, max(-1.0, s))) * radius_m
 
 
 def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int,
@@ -311,10 +356,23 @@ class DensityEstimator:
 
 
 class LateralLogic:
-    """Bank sign: reverse when the heading error to the target leaves a corridor whose
-    half-width narrows linearly with speed (dpsi_hi at v_hi, dpsi_lo at v_lo), at most one
-    reversal per rev_gap_s, none below v_norev. Positive bank turns right (heading up), so
-    an error beyond +corridor wants a negative bank and beyond -corridor a positive one."""
+    """Bank sign, two rules (spec 60-guidance.md, lateral channel):
+
+    - corridor: reverse when the heading error to the target leaves a corridor whose
+      half-width narrows linearly with speed (dpsi_hi at v_hi, dpsi_lo at v_lo). Positive
+      bank turns right (heading up), so an error beyond +corridor wants a negative bank
+      and beyond -corridor a positive one. It keeps the heading near the target while the
+      vehicle has more lateral reach left than it needs;
+    - final reversal, by prediction: xr_keep and xr_rev are the predicted crossranges at
+      the deploy point if the sign is kept to the end, resp. reversed now (and kept). The
+      current sign pushes the deploy point towards xr_keep - xr_rev; once even a reversal
+      now leaves it on that side of the target line (or on it), waiting only adds miss: it
+      reverses. After that reversal the corridor is off: the heading error near the end
+      grows geometrically as the target comes close (its bearing swings), and a corridor
+      reversal then would undo the null the prediction set up. Only the prediction may
+      reverse again (if the deploy crossrange drifts past what a reversal can null).
+
+    Both at most one reversal per rev_gap_s, none below v_norev (the last stretch)."""
 
     def __init__(self, params: dict, v_hi_mps: float, v_lo_mps: float, sign0: float = 1.0):
         self.dpsi_hi = math.radians(params["npc.dpsi_hi_deg"])
@@ -324,42 +382,36 @@ class LateralLogic:
         self.v_hi, self.v_lo = v_hi_mps, v_lo_mps
         self.sign = 1.0 if sign0 >= 0 else -1.0
         self.t_last = -math.inf
+        self.final = False            # the prediction has taken over (corridor off)
         self.reversals: list[float] = []
+        self.rules: list[str] = []    # which rule made each reversal
 
     def corridor(self, V: float) -> float:
         f = (V - self.v_lo) / (self.v_hi - self.v_lo) if self.v_hi != self.v_lo else 1.0
         f = min(1.0, max(0.0, f))
         return self.dpsi_lo + (self.dpsi_hi - self.dpsi_lo) * f
 
-    def update(self, t_s: float, V: float, dpsi: float) -> bool:
-        """New sign from the heading error dpsi [rad] at speed V; True when it reversed."""
-        w = self.corridor(V)
-        want = -1.0 if dpsi > w else (1.0 if dpsi < -w else self.sign)
-        if want == self.sign or V < self.v_norev or t_s - self.t_last < self.gap_s:
+    def update(self, t_s: float, V: float, dpsi: float, xr_keep: float = math.nan,
+               xr_rev: float = math.nan) -> bool:
+        """New sign from the heading error dpsi [rad] at speed V and the predicted deploy
+        crossranges [m] (NaN: no prediction); True when it reversed."""
+        if V < self.v_norev or t_s - self.t_last < self.gap_s:
             return False
-        self.sign = want
+        push = xr_keep - xr_rev
+        if push != 0.0 and push * xr_rev >= 0.0:        # NaN compares False
+            rule = "final"
+        elif not self.final and (dpsi > self.corridor(V) if self.sign > 0 else dpsi < -self.corridor(V)):
+            rule = "corridor"
+        else:
+            return False
+        self.final = self.final or rule == "final"
+        self.rules.append(rule)
+        self.sign = -self.sign
         self.t_last = t_s
         self.reversals.append(t_s)
         return True
 
 
-def path_limited_bank(bank_mag: float, h: float, hdot: float, n_g: float, q_wm2: float, n_lim: float,
-                      q_lim: float, H_m: float, tau_s: float, gain: float) -> float:
-    """Bank magnitude after altitude-rate feedback on the path limits (Lu 2014): with an
-    exponential atmosphere the load factor (~rho) and heat rate (~sqrt(rho)) would reach
-    their limits at h_lim = h + H ln(n/n_lim), resp. h + 2H ln(q/q_lim), at today's speed.
-    The vehicle may close on h_lim at hdot_ref = -(h - h_lim)/tau; descending faster than
-    that raises cos(bank) (more lift up) by gain (hdot_ref - hdot)."""
-    c0 = math.cos(bank_mag)
-    c = c0
-    for val, lim, sh in ((n_g, n_lim, H_m), (q_wm2, q_lim, 2.0 * H_m)):
-        if val <= 0.0 or lim <= 0.0:
-            continue
-        h_lim = h + sh * math.log(val / lim)
-        hdot_ref = -(h - h_lim) / tau_s
-        if hdot < hdot_ref:
-            c = max(c, c0 + gain * (hdot_ref - hdot))
-    return math.acos(min(1.0, max(-1.0, c)))
 
 
 class BankShaper:
@@ -409,6 +461,19 @@ class BankShaper:
         self.phidd = max(-self.accel_limit_radps2, min(self.accel_limit_radps2, (v_des - self.phid) / self.dt))
         return self.phi, self.phid, self.phidd
 
+    def transition_s(self, angle_rad: float) -> float:
+        """Time [s] of a rest-to-rest turn through angle_rad within the rate and acceleration
+        limits (trapezoidal rate, triangular when the rate limit is not reached)."""
+        w, a, d = self.rate_limit_radps, self.accel_limit_radps2, abs(angle_rad)
+        if w <= 0.0 or a <= 0.0:
+            return math.inf
+        return d / w + w / a if d >= w * w / a else 2.0 * math.sqrt(d / a)
+
+    def reversal_s(self, mag_rad: float) -> float:
+        """Time [s] of a reversal at bank magnitude mag_rad (the shorter way: through 0 below
+        90 deg, through 180 above)."""
+        return self.transition_s(2.0 * min(abs(mag_rad), math.pi - abs(mag_rad)))
+
     def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float) -> bool:
         changed = (rate_limit_radps, accel_limit_radps2) != (self.rate_limit_radps, self.accel_limit_radps2)
         self.rate_limit_radps, self.accel_limit_radps2 = float(rate_limit_radps), float(accel_limit_radps2)
@@ -433,6 +498,9 @@ def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:
     c[C_G0] = pl.g0_mps2
     c[C_RN] = veh.nose_radius_m
     c[C_SG] = SUTTON_GRAVES_MARS
+    c[C_NLIM] = params["npc.limit_frac"] * veh.max_load_g
+    c[C_QLIM] = params["npc.limit_frac"] * veh.max_heat_rate_wcm2 * 1e4
+    c[C_HTAU], c[C_HGAIN] = params["npc.hdot_tau_s"], params["npc.hdot_gain"]
     return c
 
 
@@ -473,8 +541,7 @@ class EntryGuidance:
         self.bank_lo = math.radians(params["npc.bank_min_deg"])
         self.bank_hi = math.radians(params["npc.bank_max_deg"])
         self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
-        self.n_lim = params["npc.limit_frac"] * veh.max_load_g
-        self.q_lim = params["npc.limit_frac"] * veh.max_heat_rate_wcm2 * 1e4
+        self.n_lim, self.q_lim = self.c[C_NLIM], self.c[C_QLIM]
         self.estimator = DensityEstimator(params, veh.S_ref_m2, veh.mass_kg, veh.aero.C_L, veh.aero.C_D)
         bank0 = scenario.bank_schedule[0][1]
         v_f = scenario.end_speed_mps or scenario.end_mach * atmosphere.speed_of_sound(params["npc.h_deploy_m"])
@@ -488,6 +555,9 @@ class EntryGuidance:
         self.range_to_go_m = math.nan
         self.pred_impact = np.full(2, math.nan)   # predicted deploy point (lat, lon) [rad]
         self.pred_h_m = math.nan
+        self.xr_keep_m = math.nan        # predicted deploy crossrange, sign kept [m, + left]
+        self.xr_rev_m = math.nan         # ... reversed at the next cycle
+        self._t_cycle = math.nan         # release time of the last cycle
         self.cycles = 0
         self.no_root = 0
         self.overruns = 0
@@ -528,8 +598,11 @@ class EntryGuidance:
             return central_angle(x[:3], out[:3]) * self.R - s_togo
         return z
 
-    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float) -> dict:
-        """One correction from the planet-fixed state x: phi_0 and the predicted deploy."""
+    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan) -> dict:
+        """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
+        t_flip given, one more prediction: the same phi_0 with a reversal taking effect
+        t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
+        sign kept and reversed)."""
         t0 = time.perf_counter_ns()
         self.c[C_KRHO], self.c[C_KLD] = k_rho, k_ld
         r = math.sqrt(float(x[:3] @ x[:3]))
@@ -539,11 +612,18 @@ class EntryGuidance:
                                    self.params["npc.tol_m"], int(self.params["npc.max_iter"]))
         # the prediction of the answer (the root-finder's last call may have been another)
         predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], self._out)
-        rf = self._out[:3]
-        return {"bank0": b0, "miss_m": zb, "calls": n + 1, "ok": ok, "s_togo": s_togo,
-                "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
-                "h_f": float(self._out[O_H]), "t_go": float(self._out[O_T]),
-                "ns": time.perf_counter_ns() - t0}
+        rf = self._out[:3].copy()
+        res = {"bank0": b0, "miss_m": zb, "calls": n + 1, "ok": ok, "s_togo": s_togo,
+               "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
+               "h_f": float(self._out[O_H]), "t_go": float(self._out[O_T]), "xr": math.nan, "xr_rev": math.nan}
+        if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
+            res["xr"] = crossrange(x[:3], self.target_u, rf, self.R)
+            predict(x, self.c, b0, self.bank_f, e0, self.ef, -sign, self.params["npc.dt_pred_s"], self._out, t_flip)
+            res["calls"] += 1
+            if self._out[O_FLAG] == REACHED:
+                res["xr_rev"] = crossrange(x[:3], self.target_u, self._out[:3], self.R)
+        res["ns"] = time.perf_counter_ns() - t0
+        return res
 
     def _worker(self) -> None:
         rt.run_below_loop()
@@ -552,9 +632,9 @@ class EntryGuidance:
             self._go.clear()
             if self._stop:
                 return
-            x, sign, k_rho, k_ld, t_s = self._job
-            res = self.solve(x, sign, k_rho, k_ld)
-            res["t_s"] = t_s
+            x, sign, k_rho, k_ld, t_flip, t_s = self._job
+            res = self.solve(x, sign, k_rho, k_ld, t_flip)
+            res["t_s"], res["sign"] = t_s, sign
             with self._lock:
                 self._result = res
                 self._busy = False
@@ -572,9 +652,14 @@ class EntryGuidance:
         dpsi, ang = heading_error(x, self.target_u)
         self.range_to_go_m = ang * self.R
         V = nav.V_rel_mps
-        if self.lateral.update(t_s, V, dpsi):
+        # the crossranges were predicted from the last cycle's state, the reversal in them
+        # taking effect one cycle later (now) plus half the shaped transition
+        if self.lateral.update(t_s, V, dpsi, self.xr_keep_m, self.xr_rev_m):
+            self.xr_keep_m = self.xr_rev_m = math.nan      # for the sign just left
             self.events.emit(t_s, Severity.INFO, "guidance", "bank_reversal",
-                             f"BANK REVERSAL dpsi {math.degrees(dpsi):+.1f} DEG")
+                             f"BANK REVERSAL ({self.lateral.rules[-1].upper()}) DPSI {math.degrees(dpsi):+.1f} DEG")
+        period = t_s - self._t_cycle if math.isfinite(self._t_cycle) else 1.0
+        self._t_cycle = t_s
         if self._frozen:
             return
         with self._lock:
@@ -589,7 +674,8 @@ class EntryGuidance:
         self._due_t = t_s + self.apply_delay_s - 1e-9
         self._done.clear()
         sign = self.lateral.sign
-        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_s)
+        t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
+        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, t_s)
         self._go.set()
 
     def _apply(self, res: dict) -> None:
@@ -602,6 +688,8 @@ class EntryGuidance:
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat"], res["lon"])
         self.pred_h_m = res["h_f"]
+        if res["sign"] == self.lateral.sign:        # not for a sign left since the job started
+            self.xr_keep_m, self.xr_rev_m = res["xr"], res["xr_rev"]
         if not res["ok"]:
             self.no_root += 1
             self.events.emit(res["t_s"], Severity.NOTICE, "guidance", "guidance_no_root",
@@ -648,6 +736,6 @@ class EntryGuidance:
                 "predictions_per_cycle_mean": float(calls.mean()) if n else None,
                 "predictions_per_cycle_max": int(calls.max()) if n else None,
                 "no_root": self.no_root, "overruns": self.overruns,
-                "reversal_times_s": list(self.lateral.reversals),
+                "reversal_times_s": list(self.lateral.reversals), "reversal_rules": list(self.lateral.rules),
                 "k_rho_final": self.estimator.k_rho, "k_ld_final": self.estimator.k_ld,
                 "bank0_final_deg": math.degrees(self.bank0)}

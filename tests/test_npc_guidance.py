@@ -58,6 +58,7 @@ def test_predictor_matches_the_plant_flown_open_loop_with_the_same_bank_history(
     assert reason == "mach"
     c = npc.predictor_constants(SCN, PARAMS)
     c[npc.C_KRHO] = SCN.truth.density_scale
+    c[npc.C_NLIM] = c[npc.C_QLIM] = 0.0          # the plant flies the law without the path-limit feedback
     out = np.zeros(npc.N_O)
     npc.predict(x0, c, b0, bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out)
     assert out[npc.O_FLAG] == npc.REACHED

@@ -67,7 +67,12 @@ C_MU, C_RE, C_OM, C_RHO_MODEL, C_RHO0, C_H, C_KRHO, C_KLD = 0, 1, 2, 3, 4, 5, 6,
 C_S_M, C_CL, C_CD, C_MACH_F, C_V_F, C_H_FLOOR, C_H_CEIL, C_T_MAX = 8, 9, 10, 11, 12, 13, 14, 15
 C_G0, C_RN, C_SG = 16, 17, 18
 C_NLIM, C_QLIM, C_HTAU, C_HGAIN = 19, 20, 21, 22   # path-limit feedback (0 limits: off)
-N_C = 23
+# the bank reference's own dynamics (BankShaper): C_TRACK 0 = the bank follows the law at
+# once; else the reference starts at C_PHI, C_PHID [rad, rad/s] (its branch C_SGN, C_TURN)
+# and tracks the law within the rate and acceleration limits C_W, C_A
+C_TRACK, C_PHI, C_PHID, C_SGN, C_TURN, C_W, C_A = 23, 24, 25, 26, 27, 28, 29
+N_C = 30
+TRACK_SUBSTEPS = 4                 # reference steps per predictor step
 # predictor outputs
 O_R = 0                     # 3: final position, planet-fixed [m]
 O_T, O_NMAX, O_QMAX, O_H, O_V, O_FLAG = 3, 4, 5, 6, 7, 8
@@ -100,11 +105,33 @@ def path_limited_bank(bank_mag: float, h: float, hdot: float, n_g: float, q_wm2:
 
 
 @njit(cache=True, nogil=True)
-def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
+def shaper_accel(phi, phid, target, rate_limit, accel_limit, dt):
+    """The reference's acceleration towards target: bang-bang at the acceleration limit to
+    the desired rate min(rate limit, sqrt(2 a |e|) (braking), |e|/dt), by sign of the error.
+    One law for the BankShaper and the predictor."""
+    e = target - phi
+    v_des = math.copysign(min(rate_limit, math.sqrt(2.0 * accel_limit * abs(e)), abs(e) / dt), e)
+    return max(-accel_limit, min(accel_limit, (v_des - phid) / dt))
+
+
+@njit(cache=True, nogil=True)
+def shaper_branch(phi, sign_now, turn, bank_signed):
+    """(sign, turn) of the reference's target bank_signed + turn (turn a multiple of 2 pi): a
+    new reversal goes the shorter way from phi; once the reference is on the commanded
+    side, magnitude changes take the nearest way (they never cross 0 or 180 deg)."""
+    s = 1.0 if bank_signed >= 0 else -1.0
+    if s != sign_now or math.sin(phi) * s > 0.0:
+        return s, 2.0 * math.pi * round((phi - bank_signed) / (2.0 * math.pi))
+    return sign_now, turn
+
+
+@njit(cache=True, nogil=True)
+def _deriv(x, c, b0, bf, e0, ef, sign, bank_ref, dx, aux):
     """dx = f(x), x = [r (3), v (3)] in the rotating planet-fixed frame (v planet-relative):
     r'' = g - D w1 + L l - 2 Omega x v - Omega x (Omega x r); w1 = v/V, w2 = (v x r)/|.|,
     w3 = w1 x w2, l = sin(bank) w2 - cos(bank) w3 (the plant's frames, spec 10-plant.md).
-    aux: [h, V, load factor (g), heat rate (W/m^2)]."""
+    The bank is bank_ref when tracking the reference (C_TRACK), else the law's.
+    aux: [h, V, load factor (g), heat rate (W/m^2), the law's bank magnitude (rad)]."""
     rx, ry, rz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
     r2 = rx * rx + ry * ry + rz * rz
     r = math.sqrt(r2)
@@ -130,8 +157,9 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
     n_g = math.sqrt(D * D + L * L) / c[C_G0]
     q_heat = c[C_SG] * math.sqrt(rho / c[C_RN]) * V * V * V
     hdot = (rx * vx + ry * vy + rz * vz) / r
-    bank = sign * path_limited_bank(b0 + (bf - b0) * f, h, hdot, n_g, q_heat, c[C_NLIM], c[C_QLIM], c[C_H],
-                                    c[C_HTAU], c[C_HGAIN])
+    mag = path_limited_bank(b0 + (bf - b0) * f, h, hdot, n_g, q_heat, c[C_NLIM], c[C_QLIM], c[C_H],
+                            c[C_HTAU], c[C_HGAIN])
+    bank = bank_ref if c[C_TRACK] != 0.0 else sign * mag
     e1x, e1y, e1z = vx / V, vy / V, vz / V
     hx, hy, hz = vy * rz - vz * ry, vz * rx - vx * rz, vx * ry - vy * rx
     hn = math.sqrt(hx * hx + hy * hy + hz * hz)
@@ -148,6 +176,7 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
     aux[1] = V
     aux[2] = n_g
     aux[3] = q_heat
+    aux[4] = mag
 
 
 @njit(cache=True, nogil=True)
@@ -161,8 +190,11 @@ def _end_metric(h, V, c):
 @njit(cache=True, nogil=True)
 def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     """Fly the 3-DOF model from x0 until the deploy condition (or skip, ground, timeout).
-    The bank's sign is ``sign``, or ``-sign`` before ``t_flip`` [s] (a reversal that takes
-    effect then: the lateral mid-point of the shaped transition). out: final position (3)
+    The commanded sign is ``sign``, or ``-sign`` before ``t_flip`` [s] (a reversal then).
+    With C_TRACK the bank is the reference the vehicle flies: the commanded bank shaped by
+    the BankShaper's law and branch (a reversal through lift up or lift down, at its rate and
+    acceleration limits, as flown), stepped TRACK_SUBSTEPS times per step; the RK4 stages
+    see it at the step's start, middle and end. out: final position (3)
     [m, planet-fixed], time of flight [s], peak load [g], peak heat rate [W/m^2], final
     altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT). The last step is
     cut back linearly to the deploy condition."""
@@ -173,31 +205,45 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     k3 = np.empty(6)
     k4 = np.empty(6)
     xt = np.empty(6)
-    aux = np.empty(4)
+    aux = np.empty(5)
+    phi, phid, sgn_ref, turn = c[C_PHI], c[C_PHID], c[C_SGN], c[C_TURN]
+    w_lim, a_lim = c[C_W], c[C_A]
+    h_sub = dt / TRACK_SUBSTEPS
     t = 0.0
     nmax = 0.0
     qmax = 0.0
-    _deriv(x, c, b0, bf, e0, ef, sign, k1, aux)
+    _deriv(x, c, b0, bf, e0, ef, sign, phi, k1, aux)
     m_prev = _end_metric(aux[0], aux[1], c)
     flag = TIMEOUT
     frac = 1.0
     while t < c[C_T_MAX]:
         xp[:] = x
         sg = -sign if t < t_flip else sign
-        _deriv(x, c, b0, bf, e0, ef, sg, k1, aux)
+        phi0 = phi
+        _deriv(x, c, b0, bf, e0, ef, sg, phi0, k1, aux)
         if aux[2] > nmax:
             nmax = aux[2]
         if aux[3] > qmax:
             qmax = aux[3]
+        phi_mid = phi
+        if c[C_TRACK] != 0.0:
+            sgn_ref, turn = shaper_branch(phi, sgn_ref, turn, sg * aux[4])
+            target = sg * aux[4] + turn
+            for j in range(TRACK_SUBSTEPS):
+                acc = shaper_accel(phi, phid, target, w_lim, a_lim, h_sub)
+                phi += phid * h_sub + 0.5 * acc * h_sub * h_sub
+                phid += acc * h_sub
+                if 2 * (j + 1) == TRACK_SUBSTEPS:
+                    phi_mid = phi
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k1[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, k2, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, phi_mid, k2, aux)
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k2[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, k3, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, phi_mid, k3, aux)
         for i in range(6):
             xt[i] = x[i] + dt * k3[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, k4, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, phi, k4, aux)
         for i in range(6):
             x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         t += dt
@@ -372,13 +418,17 @@ class LateralLogic:
       reversal then would undo the null the prediction set up. Only the prediction may
       reverse again (if the deploy crossrange drifts past what a reversal can null).
 
-    Both at most one reversal per rev_gap_s, none below v_norev (the last stretch)."""
+    Both at most one reversal per rev_gap_s, and none in the last stretch: below v_norev, or
+    when the predicted time to deploy is shorter than the reversal itself plus the time
+    the corrector holds still before the deploy (tgo_freeze_s): the vehicle deploys with
+    its bank settled."""
 
     def __init__(self, params: dict, v_hi_mps: float, v_lo_mps: float, sign0: float = 1.0):
         self.dpsi_hi = math.radians(params["npc.dpsi_hi_deg"])
         self.dpsi_lo = math.radians(params["npc.dpsi_lo_deg"])
         self.gap_s = params["npc.rev_gap_s"]
         self.v_norev = params["npc.v_norev_mps"]
+        self.t_settle = params["npc.tgo_freeze_s"]
         self.v_hi, self.v_lo = v_hi_mps, v_lo_mps
         self.sign = 1.0 if sign0 >= 0 else -1.0
         self.t_last = -math.inf
@@ -392,10 +442,11 @@ class LateralLogic:
         return self.dpsi_lo + (self.dpsi_hi - self.dpsi_lo) * f
 
     def update(self, t_s: float, V: float, dpsi: float, xr_keep: float = math.nan,
-               xr_rev: float = math.nan) -> bool:
-        """New sign from the heading error dpsi [rad] at speed V and the predicted deploy
-        crossranges [m] (NaN: no prediction); True when it reversed."""
-        if V < self.v_norev or t_s - self.t_last < self.gap_s:
+               xr_rev: float = math.nan, t_go_s: float = math.inf, t_rev_s: float = 0.0) -> bool:
+        """New sign from the heading error dpsi [rad] at speed V, the predicted deploy
+        crossranges [m] (NaN: no prediction), the predicted time to deploy and the time a
+        reversal takes [s]; True when it reversed."""
+        if V < self.v_norev or t_s - self.t_last < self.gap_s or t_go_s < t_rev_s + self.t_settle:
             return False
         push = xr_keep - xr_rev
         if push != 0.0 and push * xr_rev >= 0.0:        # NaN compares False
@@ -435,13 +486,12 @@ class BankShaper:
         self._t = None
 
     def command(self, bank_signed_rad: float) -> None:
-        s = 1.0 if bank_signed_rad >= 0 else -1.0
-        if s != self._sign or math.sin(self.phi) * s > 0.0:
-            # a new reversal goes the shorter way; once the reference is on the commanded
-            # side, magnitude changes take the nearest way (they never cross 0 or 180 deg)
-            self._sign = s
-            self._turn = 2.0 * math.pi * round((self.phi - bank_signed_rad) / (2.0 * math.pi))
+        self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
         self.target = bank_signed_rad + self._turn
+
+    def state(self) -> tuple[float, float, float, float]:
+        """(phi, phidot, branch sign, turn): where the reference is, for the predictor."""
+        return self.phi, self.phid, self._sign, self._turn
 
     def _step(self) -> None:
         dt, a = self.dt, self.phidd
@@ -455,10 +505,8 @@ class BankShaper:
         for _ in range(max(0, n)):
             self._step()
         self._t += n * self.dt if n > 0 else 0.0
-        e = self.target - self.phi
-        v_des = math.copysign(min(self.rate_limit_radps, math.sqrt(2.0 * self.accel_limit_radps2 * abs(e)),
-                                  abs(e) / self.dt), e)
-        self.phidd = max(-self.accel_limit_radps2, min(self.accel_limit_radps2, (v_des - self.phid) / self.dt))
+        self.phidd = shaper_accel(self.phi, self.phid, self.target, self.rate_limit_radps,
+                                  self.accel_limit_radps2, self.dt)
         return self.phi, self.phid, self.phidd
 
     def transition_s(self, angle_rad: float) -> float:
@@ -555,6 +603,7 @@ class EntryGuidance:
         self.range_to_go_m = math.nan
         self.pred_impact = np.full(2, math.nan)   # predicted deploy point (lat, lon) [rad]
         self.pred_h_m = math.nan
+        self.t_go_s = math.inf           # predicted time to deploy (last solution, from its state)
         self.xr_keep_m = math.nan        # predicted deploy crossrange, sign kept [m, + left]
         self.xr_rev_m = math.nan         # ... reversed at the next cycle
         self._t_cycle = math.nan         # release time of the last cycle
@@ -598,13 +647,21 @@ class EntryGuidance:
             return central_angle(x[:3], out[:3]) * self.R - s_togo
         return z
 
-    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan) -> dict:
-        """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
-        t_flip given, one more prediction: the same phi_0 with a reversal taking effect
-        t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
-        sign kept and reversed)."""
+    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
+              ref: tuple | None = None) -> dict:
+        """One correction from the planet-fixed state x: phi_0 and the predicted deploy.
+        ref: the bank reference now (phi, phidot, branch sign, turn, rate and acceleration
+        limits): the predictor then flies it as the vehicle will (None: the law at once). With
+        t_flip given, one more prediction: the same phi_0 with a reversal commanded t_flip
+        from now, for the lateral logic's final reversal (deploy crossranges with the sign
+        kept and reversed)."""
         t0 = time.perf_counter_ns()
         self.c[C_KRHO], self.c[C_KLD] = k_rho, k_ld
+        if ref is None:
+            self.c[C_TRACK] = 0.0
+        else:
+            self.c[C_TRACK] = 1.0
+            self.c[C_PHI], self.c[C_PHID], self.c[C_SGN], self.c[C_TURN], self.c[C_W], self.c[C_A] = ref
         r = math.sqrt(float(x[:3] @ x[:3]))
         e0 = self.mu / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.R
@@ -632,8 +689,8 @@ class EntryGuidance:
             self._go.clear()
             if self._stop:
                 return
-            x, sign, k_rho, k_ld, t_flip, t_s = self._job
-            res = self.solve(x, sign, k_rho, k_ld, t_flip)
+            x, sign, k_rho, k_ld, t_flip, ref, t_s = self._job
+            res = self.solve(x, sign, k_rho, k_ld, t_flip, ref)
             res["t_s"], res["sign"] = t_s, sign
             with self._lock:
                 self._result = res
@@ -653,8 +710,10 @@ class EntryGuidance:
         self.range_to_go_m = ang * self.R
         V = nav.V_rel_mps
         # the crossranges were predicted from the last cycle's state, the reversal in them
-        # taking effect one cycle later (now) plus half the shaped transition
-        if self.lateral.update(t_s, V, dpsi, self.xr_keep_m, self.xr_rev_m):
+        # commanded one cycle later (now)
+        t_go = self.t_go_s - (t_s - self._t_cycle) if math.isfinite(self._t_cycle) else math.inf
+        if self.lateral.update(t_s, V, dpsi, self.xr_keep_m, self.xr_rev_m, t_go,
+                               self.shaper.reversal_s(self.bank_cmd)):
             self.xr_keep_m = self.xr_rev_m = math.nan      # for the sign just left
             self.events.emit(t_s, Severity.INFO, "guidance", "bank_reversal",
                              f"BANK REVERSAL ({self.lateral.rules[-1].upper()}) DPSI {math.degrees(dpsi):+.1f} DEG")
@@ -674,8 +733,10 @@ class EntryGuidance:
         self._due_t = t_s + self.apply_delay_s - 1e-9
         self._done.clear()
         sign = self.lateral.sign
+        # a reversal decided at the next cycle, in effect laterally at its shaped transition's
+        # mid-point (half-way the lateral lift has turned over)
         t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
-        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, t_s)
+        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, None, t_s)
         self._go.set()
 
     def _apply(self, res: dict) -> None:
@@ -688,6 +749,7 @@ class EntryGuidance:
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat"], res["lon"])
         self.pred_h_m = res["h_f"]
+        self.t_go_s = res["t_go"]
         if res["sign"] == self.lateral.sign:        # not for a sign left since the job started
             self.xr_keep_m, self.xr_rev_m = res["xr"], res["xr_rev"]
         if not res["ok"]:

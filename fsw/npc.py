@@ -67,12 +67,7 @@ C_MU, C_RE, C_OM, C_RHO_MODEL, C_RHO0, C_H, C_KRHO, C_KLD = 0, 1, 2, 3, 4, 5, 6,
 C_S_M, C_CL, C_CD, C_MACH_F, C_V_F, C_H_FLOOR, C_H_CEIL, C_T_MAX = 8, 9, 10, 11, 12, 13, 14, 15
 C_G0, C_RN, C_SG = 16, 17, 18
 C_NLIM, C_QLIM, C_HTAU, C_HGAIN = 19, 20, 21, 22   # path-limit feedback (0 limits: off)
-# the bank reference's own dynamics (BankShaper): C_TRACK 0 = the bank follows the law at
-# once; else the reference starts at C_PHI, C_PHID [rad, rad/s] (its branch C_SGN, C_TURN)
-# and tracks the law within the rate and acceleration limits C_W, C_A
-C_TRACK, C_PHI, C_PHID, C_SGN, C_TURN, C_W, C_A = 23, 24, 25, 26, 27, 28, 29
-N_C = 30
-TRACK_SUBSTEPS = 4                 # reference steps per predictor step
+N_C = 23
 # predictor outputs
 O_R = 0                     # 3: final position, planet-fixed [m]
 O_T, O_NMAX, O_QMAX, O_H, O_V, O_FLAG = 3, 4, 5, 6, 7, 8
@@ -126,11 +121,10 @@ def shaper_branch(phi, sign_now, turn, bank_signed):
 
 
 @njit(cache=True, nogil=True)
-def _deriv(x, c, b0, bf, e0, ef, sign, bank_ref, dx, aux):
+def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
     """dx = f(x), x = [r (3), v (3)] in the rotating planet-fixed frame (v planet-relative):
     r'' = g - D w1 + L l - 2 Omega x v - Omega x (Omega x r); w1 = v/V, w2 = (v x r)/|.|,
     w3 = w1 x w2, l = sin(bank) w2 - cos(bank) w3 (the plant's frames, spec 10-plant.md).
-    The bank is bank_ref when tracking the reference (C_TRACK), else the law's.
     aux: [h, V, load factor (g), heat rate (W/m^2), the law's bank magnitude (rad)]."""
     rx, ry, rz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
     r2 = rx * rx + ry * ry + rz * rz
@@ -159,7 +153,7 @@ def _deriv(x, c, b0, bf, e0, ef, sign, bank_ref, dx, aux):
     hdot = (rx * vx + ry * vy + rz * vz) / r
     mag = path_limited_bank(b0 + (bf - b0) * f, h, hdot, n_g, q_heat, c[C_NLIM], c[C_QLIM], c[C_H],
                             c[C_HTAU], c[C_HGAIN])
-    bank = bank_ref if c[C_TRACK] != 0.0 else sign * mag
+    bank = sign * mag
     e1x, e1y, e1z = vx / V, vy / V, vz / V
     hx, hy, hz = vy * rz - vz * ry, vz * rx - vx * rz, vx * ry - vy * rx
     hn = math.sqrt(hx * hx + hy * hy + hz * hz)
@@ -190,11 +184,8 @@ def _end_metric(h, V, c):
 @njit(cache=True, nogil=True)
 def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     """Fly the 3-DOF model from x0 until the deploy condition (or skip, ground, timeout).
-    The commanded sign is ``sign``, or ``-sign`` before ``t_flip`` [s] (a reversal then).
-    With C_TRACK the bank is the reference the vehicle flies: the commanded bank shaped by
-    the BankShaper's law and branch (a reversal through lift up or lift down, at its rate and
-    acceleration limits, as flown), stepped TRACK_SUBSTEPS times per step; the RK4 stages
-    see it at the step's start, middle and end. out: final position (3)
+    The bank's sign is ``sign``, or ``-sign`` before ``t_flip`` [s] (a reversal that takes
+    effect then: the lateral mid-point of the shaped transition). out: final position (3)
     [m, planet-fixed], time of flight [s], peak load [g], peak heat rate [W/m^2], final
     altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT). The last step is
     cut back linearly to the deploy condition."""
@@ -206,44 +197,30 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     k4 = np.empty(6)
     xt = np.empty(6)
     aux = np.empty(5)
-    phi, phid, sgn_ref, turn = c[C_PHI], c[C_PHID], c[C_SGN], c[C_TURN]
-    w_lim, a_lim = c[C_W], c[C_A]
-    h_sub = dt / TRACK_SUBSTEPS
     t = 0.0
     nmax = 0.0
     qmax = 0.0
-    _deriv(x, c, b0, bf, e0, ef, sign, phi, k1, aux)
+    _deriv(x, c, b0, bf, e0, ef, sign, k1, aux)
     m_prev = _end_metric(aux[0], aux[1], c)
     flag = TIMEOUT
     frac = 1.0
     while t < c[C_T_MAX]:
         xp[:] = x
         sg = -sign if t < t_flip else sign
-        phi0 = phi
-        _deriv(x, c, b0, bf, e0, ef, sg, phi0, k1, aux)
+        _deriv(x, c, b0, bf, e0, ef, sg, k1, aux)
         if aux[2] > nmax:
             nmax = aux[2]
         if aux[3] > qmax:
             qmax = aux[3]
-        phi_mid = phi
-        if c[C_TRACK] != 0.0:
-            sgn_ref, turn = shaper_branch(phi, sgn_ref, turn, sg * aux[4])
-            target = sg * aux[4] + turn
-            for j in range(TRACK_SUBSTEPS):
-                acc = shaper_accel(phi, phid, target, w_lim, a_lim, h_sub)
-                phi += phid * h_sub + 0.5 * acc * h_sub * h_sub
-                phid += acc * h_sub
-                if 2 * (j + 1) == TRACK_SUBSTEPS:
-                    phi_mid = phi
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k1[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, phi_mid, k2, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k2, aux)
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k2[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, phi_mid, k3, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k3, aux)
         for i in range(6):
             xt[i] = x[i] + dt * k3[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, phi, k4, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k4, aux)
         for i in range(6):
             x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         t += dt
@@ -489,9 +466,6 @@ class BankShaper:
         self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
         self.target = bank_signed_rad + self._turn
 
-    def state(self) -> tuple[float, float, float, float]:
-        """(phi, phidot, branch sign, turn): where the reference is, for the predictor."""
-        return self.phi, self.phid, self._sign, self._turn
 
     def _step(self) -> None:
         dt, a = self.dt, self.phidd
@@ -610,6 +584,7 @@ class EntryGuidance:
         self.cycles = 0
         self.no_root = 0
         self.overruns = 0
+        self.faults = 0                  # corrections that raised (command kept)
         self.calls = np.zeros(self.STATS, np.int32)
         self.compute_ns = np.zeros(self.STATS, np.int64)
         self.k_rho_hist = np.zeros(self.STATS)
@@ -630,15 +605,29 @@ class EntryGuidance:
         self._done = threading.Event()
         self._job = None
         self._stop = False
+        self._warm_up()
         self._thread = threading.Thread(target=self._worker, name="npc-guidance", daemon=True)
         self._thread.start()
+
+    def _warm_up(self) -> None:
+        """Compile (or load from numba's cache) every kernel with the argument types flight
+        uses, here at construction: a first compile inside the first guidance cycle takes
+        tens of seconds on a loaded machine (lockstep would wait that long; the plant gives
+        up on a silent FSW after 10 s)."""
+        c = self.c.copy()
+        c[C_T_MAX] = 0.0                 # the initial derivative only
+        x = np.array([self.R + 1e5, 0.0, 0.0, 0.0, 1e3, 0.0])
+        predict(x, c, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, np.zeros(N_O), 0.0)
+        path_limited_bank(1.0, 1e4, -1.0, 1.0, 1.0, 1.0, 1.0, self.H, 1.0, 0.0)
+        shaper_accel(0.0, 0.0, 1.0, 1.0, 1.0, 0.02)
+        shaper_branch(0.0, 1.0, 0.0, 1.0)
 
     # ------------------------------------------------------------------ prediction
     def _z(self, x, e0, s_togo, sign):
         out = self._out
 
         def z(b0):
-            predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], out)
+            predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], out, 0.0)
             if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
                 # out of the atmosphere: far long. Its range so far says little, so the miss
                 # is made 1000 km plus a slope towards more bank: the corrector then walks
@@ -647,28 +636,20 @@ class EntryGuidance:
             return central_angle(x[:3], out[:3]) * self.R - s_togo
         return z
 
-    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
-              ref: tuple | None = None) -> dict:
-        """One correction from the planet-fixed state x: phi_0 and the predicted deploy.
-        ref: the bank reference now (phi, phidot, branch sign, turn, rate and acceleration
-        limits): the predictor then flies it as the vehicle will (None: the law at once). With
-        t_flip given, one more prediction: the same phi_0 with a reversal commanded t_flip
-        from now, for the lateral logic's final reversal (deploy crossranges with the sign
-        kept and reversed)."""
+    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan) -> dict:
+        """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
+        t_flip given, one more prediction: the same phi_0 with a reversal taking effect
+        t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
+        sign kept and reversed)."""
         t0 = time.perf_counter_ns()
         self.c[C_KRHO], self.c[C_KLD] = k_rho, k_ld
-        if ref is None:
-            self.c[C_TRACK] = 0.0
-        else:
-            self.c[C_TRACK] = 1.0
-            self.c[C_PHI], self.c[C_PHID], self.c[C_SGN], self.c[C_TURN], self.c[C_W], self.c[C_A] = ref
         r = math.sqrt(float(x[:3] @ x[:3]))
         e0 = self.mu / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.R
         b0, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.bank_lo, self.bank_hi, self.bank0,
                                    self.params["npc.tol_m"], int(self.params["npc.max_iter"]))
         # the prediction of the answer (the root-finder's last call may have been another)
-        predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], self._out)
+        predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], self._out, 0.0)
         rf = self._out[:3].copy()
         res = {"bank0": b0, "miss_m": zb, "calls": n + 1, "ok": ok, "s_togo": s_togo,
                "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
@@ -689,8 +670,11 @@ class EntryGuidance:
             self._go.clear()
             if self._stop:
                 return
-            x, sign, k_rho, k_ld, t_flip, ref, t_s = self._job
-            res = self.solve(x, sign, k_rho, k_ld, t_flip, ref)
+            x, sign, k_rho, k_ld, t_flip, t_s = self._job
+            try:
+                res = self.solve(x, sign, k_rho, k_ld, t_flip)
+            except Exception as e:      # noqa: BLE001 -- a fault in the correction must not stall the FSW
+                res = {"error": f"{type(e).__name__}: {e}"}
             res["t_s"], res["sign"] = t_s, sign
             with self._lock:
                 self._result = res
@@ -736,10 +720,15 @@ class EntryGuidance:
         # a reversal decided at the next cycle, in effect laterally at its shaped transition's
         # mid-point (half-way the lateral lift has turned over)
         t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
-        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, None, t_s)
+        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, t_s)
         self._go.set()
 
     def _apply(self, res: dict) -> None:
+        if "error" in res:              # the correction raised: the previous command stays
+            self.faults += 1
+            self.events.emit(res["t_s"], Severity.WARNING, "guidance", "guidance_fault",
+                             f"GUIDANCE FAULT: {res['error']}"[:50], rate_limited=True)
+            return
         i = self.cycles % self.STATS
         self.calls[i], self.compute_ns[i] = res["calls"], res["ns"]
         self.k_rho_hist[i], self.t_hist[i] = self.estimator.k_rho, res["t_s"]
@@ -797,7 +786,7 @@ class EntryGuidance:
                 "compute_max_us": float(us.max()) if n else None,
                 "predictions_per_cycle_mean": float(calls.mean()) if n else None,
                 "predictions_per_cycle_max": int(calls.max()) if n else None,
-                "no_root": self.no_root, "overruns": self.overruns,
+                "no_root": self.no_root, "overruns": self.overruns, "faults": self.faults,
                 "reversal_times_s": list(self.lateral.reversals), "reversal_rules": list(self.lateral.rules),
                 "k_rho_final": self.estimator.k_rho, "k_ld_final": self.estimator.k_ld,
                 "bank0_final_deg": math.degrees(self.bank0)}

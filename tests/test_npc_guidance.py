@@ -60,7 +60,7 @@ def test_predictor_matches_the_plant_flown_open_loop_with_the_same_bank_history(
     c[npc.C_KRHO] = SCN.truth.density_scale
     c[npc.C_NLIM] = c[npc.C_QLIM] = 0.0          # the plant flies the law without the path-limit feedback
     out = np.zeros(npc.N_O)
-    npc.predict(x0, c, b0, bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out)
+    npc.predict(x0, c, b0, bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
     assert out[npc.O_FLAG] == npc.REACHED
     R = SCN.planet.radius_m
     plant_end = npc.unit_from_latlon(tr["lat_rad"], tr["lon_rad"])
@@ -71,7 +71,7 @@ def test_predictor_matches_the_plant_flown_open_loop_with_the_same_bank_history(
     assert out[npc.O_T] == pytest.approx(tr["t_s"], rel=0.02)
     assert out[npc.O_H] == pytest.approx(tr["h_m"], abs=1500.0)
     # and a bank 10 deg off moves the prediction by much more than that error (the test can fail)
-    npc.predict(x0, c, b0 - math.radians(10.0), bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out)
+    npc.predict(x0, c, b0 - math.radians(10.0), bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
     assert npc.central_angle(out[:3], plant_end) * R > 3 * miss
 
 
@@ -86,7 +86,7 @@ def test_root_finder_recovers_a_known_bank():
         out = np.zeros(npc.N_O)
         b_star = math.radians(120.0)
         e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
-        npc.predict(x, eg.c, b_star, eg.bank_f, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out)
+        npc.predict(x, eg.c, b_star, eg.bank_f, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
         r = out[:3] / np.linalg.norm(out[:3])
         eg.target_u = r
         eg.bank0 = math.radians(70.0)
@@ -209,3 +209,82 @@ def test_guided_campaign_draws_entry_state_and_density_waves_and_keeps_the_defau
     dflt = load_campaign("default")
     _, d0 = draw_run(dflt, load_scenario("nominal"), 5)
     assert "density_waves" not in d0 and "speed_offset_mps" not in d0
+
+
+def _state_heading_east(V=3000.0, h=30e3):
+    """Planet-fixed state on the equator at longitude 0, heading east (level)."""
+    R = SCN.planet.radius_m + h
+    return np.array([R, 0.0, 0.0, 0.0, V, 0.0])
+
+
+def test_corridor_reverses_on_a_constructed_heading_error_and_not_towards_the_target():
+    """Heading east from (0, 0), the target at (+/-0.5 deg, 5 deg): its bearing by the
+    spherical-trig formula is 90 -/+ 5.7 deg, outside a 4-deg corridor. Turning right
+    (positive bank) with the target to the left must reverse; with the target to the
+    right the same turn closes on it and must not."""
+    p = dict(PARAMS, **{"npc.dpsi_hi_deg": 4.0, "npc.dpsi_lo_deg": 4.0, "npc.rev_gap_s": 20.0,
+                        "npc.v_norev_mps": 0.0})
+    x = _state_heading_east()
+    for lat_t, want_rev in ((0.5, True), (-0.5, False)):
+        lat2, lon2 = math.radians(lat_t), math.radians(5.0)
+        bearing = math.atan2(math.sin(lon2) * math.cos(lat2), math.sin(lat2))     # from (0, 0)
+        dpsi, _ = npc.heading_error(x, npc.unit_from_latlon(lat2, lon2))
+        assert math.degrees(dpsi) == pytest.approx(90.0 - math.degrees(bearing), abs=1e-6)
+        assert abs(math.degrees(dpsi)) > 5.0
+        lat = npc.LateralLogic(p, v_hi_mps=7000.0, v_lo_mps=500.0, sign0=1.0)
+        assert lat.update(100.0, 3000.0, dpsi) is want_rev
+        assert lat.sign == (-1.0 if want_rev else 1.0)
+        assert lat.rules == (["corridor"] if want_rev else [])
+
+
+def test_final_reversal_fires_when_a_reversal_nulls_the_predicted_deploy_crossrange():
+    """Truth by construction: the target is the predictor's deploy point for phi_0 = 120 deg
+    flown right (+) for 100 s, then left. Offered each second tau the crossranges of
+    'keep right to the end' and 'reverse at tau' (the crossrange function against that
+    target), the logic must reverse at tau = 100 s +- 1 s, by the final rule, never by the
+    corridor (a heading error inside it)."""
+    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = npc.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    c = npc.predictor_constants(SCN, PARAMS)
+    b0, bf, dt, R = math.radians(120.0), math.radians(PARAMS["npc.bank_final_deg"]), PARAMS["npc.dt_pred_s"], \
+        SCN.planet.radius_m
+    out = np.zeros(npc.N_O)
+    npc.predict(x, c, b0, bf, e0, ef, -1.0, dt, out, 100.0)       # right (+) before 100 s, left after
+    assert out[npc.O_FLAG] == npc.REACHED
+    target = out[:3] / np.linalg.norm(out[:3])
+    npc.predict(x, c, b0, bf, e0, ef, 1.0, dt, out, 0.0)
+    keep = npc.crossrange(x[:3], target, out[:3], R)
+    lat = npc.LateralLogic(dict(PARAMS, **{"npc.v_norev_mps": 0.0}), 7300.0, 450.0, sign0=1.0)
+    fired = None
+    for tau in range(0, 200):
+        npc.predict(x, c, b0, bf, e0, ef, -1.0, dt, out, float(tau))
+        rev = npc.crossrange(x[:3], target, out[:3], R)
+        if lat.update(float(tau), 5000.0, 0.0, keep, rev):
+            fired = tau
+            break
+    assert keep < -10e3          # flown right all the way it ends well right of the target
+    assert fired is not None and abs(fired - 100) <= 1, fired
+    assert lat.rules == ["final"] and lat.sign == -1.0 and lat.final
+    # after the final reversal the corridor is off; the prediction alone may reverse again
+    assert not lat.update(300.0, 5000.0, math.radians(30.0))
+    # and none when the reversal would not end before the deploy
+    lat2 = npc.LateralLogic(dict(PARAMS, **{"npc.v_norev_mps": 0.0}), 7300.0, 450.0, sign0=1.0)
+    assert not lat2.update(100.0, 5000.0, 0.0, keep, -1.0, t_go_s=20.0, t_rev_s=15.0)
+    assert lat2.update(100.0, 5000.0, 0.0, keep, -1.0, t_go_s=40.0, t_rev_s=15.0)
+
+
+def test_a_correction_that_raises_keeps_the_command_and_never_stalls_the_run(monkeypatch):
+    """The correction runs on a worker thread that batch and lockstep wait for: an exception
+    there must come back as an event with the previous command kept, not as a silent thread
+    death that leaves the control loop waiting for ever."""
+    from ellipsled import batch
+
+    def boom(self, *a, **k):
+        raise FloatingPointError("injected")
+    monkeypatch.setattr(npc.EntryGuidance, "solve", boom)
+    s, h, fsw = batch.run("guided-nominal", duration_s=4.0)
+    assert h["t_s"][-1] >= 3.9
+    assert fsw.entry.faults >= 3 and fsw.entry.cycles == 0
+    assert any(e.code == "guidance_fault" and "INJECTED" in e.text.upper() for e in fsw.events.history)
+    assert np.all(np.isfinite(h["bank_ref_rad"]))

@@ -234,6 +234,7 @@ class Fdir:
         self._tau_ref_f = 0.0
         self._res_above_s = 0.0
         self.residual_norm_Nm = 0.0
+        self.residual_limit_Nm = 0.0       # what |r_f| was last compared with
         self.residual_alarm = False
 
     # ------------------------------------------------------------------ parameters
@@ -449,7 +450,7 @@ class Fdir:
                        tau_cmd_B: np.ndarray, tau_aero_est_B: np.ndarray, I_hat: np.ndarray) -> float:
         """Angular-acceleration residual r = I_hat w_dot + w x I_hat w - tau_aero_est - tau_cmd
         (spec 20-fsw.md FDIR), with w_dot = (w - w_prev)/dt (the mean over the interval, which
-        matches jets held over it) and w at the interval midpoint. ``tau_cmd_B`` is the torque
+        matches jets held over it) and w at the interval midpoint. ``tau_cmd_B`` is the (mean) torque
         the jets were commanded to give over that interval. r is low-passed (res_tau_s); when
         |r_f| > res_thr_Nm + res_rel (|tau_cmd| + |tau_aero_est|) (low-passed too) for
         res_persist_s, an "unexplained torque" WARNING is raised (rate-limited) and
@@ -467,6 +468,7 @@ class Fdir:
         norm = math.sqrt(rf[0] * rf[0] + rf[1] * rf[1] + rf[2] * rf[2])
         self.residual_norm_Nm = norm
         limit = self.p["fdir.res_thr_Nm"] + self.p["fdir.res_rel"] * self._tau_ref_f
+        self.residual_limit_Nm = limit
         if norm > limit:
             self._res_above_s += dt_s
             if self._res_above_s >= self.p["fdir.res_persist_s"] - _T_EPS_S:

@@ -127,7 +127,14 @@ class FlightSoftware:
         self.alloc_short_cycles = 0
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
         self._omega_prev = np.zeros(3)
-        self._tau_cmd_prev = np.zeros(3)
+        # the RG2 residual compares the rate change over its interval with the torque the jets
+        # gave over it: the mean of the interval's RG1 commands (the allocator's torque changes
+        # from cycle to cycle; one cycle's sample misstates it). Each cycle adds the torque of
+        # the cycle before it (the one that acted up to this frame); jets held off add zero.
+        self._tau_last = np.zeros(3)
+        self._tau_sum = np.zeros(3)
+        self._tau_n = 0
+        self._tau_mean = np.zeros(3)
         self._have_prev = False
         self.alloc_ns = 0
         self.reconfig_times: list[float] = []
@@ -137,16 +144,17 @@ class FlightSoftware:
         self._zero_u = np.zeros(self.driver.n, dtype=np.uint8)   # jets off
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
-        self._residual_dt = 0.0
         self.realtime = realtime
         self.controllability: Controllability | None = None   # the LP's answer at the last reconfiguration
         self._lp_worker: _LpWorker | None = None
+        self._lp_periodic = False      # the answer awaited is a periodic re-assessment
         self._assess_pending = False
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
         """One control cycle on a SENSORS record; returns the jet command (uint8, one per jet)."""
         self.cycles += 1
+        self._count_torque()
         t_s = float(frame["t_ns"]) * 1e-9     # a Python float (a 0-d field times 1e-9 is a NumPy scalar)
         ok = self.monitor.check(t_s, frame)
         if not ok or self.monitor.stale:
@@ -167,7 +175,7 @@ class FlightSoftware:
             self.assess_controllability(t_s)
         if self._lp_worker is not None and self._lp_worker.ready():
             need, r = self._lp_worker.take()
-            self._apply_controllability(t_s, need, r)     # re-planned from now: the reference stays C2
+            self._apply_controllability(t_s, need, r, self._lp_periodic)     # re-planned from now
         if self.entry is not None:
             self.entry.steer(nav)
         self._hold_trim(nav.qbar_pa)
@@ -201,6 +209,7 @@ class FlightSoftware:
                              "ALLOCATION DEGRADED (infeasible)", rate_limited=True)
         self._check_bank_shortfall(t_s)
         self._have_prev = True
+        self._tau_last[:] = self.tau_alloc_B
         return self.driver.command(u_alloc, self.modes.jets_enabled)
 
     def _check_bank_shortfall(self, t_s: float) -> None:
@@ -231,19 +240,35 @@ class FlightSoftware:
                 self.params["guidance.trim_max_deg"], need, float(nav.qbar_pa))
         return need, args
 
-    def assess_controllability(self, t_s: float) -> None:
+    def assess_controllability(self, t_s: float, periodic: bool = False) -> None:
         """The duty-cycle LP (fsw/controllability.py) on the health the allocator now uses, with
         the FSW's own models: inertia estimate, velocity direction from navigation, the aero
         moment of its density model, nominal derivatives and current factors d_hat. In real time
         it runs on a background thread (tens of ms: longer than a control period); its answer is
-        applied by the first cycle after it is ready. Batch and lockstep apply it here."""
+        applied by the first cycle after it is ready. Batch and lockstep apply it here.
+        ``periodic``: a re-assessment of the same health (``reassess_step``)."""
         need, args = self._lp_problem(t_s)
         if not self.realtime:
-            self._apply_controllability(t_s, need, controllability(*args))
+            self._apply_controllability(t_s, need, controllability(*args), periodic)
             return
         if self._lp_worker is None:
             self._lp_worker = _LpWorker()
+        self._lp_periodic = periodic
         self._lp_worker.submit(need, args)
+
+    def reassess_step(self) -> None:
+        """RG3 (1 Hz): the LP asked again while a stuck-on bias the jets cannot cancel has no
+        trim yet (the aerodynamic moment grows with the dynamic pressure: a stuck-on jet found
+        early, at qbar near 0, gets its trim once the air can give it). Once a trim exists it is
+        carried by its qbar scaling (``_hold_trim``) and the LP is not asked again: a fresh
+        solve may return another of its equally good trims, and the reference's alpha/beta
+        would jump between them (campaign run 54: 1.3 deg -> 9.2 deg with re-solves at 1 Hz)."""
+        r = self.controllability
+        if (r is None or self._assess_pending or self.cycles == 0 or r.bias_Nm == 0.0
+                or math.isfinite(r.trim_needed_deg)
+                or (self._lp_worker is not None and self._lp_worker.busy())):
+            return
+        self.assess_controllability(self.t_s, periodic=True)
 
     def _hold_trim(self, qbar_pa: float) -> None:
         """The reference's alpha/beta offset that lets the aerodynamic moment absorb the part of
@@ -261,19 +286,33 @@ class FlightSoftware:
         g.trim_offset_alpha_rad = tr[0] * k
         g.trim_offset_beta_rad = tr[1] * k
 
-    def _apply_controllability(self, t_s: float, need: float, r: Controllability) -> None:
+    def _apply_controllability(self, t_s: float, need: float, r: Controllability, periodic: bool = False) -> None:
         """Event and telemetry of the LP's answer; the guidance re-planned to the weaker way's
         authority times ``guidance.authority_use`` (the scenario's limit stays the ceiling), never
         below what the schedule still needs (the reference then keeps the schedule's pace: the
-        tracking, not the reference, shows what the jets cannot do)."""
-        self.controllability = r
+        tracking, not the reference, shows what the jets cannot do). A periodic re-assessment
+        whose answer reads the same as the last (the event's precision: 0.01 deg/s^2, 1 N m,
+        0.1 deg) and keeps its verdict changes nothing but the trim's dynamic pressure."""
+        last, self.controllability = self.controllability, r
+        if periodic and last is not None and r.text() == last.text() and r.controllable == last.controllable:
+            self._set_trim_ref(r)
+            return
         self.events.emit(t_s, Severity.NOTICE, "guidance", "controllability", r.text())
-        trim = (math.radians(r.trim_alpha_deg), math.radians(r.trim_beta_deg))
-        self._trim_ref = ((trim[0], trim[1], r.qbar_pa) if all(map(math.isfinite, (*trim, r.qbar_pa)))
-                          and max(map(abs, trim)) > 0.0 and r.qbar_pa > 0.0 else None)
+        self._set_trim_ref(r)
+        if periodic and last is not None and r.controllable == last.controllable:
+            self._replan_to(t_s, need, r)
+            return
         if not r.controllable:
             self.events.emit(t_s, Severity.WARNING, "guidance", "not_controllable",
                              f"NOT CONTROLLABLE: {r.reason}"[:50])
+        self._replan_to(t_s, need, r)
+
+    def _set_trim_ref(self, r: Controllability) -> None:
+        trim = (math.radians(r.trim_alpha_deg), math.radians(r.trim_beta_deg))
+        self._trim_ref = ((trim[0], trim[1], r.qbar_pa) if all(map(math.isfinite, (*trim, r.qbar_pa)))
+                          and max(map(abs, trim)) > 0.0 and r.qbar_pa > 0.0 else None)
+
+    def _replan_to(self, t_s: float, need: float, r: Controllability) -> None:
         weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
         accel = self.params["guidance.authority_use"] * weak
         if accel < need:
@@ -292,17 +331,24 @@ class FlightSoftware:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards
         STALE and holds the jets off once stale."""
         self.cycles += 1
+        self._count_torque()
+        self._tau_last[:] = 0.0
         self.t_s = t_s
         self.monitor.tick(t_s, got_frame=False)
         if self.monitor.stale:
             return self._hold_off(t_s)
         return self.driver.command(self._zero_u, False)
 
+    def _count_torque(self) -> None:
+        self._tau_sum += self._tau_last
+        self._tau_n += 1
+
     def _hold_off(self, t_s: float) -> np.ndarray:
         """Jets off, nothing learnt: a rejected frame or stale sensors."""
         self._have_prev = False
         self.u_cal_B[:] = 0.0
         self.tau_alloc_B[:] = 0.0
+        self._tau_last[:] = 0.0
         self.alloc_short = False
         return self.driver.command(self._zero_u, False)
 
@@ -310,13 +356,14 @@ class FlightSoftware:
     def slow_step(self) -> None:
         """RG2: analytic-redundancy residual (needs two consecutive good cycles)."""
         nav = self.nav.state
-        if self._have_prev and self._residual_ready:
-            self.fdir.residual_check(self.t_s, nav.omega_BN_B, self._omega_prev, self._residual_dt,
-                                     self._tau_cmd_prev, self.control.aero_torque_est(nav),
+        if self._have_prev and self._residual_ready and self._tau_n > 0:
+            np.multiply(self._tau_sum, 1.0 / self._tau_n, out=self._tau_mean)
+            self.fdir.residual_check(self.t_s, nav.omega_BN_B, self._omega_prev, self._tau_n * self.dt_s,
+                                     self._tau_mean, self.control.aero_torque_est(nav),
                                      self.control.inertia_hat())
         self._omega_prev[:] = nav.omega_BN_B
-        self._tau_cmd_prev[:] = self.tau_alloc_B
-        self._residual_dt = self.dt_s * self.params["executive.rg2_divisor"]
+        self._tau_sum[:] = 0.0
+        self._tau_n = 0
         self._residual_ready = True
 
     def entry_guidance_step(self) -> None:
@@ -459,6 +506,7 @@ class _LpWorker:
         self._cv = threading.Condition()
         self._job = None
         self._result = None
+        self._running = False
         self._stop = False
         self._thread = threading.Thread(target=self._run, name="controllability", daemon=True)
         self._thread.start()
@@ -470,6 +518,10 @@ class _LpWorker:
 
     def ready(self) -> bool:
         return self._result is not None
+
+    def busy(self) -> bool:
+        """A request queued, being solved, or its answer not yet taken."""
+        return self._job is not None or self._running or self._result is not None
 
     def take(self) -> tuple:
         with self._cv:
@@ -485,8 +537,10 @@ class _LpWorker:
                 if self._stop:
                     return
                 (need, args), self._job = self._job, None
+                self._running = True
             r = controllability(*args)
             with self._cv:
+                self._running = False
                 if self._job is None:          # else a newer health is queued: this answer is stale
                     self._result = (need, r)
 

@@ -38,6 +38,7 @@ class Topology:
         self.executive.add(2, "fdir_slow", lambda c: fsw.slow_step())
         if fsw.entry is not None:
             self.executive.add(3, "entry_guidance", lambda c: fsw.entry_guidance_step())
+        self.executive.add(3, "controllability", lambda c: fsw.reassess_step())
 
     def _input(self, cyc: Cycle) -> None:
         self._frame = self.frame_source()

@@ -231,3 +231,49 @@ def test_the_lp_runs_off_the_loop_in_real_time_and_is_applied_when_ready():
         assert f.controllability is r and f.guidance.profile.accel_limit_radps2 < SC.bank_accel_limit_radps2
     finally:
         f.close()
+
+
+def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows():
+    """Campaign run 54's faults (jets 6 and 12 stuck on, four failed, two degraded) found at
+    qbar 0: no trim exists yet. The 1 Hz re-assessment (RG3) finds the trim once the air can
+    give it, sets the reference's offset and says so; from then on the trim is carried by its
+    qbar scaling, not solved again. A stuck-on bias the jets cancel alone is not assessed
+    again (its answer does not depend on qbar)."""
+    from fsw.controllability import controllability as lp
+    sc = load_scenario("mc/default-20110808-run054")
+    h = JetHealth.of(failed=[1, 2, 10, 16], stuck=[6, 12], degraded=[(4, 0.5838198113373984), (7, 0.3871118055537681)])
+    f = FlightSoftware(sc)
+    try:
+        f.fdir.health_active = h
+        f.t_s, f.cycles = 230.0, 1
+        f.health_changed()
+        r0 = f.controllability
+        assert not math.isfinite(r0.trim_needed_deg) and not r0.controllable and f._trim_ref is None
+        n_events = sum(e.code == "controllability" for e in f.events.history)
+        f.nav.state.qbar_pa = 3000.0
+        f.t_s = 231.0
+        f.reassess_step()
+        r1 = f.controllability
+        assert r1 is not r0 and math.isfinite(r1.trim_needed_deg) and r1.qbar_pa == 3000.0
+        assert 0.0 < r1.trim_needed_deg <= f.params["guidance.trim_max_deg"] and r1.controllable
+        assert f._trim_ref is not None and f._trim_ref[2] == 3000.0
+        # the same LP asked directly gives the same trim
+        _, args = f._lp_problem(231.0)
+        assert lp(*args).trim_needed_deg == pytest.approx(r1.trim_needed_deg)
+        texts = [e.text for e in f.events.history if e.code == "controllability"]
+        assert len(texts) == n_events + 1 and texts[-1] == r1.text()
+        f.nav.state.qbar_pa = 5000.0
+        f.t_s = 232.0
+        f.reassess_step()                                  # a trim exists: carried by its qbar scaling
+        assert f.controllability is r1
+        assert sum(e.code == "controllability" for e in f.events.history) == n_events + 1
+    finally:
+        f.close()
+    g = _fsw(JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]))   # case 2: the jets cancel its bias alone
+    r = g.controllability
+    assert r.bias_Nm > 0.0 and r.trim_needed_deg == 0.0
+    g.nav.state.qbar_pa = 3000.0
+    g.cycles = 1
+    g.reassess_step()
+    assert g.controllability is r
+    g.close()

@@ -205,6 +205,7 @@ class Executive:
         # what each of the first SLIP_RECORDS late cycles spent where (a slip is rare: the
         # dict is built only then): the evidence a user needs to find its cause
         self.slip_records: list[dict] = []
+        self.event_time: Callable[[], float] | None = None
 
     @classmethod
     def from_params(cls, params: dict, period_ns: int, clock, **kw) -> "Executive":
@@ -290,9 +291,12 @@ class Executive:
                              f"{self._names[worst]} {task_row[worst] / 1e6:.1f}", rate_limited=True)
         return not late
 
-    @staticmethod
-    def _t_s(t_s: float | None, t_rel_ns: int) -> float:
-        return t_s if t_s is not None else t_rel_ns * 1e-9
+    def _t_s(self, t_s: float | None, t_rel_ns: int) -> float:
+        """The time stamp of an event: the tick's own, else the owner's clock (``event_time``,
+        e.g. the FSW's mission time), else the release time."""
+        if t_s is not None:
+            return t_s
+        return self.event_time() if self.event_time is not None else t_rel_ns * 1e-9
 
     def run(self, n_cycles: int | None = None, should_stop: Callable[[], bool] | None = None,
             on_slack: Callable[[int], None] | None = None) -> int:

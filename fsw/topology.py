@@ -27,6 +27,7 @@ class Topology:
         period_ns = int(round(fsw.dt_s * 1e9))
         self.executive = Executive.from_params(fsw.params, period_ns, clock, events=fsw.events,
                                                history=history)
+        self.executive.event_time = lambda: fsw.t_s     # its events in mission time, as every other
         self.u: np.ndarray = fsw.driver.last_command
         self.got_frame = False
         self._frame = None

@@ -139,6 +139,7 @@ def test_a_cycle_released_late_by_the_host_is_a_slip_of_its_own_cause():
         ft.t += stalls.pop(len(ft.sleeps) - 1, 0)
     clock = RealTimeClock(period, now_ns=ft.now, sleep_until=sleep_until)
     ex = Executive(period, clock, (1,))
+    ex.event_time = lambda: 42.0
     ex.add(1, "control", lambda c: setattr(ft, "t", ft.t + MS))
     clock.start(ft.t)
     for _ in range(6):
@@ -146,6 +147,8 @@ def test_a_cycle_released_late_by_the_host_is_a_slip_of_its_own_cause():
     assert ex.slips == 1
     (rec,) = ex.telemetry()["slip_records"]
     assert rec["cause"] == "late_release" and rec["jitter_us"] == 21_000 and rec["tasks_us"] == {"control": 1_000}
+    # its event is stamped by the owner's clock (the FSW's mission time), not the host's
+    assert [e.t_s for e in ex.events.history if e.code == "cycle_slip"] == [42.0]
 
 
 def test_joining_a_running_plant_at_step_k0_misses_nothing_and_keeps_the_phase():

@@ -4,6 +4,8 @@ answers never fire a jet the new health forbids, are exact over the interim mode
 by brute force over the previous candidates), and switch to answers equal to the
 synchronous allocator's. Timing figures are in the benchmark; bounds here are sanity only."""
 import gc
+import resource
+import sys
 import threading
 import time
 
@@ -132,33 +134,57 @@ def test_async_interim_is_safe_exact_over_its_model_then_switches_to_the_sync_an
     assert not al.builder_alive
 
 
-@pytest.mark.xfail(strict=False, reason="known open (issues 13/17): with the spill box a single solve during a "
-                   "background rebuild occasionally exceeds 20 ms (measured max 20.4 ms, p99 0.18 ms; 7.8 ms with "
-                   "the sign box), likely the rebuild thread's GIL hold between its nogil kernels")
+def _switches() -> tuple[int, int]:
+    """(voluntary, involuntary) context switches of the calling thread so far: it slept (a
+    thread waiting for the GIL sleeps once per switch interval), or the kernel gave its CPU
+    to another thread or process."""
+    r = resource.getrusage(resource.RUSAGE_THREAD)
+    return r.ru_nvcsw, r.ru_nivcsw
+
+
 def test_async_solve_keeps_answering_while_real_rebuilds_run():
+    """Solves back to back while the builder thread builds six configurations of up to
+    ~40,000 candidates (four jets degraded at distinct etas; the first one grows the
+    builder's buffers): no answer fires a jet the new health forbids, every reconfiguration
+    switches, and the loop never waits on the builder for a control period. Wall time alone
+    would judge the host's load: an iteration the kernel preempted for another process is
+    not the allocator's. So the waits are counted as the sleeps of this thread (a thread
+    waiting for the GIL sleeps once per switch interval and the loop has nothing else to wait
+    on), and wall time is judged on the iterations nobody preempted. Figures: the benchmark."""
     rng = np.random.default_rng(5)
     al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
-    worst = 0.0
-    n_interim = 0
+    worst_own = worst_any = worst_sleeps = 0.0
+    n_interim = n_solves = n_judged = 0
     try:
-        for _ in range(6):                 # four jets degraded at distinct etas: ~40,000 torques
+        for _ in range(6):
             h = JetHealth()
             for j in rng.choice(18, 4, replace=False):
                 h.set(int(j) + 1, DEGRADED, float(rng.uniform(0.3, 0.9)))
             bad = ~h.usable()
             al.set_health(h)
-            t_end = time.perf_counter() + 5.0
-            while al.reconfig_pending and time.perf_counter() < t_end:
-                t0 = time.perf_counter()
+            t_end = time.perf_counter() + 30.0     # generous: a loaded machine
+            (v0, i0), t0 = _switches(), time.perf_counter()
+            while al.reconfig_pending and t0 < t_end:
                 u = al.solve(rng.normal(0.0, 300.0, 3))
-                worst = max(worst, time.perf_counter() - t0)
                 n_interim += al.interim
                 assert not np.any(u[bad])
+                # one iteration to the next, so a wait for the GIL anywhere in the loop counts
+                (v, i), t = _switches(), time.perf_counter()
+                n_solves += 1
+                worst_any = max(worst_any, t - t0)
+                worst_sleeps = max(worst_sleeps, v - v0)
+                if i == i0:
+                    n_judged += 1
+                    worst_own = max(worst_own, t - t0)
+                (v0, i0), t0 = (v, i), t
             assert not al.reconfig_pending          # the switch happened
     finally:
         al.close()
     assert n_interim >= 1                           # the loop ran while tables were built
-    assert worst < 0.020                            # generous: never a control period (bench: < 1 ms)
+    assert n_judged >= n_solves // 2                # the host left most iterations alone
+    assert worst_sleeps * sys.getswitchinterval() < 0.020   # never a control period waiting for the GIL
+    assert worst_own < 0.020                        # generous: never a control period
+    assert worst_any < 0.5                          # sanity, preempted or not
 
 
 def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():

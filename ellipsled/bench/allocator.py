@@ -208,7 +208,8 @@ def run(quick: bool) -> dict:
     highs_per_case = 40 if quick else n_per_case
     al = Allocator(T, thrust, load_params(Allocator.PARAMS))
     ours_ns, highs_ns, rebuild_ms = [], [], []
-    mism_enum = mism_highs = mism_u = n_deg = 0
+    mism_enum = mism_highs = mism_u = n_deg = mism_flown = 0
+    flown_ns = []
     n_dem = n_highs = 0
     gc.disable()
     try:
@@ -242,9 +243,26 @@ def run(quick: bool) -> dict:
                     n_highs += 1
                     if abs(ours_obj - obj_h) > 1e-6 + 1e-9 * abs(obj_h) or ours_deg != deg_h:
                         mism_highs += 1
+        # the box the FSW flies (allocator.spill_jets default), every configuration on the same demands
+        spill_flown = load_params(Allocator.PARAMS)["allocator.spill_jets"]
+        for ci, case in enumerate(all_cases):
+            al.set_params({**params_for(case), "allocator.spill_jets": spill_flown})
+            al.set_health(case.health)
+            D = demands(T, thrust, case, n_per_case, seed=1000 + ci)
+            _, obj_e, deg_e = solve_enumeration_many(T, thrust, case.health, np.array(case.w),
+                                                     case.penalty_per_N, D, case.fault_tolerance,
+                                                     spill_of(T, spill_flown))
+            for i, d in enumerate(D):
+                t = time.perf_counter_ns()
+                al.solve(d)
+                flown_ns.append(time.perf_counter_ns() - t)
+                if abs(al.objective - obj_e[i]) > 1e-7 + 1e-12 * abs(obj_e[i]) or al.degraded != deg_e[i]:
+                    mism_flown += 1
     finally:
         gc.enable()
     reb = rebuild_figures(T, thrust)
+    flown_us = np.array(flown_ns) / 1e3
+    f50, f99 = np.percentile(flown_us, [50, 99])
     ours_us = np.array(ours_ns) / 1e3
     highs_us = np.array(highs_ns) / 1e3
     p50, p99 = np.percentile(ours_us, [50, 99])
@@ -255,7 +273,11 @@ def run(quick: bool) -> dict:
         "highs_p50_us": float(h50), "highs_p99_us": float(h99), "highs_max_us": float(highs_us.max()),
         "speedup": float(h50 / p50), "speedup_basis": "HiGHS p50 / allocator p50 (same run)",
         "speedup_p99": float(h99 / p99),
-        "mismatches": int(mism_enum + mism_highs),
+        "flown_spill_jets": float(spill_flown),
+        "flown_p50_us": float(f50), "flown_p99_us": float(f99), "flown_max_us": float(flown_us.max()),
+        "flown_speedup": float(h50 / f50),
+        "flown_mismatches_vs_enumeration": int(mism_flown),
+        "mismatches": int(mism_enum + mism_highs + mism_flown),
         "mismatches_vs_enumeration": int(mism_enum), "mismatches_vs_highs": int(mism_highs),
         "u_differs_from_enumeration_tiebreak": int(mism_u),
         "demands": int(n_dem), "highs_demands": int(n_highs),
@@ -275,8 +297,8 @@ def run(quick: bool) -> dict:
         "rebuild": reb["per_case"],
         "set_health": rebuild_ms,
         "targets": dict(TARGETS),
-        "pass": bool(p99 <= TARGETS["p99_us_max"] and h50 / p50 >= TARGETS["speedup_min"]
-                     and mism_enum + mism_highs == TARGETS["mismatches"]),
+        "pass": bool(max(p99, f99) <= TARGETS["p99_us_max"] and h50 / max(p50, f50) >= TARGETS["speedup_min"]
+                     and mism_enum + mism_highs + mism_flown == TARGETS["mismatches"]),
     }
 
 
@@ -286,14 +308,20 @@ def rows(res: dict) -> list[Row]:
         return []
     t = TARGETS
     return [
-        row("allocator solve p50 / p99 / max [us]",
+        row("allocator solve, each configuration's own box p50 / p99 / max [us]",
             f"{fmt(a.get('p50_us'))} / {fmt(a.get('p99_us'))} / {fmt(a.get('max_us'))}",
             f"HiGHS {fmt(a.get('highs_p50_us'))} / {fmt(a.get('highs_p99_us'))}",
             f"{fmt(a.get('speedup'))}x (p50)", f"p99 <= {t['p99_us_max']:g} us, >= {t['speedup_min']:g}x",
             ge(a.get("speedup"), t["speedup_min"]), absolute=(a.get("p99_us"), t["p99_us_max"], "<="),
             machine=speed(res)),
+        row(f"  the flown box (spill {fmt(a.get('flown_spill_jets'))} jet) on every configuration p50 / p99 / max [us]",
+            f"{fmt(a.get('flown_p50_us'))} / {fmt(a.get('flown_p99_us'))} / {fmt(a.get('flown_max_us'))}",
+            f"HiGHS {fmt(a.get('highs_p50_us'))} / {fmt(a.get('highs_p99_us'))}",
+            f"{fmt(a.get('flown_speedup'))}x (p50)", f"p99 <= {t['p99_us_max']:g} us, >= {t['speedup_min']:g}x",
+            ge(a.get("flown_speedup"), t["speedup_min"]), absolute=(a.get("flown_p99_us"), t["p99_us_max"], "<="),
+            machine=speed(res)),
         row(f"allocator optimality mismatches ({fmt(a.get('demands'))} demands)", fmt(a.get("mismatches")),
-            f"HiGHS on {fmt(a.get('highs_demands'))}, enumeration on all", "", f"{t['mismatches']}",
+            f"HiGHS on {fmt(a.get('highs_demands'))}, enumeration on all (both boxes)", "", f"{t['mismatches']}",
             None if a.get("mismatches") is None else a.get("mismatches") == t["mismatches"]),
     ]
 

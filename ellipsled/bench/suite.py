@@ -32,7 +32,7 @@ from .rows import Row, fmt
 REQUIRED: dict[str, tuple[str, ...]] = {
     "machine": ("nproc", "load", "python", "versions", "speed_bytes_p50_us", "speed_factor"),
     "codec": ("sensors_roundtrip_p99_us", "jets_roundtrip_p99_us"),
-    "allocator": ("p50_us", "p99_us", "max_us", "highs_p99_us", "speedup", "mismatches"),
+    "allocator": ("p50_us", "p99_us", "max_us", "flown_p50_us", "flown_p99_us", "highs_p99_us", "speedup", "mismatches"),
     "plant": ("step_p50_us", "step_p99_us", "entry_real_time_factor"),
     "cycle": ("compute_p50_us", "compute_p99_us", "compute_max_us"),
     "batch": ("realtime_factor",),

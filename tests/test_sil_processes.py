@@ -196,7 +196,13 @@ def test_plant_killed_fsw_holds_jets_off_and_recovers(tmp_path, procs):
     procs.start("fsw", _node("fsw", "case1", "realtime", tmp_path / "fsw", listen=[e_fsw]))
     procs.start("sim1", _node("sim", "case1", "realtime", tmp_path / "sim1", connect=[e_fsw],
                               extra=["--duration", "60"]))
-    time.sleep(8.0)                                           # start-up, then a few seconds flying
+    # start-up (seconds on a loaded machine: imports, compiled kernels, warm-up), then a few
+    # seconds flying: the plant logs the FSW's first command
+    end = time.monotonic() + 120.0
+    while "first jet command" not in procs.log("sim1"):
+        assert procs.p["sim1"].poll() is None and time.monotonic() < end, procs.log("sim1") + procs.log("fsw")
+        time.sleep(0.2)
+    time.sleep(3.0)
     assert procs.p["sim1"].poll() is None, procs.log("sim1")
     procs.stop("sim1", signal.SIGKILL)
     time.sleep(3.0)

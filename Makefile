@@ -10,11 +10,13 @@ STAMP  := $(VENV)/.installed
 
 venv: $(STAMP)
 
+# requirements.lock is a full freeze (`make lock`): nothing needs resolving, and --no-deps keeps
+# out what the packages of requirements-nodeps.in declare but do not need here.
 $(STAMP): requirements.lock pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (Python 3.11 is required)"; exit 1; }
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -r requirements.lock
+	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps -e .
 	@touch $(STAMP)
 
@@ -27,9 +29,10 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/ellipsled bench --out runs/bench.json
 
-# Refresh the full lock from the pinned direct dependencies.
+# Refresh the full lock from the direct dependencies (requirements-nodeps.in: without theirs).
 lock:
 	$(PYTHON) -m venv /tmp/ellipsled-lock && /tmp/ellipsled-lock/bin/pip install -q -r requirements.in \
+	  && /tmp/ellipsled-lock/bin/pip install -q --no-deps -r requirements-nodeps.in \
 	  && /tmp/ellipsled-lock/bin/pip freeze --exclude-editable > requirements.lock && rm -rf /tmp/ellipsled-lock
 
 clean:

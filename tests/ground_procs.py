@@ -41,13 +41,14 @@ class GroundSil:
         return self.log_path.read_text()
 
 
-def start_ground_sil(tmp_path: Path, scenario: str = "nominal", duration_s: float = 40.0) -> GroundSil:
-    """``ellipsled run SCENARIO --realtime --rt`` with a new signing key (tmp_path/keys) and
-    the ground link on free loopback ports; output in tmp_path/run, log in tmp_path/run.log.
-    The caller stops ``run`` (``stop``)."""
+def start_ground_sil(tmp_path: Path, scenario: str = "nominal", duration_s: float = 40.0,
+                     key: SigningKey | None = None) -> GroundSil:
+    """``ellipsled run SCENARIO --realtime --rt`` with a signing key (``key``, or a new one)
+    written to tmp_path/keys and the ground link on free loopback ports; output in
+    tmp_path/run, log in tmp_path/run.log. The caller stops ``run`` (``stop``)."""
     key_file = tmp_path / "keys" / "signing.key"
     key_file.parent.mkdir()
-    key = SigningKey.generate()
+    key = key if key is not None else SigningKey.generate()
     key.write_file(str(key_file))
     vehicle, gcs = free_udp(), free_udp()
     out, log_path = tmp_path / "run", tmp_path / "run.log"

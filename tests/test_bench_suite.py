@@ -49,7 +49,7 @@ def test_table_shows_not_measured_with_reason():
     suite.fill_required(res, "allocator", "section failed: X")
     suite.fill_required(res, "jitter", "cyclictest missing")
     md = suite.table(res)
-    assert "| allocator solve p50 / p99 / max [us] | n/m / n/m / n/m |" in md
+    assert "| allocator solve, each configuration's own box p50 / p99 / max [us] | n/m / n/m / n/m |" in md
     assert "`allocator.p99_us`: section failed: X" in md
     assert "`jitter.idle.cyclictest_p99_us`: cyclictest missing" in md
     bridge_row = next(ln for ln in md.splitlines() if ln.startswith("| Rerun bridge"))
@@ -110,7 +110,7 @@ def test_realtime_loop_child_reports_shape():
     for k in ("p50_us", "p99_us", "max_us", "compute_p99_us"):
         assert math.isfinite(r[k]) and r[k] >= 0
     assert r["p50_us"] <= r["p99_us"] <= r["max_us"]
-    assert set(r["tasks"]) == {"input", "control", "fdir_slow", "plant"}
+    assert set(r["tasks"]) == {"input", "control", "fdir_slow", "controllability", "plant"}
     assert set(r["rt"]) >= {"sched_fifo", "affinity", "mlockall", "messages"}
     assert r["gc"]["enabled_in_loop"] is False          # GC kept out of the cycle
     assert r["threads"]["env"]["OPENBLAS_NUM_THREADS"] == "1"

@@ -43,6 +43,16 @@ class Bench:
         self.tx.close()
 
 
+def stepping_clock(step_ns: int):
+    """A clock that advances ``step_ns`` at each reading (the intake's budget, made exact)."""
+    t = [0]
+
+    def clock_ns():
+        t[0] += step_ns
+        return t[0]
+    return clock_ns
+
+
 @pytest.fixture
 def b():
     x = Bench()
@@ -99,13 +109,7 @@ def test_one_call_reads_at_most_its_datagram_budget():
 
 
 def test_one_call_stops_when_its_time_budget_is_spent():
-    t = [0]
-
-    def clock_ns():
-        t[0] += 300_000                         # each reading of the clock: 0.3 ms later
-        return t[0]
-
-    b = Bench(budget_us=1000.0, clock_ns=clock_ns)
+    b = Bench(budget_us=1000.0, clock_ns=stepping_clock(300_000))
     try:
         for _ in range(100):
             b.send(b"\x00" * 30)
@@ -116,13 +120,7 @@ def test_one_call_stops_when_its_time_budget_is_spent():
 
 
 def test_a_calls_own_budget_caps_the_configured_one_and_none_left_reads_nothing():
-    t = [0]
-
-    def clock_ns():
-        t[0] += 300_000                         # each reading of the clock: 0.3 ms later
-        return t[0]
-
-    b = Bench(budget_us=1e6, clock_ns=clock_ns)
+    b = Bench(budget_us=1e6, clock_ns=stepping_clock(300_000))
     try:
         for _ in range(100):
             b.send(b"\x00" * 30)

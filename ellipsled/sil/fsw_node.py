@@ -111,11 +111,9 @@ class FswNode:
         if self.link is not None:
             # real time: the link's receiving stops short of the cycle's deadline (lockstep
             # keeps only the link's own budget: its cycles have no wall-clock deadline)
-            ex = self.topo.executive
-            if args.mode == "realtime":
-                self.topo.add(2, "groundlink", lambda c: self.link.tick(self.frame, c.t_release_ns + ex.deadline_ns))
-            else:
-                self.topo.add(2, "groundlink", lambda c: self.link.tick(self.frame))
+            ex, realtime = self.topo.executive, args.mode == "realtime"
+            self.topo.add(2, "groundlink", lambda c: self.link.tick(
+                self.frame, c.t_release_ns + ex.deadline_ns if realtime else None))
 
     # ------------------------------------------------------------------ inputs
     def _rejected(self, reason: str, detail: str) -> None:

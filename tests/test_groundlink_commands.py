@@ -46,9 +46,9 @@ def write_key(tmp_path, name: str = "ground.key") -> SigningKey:
 class Rig:
     """FSW + plant + ground link + ground client, stepped by the test."""
 
-    def __init__(self, tmp_path, *, inject="plant", rates=None, tlog=None, key=None):
+    def __init__(self, tmp_path, *, inject="plant", rates=None, tlog=None, key=None, scenario="case1"):
         # case1 with its scheduled faults removed: the ground injects them instead
-        self.scn = load_scenario("case1").with_(faults=())
+        self.scn = load_scenario(scenario).with_(faults=())
         self.plant = Plant(self.scn)
         self.fsw = FlightSoftware(self.scn)
         self.key = key or write_key(tmp_path)
@@ -73,8 +73,11 @@ class Rig:
     def fly(self, n: int, tick_every: int = 5) -> None:
         """n control cycles; the link ticks every ``tick_every`` (RG2), the fake clock
         advancing by the time that elapsed in simulation."""
+        rg3 = int(self.fsw.params["executive.rg3_divisor"])
         for _ in range(n):
             u = self.fsw.control_step(self.frame)
+            if self.k % rg3 == 0:
+                self.fsw.entry_guidance_step()        # mode npc only (a no-op in profile)
             if self.k % tick_every == 0:
                 self.clock.t += tick_every * self.scn.dt_control_s
                 self.gl.tick(self.frame)
@@ -108,6 +111,7 @@ class Rig:
     def close(self):
         self.gl.close()
         self.gcs.close()
+        self.fsw.close()
 
 
 @pytest.fixture

@@ -64,7 +64,7 @@ def test_upstream_common_messages_match_the_published_crc_extra():
 
 def test_message_ids_are_mavlink2_range_and_unused_by_every_shipped_dialect():
     ours = _message_ids(_ours()) - set(UPSTREAM_COMMON)
-    assert ours == {44000, 44001, 44002, 44003}
+    assert ours == {44000, 44001, 44002, 44003, 44004}
     assert all(256 <= i <= 16_777_215 for i in ours)      # > 255 needs MAVLink 2 (24-bit id)
     shipped = [p for p in STOCK.glob("*.xml")]
     assert any(p.name == "common.xml" for p in shipped)
@@ -100,7 +100,8 @@ def test_generated_module_exposes_custom_ids_and_inject_failure():
 
 def test_every_field_has_units_or_is_dimensionless_by_design():
     dimensionless = {"mach", "theta_hat", "eta_hat", "health", "pulses", "commanded", "firing",
-                     "alloc_solves", "alloc_degraded", "cycle_slips", "rate_group"}
+                     "alloc_solves", "alloc_degraded", "cycle_slips", "rate_group", "mode", "flags", "bank_sign",
+                     "density_scale", "cycles", "overruns", "reversals", "last_reversal_rule"}
     for m in _ours().iter("message"):
         if int(m.get("id")) in UPSTREAM_COMMON:       # upstream's text, kept verbatim
             continue
@@ -169,15 +170,18 @@ def _f32(rng: random.Random) -> float:
 def _value(rng: random.Random, t: str):
     if t == "float":
         return _f32(rng)
-    if t == "uint8_t":
-        return rng.randrange(1, 5)          # valid ELLIPSLED_JET_HEALTH / rate group
+    if t in ("uint8_t", "int8_t"):
+        return rng.randrange(1, 5)          # valid ELLIPSLED_JET_HEALTH / rate group / sign
+    if t == "uint16_t":
+        return rng.randrange(1, 2**16)
     if t == "uint32_t":
         return rng.randrange(1, 2**32)
     raise AssertionError(t)
 
 
 @pytest.mark.parametrize("msg_name", ["ELLIPSLED_ENTRY_STATE", "ELLIPSLED_JET_STATUS",
-                                      "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING"])
+                                      "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING",
+                                      "ELLIPSLED_GUIDANCE_STATUS"])
 def test_custom_message_round_trip_and_independent_wire_layout(msg_name):
     xml_msg = next(m for m in _ours().iter("message") if m.get("name") == msg_name)
     fields = _fields(xml_msg)

@@ -60,6 +60,7 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "ELLIPSLED_JET_STATUS": 5.0,
     "ELLIPSLED_CONTROL_STATUS": 5.0,
     "ELLIPSLED_LOOP_TIMING": 1.0,
+    "ELLIPSLED_GUIDANCE_STATUS": 2.0,        # guidance re-predicts at 0.5-1 Hz; range to go moves ~7 km/s
     "GLOBAL_POSITION_INT": 5.0,
     "VFR_HUD": 5.0,
     "ALTITUDE": 1.0,
@@ -69,7 +70,7 @@ ATTITUDE_GROUP = ("ATTITUDE", "ATTITUDE_QUATERNION", "ATTITUDE_TARGET", "NAMED_V
 POSITION_GROUP = ("GLOBAL_POSITION_INT", "VFR_HUD", "ALTITUDE")
 # streams of one message type each, built one by one (the groups share their geometry)
 SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STATUS", "ELLIPSLED_JET_STATUS",
-                  "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING")
+                  "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS")
 MAX_RATE_HZ = 100.0
 DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
 
@@ -458,6 +459,8 @@ class GroundLink:
             yield tm.control_status(fsw, ms, self._alloc_ns, self._alloc_degraded)
         elif name == "ELLIPSLED_LOOP_TIMING":
             yield from tm.loop_timing(ms, self._loop_timing)
+        elif name == "ELLIPSLED_GUIDANCE_STATUS":
+            yield tm.guidance_status(fsw, ms)
 
     def send_due(self, sensors=None) -> None:
         """Send every telemetry stream that is due, queued parameters and new events."""

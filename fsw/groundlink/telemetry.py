@@ -177,6 +177,113 @@ def position(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool]) -> I
         yield mav.MAVLink_altitude_message(int(max(0.0, fsw.t_s) * 1e6), h, h, h, h, -1001.0, -1.0)
 
 
+# ---------------------------------------------------------------- guidance
+_RULES = {"corridor": mav.ELLIPSLED_REVERSAL_RULE_CORRIDOR, "final": mav.ELLIPSLED_REVERSAL_RULE_FINAL}
+
+
+def _unit(lat: float, lon: float) -> tuple[float, float, float]:
+    cl = math.cos(lat)
+    return cl * math.cos(lon), cl * math.sin(lon), math.sin(lat)
+
+
+def _cross(a, b) -> tuple[float, float, float]:
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+def _dot(a, b) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _angle(a, b) -> float:
+    """Great-circle angle between unit vectors (atan2 form: exact near 0)."""
+    c = _cross(a, b)
+    return math.atan2(math.sqrt(_dot(c, c)), _dot(a, b))
+
+
+def deploy_errors(vehicle: tuple[float, float], target: tuple[float, float], point: tuple[float, float],
+                  radius_m: float) -> tuple[float, float, float]:
+    """(miss, downrange, crossrange) [m] of ``point`` (latitude, longitude [rad]) against
+    ``target``, split along the great circle from ``vehicle`` to the target: downrange
+    positive beyond the target, crossrange positive to the right of that path (the signs of
+    summary.json's deploy figures). A vehicle on the target (no path) gives crossrange 0 and
+    downrange = miss."""
+    u, t, p = _unit(*vehicle), _unit(*target), _unit(*point)
+    miss = _angle(p, t) * radius_m
+    n = _cross(u, t)                       # normal of the path's plane (left of the path)
+    nn = math.sqrt(_dot(n, n))
+    if nn < 1e-12:
+        return miss, miss, 0.0
+    n = (n[0] / nn, n[1] / nn, n[2] / nn)
+    along = _cross(n, u)                   # direction of travel at the vehicle
+    off = max(-1.0, min(1.0, _dot(p, n)))
+    s_p = math.atan2(_dot(p, along), _dot(p, u))       # p's foot on the path, from the vehicle
+    s_t = _angle(u, t)
+    return miss, (s_p - s_t) * radius_m, -math.asin(off) * radius_m
+
+
+def _finite(*xs: float) -> bool:
+    return all(math.isfinite(x) for x in xs)
+
+
+def guidance_status(fsw, ms: int):
+    """ELLIPSLED_GUIDANCE_STATUS: mode, target and range to go (navigation now), the
+    predictor-corrector's last answer (mode npc), reversals and the controllability LP's last
+    answer. A group of fields goes out only when all its values are finite (its flag set);
+    otherwise it is 0 with its flag clear: the ground never receives NaN or infinity."""
+    scn, e, lp = fsw.scenario, fsw.entry, fsw.controllability
+    R = scn.planet.radius_m
+    flags = 0
+    tgt = (scn.target_lat_rad, scn.target_lon_rad) if scn.target_lat_rad is not None else None
+    veh = lat_lon(fsw) if nav_valid(fsw) else None
+    tlat = tlon = rtg = 0.0
+    if tgt is not None and veh is not None and _finite(*tgt, *veh):
+        flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_TARGET
+        tlat, tlon = tgt
+        rtg = _angle(_unit(*veh), _unit(*tgt)) * R
+    plat = plon = palt = miss = down = cross = tgo = b0 = bcmd = krho = 0.0
+    sign = cycles = overruns = reversals = rule = 0
+    t_rev = 0.0
+    mode = mav.ELLIPSLED_GUIDANCE_MODE_PROFILE
+    if e is not None:
+        mode = mav.ELLIPSLED_GUIDANCE_MODE_NPC
+        lat_f, lon_f = float(e.pred_impact[0]), float(e.pred_impact[1])
+        if e.cycles > 0 and flags & mav.ELLIPSLED_GUIDANCE_FLAGS_TARGET and \
+                _finite(lat_f, lon_f, e.pred_h_m, e.t_go_s, e.bank0):
+            miss, down, cross = deploy_errors(veh, tgt, (lat_f, lon_f), R)
+            if _finite(miss, down, cross):
+                flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_PREDICTION
+                plat, plon, palt, tgo, b0 = lat_f, lon_f, e.pred_h_m, e.t_go_s, e.bank0
+                if not abs(e.miss_m) <= fsw.params["npc.tol_m"]:            # solve_bank's criterion
+                    flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT
+                if e.t_go_s < fsw.params["npc.tgo_freeze_s"]:              # EntryGuidance holds phi_0
+                    flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_FROZEN
+            else:
+                miss = down = cross = 0.0
+        lat_logic = e.lateral
+        if lat_logic.final:
+            flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_FINAL_REVERSAL
+        bcmd = e.bank_cmd if math.isfinite(e.bank_cmd) else 0.0
+        krho = e.estimator.k_rho if math.isfinite(e.estimator.k_rho) else 0.0
+        sign = 1 if lat_logic.sign > 0 else -1
+        cycles, overruns, reversals = e.cycles, e.overruns, len(lat_logic.reversals)
+        if reversals:
+            t_rev = lat_logic.reversals[-1]
+            rule = _RULES.get(lat_logic.rules[-1], mav.ELLIPSLED_REVERSAL_RULE_NONE)
+    a_pos = a_neg = bias = trim = 0.0
+    if lp is not None and _finite(lp.authority_pos_radps2, lp.authority_neg_radps2, lp.bias_Nm):
+        flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_LP
+        a_pos, a_neg, bias = lp.authority_pos_radps2, lp.authority_neg_radps2, lp.bias_Nm
+        if lp.controllable:
+            flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_CONTROLLABLE
+        if math.isfinite(lp.trim_needed_deg):
+            flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_TRIM
+            trim = math.radians(lp.trim_needed_deg)
+    return mav.MAVLink_ellipsled_guidance_status_message(
+        ms, mode, flags, tlat, tlon, rtg, plat, plon, palt, miss, down, cross, tgo, b0, bcmd, sign, krho,
+        cycles & 0xFFFFFFFF, min(overruns, UINT16_MAX), min(reversals, UINT16_MAX),
+        t_rev if math.isfinite(t_rev) else 0.0, rule, a_pos, a_neg, bias, trim)
+
+
 def system_time(fsw, unix_s: float):
     """SYSTEM_TIME: the FSW host's Unix time and the FSW's mission time (the time_boot_ms
     of every other message)."""

@@ -386,6 +386,50 @@ enums["ELLIPSLED_MODE"][2] = EnumEntry("ELLIPSLED_MODE_SAFE", """Rate damping on
 ELLIPSLED_MODE_ENUM_END = 3
 enums["ELLIPSLED_MODE"][3] = EnumEntry("ELLIPSLED_MODE_ENUM_END", """""")
 
+# ELLIPSLED_GUIDANCE_MODE
+enums["ELLIPSLED_GUIDANCE_MODE"] = Enum()
+enums["ELLIPSLED_GUIDANCE_MODE"].bitmask = False
+ELLIPSLED_GUIDANCE_MODE_PROFILE = 0
+enums["ELLIPSLED_GUIDANCE_MODE"][0] = EnumEntry("ELLIPSLED_GUIDANCE_MODE_PROFILE", """Prescribed bank schedule (the paper's profile): no target, no prediction.""")
+ELLIPSLED_GUIDANCE_MODE_NPC = 1
+enums["ELLIPSLED_GUIDANCE_MODE"][1] = EnumEntry("ELLIPSLED_GUIDANCE_MODE_NPC", """Numerical predictor-corrector steering to the deploy target.""")
+ELLIPSLED_GUIDANCE_MODE_ENUM_END = 2
+enums["ELLIPSLED_GUIDANCE_MODE"][2] = EnumEntry("ELLIPSLED_GUIDANCE_MODE_ENUM_END", """""")
+
+# ELLIPSLED_GUIDANCE_FLAGS
+enums["ELLIPSLED_GUIDANCE_FLAGS"] = Enum()
+enums["ELLIPSLED_GUIDANCE_FLAGS"].bitmask = True
+ELLIPSLED_GUIDANCE_FLAGS_TARGET = 1
+enums["ELLIPSLED_GUIDANCE_FLAGS"][1] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_TARGET", """A deploy target exists: target_lat, target_lon, range_to_go.""")
+ELLIPSLED_GUIDANCE_FLAGS_PREDICTION = 2
+enums["ELLIPSLED_GUIDANCE_FLAGS"][2] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_PREDICTION", """The corrector has answered at least once: predicted_*, downrange_error, crossrange_error, time_to_go, bank_0.""")
+ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT = 4
+enums["ELLIPSLED_GUIDANCE_FLAGS"][4] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT", """The last correction found no root: the bound nearest to one is flown.""")
+ELLIPSLED_GUIDANCE_FLAGS_FROZEN = 8
+enums["ELLIPSLED_GUIDANCE_FLAGS"][8] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_FROZEN", """Too close to the deploy for the range to respond: bank_0 is held.""")
+ELLIPSLED_GUIDANCE_FLAGS_FINAL_REVERSAL = 16
+enums["ELLIPSLED_GUIDANCE_FLAGS"][16] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_FINAL_REVERSAL", """The final reversal (by prediction) has been made; the heading corridor is off.""")
+ELLIPSLED_GUIDANCE_FLAGS_LP = 32
+enums["ELLIPSLED_GUIDANCE_FLAGS"][32] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_LP", """The controllability LP has answered: authority_pos, authority_neg, bias.""")
+ELLIPSLED_GUIDANCE_FLAGS_CONTROLLABLE = 64
+enums["ELLIPSLED_GUIDANCE_FLAGS"][64] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_CONTROLLABLE", """The LP's verdict: the bank can be controlled with the jets FDIR holds usable.""")
+ELLIPSLED_GUIDANCE_FLAGS_TRIM = 128
+enums["ELLIPSLED_GUIDANCE_FLAGS"][128] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_TRIM", """A trim exists (trim_needed; with LP clear or TRIM clear no trim was found).""")
+ELLIPSLED_GUIDANCE_FLAGS_ENUM_END = 129
+enums["ELLIPSLED_GUIDANCE_FLAGS"][129] = EnumEntry("ELLIPSLED_GUIDANCE_FLAGS_ENUM_END", """""")
+
+# ELLIPSLED_REVERSAL_RULE
+enums["ELLIPSLED_REVERSAL_RULE"] = Enum()
+enums["ELLIPSLED_REVERSAL_RULE"].bitmask = False
+ELLIPSLED_REVERSAL_RULE_NONE = 0
+enums["ELLIPSLED_REVERSAL_RULE"][0] = EnumEntry("ELLIPSLED_REVERSAL_RULE_NONE", """No reversal yet.""")
+ELLIPSLED_REVERSAL_RULE_CORRIDOR = 1
+enums["ELLIPSLED_REVERSAL_RULE"][1] = EnumEntry("ELLIPSLED_REVERSAL_RULE_CORRIDOR", """The heading error to the target left the corridor.""")
+ELLIPSLED_REVERSAL_RULE_FINAL = 2
+enums["ELLIPSLED_REVERSAL_RULE"][2] = EnumEntry("ELLIPSLED_REVERSAL_RULE_FINAL", """Final reversal timed by prediction (the deploy crossrange).""")
+ELLIPSLED_REVERSAL_RULE_ENUM_END = 3
+enums["ELLIPSLED_REVERSAL_RULE"][3] = EnumEntry("ELLIPSLED_REVERSAL_RULE_ENUM_END", """""")
+
 # MAV_CMD
 enums["MAV_CMD"] = Enum()
 enums["MAV_CMD"].bitmask = False
@@ -6412,6 +6456,7 @@ MAVLINK_MSG_ID_ELLIPSLED_ENTRY_STATE = 44000
 MAVLINK_MSG_ID_ELLIPSLED_JET_STATUS = 44001
 MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS = 44002
 MAVLINK_MSG_ID_ELLIPSLED_LOOP_TIMING = 44003
+MAVLINK_MSG_ID_ELLIPSLED_GUIDANCE_STATUS = 44004
 MAVLINK_MSG_ID_SYS_STATUS = 1
 MAVLINK_MSG_ID_SYSTEM_TIME = 2
 MAVLINK_MSG_ID_PING = 4
@@ -6894,6 +6939,72 @@ class MAVLink_ellipsled_loop_timing_message(MAVLink_message):
 # Define name on the class for backwards compatibility (it is now msgname).
 # Done with setattr to hide the class variable from mypy.
 setattr(MAVLink_ellipsled_loop_timing_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_ellipsled_guidance_status_message(MAVLink_message):
+    """
+    Entry guidance: mode, target, the predictor-corrector's last
+    answer, the lateral logic's reversals and the controllability LP's
+    bank authority. Fields whose flag is clear are 0 (not available);
+    no field is ever NaN or infinite.
+    """
+
+    id = MAVLINK_MSG_ID_ELLIPSLED_GUIDANCE_STATUS
+    msgname = "ELLIPSLED_GUIDANCE_STATUS"
+    fieldnames = ["time_boot_ms", "mode", "flags", "target_lat", "target_lon", "range_to_go", "predicted_lat", "predicted_lon", "predicted_alt", "predicted_miss", "downrange_error", "crossrange_error", "time_to_go", "bank_0", "bank_cmd", "bank_sign", "density_scale", "cycles", "overruns", "reversals", "last_reversal_time", "last_reversal_rule", "authority_pos", "authority_neg", "bias", "trim_needed"]
+    ordered_fieldnames = ["time_boot_ms", "target_lat", "target_lon", "range_to_go", "predicted_lat", "predicted_lon", "predicted_alt", "predicted_miss", "downrange_error", "crossrange_error", "time_to_go", "bank_0", "bank_cmd", "density_scale", "cycles", "last_reversal_time", "authority_pos", "authority_neg", "bias", "trim_needed", "overruns", "reversals", "mode", "flags", "bank_sign", "last_reversal_rule"]
+    fieldtypes = ["uint32_t", "uint8_t", "uint8_t", "float", "float", "float", "float", "float", "float", "float", "float", "float", "float", "float", "float", "int8_t", "float", "uint32_t", "uint16_t", "uint16_t", "float", "uint8_t", "float", "float", "float", "float"]
+    fielddisplays_by_name: Dict[str, str] = {"flags": "bitmask"}
+    fieldenums_by_name: Dict[str, str] = {"mode": "ELLIPSLED_GUIDANCE_MODE", "flags": "ELLIPSLED_GUIDANCE_FLAGS", "last_reversal_rule": "ELLIPSLED_REVERSAL_RULE"}
+    fieldunits_by_name: Dict[str, str] = {"time_boot_ms": "ms", "target_lat": "rad", "target_lon": "rad", "range_to_go": "m", "predicted_lat": "rad", "predicted_lon": "rad", "predicted_alt": "m", "predicted_miss": "m", "downrange_error": "m", "crossrange_error": "m", "time_to_go": "s", "bank_0": "rad", "bank_cmd": "rad", "last_reversal_time": "s", "authority_pos": "rad/s/s", "authority_neg": "rad/s/s", "bias": "N.m", "trim_needed": "rad"}
+    native_format = bytearray(b"<IfffffffffffffIfffffHHBBbB")
+    orders = [0, 22, 23, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 24, 13, 14, 20, 21, 15, 25, 16, 17, 18, 19]
+    lengths = [1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1]
+    array_lengths = [0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+    crc_extra = 58
+    unpacker = struct.Struct("<IfffffffffffffIfffffHHBBbB")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, time_boot_ms: int, mode: int, flags: int, target_lat: float, target_lon: float, range_to_go: float, predicted_lat: float, predicted_lon: float, predicted_alt: float, predicted_miss: float, downrange_error: float, crossrange_error: float, time_to_go: float, bank_0: float, bank_cmd: float, bank_sign: int, density_scale: float, cycles: int, overruns: int, reversals: int, last_reversal_time: float, last_reversal_rule: int, authority_pos: float, authority_neg: float, bias: float, trim_needed: float):
+        MAVLink_message.__init__(self, MAVLink_ellipsled_guidance_status_message.id, MAVLink_ellipsled_guidance_status_message.msgname)
+        self._fieldnames = MAVLink_ellipsled_guidance_status_message.fieldnames
+        self._instance_field = MAVLink_ellipsled_guidance_status_message.instance_field
+        self._instance_offset = MAVLink_ellipsled_guidance_status_message.instance_offset
+        self.time_boot_ms = time_boot_ms
+        self.mode = mode
+        self.flags = flags
+        self.target_lat = target_lat
+        self.target_lon = target_lon
+        self.range_to_go = range_to_go
+        self.predicted_lat = predicted_lat
+        self.predicted_lon = predicted_lon
+        self.predicted_alt = predicted_alt
+        self.predicted_miss = predicted_miss
+        self.downrange_error = downrange_error
+        self.crossrange_error = crossrange_error
+        self.time_to_go = time_to_go
+        self.bank_0 = bank_0
+        self.bank_cmd = bank_cmd
+        self.bank_sign = bank_sign
+        self.density_scale = density_scale
+        self.cycles = cycles
+        self.overruns = overruns
+        self.reversals = reversals
+        self.last_reversal_time = last_reversal_time
+        self.last_reversal_rule = last_reversal_rule
+        self.authority_pos = authority_pos
+        self.authority_neg = authority_neg
+        self.bias = bias
+        self.trim_needed = trim_needed
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.time_boot_ms, self.target_lat, self.target_lon, self.range_to_go, self.predicted_lat, self.predicted_lon, self.predicted_alt, self.predicted_miss, self.downrange_error, self.crossrange_error, self.time_to_go, self.bank_0, self.bank_cmd, self.density_scale, self.cycles, self.last_reversal_time, self.authority_pos, self.authority_neg, self.bias, self.trim_needed, self.overruns, self.reversals, self.mode, self.flags, self.bank_sign, self.last_reversal_rule), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_ellipsled_guidance_status_message, "name", mavlink_msg_deprecated_name_property())
 
 
 class MAVLink_sys_status_message(MAVLink_message):
@@ -16975,6 +17086,7 @@ mavlink_map: Dict[int, Type[MAVLink_message]] = {
     MAVLINK_MSG_ID_ELLIPSLED_JET_STATUS: MAVLink_ellipsled_jet_status_message,
     MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS: MAVLink_ellipsled_control_status_message,
     MAVLINK_MSG_ID_ELLIPSLED_LOOP_TIMING: MAVLink_ellipsled_loop_timing_message,
+    MAVLINK_MSG_ID_ELLIPSLED_GUIDANCE_STATUS: MAVLink_ellipsled_guidance_status_message,
     MAVLINK_MSG_ID_SYS_STATUS: MAVLink_sys_status_message,
     MAVLINK_MSG_ID_SYSTEM_TIME: MAVLink_system_time_message,
     MAVLINK_MSG_ID_PING: MAVLink_ping_message,
@@ -17772,6 +17884,80 @@ class MAVLink(object):
 
         """
         self.send(self.ellipsled_loop_timing_encode(time_boot_ms, jitter_p50, jitter_p99, jitter_max, compute_p50, compute_p99, compute_max, cycle_slips, rate_group), force_mavlink1=force_mavlink1)
+
+    def ellipsled_guidance_status_encode(self, time_boot_ms: int, mode: int, flags: int, target_lat: float, target_lon: float, range_to_go: float, predicted_lat: float, predicted_lon: float, predicted_alt: float, predicted_miss: float, downrange_error: float, crossrange_error: float, time_to_go: float, bank_0: float, bank_cmd: float, bank_sign: int, density_scale: float, cycles: int, overruns: int, reversals: int, last_reversal_time: float, last_reversal_rule: int, authority_pos: float, authority_neg: float, bias: float, trim_needed: float) -> MAVLink_ellipsled_guidance_status_message:
+        """
+        Entry guidance: mode, target, the predictor-corrector's last answer,
+        the lateral logic's reversals and the controllability LP's
+        bank authority. Fields whose flag is clear are 0 (not
+        available); no field is ever NaN or infinite.
+
+        time_boot_ms              : Flight software time since start. [ms] (type:uint32_t)
+        mode                      : Guidance mode. (type:uint8_t, values:ELLIPSLED_GUIDANCE_MODE)
+        flags                     : Which fields hold a value. (type:uint8_t, values:ELLIPSLED_GUIDANCE_FLAGS)
+        target_lat                : Deploy target latitude (TARGET). [rad] (type:float)
+        target_lon                : Deploy target longitude, positive east (TARGET). [rad] (type:float)
+        range_to_go               : Great-circle distance from the navigation position to the target (TARGET). [m] (type:float)
+        predicted_lat             : Latitude of the predicted deploy point (PREDICTION). [rad] (type:float)
+        predicted_lon             : Longitude of the predicted deploy point (PREDICTION). [rad] (type:float)
+        predicted_alt             : Altitude of the predicted deploy point (PREDICTION). [m] (type:float)
+        predicted_miss            : Great-circle distance from the predicted deploy point to the target (PREDICTION). [m] (type:float)
+        downrange_error           : Predicted deploy point along the great circle from the vehicle to the target, positive beyond the target (PREDICTION). [m] (type:float)
+        crossrange_error          : Predicted deploy point off that great circle, positive to the right (PREDICTION). [m] (type:float)
+        time_to_go                : Predicted time to the deploy condition from the last correction's state (PREDICTION). [s] (type:float)
+        bank_0                    : The corrector's bank magnitude at the current energy of its linear profile, phi_0 (PREDICTION). [rad] (type:float)
+        bank_cmd                  : Bank magnitude commanded now, after the path-limit feedback (mode NPC). [rad] (type:float)
+        bank_sign                 : Sign of the commanded bank: +1 right, -1 left (mode NPC; 0 otherwise). (type:int8_t)
+        density_scale             : In-flight density estimate K_rho, sensed over modelled drag (mode NPC). (type:float)
+        cycles                    : Corrections applied since start. (type:uint32_t)
+        overruns                  : Guidance cycles whose answer was late or skipped (saturating). (type:uint16_t)
+        reversals                 : Bank reversals since start. (type:uint16_t)
+        last_reversal_time        : Flight software time of the last reversal (reversals above 0). [s] (type:float)
+        last_reversal_rule        : Rule that made the last reversal. (type:uint8_t, values:ELLIPSLED_REVERSAL_RULE)
+        authority_pos             : Bank acceleration the jets can give, positive way (LP). [rad/s/s] (type:float)
+        authority_neg             : Bank acceleration the jets can give, negative way, a magnitude (LP). [rad/s/s] (type:float)
+        bias                      : Magnitude of the net stuck-on jet torque (LP). [N.m] (type:float)
+        trim_needed               : Largest alpha/beta offset of the smallest trim absorbing the bias the jets cannot cancel (TRIM). [rad] (type:float)
+
+        """
+        return MAVLink_ellipsled_guidance_status_message(time_boot_ms, mode, flags, target_lat, target_lon, range_to_go, predicted_lat, predicted_lon, predicted_alt, predicted_miss, downrange_error, crossrange_error, time_to_go, bank_0, bank_cmd, bank_sign, density_scale, cycles, overruns, reversals, last_reversal_time, last_reversal_rule, authority_pos, authority_neg, bias, trim_needed)
+
+    def ellipsled_guidance_status_send(self, time_boot_ms: int, mode: int, flags: int, target_lat: float, target_lon: float, range_to_go: float, predicted_lat: float, predicted_lon: float, predicted_alt: float, predicted_miss: float, downrange_error: float, crossrange_error: float, time_to_go: float, bank_0: float, bank_cmd: float, bank_sign: int, density_scale: float, cycles: int, overruns: int, reversals: int, last_reversal_time: float, last_reversal_rule: int, authority_pos: float, authority_neg: float, bias: float, trim_needed: float, force_mavlink1: bool = False) -> None:
+        """
+        Entry guidance: mode, target, the predictor-corrector's last answer,
+        the lateral logic's reversals and the controllability LP's
+        bank authority. Fields whose flag is clear are 0 (not
+        available); no field is ever NaN or infinite.
+
+        time_boot_ms              : Flight software time since start. [ms] (type:uint32_t)
+        mode                      : Guidance mode. (type:uint8_t, values:ELLIPSLED_GUIDANCE_MODE)
+        flags                     : Which fields hold a value. (type:uint8_t, values:ELLIPSLED_GUIDANCE_FLAGS)
+        target_lat                : Deploy target latitude (TARGET). [rad] (type:float)
+        target_lon                : Deploy target longitude, positive east (TARGET). [rad] (type:float)
+        range_to_go               : Great-circle distance from the navigation position to the target (TARGET). [m] (type:float)
+        predicted_lat             : Latitude of the predicted deploy point (PREDICTION). [rad] (type:float)
+        predicted_lon             : Longitude of the predicted deploy point (PREDICTION). [rad] (type:float)
+        predicted_alt             : Altitude of the predicted deploy point (PREDICTION). [m] (type:float)
+        predicted_miss            : Great-circle distance from the predicted deploy point to the target (PREDICTION). [m] (type:float)
+        downrange_error           : Predicted deploy point along the great circle from the vehicle to the target, positive beyond the target (PREDICTION). [m] (type:float)
+        crossrange_error          : Predicted deploy point off that great circle, positive to the right (PREDICTION). [m] (type:float)
+        time_to_go                : Predicted time to the deploy condition from the last correction's state (PREDICTION). [s] (type:float)
+        bank_0                    : The corrector's bank magnitude at the current energy of its linear profile, phi_0 (PREDICTION). [rad] (type:float)
+        bank_cmd                  : Bank magnitude commanded now, after the path-limit feedback (mode NPC). [rad] (type:float)
+        bank_sign                 : Sign of the commanded bank: +1 right, -1 left (mode NPC; 0 otherwise). (type:int8_t)
+        density_scale             : In-flight density estimate K_rho, sensed over modelled drag (mode NPC). (type:float)
+        cycles                    : Corrections applied since start. (type:uint32_t)
+        overruns                  : Guidance cycles whose answer was late or skipped (saturating). (type:uint16_t)
+        reversals                 : Bank reversals since start. (type:uint16_t)
+        last_reversal_time        : Flight software time of the last reversal (reversals above 0). [s] (type:float)
+        last_reversal_rule        : Rule that made the last reversal. (type:uint8_t, values:ELLIPSLED_REVERSAL_RULE)
+        authority_pos             : Bank acceleration the jets can give, positive way (LP). [rad/s/s] (type:float)
+        authority_neg             : Bank acceleration the jets can give, negative way, a magnitude (LP). [rad/s/s] (type:float)
+        bias                      : Magnitude of the net stuck-on jet torque (LP). [N.m] (type:float)
+        trim_needed               : Largest alpha/beta offset of the smallest trim absorbing the bias the jets cannot cancel (TRIM). [rad] (type:float)
+
+        """
+        self.send(self.ellipsled_guidance_status_encode(time_boot_ms, mode, flags, target_lat, target_lon, range_to_go, predicted_lat, predicted_lon, predicted_alt, predicted_miss, downrange_error, crossrange_error, time_to_go, bank_0, bank_cmd, bank_sign, density_scale, cycles, overruns, reversals, last_reversal_time, last_reversal_rule, authority_pos, authority_neg, bias, trim_needed), force_mavlink1=force_mavlink1)
 
     def sys_status_encode(self, onboard_control_sensors_present: int, onboard_control_sensors_enabled: int, onboard_control_sensors_health: int, load: int, voltage_battery: int, current_battery: int, battery_remaining: int, drop_rate_comm: int, errors_comm: int, errors_count1: int, errors_count2: int, errors_count3: int, errors_count4: int, onboard_control_sensors_present_extended: int = 0, onboard_control_sensors_enabled_extended: int = 0, onboard_control_sensors_health_extended: int = 0) -> MAVLink_sys_status_message:
         """

@@ -2,8 +2,12 @@
 
 Shows: link status (vehicle heartbeat age, rx/tx message rates, rejections, mode, armed,
 MAV_STATE), entry state (altitude, speed, gamma, Mach, qbar, alpha, beta), bank vs
-reference and the error, the 18-jet grid (commanded, firing, health), loop timing and
-allocator figures, the events (STATUSTEXT with severity) and the acknowledgements.
+reference and the error, position (latitude, longitude, altitude of GLOBAL_POSITION_INT),
+guidance (mode, range to go, predicted deploy miss and its downrange/crossrange split,
+bank command, reversals, the controllability LP's bank authority: ELLIPSLED_GUIDANCE_STATUS,
+"-" where the vehicle says "not available"), the 18-jet grid (commanded, firing, health),
+loop timing and allocator figures, the events (STATUSTEXT with severity) and the
+acknowledgements.
 
 Commands from the command line at the bottom (the language of gse/commands.py USAGE, e.g.
 "inject 17 off", "mark 3 degraded 0.5", "param set C_LAMBDA_RADPS 1.2") or keys, when
@@ -117,6 +121,7 @@ class GroundConsole(App):
         with Horizontal(id="main"):
             with Vertical(id="left"):
                 yield Static(id="entry", classes="panel")
+                yield Static(id="guidance", classes="panel")
                 yield Static(id="jets", classes="panel")
                 yield Static(id="timing", classes="panel")
             with Vertical(id="right"):
@@ -252,6 +257,7 @@ class GroundConsole(App):
                                 (" telemetry not verified " if c.view_only else ""), top)
         self.query_one("#top", Static).update(top)
         self.query_one("#entry", Static).update(self._entry_table())
+        self.query_one("#guidance", Static).update(self._guidance_table())
         self.query_one("#jets", Static).update(self._jet_table())
         self.query_one("#timing", Static).update(self._timing_table())
 
@@ -273,6 +279,53 @@ class GroundConsole(App):
         t.add_row("bank ref", _deg(es.bank_ref))
         t.add_row(Text("bank error", style="bold"),
                   Text(_deg(err), style="bold red" if abs(err) > math.radians(10) else "bold green"))
+        gp = self.client.state.latest.get("GLOBAL_POSITION_INT")
+        if gp is not None:
+            t.add_row("lat / lon", f"{gp.lat * 1e-7:8.4f}° {gp.lon * 1e-7:9.4f}°")
+            t.add_row("alt (position)", f"{gp.alt * 1e-6:8.2f} km")
+        return t
+
+    def _guidance_table(self) -> Table:
+        """ELLIPSLED_GUIDANCE_STATUS; a group whose flag is clear shows "-"."""
+        t = Table.grid(padding=(0, 1))
+        t.add_column(style="bold")
+        t.add_column(justify="right")
+        g = self.client.state.latest.get("ELLIPSLED_GUIDANCE_STATUS")
+        if g is None:
+            t.add_row("guidance", "-")
+            return t
+
+        def has(bit: int) -> bool:
+            return bool(g.flags & bit)
+        npc = g.mode == mav.ELLIPSLED_GUIDANCE_MODE_NPC
+        t.add_row("guidance", "NPC" if npc else "PROFILE" if g.mode == mav.ELLIPSLED_GUIDANCE_MODE_PROFILE
+                  else str(g.mode))
+        t.add_row("range to go", f"{g.range_to_go / 1e3:8.1f} km" if has(mav.ELLIPSLED_GUIDANCE_FLAGS_TARGET) else "-")
+        if has(mav.ELLIPSLED_GUIDANCE_FLAGS_PREDICTION):
+            note = " NO ROOT" if has(mav.ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT) else \
+                " held" if has(mav.ELLIPSLED_GUIDANCE_FLAGS_FROZEN) else ""
+            miss_style = "bold green" if g.predicted_miss < 1e3 else "yellow" if g.predicted_miss < 12.5e3 else "bold red"
+            t.add_row(Text("pred. miss", style="bold"), Text(f"{g.predicted_miss / 1e3:6.2f} km{note}", style=miss_style))
+            t.add_row("down / cross", f"{g.downrange_error / 1e3:+7.2f} {g.crossrange_error / 1e3:+7.2f} km")
+            t.add_row("deploy alt / tgo", f"{g.predicted_alt / 1e3:6.2f} km {g.time_to_go:5.0f} s")
+        else:
+            t.add_row("pred. miss", "-")
+        if npc:
+            side = "R" if g.bank_sign > 0 else "L" if g.bank_sign < 0 else ""
+            t.add_row("bank cmd", f"{_deg(g.bank_cmd)} {side}")
+            last = ""
+            if g.reversals:
+                rule = {mav.ELLIPSLED_REVERSAL_RULE_CORRIDOR: "corridor",
+                        mav.ELLIPSLED_REVERSAL_RULE_FINAL: "final"}.get(g.last_reversal_rule, "?")
+                last = f", last {g.last_reversal_time:.0f} s {rule}"
+            t.add_row("reversals", f"{g.reversals}{last}")
+        if has(mav.ELLIPSLED_GUIDANCE_FLAGS_LP):
+            ok = has(mav.ELLIPSLED_GUIDANCE_FLAGS_CONTROLLABLE)
+            trim = _deg(g.trim_needed) if has(mav.ELLIPSLED_GUIDANCE_FLAGS_TRIM) else "none"
+            t.add_row(Text("bank auth.", style="bold"),
+                      Text(f"+{math.degrees(g.authority_pos):.2f} / -{math.degrees(g.authority_neg):.2f} °/s²",
+                           style="green" if ok else "bold red"))
+            t.add_row("bias / trim", f"{g.bias:.0f} N m / {trim.strip()}")
         return t
 
     def _jet_table(self) -> Table:

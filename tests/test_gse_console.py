@@ -5,6 +5,7 @@ and shows the ACK; bad command lines are answered in the panel, never sent.
 from __future__ import annotations
 
 import asyncio
+import math
 
 import pytest
 
@@ -72,3 +73,47 @@ def test_console_shows_state_and_injects_with_ack(rig):
             assert status in (mav.MAV_STATE_STANDBY, mav.MAV_STATE_CRITICAL)
 
     asyncio.run(scenario())
+
+
+def _text(renderable) -> str:
+    from rich.console import Console
+    con = Console(width=60, record=True, color_system=None)
+    con.print(renderable)
+    return con.export_text()
+
+
+@pytest.mark.parametrize("scenario", ["guided-nominal", "case1"])
+def test_console_shows_guidance_and_position_as_the_vehicle_reports_them(tmp_path, scenario):
+    r = Rig(tmp_path, scenario=scenario)
+    try:
+        r.fly(120)                     # guided: corrections of the cycles at 0 and 1 s applied
+
+        async def run():
+            app = GroundConsole(r.gcs, timeout_s=0.5, retries=2, poll_s=0.05, refresh_s=0.1)
+            async with app.run_test(size=(140, 60)) as pilot:
+                r.fly(10)
+                r.clock.t += 1.0                       # every stream due at the next tick
+                r.exchange(lambda: {"ELLIPSLED_GUIDANCE_STATUS", "GLOBAL_POSITION_INT"}
+                           <= set(r.gcs.state.latest), 2.0)
+                await pilot.pause(0.3)
+                return _text(app._guidance_table()), _text(app._entry_table())
+
+        guidance, entry = asyncio.run(run())
+        g = r.gcs.state.latest["ELLIPSLED_GUIDANCE_STATUS"]
+        gp = r.gcs.state.latest["GLOBAL_POSITION_INT"]
+        assert f"{gp.lat * 1e-7:8.4f}°".strip() in entry and f"{gp.lon * 1e-7:9.4f}°".strip() in entry
+        assert f"{gp.alt * 1e-6:8.2f} km".strip() in entry
+        if scenario == "case1":
+            assert "PROFILE" in guidance
+            assert "range to go" in guidance and "pred. miss" in guidance
+            assert "km" not in guidance and "bank cmd" not in guidance      # "-": not available
+        else:
+            e = r.fsw.entry
+            assert "NPC" in guidance and e.cycles >= 2
+            assert f"{g.range_to_go / 1e3:8.1f} km".strip() in guidance
+            assert f"{g.predicted_miss / 1e3:6.2f} km".strip() in guidance
+            assert f"{g.downrange_error / 1e3:+7.2f}".strip() in guidance
+            assert f"{math.degrees(e.bank_cmd):8.2f}°".strip() in guidance
+            assert f"reversals {len(e.lateral.reversals)}" in " ".join(guidance.split())
+    finally:
+        r.close()

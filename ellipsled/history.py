@@ -6,9 +6,11 @@ it from the truth and FSW-state records the processes publish. Figures of merit
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from interfaces.records import TRUTH
+from interfaces.records import GUID_NPC, GUID_PREDICTION, GUID_TARGET, TRUTH
 from interfaces.vocabulary import N_JETS
 
 
@@ -23,13 +25,16 @@ FIELDS: dict[str, tuple[int, ...]] = {
     "bank_ref_rad": (), "bankdot_ref_radps": (), "sigma_RN": (3,), "u_cal_B": (3,), "tau_alloc_B": (3,),
     "theta_hat": (9,), "jets_cmd": (N_JETS,), "health": (N_JETS,), "mode": (),
     "alloc_degraded": (), "alloc_short": (), "compute_us": (), "alloc_us": (),
+    # entry guidance (FSW_STATE's guidance fields: 0 where guid_flags says not available)
+    "guid_cycles": (), "guid_flags": (), "target_lat_rad": (), "target_lon_rad": (), "pred_lat_rad": (),
+    "pred_lon_rad": (), "bank_cmd_rad": (),
 }
 # Which side of the SIL records each field (the batch runner records both).
 TRUTH_FIELDS = ("k", "t_s", "bank_rad", "alpha_rad", "beta_rad", "omega_BN_B", "sigma_BN", "h_m", "V_rel_mps",
                 "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa", "decel_g", "tau_jets_B")
 FSW_FIELDS = tuple(k for k in FIELDS if k not in TRUTH_FIELDS)
 
-_DTYPES = {"k": np.int64, "jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8, "alloc_short": np.uint8}
+_DTYPES = {"k": np.int64, "guid_cycles": np.int64, "guid_flags": np.uint8, "jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8, "alloc_short": np.uint8}
 
 
 class History:
@@ -104,6 +109,27 @@ def record_fsw(h: History, i: int, fsw, u: np.ndarray, compute_ns: int) -> None:
     a["alloc_short"][i] = fsw.alloc_short
     a["compute_us"][i] = compute_ns * 1e-3
     a["alloc_us"][i] = fsw.alloc_ns * 1e-3
+    (a["guid_cycles"][i], a["guid_flags"][i], a["target_lat_rad"][i], a["target_lon_rad"][i],
+     a["pred_lat_rad"][i], a["pred_lon_rad"][i], a["bank_cmd_rad"][i]) = guidance_fields(fsw)
+
+
+def guidance_fields(fsw) -> tuple:
+    """(guid_cycles, guid_flags, target lat, lon, predicted deploy lat, lon [rad], bank command
+    [rad]) of the FSW now, as FSW_STATE carries them: a value not available (no target, no
+    answer yet, profile mode, non-finite) is 0 with its guid_flags bit clear."""
+    scn, e = fsw.scenario, fsw.entry
+    flags, tlat, tlon, plat, plon, bank, cycles = 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0
+    if scn.target_lat_rad is not None and math.isfinite(scn.target_lat_rad) and math.isfinite(scn.target_lon_rad):
+        flags, tlat, tlon = GUID_TARGET, scn.target_lat_rad, scn.target_lon_rad
+    if e is not None:
+        flags |= GUID_NPC
+        cycles = e.cycles
+        bank = e.bank_cmd if math.isfinite(e.bank_cmd) else 0.0
+        p = e.pred_impact
+        if cycles > 0 and math.isfinite(p[0]) and math.isfinite(p[1]):
+            flags |= GUID_PREDICTION
+            plat, plon = float(p[0]), float(p[1])
+    return cycles, flags, tlat, tlon, plat, plon, bank
 
 
 def merge(truth: History, fsw: History) -> History:

@@ -142,9 +142,19 @@ FSW_STATE = np.dtype([
     ("alloc_us", "<f8"),                   # allocator time [us]
     ("jitter_us", "<f8"),                  # release time - scheduled release time [us]
     ("slips", "<u4"),                      # cycle slips so far
+    # entry guidance (mode npc; 0 where guid_flags says not available: never NaN on the wire)
+    ("guid_cycles", "<u4"),                # predictor-corrector answers applied so far
+    ("target_lat_rad", "<f8"),             # deploy target, planet-fixed (GUID_TARGET)
+    ("target_lon_rad", "<f8"),
+    ("pred_lat_rad", "<f8"),               # predicted deploy point of the last answer (GUID_PREDICTION)
+    ("pred_lon_rad", "<f8"),
+    ("bank_cmd_rad", "<f8"),               # bank magnitude commanded (mode npc)
     ("jets_cmd", "u1", (N_JETS,)),         # 1 = open
     ("health", "i1", (N_JETS,)),           # jet health codes (interfaces/vocabulary.py)
     ("mode", "i1"),                        # Mode (interfaces/vocabulary.py)
     ("alloc_degraded", "u1"),              # 1 = allocation infeasible, degraded solution
-    ("_pad", "u1", (6,)),
+    ("guid_flags", "u1"),                  # GUID_TARGET | GUID_PREDICTION | GUID_NPC
+    ("_pad", "u1", (5,)),
 ])
+# guid_flags bits of FSW_STATE
+GUID_TARGET, GUID_PREDICTION, GUID_NPC = 1, 2, 4

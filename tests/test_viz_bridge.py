@@ -38,6 +38,11 @@ def _publish(session, k, codecs, k0, n, seq0):
         fs["bank_ref_rad"] = -0.01 * kk
         fs["jets_cmd"][:] = 0
         fs["jets_cmd"][kk % 18] = 1
+        tr["lat_rad"], tr["lon_rad"] = 0.01 * kk, 0.02 * kk
+        fs["guid_flags"] = records.GUID_TARGET | records.GUID_PREDICTION | records.GUID_NPC
+        fs["guid_cycles"] = kk // 10                               # a guidance answer every 10 steps
+        fs["target_lat_rad"], fs["target_lon_rad"] = 0.1, 0.3
+        fs["pred_lat_rad"], fs["pred_lon_rad"] = 0.1 + 0.001 * (kk // 10), 0.3
         pubs["truth"].put(codecs["truth"].encode(tr, seq0 + i, 0))
         pubs["fsw"].put(codecs["fsw"].encode(fs, seq0 + i, 0))
         if i == 3:
@@ -86,6 +91,12 @@ def test_bridge_logs_what_is_published_survives_bad_payloads_and_publisher_resta
     np.testing.assert_allclose([b[0] for b in bank], np.degrees(0.01 * np.array(expected_k)), atol=1e-12)
     steps, _, ref = _column(ents["/bank/reference_deg"], "Scalars:scalars")
     np.testing.assert_allclose([b[0] for b in ref], np.degrees(-0.01 * np.array(expected_k)), atol=1e-12)
+    # the map: track every 10th step, the predicted point once per guidance answer
+    assert list(_column(ents["/map/track"], "LineStrips3D:strips")[0]) == [0, 10, 40, 50]
+    steps, _, pts = _column(ents["/map/predicted"], "Points3D:positions")
+    assert list(steps) == [0, 10, 40, 50]
+    np.testing.assert_allclose([p[0][1] for p in pts], np.degrees(0.1 + 0.001 * np.array([0, 1, 4, 5])), rtol=1e-6)
+    assert len(_column(ents["/map/target"], "Points3D:positions")[0]) == 1
     _, _, text = _column(ents["/events"], "TextLog:text")
     flat = [t for row in text for t in row]
     assert sum("jet_failed_off" in t for t in flat) == 2

@@ -20,6 +20,7 @@ from gse.viz.blueprint import VIEW_NAMES
 from gse.viz.logger import SCALAR_CHANNELS, TRUTH
 from gse.viz.record import r_N_from_history
 from gse.viz.sinks import parse_mode
+from interfaces.records import GUID_NPC, GUID_PREDICTION, GUID_TARGET
 
 RERUN = str(Path(sys.executable).parent / "rerun")
 N = 240
@@ -48,6 +49,13 @@ def _history(n: int = N) -> History:
     a["health"][n // 2:, 6] = 1            # jet 7 failed off halfway
     a["mode"][:] = 1
     a["compute_us"][:] = 300 + np.arange(n) % 7
+    # guidance (mode npc): target known from the start, an answer every 50 steps from step 20
+    a["guid_flags"][:] = GUID_TARGET | GUID_NPC
+    a["guid_flags"][20:] |= GUID_PREDICTION
+    a["target_lat_rad"][:], a["target_lon_rad"][:] = 0.2, 0.05
+    a["guid_cycles"][:] = (np.arange(n) + 30) // 50
+    a["pred_lat_rad"][:] = 0.2 + 0.01 * a["guid_cycles"]
+    a["pred_lon_rad"][:] = 0.05 + 0.02 * a["guid_cycles"]
     return h
 
 
@@ -104,6 +112,35 @@ def test_recording_has_expected_entities_and_blueprint(recorded):
     text = "".join(str(c.to_record_batch().columns) for c in reader.stream(store=bps[0]))
     for name in ("Bank vs reference", "Trajectory", "Attitude", "Events", "Jets firing", "Loop timing"):
         assert name in text and name in VIEW_NAMES
+
+
+def test_map_has_the_ground_track_the_target_and_one_predicted_point_per_guidance_answer(recorded):
+    h, _, ents, reader = recorded
+    steps, _, strips = _column(ents["/map/track"], "LineStrips3D:strips")
+    assert list(steps) == list(range(0, N, 10))                # decimated: every 10th step
+    ends = np.array([s[0][-1] for s in strips])
+    np.testing.assert_allclose(ends[:, 0], np.degrees(h["lon_rad"][::10]), rtol=1e-6)
+    np.testing.assert_allclose(ends[:, 1], np.degrees(h["lat_rad"][::10]), rtol=1e-6)
+    assert np.all(ends[:, 2] == 0.0)
+    starts = np.array([s[0][0] for s in strips])
+    np.testing.assert_allclose(starts[1:], ends[:-1])          # a connected track
+    steps, _, tgt = _column(ents["/map/target"], "Points3D:positions")
+    assert len(steps) == 1 and np.allclose(tgt[0][0], [math.degrees(0.05), math.degrees(0.2), 0.0])
+    # a predicted point at each new answer only (guidance rate, not the 50 Hz rows)
+    steps, _, pts = _column(ents["/map/predicted"], "Points3D:positions")
+    assert list(steps) == [20, 70, 120, 170, 220]
+    cyc = (np.array(steps) + 30) // 50
+    np.testing.assert_allclose([p[0][:2] for p in pts],
+                               np.degrees(np.stack([0.05 + 0.02 * cyc, 0.2 + 0.01 * cyc], axis=1)), rtol=1e-6)
+    steps, _, miss = _column(ents["/guidance/predicted_miss_km"], "Scalars:scalars")
+    R = load_planet("mars").radius_m
+    lat1, lon1 = 0.2 + 0.01 * cyc, 0.05 + 0.02 * cyc
+    # independent: the spherical law of cosines
+    want = R / 1e3 * np.arccos(np.sin(lat1) * math.sin(0.2) + np.cos(lat1) * math.cos(0.2) * np.cos(lon1 - 0.05))
+    assert list(steps) == [20, 70, 120, 170, 220]
+    np.testing.assert_allclose([m[0] for m in miss], want, rtol=1e-6)
+    text = "".join(str(c.to_record_batch().columns) for c in reader.stream(store=reader.blueprints()[0]))
+    assert "Ground track" in text and "Predicted miss" in text
 
 
 def test_bank_series_equals_history_at_every_step(recorded):

@@ -25,6 +25,7 @@ import rerun as rr
 
 from gse.viz.logger import SCALAR_CHANNELS, SOURCE_FIELDS, RerunLogger
 from gse.viz.sinks import open_sinks
+from interfaces.records import GUID_NPC, GUID_PREDICTION, GUID_TARGET
 
 from .rows import Row, fmt, le, row, speed
 
@@ -51,10 +52,14 @@ def memory_verdict(rss_MB: list[tuple[int, float]]) -> dict:
 
 def _rows(n: int, rng: np.random.Generator) -> tuple[list[dict], list[dict]]:
     """A pool of realistic truth / FSW rows (values vary so nothing compresses away)."""
-    def one(fields):
+    def one(fields, i):
         out = {}
         for f, shp in fields.items():
-            if f in ("jets_cmd",):
+            if f == "guid_cycles":          # one guidance answer a second, as flown (mode npc)
+                out[f] = float(i // int(RATE_HZ))
+            elif f == "guid_flags":
+                out[f] = float(GUID_TARGET | GUID_PREDICTION | GUID_NPC)
+            elif f in ("jets_cmd",):
                 out[f] = (rng.random(shp) < 0.2).astype(np.uint8)
             elif f in ("health", "mode"):
                 out[f] = np.zeros(shp, dtype=np.int8) + (1 if f == "mode" else 0)
@@ -65,7 +70,7 @@ def _rows(n: int, rng: np.random.Generator) -> tuple[list[dict], list[dict]]:
             else:
                 out[f] = rng.standard_normal(shp) if shp else float(rng.standard_normal())
         return out
-    return [one(SOURCE_FIELDS["truth"]) for _ in range(n)], [one(SOURCE_FIELDS["fsw"]) for _ in range(n)]
+    return [one(SOURCE_FIELDS["truth"], i) for i in range(n)], [one(SOURCE_FIELDS["fsw"], i) for i in range(n)]
 
 
 def _logger_run(n_steps: int, mode: str, out_dir: Path, rng) -> dict:

@@ -21,7 +21,7 @@ from common import rt
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.events import EventLog, Severity  # noqa: E402
-from ellipsled.history import History, record_fsw  # noqa: E402
+from ellipsled.history import History, guidance_fields, record_fsw  # noqa: E402
 from ellipsled.runlib import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock  # noqa: E402
 from fsw.flightsoftware import FlightSoftware  # noqa: E402
@@ -198,6 +198,8 @@ class FswNode:
         st["slips"] = topo.executive.slips
         st["jets_cmd"], st["health"] = topo.u, fsw.health.state
         st["mode"], st["alloc_degraded"] = int(fsw.modes.mode), fsw.allocator.degraded
+        (st["guid_cycles"], st["guid_flags"], st["target_lat_rad"], st["target_lon_rad"], st["pred_lat_rad"],
+         st["pred_lon_rad"], st["bank_cmd_rad"]) = guidance_fields(fsw)
         self.pub_state.put(self.enc_state.encode(st, fsw.k, t))
 
     def _publish_events(self, cyc) -> None:

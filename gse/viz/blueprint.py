@@ -13,7 +13,7 @@ VIEW_NAMES = (
     "Torque x", "Torque y", "Torque z", "Jets firing", "Jet health", "Jet health now",
     "Jets on", "Adaptive parameters", "Altitude", "Speed", "Flight-path angle", "Mach",
     "Dynamic pressure", "Deceleration", "Trajectory", "Attitude", "Loop timing", "Slips",
-    "Mode", "Events",
+    "Mode", "Ground track", "Predicted miss", "Events",
 )
 
 
@@ -62,7 +62,15 @@ def default_blueprint() -> rrb.Blueprint:
         rrb.StateTimelineView(name="Mode", origin="/", contents=["/fsw/mode"]),
         name="Timing",
     )
-    tabs = rrb.Tabs(attitude, torque, jets, adapt, entry, views3d, timing)
+    # the map: x east (longitude), y north (latitude) [deg], z up (logger: ViewCoordinates); every
+    # predicted deploy point so far stays drawn (the trail), so the re-predictions converge
+    # on the target before the viewer's eyes
+    ground = rrb.Horizontal(
+        rrb.Spatial3DView(name="Ground track", origin="/map", time_ranges=[trail, trail_t]),
+        _ts("Predicted miss", "/guidance/predicted_miss_km"),
+        column_shares=[3, 2], name="Map",
+    )
+    tabs = rrb.Tabs(attitude, torque, jets, adapt, entry, views3d, ground, timing)
     return rrb.Blueprint(
         rrb.Vertical(tabs, rrb.TextLogView(name="Events", origin="/events"), row_shares=[4, 1]),
         rrb.TimePanel(state="expanded"),

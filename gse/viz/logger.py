@@ -13,6 +13,11 @@ finite are left out of the affected entity only (counted in ``stats['skipped_row
 an SDK error while sending is counted in ``stats['send_errors']``.
 
 Angles are shown in degrees, altitude in km (entity names carry the unit).
+
+The map (``map/``): the ground track (longitude, latitude in degrees; x east, y north, z up)
+decimated to every MAP_EVERY-th control step, the deploy target, and the predicted deploy
+point of each predictor-corrector answer, logged once per answer (guidance rate, 0.5-1 Hz)
+with its great-circle miss (``guidance/predicted_miss_km``), never at the control rate.
 """
 from __future__ import annotations
 
@@ -25,8 +30,9 @@ import numpy as np
 import rerun as rr
 
 from common.config import load_toml, resolve
-from common.model import load_vehicle
+from common.model import load_planet, load_vehicle
 from common.mrp import sigma_to_quat
+from interfaces.records import GUID_PREDICTION, GUID_TARGET
 from interfaces.vocabulary import HEALTH_NAMES, N_JETS, Mode, Severity
 
 DEG = 180.0 / math.pi
@@ -37,12 +43,14 @@ TRUTH, FSW = "truth", "fsw"
 SOURCE_FIELDS: dict[str, dict[str, tuple[int, ...]]] = {
     TRUTH: {"bank_rad": (), "alpha_rad": (), "beta_rad": (), "omega_BN_B": (3,), "sigma_BN": (3,),
             "r_N": (3,), "h_m": (), "V_rel_mps": (), "gamma_rad": (), "mach": (), "qbar_pa": (),
-            "decel_g": (), "tau_jets_B": (3,)},
+            "decel_g": (), "tau_jets_B": (3,), "lat_rad": (), "lon_rad": ()},
     FSW: {"bank_ref_rad": (), "bank_err_rad": (), "sigma_RN": (3,), "u_cal_B": (3,),
           "tau_alloc_B": (3,), "theta_hat": (9,), "jets_cmd": (N_JETS,), "health": (N_JETS,),
           "mode": (), "alloc_degraded": (), "compute_us": (), "alloc_us": (), "jitter_us": (),
-          "slips": ()},
+          "slips": (), "guid_cycles": (), "guid_flags": (), "target_lat_rad": (), "target_lon_rad": (),
+          "pred_lat_rad": (), "pred_lon_rad": ()},
 }
+MAP_EVERY = 10             # ground-track points: every 10th control step (5 Hz at 50 Hz)
 
 # Rerun TextLog levels of the MAVLink severities.
 TEXTLOG_LEVEL = {Severity.EMERGENCY: "CRITICAL", Severity.ALERT: "CRITICAL", Severity.CRITICAL: "CRITICAL",
@@ -154,12 +162,13 @@ class RerunLogger:
     this much wall time (``clock``) has passed since the last send (checked at each call);
     ``math.inf`` disables the timer (batch files). ``glyph``: vehicle drawing (default
     from data/vehicles/ellipsled.toml). ``vis_scale``: the vehicle glyph in the km-scaled
-    trajectory view is drawn this many times its size.
+    trajectory view is drawn this many times its size. ``radius_m``: the planet's, for the
+    predicted miss (default data/planets/mars.toml).
     """
 
     def __init__(self, rec: rr.RecordingStream | None, *, flush_rows: int = 50, flush_s: float = 1.0,
                  glyph: VehicleGlyph | None = None, vis_scale: float = 2000.0,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, radius_m: float | None = None):
         if not isinstance(flush_rows, int) or flush_rows < 1:
             raise ValueError(f"RerunLogger: flush_rows must be an int >= 1, got {flush_rows!r}")
         if not flush_s > 0:
@@ -170,12 +179,16 @@ class RerunLogger:
         self.clock = clock
         self.glyph = glyph if glyph is not None else glyph_from_vehicle()
         self.vis_scale = float(vis_scale)
+        self.radius_m = float(radius_m) if radius_m is not None else load_planet("mars").radius_m
         self._buf = {src: _Buffer(f, flush_rows) for src, f in SOURCE_FIELDS.items()}
         self._events: list[tuple[int, float, str, str]] = []
         self._last_flush = clock()
         self._last_health: np.ndarray | None = None
         self._last_mode: float | None = None
         self._last_r_km: np.ndarray | None = None
+        self._last_track: np.ndarray | None = None     # last ground-track point (lon, lat, 0) [deg]
+        self._last_cycles: float | None = None         # guid_cycles of the last predicted point logged
+        self._last_target: tuple | None = None
         self._last_k, self._last_t, self._dt_est = 0, 0.0, None
         self.stats = {"rows_truth": 0, "rows_fsw": 0, "events": 0, "send_columns": 0, "log": 0,
                       "flushes": 0, "bad_values": 0, "skipped_rows": 0, "send_errors": 0}
@@ -351,6 +364,7 @@ class RerunLogger:
         self._log("attitude/N", rr.Arrows3D(origins=np.zeros((3, 3)), vectors=np.eye(3) * L,
                                             colors=[(255, 80, 80), (80, 255, 80), (80, 80, 255)],
                                             labels=["N1", "N2", "N3"]), static=True)
+        self._log("map", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)     # x east (lon), y north (lat)
 
     def _flush_source(self, source: str) -> None:
         b = self._buf[source]
@@ -384,7 +398,9 @@ class RerunLogger:
             self._send(c.entity, index_for(mask), rr.Scalars.columns(scalars=v[mask]))
         if source == TRUTH:
             self._flush_truth_3d(a, index_for)
+            self._flush_track(a, k, t_s)
         else:
+            self._flush_guidance_map(a, k, t_s)
             self._flush_fsw_special(a, k, t_s, index_for)
         for arr in b.a.values():
             arr[:n] = np.nan
@@ -404,6 +420,61 @@ class RerunLogger:
                 strips = np.stack([prev, r_km], axis=1)          # (n, 2, 3): segment per step
                 self._send("world/trajectory", index_for(m_pos), rr.LineStrips3D.columns(strips=strips))
                 self._last_r_km = r_km[-1].copy()
+
+    def _flush_track(self, a: dict, k: np.ndarray, t_s: np.ndarray) -> None:
+        """Ground track: one segment per MAP_EVERY steps, from the last point logged."""
+        lat, lon = a["lat_rad"], a["lon_rad"]
+        m = np.isfinite(lat) & np.isfinite(lon) & (k % MAP_EVERY == 0)
+        if not m.any():
+            return
+        pts = np.stack([np.degrees(lon[m]), np.degrees(lat[m]), np.zeros(int(m.sum()))], axis=1)
+        prev = np.vstack([self._last_track if self._last_track is not None else pts[:1], pts[:-1]])
+        wrap = np.abs(pts[:, 0] - prev[:, 0]) > 180.0          # across the antimeridian: no segment
+        prev[wrap] = pts[wrap]
+        self._send("map/track", _time_columns(k[m], t_s[m]),
+                   rr.LineStrips3D.columns(strips=np.stack([prev, pts], axis=1)))
+        self._last_track = pts[-1].copy()
+
+    def _flush_guidance_map(self, a: dict, k: np.ndarray, t_s: np.ndarray) -> None:
+        """The target when it changes; the predicted deploy point once per guidance answer."""
+        flags = np.nan_to_num(a["guid_flags"]).astype(np.int64)
+        rows = np.nonzero(flags & GUID_TARGET)[0]
+        if len(rows):
+            i = rows[-1]
+            tgt = (float(a["target_lon_rad"][i]), float(a["target_lat_rad"][i]))
+            if tgt != self._last_target and all(map(math.isfinite, tgt)):
+                self._last_target = tgt
+                self._at(int(k[i]), float(t_s[i]))
+                self._log("map/target", rr.Points3D([[math.degrees(tgt[0]), math.degrees(tgt[1]), 0.0]],
+                                                    labels=["target"], colors=[(255, 60, 60)],
+                                                    radii=rr.Radius.ui_points(7.0)))
+        rows = np.nonzero(flags & GUID_PREDICTION)[0]
+        cyc, plat, plon = a["guid_cycles"][rows], a["pred_lat_rad"][rows], a["pred_lon_rad"][rows]
+        ok = np.isfinite(cyc) & np.isfinite(plat) & np.isfinite(plon)
+        rows, cyc, plat, plon = rows[ok], cyc[ok], plat[ok], plon[ok]
+        if not len(rows):
+            return
+        last = self._last_cycles if self._last_cycles is not None else -1.0
+        new = np.diff(np.concatenate(([last], cyc))) != 0         # a new answer at these rows
+        if not new.any():
+            return
+        self._last_cycles = float(cyc[-1])
+        ni, plat, plon = rows[new], plat[new], plon[new]
+        pts = np.stack([np.degrees(plon), np.degrees(plat), np.zeros(len(ni))], axis=1)
+        idx = _time_columns(k[ni], t_s[ni])
+        self._send("map/predicted", idx, rr.Points3D.columns(positions=pts, radii=np.full(len(ni), -4.0),
+                                                             colors=np.tile([255, 200, 0], (len(ni), 1))))
+        if self._last_target is not None:
+            tlon, tlat = self._last_target
+            miss = [_great_circle_m(la, lo, tlat, tlon, self.radius_m) * 1e-3 for la, lo in zip(plat, plon)]
+            self._send("guidance/predicted_miss_km", idx, rr.Scalars.columns(scalars=np.array(miss)))
+
+    def _at(self, k: int, t_s: float) -> None:
+        try:
+            self.rec.set_time("step", sequence=k)
+            self.rec.set_time("sim_time", duration=np.timedelta64(int(round(t_s * 1e9)), "ns"))
+        except Exception:
+            self.stats["send_errors"] += 1
 
     def _flush_fsw_special(self, a: dict, k: np.ndarray, t_s: np.ndarray, index_for) -> None:
         jets = a["jets_cmd"]
@@ -439,11 +510,7 @@ class RerunLogger:
             self._send("jets/health", _time_columns(k[ci], t_s[ci]),
                        rr.StateChange.columns(state=names).partition(np.full(len(ci), N_JETS)))
             for i, c in zip(ci, codes):      # rare (a fault): one bar chart per change
-                try:
-                    self.rec.set_time("step", sequence=int(k[i]))
-                    self.rec.set_time("sim_time", duration=np.timedelta64(int(round(t_s[i] * 1e9)), "ns"))
-                except Exception:
-                    self.stats["send_errors"] += 1
+                self._at(int(k[i]), float(t_s[i]))
                 self._log("jets/health_code", rr.BarChart(c.astype(float)))
         mode = a["mode"]
         changed = []
@@ -464,6 +531,12 @@ class RerunLogger:
         t = np.array([e[1] for e in ev])
         self._send("events", _time_columns(k, t),
                    rr.TextLog.columns(text=[e[2] for e in ev], level=[e[3] for e in ev]))
+
+
+def _great_circle_m(lat1: float, lon1: float, lat2: float, lon2: float, radius_m: float) -> float:
+    """Haversine distance [m] on a sphere of radius_m."""
+    a = math.sin((lat2 - lat1) / 2) ** 2 + math.cos(lat1) * math.cos(lat2) * math.sin((lon2 - lon1) / 2) ** 2
+    return 2.0 * radius_m * math.asin(min(1.0, math.sqrt(a)))
 
 
 def _has(row, name: str) -> bool:

@@ -66,7 +66,7 @@ def record_history(history, events: list, path: Path, blueprint: bool = True, *,
     bp = default_blueprint() if blueprint else None
     rec.set_sinks(rr.FileSink(path), default_blueprint=bp)
     rec.send_recording_name(path.stem)
-    log = RerunLogger(rec, flush_rows=BLOCK_ROWS, flush_s=math.inf, glyph=glyph)
+    log = RerunLogger(rec, flush_rows=BLOCK_ROWS, flush_s=math.inf, glyph=glyph, radius_m=planet.radius_m)
     k, t_s, truth, fsw = history_blocks(history, planet)
     log.log_block(TRUTH, k, t_s, truth)
     log.log_block(FSW, k, t_s, fsw)

@@ -105,6 +105,7 @@ class FlightSoftware:
         reg.bind("SensorMonitor", self.monitor.set_param)
         reg.bind("Failsafes", self.failsafes.set_param)
         reg.bind("JetDriver", self.driver.set_param)
+        reg.bind("EntryGuidance", self.entry.set_param if self.entry is not None else self._npc_not_flown)
         reg.check_bound()
 
         if start_mode != Mode.STANDBY:
@@ -480,6 +481,10 @@ class FlightSoftware:
         new value); after a reconfiguration, assess again so the reference uses it now."""
         if self.controllability is not None:
             self.assess_controllability(self.t_s)
+
+    def _npc_not_flown(self, name: str, value: float) -> None:
+        """npc.* in a profile-mode flight: refused, so no value is acknowledged and ignored."""
+        raise ValueError(f"{name}: not flown in mode {self.scenario.guidance_mode}")
 
     def _set_allocator_param(self, name: str, value: float) -> None:
         if name == "allocator.fault_tolerance":

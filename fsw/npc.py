@@ -37,29 +37,29 @@ _rho_exp = njit(cache=True, nogil=True)(atmosphere.density_exponential)
 _rho_poly = njit(cache=True, nogil=True)(atmosphere.density_polynomial)
 _speed_of_sound = njit(cache=True, nogil=True)(atmosphere.speed_of_sound)
 
-# Read once, at construction, into the predictor, the estimator and the corridor: not settable
-# in flight until those have an owner's hook (fsw/params.py ParamRegistry refuses a
-# ground-settable parameter without one).
+# Ground-settable: EntryGuidance.set_param takes a new value, and the next guidance cycle
+# applies it to the predictor, the corrector, the estimator, the path limits and the lateral
+# logic before it starts its correction (never inside one).
 PARAMS = [
-    Param("npc.bank_final_deg", 0.0, 180.0, "deg", "bank magnitude at the deploy energy (phi_f)", ground_settable=False),
-    Param("npc.bank_min_deg", 0.0, 90.0, "deg", "lower bound of phi_0", ground_settable=False),
-    Param("npc.bank_max_deg", 90.0, 180.0, "deg", "upper bound of phi_0", ground_settable=False),
-    Param("npc.h_deploy_m", 0.0, 5e4, "m", "altitude that defines the deploy energy e_f", ground_settable=False),
-    Param("npc.dt_pred_s", 0.1, 10.0, "s", "predictor RK4 step", ground_settable=False),
-    Param("npc.max_iter", 1, 20, "", "predictions per guidance cycle (at most)", integer=True, ground_settable=False),
-    Param("npc.tol_m", 1.0, 1e5, "m", "range miss accepted by the corrector", ground_settable=False),
-    Param("npc.k_tau_s", 0.1, 100.0, "s", "time constant of the density and L/D estimates", ground_settable=False),
-    Param("npc.k_min", 0.05, 1.0, "", "lower bound of the density and L/D scale estimates", ground_settable=False),
-    Param("npc.k_max", 1.0, 20.0, "", "upper bound of the density and L/D scale estimates", ground_settable=False),
-    Param("npc.k_drag_min", 0.0, 10.0, "m/s^2", "modelled drag below which the estimates hold", ground_settable=False),
-    Param("npc.dpsi_hi_deg", 0.0, 45.0, "deg", "heading corridor half-width at entry speed", ground_settable=False),
-    Param("npc.dpsi_lo_deg", 0.0, 45.0, "deg", "heading corridor half-width at deploy speed", ground_settable=False),
-    Param("npc.rev_gap_s", 0.0, 300.0, "s", "minimum time between bank reversals", ground_settable=False),
-    Param("npc.v_norev_mps", 0.0, 8000.0, "m/s", "no reversal below this speed", ground_settable=False),
-    Param("npc.limit_frac", 0.1, 1.0, "", "path limits enforced at this fraction of the vehicle's", ground_settable=False),
-    Param("npc.hdot_tau_s", 0.5, 200.0, "s", "altitude-rate feedback: time to close on the limit altitude", ground_settable=False),
-    Param("npc.hdot_gain", 0.0, 1.0, "s/m", "altitude-rate feedback: change of cos(bank) per m/s", ground_settable=False),
-    Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held", ground_settable=False),
+    Param("npc.bank_final_deg", 0.0, 180.0, "deg", "bank magnitude at the deploy energy (phi_f)"),
+    Param("npc.bank_min_deg", 0.0, 90.0, "deg", "lower bound of phi_0"),
+    Param("npc.bank_max_deg", 90.0, 180.0, "deg", "upper bound of phi_0"),
+    Param("npc.h_deploy_m", 0.0, 5e4, "m", "altitude that defines the deploy energy e_f"),
+    Param("npc.dt_pred_s", 0.1, 10.0, "s", "predictor RK4 step"),
+    Param("npc.max_iter", 1, 20, "", "predictions per guidance cycle (at most)", integer=True),
+    Param("npc.tol_m", 1.0, 1e5, "m", "range miss accepted by the corrector"),
+    Param("npc.k_tau_s", 0.1, 100.0, "s", "time constant of the density and L/D estimates"),
+    Param("npc.k_min", 0.05, 1.0, "", "lower bound of the density and L/D scale estimates"),
+    Param("npc.k_max", 1.0, 20.0, "", "upper bound of the density and L/D scale estimates"),
+    Param("npc.k_drag_min", 0.0, 10.0, "m/s^2", "modelled drag below which the estimates hold"),
+    Param("npc.dpsi_hi_deg", 0.0, 45.0, "deg", "heading corridor half-width at entry speed"),
+    Param("npc.dpsi_lo_deg", 0.0, 45.0, "deg", "heading corridor half-width at deploy speed"),
+    Param("npc.rev_gap_s", 0.0, 300.0, "s", "minimum time between bank reversals"),
+    Param("npc.v_norev_mps", 0.0, 8000.0, "m/s", "no reversal below this speed"),
+    Param("npc.limit_frac", 0.1, 1.0, "", "path limits enforced at this fraction of the vehicle's"),
+    Param("npc.hdot_tau_s", 0.5, 200.0, "s", "altitude-rate feedback: time to close on the limit altitude"),
+    Param("npc.hdot_gain", 0.0, 1.0, "s/m", "altitude-rate feedback: change of cos(bank) per m/s"),
+    Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
 ]
 
 # flat constants vector of the predictor (indices are compile-time constants)
@@ -553,7 +553,10 @@ class EntryGuidance:
                  realtime: bool = False, apply_delay_s: float = 0.5):
         if scenario.target_lat_rad is None:
             raise ValueError(f"{scenario.file}: target: guidance mode \"npc\" needs a [target]")
-        self.scenario, self.params, self.events = scenario, params, events
+        # its own copy of the parameters: a ground set reaches it between corrections
+        # (set_param, applied by the next cycle), never while the worker predicts
+        self.scenario, self.params, self.events = scenario, dict(params), events
+        self._pending: dict[str, float] = {}
         veh, pl = scenario.vehicle, scenario.planet
         self.c = predictor_constants(scenario, params)
         self.mu, self.R, self.omega = pl.mu_m3ps2, pl.radius_m, pl.omega_radps
@@ -689,6 +692,8 @@ class EntryGuidance:
     # ------------------------------------------------------------------ rate groups
     def cycle(self, nav, t_s: float) -> None:
         """The guidance cycle (slow rate group): lateral decision, then the correction."""
+        if self._pending:
+            self._take_params(t_s)
         x = planet_fixed(nav.r_N, nav.v_N, t_s, self.omega)
         dpsi, ang = heading_error(x, self.target_u)
         self.range_to_go_m = ang * self.R
@@ -774,6 +779,45 @@ class EntryGuidance:
         self.bank_cmd = path_limited_bank(self.bank0, nav.h_m, hdot, n_g, q, self.n_lim, self.q_lim, self.H,
                                           self.params["npc.hdot_tau_s"], self.params["npc.hdot_gain"])
         self.shaper.command(self.lateral.sign * self.bank_cmd)
+
+    # ------------------------------------------------------------------ parameters
+    def set_param(self, name: str, value: float) -> None:
+        """Owner's hook (fsw/params.py): a new npc.* value, bounds already checked, applied by
+        the next guidance cycle once no correction is running. ValueError (nothing changed)
+        when it would leave the phi_0 bounds empty."""
+        lo = value if name == "npc.bank_min_deg" else self._pending.get("npc.bank_min_deg", self.params["npc.bank_min_deg"])
+        hi = value if name == "npc.bank_max_deg" else self._pending.get("npc.bank_max_deg", self.params["npc.bank_max_deg"])
+        if not lo < hi:
+            raise ValueError(f"{name}: needs bank_min < bank_max ({lo:g}, {hi:g})")
+        self._pending[name] = float(value)
+
+    def _take_params(self, t_s: float) -> None:
+        """Apply the pending sets where the construction put each value (the worker is idle:
+        lockstep has its answer; in real time a cycle with a correction still running waits)."""
+        with self._lock:
+            if self._busy:
+                return
+        p, scn = self.params, self.scenario
+        p.update(self._pending)
+        names, self._pending = set(self._pending), {}
+        self.bank_f = math.radians(p["npc.bank_final_deg"])
+        self.bank_lo, self.bank_hi = math.radians(p["npc.bank_min_deg"]), math.radians(p["npc.bank_max_deg"])
+        self.bank0 = min(self.bank_hi, max(self.bank_lo, self.bank0))      # the warm start within them
+        if "npc.h_deploy_m" in names:
+            self.ef = deploy_energy(scn, p["npc.h_deploy_m"])
+            self.lateral.v_lo = scn.end_speed_mps or scn.end_mach * atmosphere.speed_of_sound(p["npc.h_deploy_m"])
+        c = predictor_constants(scn, p)                 # path limits and their feedback
+        c[C_KRHO], c[C_KLD] = self.c[C_KRHO], self.c[C_KLD]
+        self.c[:] = c
+        self.n_lim, self.q_lim = self.c[C_NLIM], self.c[C_QLIM]
+        est = self.estimator
+        est.tau_s, est.k_min, est.k_max, est.drag_min = p["npc.k_tau_s"], p["npc.k_min"], p["npc.k_max"], \
+            p["npc.k_drag_min"]
+        lat = self.lateral
+        lat.dpsi_hi, lat.dpsi_lo = math.radians(p["npc.dpsi_hi_deg"]), math.radians(p["npc.dpsi_lo_deg"])
+        lat.gap_s, lat.v_norev, lat.t_settle = p["npc.rev_gap_s"], p["npc.v_norev_mps"], p["npc.tgo_freeze_s"]
+        for n in sorted(names):
+            self.events.emit(t_s, Severity.INFO, "guidance", "npc_param", f"GUIDANCE {n.upper()} {p[n]:g}"[:50])
 
     def stats(self) -> dict:
         n = min(self.cycles, self.STATS)

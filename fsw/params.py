@@ -94,7 +94,7 @@ def _flatten(d: dict, prefix: str = "") -> dict:
 
 PARAM_ID_LEN = 16
 PARAM_PREFIX = {"control": "C_", "allocator": "A_", "fdir": "F_", "driver": "D_", "executive": "X_",
-                "guidance": "G_"}
+                "guidance": "G_", "npc": "N_"}
 
 
 def param_id(name: str) -> str:

@@ -76,7 +76,7 @@ def test_npc_status_carries_the_flight_softwares_own_guidance_figures(guided):
     # the split is a decomposition of the miss (small angles: Pythagoras on the sphere)
     assert math.hypot(m.downrange_error, m.crossrange_error) == pytest.approx(m.predicted_miss, rel=0.02, abs=50.0)
     # no root / frozen flags follow the corrector's own criteria
-    assert bool(m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT) == (abs(e.miss_m) > rig.fsw.params["npc.tol_m"])
+    assert bool(m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT) == (abs(e.miss_m) > e.params["npc.tol_m"])
     assert not m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_FROZEN
     lp = rig.fsw.controllability
     assert bool(m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_LP) == (lp is not None)

@@ -7,6 +7,7 @@ from fsw.flightsoftware.all_params, and float32 rounding done by struct.
 """
 from __future__ import annotations
 
+import math
 import struct
 from pathlib import Path
 
@@ -55,6 +56,13 @@ STABLE_IDS = {
     "fdir.safe_track_s": "F_SAFE_TRACK_S", "fdir.sigma_tol": "F_SIGMA_TOL", "fdir.stale_n": "F_STALE_N",
     "fdir.v_max_mps": "F_V_MAX_MPS", "guidance.authority_use": "G_AUTHORITY_USE",
     "guidance.trim_max_deg": "G_TRIM_MAX_DEG",
+    "npc.bank_final_deg": "N_BANK_FINAL_DEG", "npc.bank_max_deg": "N_BANK_MAX_DEG",
+    "npc.bank_min_deg": "N_BANK_MIN_DEG", "npc.dpsi_hi_deg": "N_DPSI_HI_DEG", "npc.dpsi_lo_deg": "N_DPSI_LO_DEG",
+    "npc.dt_pred_s": "N_DT_PRED_S", "npc.h_deploy_m": "N_H_DEPLOY_M", "npc.hdot_gain": "N_HDOT_GAIN",
+    "npc.hdot_tau_s": "N_HDOT_TAU_S", "npc.k_drag_min": "N_K_DRAG_MIN", "npc.k_max": "N_K_MAX",
+    "npc.k_min": "N_K_MIN", "npc.k_tau_s": "N_K_TAU_S", "npc.limit_frac": "N_LIMIT_FRAC",
+    "npc.max_iter": "N_MAX_ITER", "npc.rev_gap_s": "N_REV_GAP_S", "npc.tgo_freeze_s": "N_TGO_FREEZE_S",
+    "npc.tol_m": "N_TOL_M", "npc.v_norev_mps": "N_V_NOREV_MPS",
 }
 
 
@@ -131,6 +139,8 @@ def _set_and_wait(rig, pid, value):
     ("C_LAMBDA_RADPS", "control.lambda_radps", float("inf"), "finite"),
     ("F_PERSIST_N", "fdir.persist_n", 2.5, "integer"),
     ("F_DEGRADED_HI", "fdir.degraded_hi", 0.1, "degraded_lo"),            # consistency with degraded_lo
+    ("N_BANK_MAX_DEG", "npc.bank_max_deg", 100.0, "not flown in mode profile"),   # case1: no npc
+    ("N_K_MAX", "npc.k_max", 0.5, "outside"),                                 # bounds hold in any mode
 ])
 def test_refused_set_answers_the_unchanged_value_and_says_why(rig, pid, name, bad, why):
     before = rig.fsw.params[name]
@@ -141,6 +151,23 @@ def test_refused_set_answers_the_unchanged_value_and_says_why(rig, pid, name, ba
     assert refusal and why in refusal[-1] and len(refusal[-1]) <= 50
     sev = [e.severity for e in rig.gcs.state.events if e.text.startswith(f"{pid} REFUSED")]
     assert sev[-1] == mav.MAV_SEVERITY_WARNING
+
+
+def test_npc_bounds_must_stay_ordered_and_a_set_applies_at_the_next_guidance_cycle(tmp_path):
+    r = Rig(tmp_path, scenario="guided-nominal")
+    try:
+        r.fly(10)
+        e = r.fsw.entry
+        assert _set_and_wait(r, "N_BANK_MAX_DEG", 90.0) == 90.0
+        v = _set_and_wait(r, "N_BANK_MIN_DEG", 90.0)                     # would empty [min, max)
+        assert v == f32(10.0) and r.fsw.params["npc.bank_min_deg"] == 10.0
+        assert any(t.startswith("N_BANK_MIN_DEG REFUSED: needs bank_min < bank_max") for t in r.texts())
+        assert e.bank_hi == pytest.approx(math.radians(165.0))         # not before the next cycle
+        r.fly(50)                                                     # the guidance cycle at 1 s
+        assert e.bank_hi == pytest.approx(math.radians(90.0)) and e.params["npc.bank_max_deg"] == 90.0
+        assert "GUIDANCE NPC.BANK_MAX_DEG 90" in r.texts()
+    finally:
+        r.close()
 
 
 def test_unknown_and_not_settable_ids_get_no_value_but_a_statustext(rig):

@@ -13,6 +13,7 @@ sensor fault in the frame path (a transducer offset, a corrupted vector, frames 
 """
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from typing import Callable
@@ -44,8 +45,8 @@ def f32(x: float) -> float:
 class Flight:
     """FSW (in its Topology, ground link in RG2) + plant + ground station, stepped here."""
 
-    def __init__(self, tmp_path):
-        self.scn = load_scenario("case1").with_(faults=())
+    def __init__(self, tmp_path, scenario: str = "case1"):
+        self.scn = load_scenario(scenario).with_(faults=())
         self.plant = Plant(self.scn)
         self.fsw = FlightSoftware(self.scn)
         self.topo = Topology(self.fsw, LockstepClock())
@@ -280,10 +281,56 @@ class Case:
     name: str
     value: float
     observe: Callable[[Flight], object]
-    relation: str                       # set vs default: ">", "<", or "==" with ``expect``
+    relation: str                       # set vs default: ">", "<", "!=", or "==" with ``expect``
     expect: tuple = ()                  # (with the set, without it) for "=="
     setup: Callable[[Flight], None] | None = None
     at: int = 25                        # cycles flown before the set
+    scenario: str = "case1"             # flown with its scheduled faults removed
+
+
+# ------------------------------------------------------------------ guidance mode npc
+# (guided-nominal; a set is applied by the next guidance cycle, at 1 s, so observations
+# start with the answer of that cycle: index 1 of the answer histories)
+GUIDED = "guided-nominal"
+
+
+def npc_after(fn, n: int = 110) -> Callable[[Flight], float]:
+    """fn(EntryGuidance, answers since the set) after n cycles (two answers from the set on)."""
+    def obs(fl: Flight) -> float:
+        fl.fly(n)
+        e = fl.fsw.entry
+        return fn(e, slice(1, min(e.cycles, e.STATS)))
+    return obs
+
+
+def bank_cmd_mean(fl: Flight, n: int = 110) -> float:
+    acc = []
+    fl.fly(n, every=lambda f: acc.append(f.fsw.entry.bank_cmd))
+    return float(np.mean(acc))
+
+
+def reverses(speed: str, dpsi_deg: float, *, t_go_s: float = math.inf, t_rev_s: float = 0.0,
+             second_after_s: float | None = None) -> Callable[[Flight], bool]:
+    """Does the flight's lateral logic (its parameters as the next guidance cycle left them)
+    decide a reversal on a scripted input: heading error dpsi_deg beyond the side the bank
+    turns away from, at the entry speed ("hi") or the deploy speed ("lo"), with the predicted
+    time to go and reversal time given; with ``second_after_s``, a first reversal is
+    decided (large error) and this one asked that many seconds later."""
+    def obs(fl: Flight) -> bool:
+        fl.fly(60)
+        lat = fl.fsw.entry.lateral
+        V, t = (lat.v_hi if speed == "hi" else lat.v_lo), fl.fsw.t_s
+        if second_after_s is not None:
+            assert lat.update(t, V, math.radians(30.0) * lat.sign)
+            t += second_after_s
+        return lat.update(t, V, math.radians(dpsi_deg) * lat.sign, t_go_s=t_go_s, t_rev_s=t_rev_s)
+    return obs
+
+
+def half_sensed_accel(fl: Flight) -> None:
+    """Estimator from the start (k_drag_min 0) on a sensed acceleration halved: K_rho < 1."""
+    fl.param_set("npc.k_drag_min", 0.0)
+    fl.tamper = lambda f: f["accel_B"].__imul__(0.5)
 
 
 R_MARS = 3396.2e3
@@ -360,6 +407,45 @@ CASES = [
          lambda fl: [fl.command("inject", str(JET), "off"), fl.fly(100), fl.fsw.guidance.profile.accel_limit_radps2][2],
          "<"),
     Case("guidance.trim_max_deg", 0.0, stuck_pair_controllable, "==", (False, True), at=3000),
+    # predictor-corrector (mode npc): the corrector's answer phi_0. A higher final bank flies
+    # shorter: less bank is needed early; the bounds clip it; a deploy energy taken higher
+    # reaches phi_f earlier (more lift): more bank early
+    Case("npc.bank_final_deg", 150.0, npc_after(lambda e, a: e.bank0), "<", at=10, scenario=GUIDED),
+    Case("npc.bank_max_deg", 90.0, npc_after(lambda e, a: e.bank0), "<", at=10, scenario=GUIDED),
+    Case("npc.bank_min_deg", 90.0, npc_after(lambda e, a: e.bank0), ">", at=10, scenario=GUIDED,
+         setup=ground(("param", "npc.bank_final_deg", 150.0))),
+    Case("npc.h_deploy_m", 30000.0, npc_after(lambda e, a: e.bank0), ">", at=10, scenario=GUIDED),
+    # ... its effort: predictions per cycle (a large correction needed: phi_f moved first); the
+    # integration step: another predicted deploy point, so another answer
+    Case("npc.max_iter", 1, npc_after(lambda e, a: int(e.calls[a].max())), "<", at=10, scenario=GUIDED,
+         setup=ground(("param", "npc.bank_final_deg", 150.0))),
+    Case("npc.tol_m", 1e5, npc_after(lambda e, a: int(e.calls[a].max())), "<", at=10, scenario=GUIDED,
+         setup=ground(("param", "npc.bank_final_deg", 150.0))),
+    Case("npc.dt_pred_s", 10.0, npc_after(lambda e, a: (e.bank0, e.pred_h_m, e.t_go_s)), "!=", at=10,
+         scenario=GUIDED),
+    # density estimate (true density 1.2 x the model)
+    Case("npc.k_drag_min", 0.0, npc_after(lambda e, a: e.estimator.updates), ">", at=10, scenario=GUIDED),
+    Case("npc.k_max", 1.0, npc_after(lambda e, a: e.estimator.k_rho), "<", at=10, scenario=GUIDED,
+         setup=ground(("param", "npc.k_drag_min", 0.0))),
+    Case("npc.k_tau_s", 100.0, npc_after(lambda e, a: abs(e.estimator.k_rho - 1.0)), "<", at=10, scenario=GUIDED,
+         setup=ground(("param", "npc.k_drag_min", 0.0))),
+    Case("npc.k_min", 1.0, npc_after(lambda e, a: e.estimator.k_rho), ">", at=10, scenario=GUIDED,
+         setup=half_sensed_accel),
+    # path-limit feedback (altitude rate): closing on the limits sooner, or lower limits, lift
+    # the bank up (smaller magnitude); no gain, no feedback
+    Case("npc.hdot_tau_s", 200.0, bank_cmd_mean, "<", at=10, scenario=GUIDED),
+    Case("npc.limit_frac", 0.1, bank_cmd_mean, "<", at=10, scenario=GUIDED,
+         setup=ground(("param", "npc.hdot_tau_s", 50.0))),
+    Case("npc.hdot_gain", 0.0, bank_cmd_mean, ">", at=10, scenario=GUIDED,
+         setup=ground(("param", "npc.hdot_tau_s", 200.0))),
+    # lateral logic: the reversal decisions it makes on scripted inputs
+    Case("npc.dpsi_hi_deg", 2.0, reverses("hi", 5.0), "==", (True, False), at=10, scenario=GUIDED),
+    Case("npc.dpsi_lo_deg", 5.0, reverses("lo", 2.0), "==", (False, True), at=10, scenario=GUIDED),
+    Case("npc.rev_gap_s", 300.0, reverses("hi", 30.0, second_after_s=30.0), "==", (False, True), at=10,
+         scenario=GUIDED),
+    Case("npc.v_norev_mps", 8000.0, reverses("hi", 30.0), "==", (False, True), at=10, scenario=GUIDED),
+    Case("npc.tgo_freeze_s", 300.0, reverses("hi", 30.0, t_go_s=100.0, t_rev_s=10.0), "==", (False, True),
+         at=10, scenario=GUIDED),
 ]
 
 
@@ -370,7 +456,7 @@ def test_every_ground_settable_parameter_has_a_case():
 def fly_case(tmp_path, case: Case, apply: bool):
     where = tmp_path / ("set" if apply else "default")
     where.mkdir()
-    fl = Flight(where)
+    fl = Flight(where, case.scenario)
     try:
         fl.after_set = None
         fl.fly(case.at)
@@ -396,6 +482,8 @@ def test_a_ground_set_changes_what_the_parameter_controls(tmp_path, case):
         assert with_set > without, (with_set, without)
     elif case.relation == "<":
         assert with_set < without, (with_set, without)
+    elif case.relation == "!=":
+        assert with_set != without, (with_set, without)
     else:
         want_set, want_default = case.expect
         assert with_set == want_set, (with_set, without)

@@ -253,9 +253,9 @@ def guidance_status(fsw, ms: int):
             if _finite(miss, down, cross):
                 flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_PREDICTION
                 plat, plon, palt, tgo, b0 = lat_f, lon_f, e.pred_h_m, e.t_go_s, e.bank0
-                if not abs(e.miss_m) <= fsw.params["npc.tol_m"]:            # solve_bank's criterion
+                if not abs(e.miss_m) <= e.params["npc.tol_m"]:              # solve_bank's criterion
                     flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT
-                if e.t_go_s < fsw.params["npc.tgo_freeze_s"]:              # EntryGuidance holds phi_0
+                if e.t_go_s < e.params["npc.tgo_freeze_s"]:                # EntryGuidance holds phi_0
                     flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_FROZEN
             else:
                 miss = down = cross = 0.0

@@ -72,6 +72,7 @@ class GroundConsole(App):
     #top { height: 1; }
     #main { height: 1fr; }
     #left { width: 46; }
+    #guidance { height: auto; max-height: 12; }
     #right { width: 1fr; }
     .panel { border: round $primary; padding: 0 1; }
     #events { height: 1fr; border: round $primary; }
@@ -121,10 +122,10 @@ class GroundConsole(App):
         with Horizontal(id="main"):
             with Vertical(id="left"):
                 yield Static(id="entry", classes="panel")
-                yield Static(id="guidance", classes="panel")
                 yield Static(id="jets", classes="panel")
                 yield Static(id="timing", classes="panel")
             with Vertical(id="right"):
+                yield Static(id="guidance", classes="panel")
                 yield RichLog(id="events", max_lines=500, markup=False)
                 yield RichLog(id="acks", max_lines=100, markup=False)
         yield Input(placeholder="command (e.g. inject 17 off) - Enter to send, Esc to leave", id="cmdline")
@@ -261,13 +262,20 @@ class GroundConsole(App):
         self.query_one("#jets", Static).update(self._jet_table())
         self.query_one("#timing", Static).update(self._timing_table())
 
-    def _entry_table(self) -> Table:
+    @staticmethod
+    def _figures(title: str, present: bool) -> Table:
+        """A two-column grid (bold name, right-aligned value); "-" when nothing arrived yet."""
         t = Table.grid(padding=(0, 1))
         t.add_column(style="bold")
         t.add_column(justify="right")
+        if not present:
+            t.add_row(title, "-")
+        return t
+
+    def _entry_table(self) -> Table:
         es = self.client.state.latest.get("ELLIPSLED_ENTRY_STATE")
+        t = self._figures("entry state", es is not None)
         if es is None:
-            t.add_row("entry state", "-")
             return t
         err = math.remainder(es.bank - es.bank_ref, 2 * math.pi)
         t.add_row("altitude", f"{es.altitude / 1e3:8.2f} km")
@@ -287,12 +295,9 @@ class GroundConsole(App):
 
     def _guidance_table(self) -> Table:
         """ELLIPSLED_GUIDANCE_STATUS; a group whose flag is clear shows "-"."""
-        t = Table.grid(padding=(0, 1))
-        t.add_column(style="bold")
-        t.add_column(justify="right")
         g = self.client.state.latest.get("ELLIPSLED_GUIDANCE_STATUS")
+        t = self._figures("guidance", g is not None)
         if g is None:
-            t.add_row("guidance", "-")
             return t
 
         def has(bit: int) -> bool:

@@ -175,3 +175,29 @@ def test_deploy_errors_split_a_known_geometry():
     # on the target: no path, the whole miss is downrange
     assert tm.deploy_errors((0.1, 0.2), (0.1, 0.2), (0.1, 0.21), R)[1:] == pytest.approx(
         (haversine(0.1, 0.2, 0.1, 0.21, R), 0.0))
+
+
+def test_the_fsw_state_record_carries_the_same_guidance_figures_through_the_codec(guided):
+    """What the live bridge draws the map from (FSW_STATE v2, ellipsled.history.guidance_fields)
+    survives the codec (which refuses non-finite numbers) and equals the corrector's values;
+    a non-finite predicted point goes out as 0 with its flag clear, never refused."""
+    from ellipsled.history import guidance_fields
+    from interfaces import codec, records
+    e, fsw = guided.fsw.entry, guided.fsw
+    c = codec.Codec.for_schema("FSW_STATE")
+    st = records.new(records.FSW_STATE)
+    (st["guid_cycles"], st["guid_flags"], st["target_lat_rad"], st["target_lon_rad"], st["pred_lat_rad"],
+     st["pred_lon_rad"], st["bank_cmd_rad"]) = guidance_fields(fsw)
+    got = c.decode(c.encode(st, 1, 0))
+    assert got is not None and int(got["guid_cycles"]) == e.cycles
+    assert int(got["guid_flags"]) == records.GUID_TARGET | records.GUID_PREDICTION | records.GUID_NPC
+    assert (float(got["pred_lat_rad"]), float(got["pred_lon_rad"])) == tuple(e.pred_impact)
+    assert float(got["bank_cmd_rad"]) == e.bank_cmd
+    saved = e.pred_impact.copy()
+    try:
+        e.pred_impact[0] = math.nan
+        fields = guidance_fields(fsw)
+    finally:
+        e.pred_impact[:] = saved
+    assert not fields[1] & records.GUID_PREDICTION and fields[4] == fields[5] == 0.0
+    assert all(math.isfinite(x) for x in fields)

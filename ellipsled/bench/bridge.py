@@ -59,6 +59,8 @@ def _rows(n: int, rng: np.random.Generator) -> tuple[list[dict], list[dict]]:
                 out[f] = float(i // int(RATE_HZ))
             elif f == "guid_flags":
                 out[f] = float(GUID_TARGET | GUID_PREDICTION | GUID_NPC)
+            elif f in ("target_lat_rad", "target_lon_rad"):      # one target per flight
+                out[f] = 0.1
             elif f in ("jets_cmd",):
                 out[f] = (rng.random(shp) < 0.2).astype(np.uint8)
             elif f in ("health", "mode"):

@@ -183,3 +183,24 @@ def test_absolute_targets_judged_also_at_machine_speed_and_verdict_names_the_fai
 def test_machine_section_measures_its_speed_baseline():
     m = suite.machine(True)
     assert m["speed_bytes_p50_us"] > 0 and m["speed_factor"] == m["speed_bytes_p50_us"] / suite.REFERENCE_BYTES_P50_US
+
+
+def test_latency_is_judged_against_the_udp_round_trip_of_the_sil_placement():
+    """The ratio target uses the UDP round trip measured with the SIL's own placement when
+    there is one (else the default one), and the verdict names the ratio when only it fails."""
+    s = {"latency_p50_us": 500.0, "latency_p99_us": 700.0,
+         "extra": {"latency_split_us": {"command_p50_us": 150.0, "command_p99_us": 200.0},
+                   "fsw_frame_age_p50_us": 200.0, "fsw_frame_age_p99_us": 250.0,
+                   "fsw_control_us": {"p50": 160.0, "p99": 220.0}}}
+    res = {"machine": {"speed_factor": 1.0},
+           "latency": {"udp_p99_us": 100.0, "sil_udp_p99_us": 200.0, "sil_zenoh_p50_us": 300.0,
+                       "sil_zenoh_p99_us": 450.0}}
+    rows = sil.latency_rows(res, "idle", s)
+    assert "(SIL placement) 200.0" in rows[0][2] and rows[0][3].startswith("3.50x")
+    assert rows[0][5] == "**FAIL** (ratio)"
+    assert "200.0 / 250.0; 160.0 / 220.0; 150.0 / 200.0" in rows[1][1]
+    res["latency"]["sil_udp_p99_us"] = 250.0                 # 2.8x: within 3x and 1 ms
+    assert sil.latency_rows(res, "idle", s)[0][5] == "pass"
+    del res["latency"]["sil_udp_p99_us"]                     # no SIL placement: the default one
+    r = sil.latency_rows(res, "idle", s)[0]
+    assert r[2] == "UDP round trip p99 100.0" and r[5] == "**FAIL** (ratio)"

@@ -9,6 +9,17 @@
 Round trips are paced (``rate_hz``) like a control loop, not back to back, so each one
 pays the wake-up of an idle process. Each echo runs in its own interpreter
 (``python -m ellipsled.bench.latency --echo udp|zenoh --port P``), started and ended by pid.
+
+Two placements of the two processes:
+- ``default``: both SCHED_OTHER, anywhere (what a plain program gets);
+- ``sil``: as the real-time SIL places its nodes (``ellipsled run --realtime``, --rt): the
+  client (the plant's role) SCHED_FIFO 80 on CPU 0, the echo (the FSW's role) SCHED_FIFO 80
+  on CPU 1, Zenoh's threads one priority above on the same CPU, receiving as the nodes do
+  (spinning when SCHED_FIFO is in force). The sensor-to-actuator target is a ratio to the
+  UDP round trip of this placement: the SIL's latency includes one cross-CPU wake-up per
+  hop by design, which a baseline free to run both ends on one CPU does not pay. Under
+  ``sil`` the client runs in a child process too (the bench's own process keeps its
+  scheduling).
 """
 from __future__ import annotations
 
@@ -36,9 +47,29 @@ def _stats(rtt_ns: list[int], lost: int) -> dict:
 
 
 # --------------------------------------------------------------------------- echo processes
-def _echo_udp(port: int) -> None:
+ECHO_CPU, CLIENT_CPU, LOOP_PRIORITY = 1, 0, 80     # the SIL's: FSW on CPU 1, plant on CPU 0
+
+
+def _place(placement: str, cpu: int) -> bool:
+    """Apply the SIL's real-time placement to this process (``sil``); True if SCHED_FIFO is in
+    force (then the receiving loops spin, as the SIL nodes do). Zenoh's threads are raised
+    separately, after the session exists (``_raise_zenoh_threads``)."""
+    if placement != "sil":
+        return False
+    from common import rt
+    return bool(rt.apply([cpu], LOOP_PRIORITY)["sched_fifo"])
+
+
+def _raise_zenoh_threads(fifo: bool, cpu: int) -> None:
+    if fifo:
+        from common import rt
+        rt.other_threads([cpu], LOOP_PRIORITY + 1, python_priority=LOOP_PRIORITY - 1)
+
+
+def _echo_udp(port: int, placement: str = "default") -> None:
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.bind(("127.0.0.1", port))
+    _place(placement, ECHO_CPU)
     print(READY, flush=True)
     while True:
         data, addr = s.recvfrom(2048)
@@ -47,21 +78,28 @@ def _echo_udp(port: int) -> None:
         s.sendto(data, addr)
 
 
-def _echo_zenoh(port: int) -> None:
+def _echo_zenoh(port: int, placement: str = "default", rate_hz: float = 100.0) -> None:
     from interfaces import records, transport
     from interfaces.codec import Codec
     from interfaces.keys import keys
     k = keys("bench-latency")
+    fifo = _place(placement, ECHO_CPU)
     ses = transport.open_session("sim", [transport.loopback(port)], [])
     sub = transport.subscriber(ses, k.sensors)
     pub = transport.publisher(ses, k.jets)
+    _raise_zenoh_threads(fifo, ECHO_CPU)
+    # as the FSW node under SCHED_FIFO: release 100 us before the next frame is due, then spin
+    # for it (3 ms at most); never a continuous spin (the kernel's real-time throttling
+    # would stop every FIFO thread of the CPU, Zenoh's too, for 50 ms each second)
+    spin, period_ns = (0.003 if fifo else 0.0), int(1e9 / rate_hz)
+    from common import rt
     dec, enc = Codec.for_schema("SENSORS"), Codec.for_schema("JETS")
     jets = records.new(records.JETS)
     print(READY, flush=True)
     seq = 0
     try:
         while True:
-            smp = transport.recv(sub, timeout_s=30.0)
+            smp = transport.recv(sub, timeout_s=30.0, spin_s=spin)
             if smp is None:
                 return
             rec = dec.decode(smp.payload)
@@ -73,13 +111,16 @@ def _echo_zenoh(port: int) -> None:
             jets["t_release_ns"] = rec["t_ns"]
             pub.put(enc.encode(jets, seq, time.monotonic_ns()))
             seq += 1
+            if fifo:
+                rt.sleep_until_ns(dec.last_t_pub_ns + period_ns - 100_000)
     finally:
         transport.close(sub, pub, ses)
 
 
 # --------------------------------------------------------------------------- clients
-def _start_echo(kind: str, port: int) -> subprocess.Popen:
-    p = subprocess.Popen([sys.executable, "-m", "ellipsled.bench.latency", "--echo", kind, "--port", str(port)],
+def _start_echo(kind: str, port: int, placement: str = "default", rate_hz: float = 100.0) -> subprocess.Popen:
+    p = subprocess.Popen([sys.executable, "-m", "ellipsled.bench.latency", "--echo", kind, "--port", str(port),
+                          "--placement", placement, "--rate", f"{rate_hz:g}"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     t_end = time.monotonic() + 30.0
     line = ""
@@ -107,10 +148,11 @@ def _stop(p: subprocess.Popen) -> None:
                 p.wait()
 
 
-def udp_roundtrip(n: int, rate_hz: float) -> dict:
+def udp_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
     from interfaces.transport import free_port
     port = free_port()
-    p = _start_echo("udp", port)
+    p = _start_echo("udp", port, placement)
+    _place(placement, CLIENT_CPU)
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.settimeout(1.0)
     rtt, lost = [], 0
@@ -144,12 +186,14 @@ def udp_roundtrip(n: int, rate_hz: float) -> dict:
     return _stats(rtt, lost)
 
 
-def zenoh_roundtrip(n: int, rate_hz: float) -> dict:
+def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
     from interfaces import records, transport
     from interfaces.codec import Codec
     from interfaces.keys import keys
     port = transport.free_port()
-    p = _start_echo("zenoh", port)
+    p = _start_echo("zenoh", port, placement, rate_hz)
+    fifo = _place(placement, CLIENT_CPU)
+    spin = 0.003 if fifo else 0.0        # the plant node spins 3 ms for its command under SCHED_FIFO
     k = keys("bench-latency")
     ses = pub = sub = None
     rtt, lost = [], 0
@@ -157,6 +201,7 @@ def zenoh_roundtrip(n: int, rate_hz: float) -> dict:
         ses = transport.open_session("fsw", [], [transport.loopback(port)])
         sub = transport.subscriber(ses, k.jets)
         pub = transport.publisher(ses, k.sensors)
+        _raise_zenoh_threads(fifo, CLIENT_CPU)
         if not transport.wait_for_subscriber(pub, 10.0):
             raise RuntimeError("zenoh echo never matched the sensors publisher")
         enc, dec = Codec.for_schema("SENSORS"), Codec.for_schema("JETS")
@@ -172,7 +217,7 @@ def zenoh_roundtrip(n: int, rate_hz: float) -> dict:
             t0 = time.perf_counter_ns()
             pub.put(enc.encode(rec, i, time.monotonic_ns()))
             while True:
-                smp = transport.recv(sub, timeout_s=1.0)
+                smp = transport.recv(sub, timeout_s=1.0, spin_s=spin)
                 if smp is None:
                     lost += 1
                     if p.poll() is not None or lost > 20:
@@ -191,27 +236,64 @@ def zenoh_roundtrip(n: int, rate_hz: float) -> dict:
     return _stats(rtt, lost)
 
 
+def _in_child(n: int, rate_hz: float, placement: str) -> dict:
+    """Both round trips measured by a child client (its scheduling changes stay there)."""
+    cmd = [sys.executable, "-m", "ellipsled.bench.latency", "--client", "--placement", placement,
+           "--n", str(n), "--rate", f"{rate_hz:g}"]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        out, err = p.communicate(timeout=60.0 + 3.0 * n / rate_hz)
+    except subprocess.TimeoutExpired:
+        _stop(p)
+        raise RuntimeError(f"latency client ({placement}) timed out") from None
+    if p.returncode != 0:
+        raise RuntimeError(f"latency client ({placement}) exit {p.returncode}: {err.strip()[-400:]}")
+    import json
+    return json.loads(out)
+
+
+def _both(n: int, rate_hz: float, placement: str) -> dict:
+    return {"udp": udp_roundtrip(n, rate_hz, placement), "zenoh": zenoh_roundtrip(n, rate_hz, placement)}
+
+
 def run(quick: bool) -> dict:
     n, rate = (1000, 100.0) if quick else (6000, 100.0)
-    udp = udp_roundtrip(n, rate)
-    zen = zenoh_roundtrip(n, rate)
-    return {"figure": "round trip between two processes on 127.0.0.1 [us], paced at %g Hz" % rate,
-            "round_trips": n, "rate_hz": rate,
-            "udp_p50_us": udp["p50_us"], "udp_p99_us": udp["p99_us"], "udp_max_us": udp["max_us"],
-            "udp_lost": udp["lost"],
-            "zenoh_p50_us": zen["p50_us"], "zenoh_p99_us": zen["p99_us"], "zenoh_max_us": zen["max_us"],
-            "zenoh_lost": zen["lost"],
-            "zenoh_over_udp_p99": (zen["p99_us"] / udp["p99_us"]) if zen["p99_us"] and udp["p99_us"] else None}
+    d = _both(n, rate, "default")
+    udp, zen = d["udp"], d["zenoh"]
+    res = {"figure": "round trip between two processes on 127.0.0.1 [us], paced at %g Hz" % rate,
+           "round_trips": n, "rate_hz": rate,
+           "udp_p50_us": udp["p50_us"], "udp_p99_us": udp["p99_us"], "udp_max_us": udp["max_us"],
+           "udp_lost": udp["lost"],
+           "zenoh_p50_us": zen["p50_us"], "zenoh_p99_us": zen["p99_us"], "zenoh_max_us": zen["max_us"],
+           "zenoh_lost": zen["lost"],
+           "zenoh_over_udp_p99": (zen["p99_us"] / udp["p99_us"]) if zen["p99_us"] and udp["p99_us"] else None}
+    try:
+        sil = _in_child(n, rate, "sil")
+        for kind in ("udp", "zenoh"):
+            for q in ("p50_us", "p99_us", "max_us", "lost"):
+                res[f"sil_{kind}_{q}"] = sil[kind][q]
+        res["sil_placement"] = sil.get("placement")
+    except Exception as e:
+        for kind in ("udp", "zenoh"):
+            res[f"sil_{kind}_p99_us"] = None
+            res[f"sil_{kind}_p99_us_reason"] = f"{type(e).__name__}: {e}"
+    return res
 
 
 def rows(res: dict) -> list[Row]:
     lat = res.get("latency") or {}
     if not lat:
         return []
-    return [row("Zenoh + codec round trip p50 / p99 [us] (2 processes)",
-                f"{fmt(lat.get('zenoh_p50_us'))} / {fmt(lat.get('zenoh_p99_us'))}",
-                f"UDP {fmt(lat.get('udp_p50_us'))} / {fmt(lat.get('udp_p99_us'))}",
-                f"{fmt(ratio(lat.get('zenoh_p99_us'), lat.get('udp_p99_us')))}x (p99)", "", NO_TARGET)]
+    R = [row("Zenoh + codec round trip p50 / p99 [us] (2 processes)",
+             f"{fmt(lat.get('zenoh_p50_us'))} / {fmt(lat.get('zenoh_p99_us'))}",
+             f"UDP {fmt(lat.get('udp_p50_us'))} / {fmt(lat.get('udp_p99_us'))}",
+             f"{fmt(ratio(lat.get('zenoh_p99_us'), lat.get('udp_p99_us')))}x (p99)", "", NO_TARGET)]
+    if lat.get("sil_zenoh_p99_us") is not None or lat.get("sil_udp_p99_us") is not None:
+        R.append(row("Zenoh + codec round trip, SIL placement (FIFO, a CPU each) p50 / p99 [us]",
+                     f"{fmt(lat.get('sil_zenoh_p50_us'))} / {fmt(lat.get('sil_zenoh_p99_us'))}",
+                     f"UDP {fmt(lat.get('sil_udp_p50_us'))} / {fmt(lat.get('sil_udp_p99_us'))}",
+                     f"{fmt(ratio(lat.get('sil_zenoh_p99_us'), lat.get('sil_udp_p99_us')))}x (p99)", "", NO_TARGET))
+    return R
 
 
 def main(argv=None) -> int:
@@ -219,11 +301,26 @@ def main(argv=None) -> int:
     ap.add_argument("--echo", choices=("udp", "zenoh"))
     ap.add_argument("--port", type=int, default=0)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--placement", choices=("default", "sil"), default="default")
+    ap.add_argument("--client", action="store_true", help="measure both round trips, print JSON")
+    ap.add_argument("--n", type=int, default=1000)
+    ap.add_argument("--rate", type=float, default=100.0)
     a = ap.parse_args(argv)
     if a.echo == "udp":
-        _echo_udp(a.port)
+        _echo_udp(a.port, a.placement)
     elif a.echo == "zenoh":
-        _echo_zenoh(a.port)
+        _echo_zenoh(a.port, a.placement, a.rate)
+    elif a.client:
+        import json
+        from common import rt
+        out = _both(a.n, a.rate, a.placement)
+        try:
+            fifo = os.sched_getscheduler(0) == os.SCHED_FIFO
+        except OSError:
+            fifo = False
+        out["placement"] = {"name": a.placement, "sched_fifo": fifo, "client_cpus": sorted(os.sched_getaffinity(0)),
+                            "timer_slack_ns": rt.get_timer_slack_ns()}
+        print(json.dumps(out))
     else:
         import json
         print(json.dumps(run(a.quick), indent=2))

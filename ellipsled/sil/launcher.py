@@ -276,6 +276,11 @@ class Launcher:
         sil = {"mode": a.mode, "realtime_factor": sim_info["realtime_factor"], "wall_s": sim_info["wall_s"],
                "latency_p50_us": sim_info["latency_p50_us"], "latency_p99_us": sim_info["latency_p99_us"],
                "latency_max_us": sim_info["latency_max_us"], "latency_samples": sim_info["latency_samples"],
+               "latency_split_us": sim_info.get("latency_split_us"),
+               # the FSW's share of it: its frame's age when taken, and its control task
+               "fsw_frame_age_p50_us": fsw_info.get("frame_age_p50_us"),
+               "fsw_frame_age_p99_us": fsw_info.get("frame_age_p99_us"),
+               "fsw_control_us": (fsw_info.get("tasks_us") or {}).get("control"),
                "jitter_p50_us": fsw_info["jitter_p50_us"], "jitter_p99_us": fsw_info["jitter_p99_us"],
                "jitter_max_us": fsw_info["jitter_max_us"], "slips": fsw_info["cycle_slips"],
                "sim_counts": sim_info["counts"], "sim_rejects": sim_info["rejects"],

@@ -86,6 +86,9 @@ class SimNode:
         self.rejects: dict[str, int] = {}
         # one latency per step at most: preallocated, nothing grows during the run
         self.latency_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
+        # the command leg of each latency sample: FSW publication -> plant has it (one host's
+        # monotonic clock: meaningful only when both processes share the machine)
+        self.latency_cmd_ns = np.zeros_like(self.latency_ns)
         self.n_latency = 0
         self.end_reason = ""
         self.message = ""
@@ -239,7 +242,9 @@ class SimNode:
                 last_cmd_k = self._take_command(rec)
                 if kc == k:
                     if self.n_latency < len(self.latency_ns):
-                        self.latency_ns[self.n_latency] = now_ns() - t_pub
+                        t_now = now_ns()
+                        self.latency_ns[self.n_latency] = t_now - t_pub
+                        self.latency_cmd_ns[self.n_latency] = t_now - int(rec["t_publish_ns"])
                         self.n_latency += 1
                     got = True
                     break
@@ -295,6 +300,7 @@ class SimNode:
             "latency_p99_us": float(np.percentile(lat, 99)) if len(lat) else None,
             "latency_max_us": float(np.max(lat)) if len(lat) else None,
             "latency_samples": int(len(lat)),
+            "latency_split_us": latency_split(lat, self.latency_cmd_ns[: self.n_latency] / 1e3),
         }
         (out / "sim.json").write_text(json.dumps(info, indent=2) + "\n")
 
@@ -304,6 +310,17 @@ class SimNode:
             self.progress.close()
         transport.close(self.token, self.sub_jets, self.sub_faults, self.pub_sensors, self.pub_truth,
                         self.pub_fault_log, self.session)
+
+
+def latency_split(total_us: np.ndarray, command_us: np.ndarray) -> dict | None:
+    """Where the sensor-to-actuator time goes: the sensor leg with the FSW's wait and
+    compute (plant publishes -> FSW publishes its answer) and the command leg (FSW
+    publishes -> plant has it), p50 / p99 each [us]."""
+    if len(total_us) == 0:
+        return None
+    legs = {"sensor_and_fsw": total_us - command_us, "command": command_us}
+    return {f"{name}_{q}_us": float(np.percentile(v, p)) for name, v in legs.items()
+            for q, p in (("p50", 50), ("p99", 99))}
 
 
 def main(args) -> int:

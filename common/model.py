@@ -74,6 +74,7 @@ class Vehicle:
     nose_radius_m: float = 1.875             # Sutton-Graves heat rate (spec 60-guidance.md)
     max_load_g: float = 15.0                 # structural limit of the aerodynamic load factor [g0]
     max_heat_rate_wcm2: float = 100.0        # stagnation-point heat-rate limit [W/cm^2]
+    inertia_uncertainty_frac: float = 0.0    # each inertia element known to within this fraction
 
 
 @dataclass(frozen=True)
@@ -237,7 +238,8 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
     out = replace(out,
                   nose_radius_m=v.num("nose_radius_m", default=diameter / 2 if diameter else 1.875, lo=0, lo_open=True),
                   max_load_g=lim.num("load_g", default=15.0, lo=0, lo_open=True),
-                  max_heat_rate_wcm2=lim.num("heat_rate_wcm2", default=100.0, lo=0, lo_open=True))
+                  max_heat_rate_wcm2=lim.num("heat_rate_wcm2", default=100.0, lo=0, lo_open=True),
+                  inertia_uncertainty_frac=v.num("inertia_uncertainty_frac", default=0.0, lo=0, hi=0.9))
     lim.reject_unknown()
     for t in (v, a, root):
         t.reject_unknown()

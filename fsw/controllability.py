@@ -131,14 +131,52 @@ def jet_columns(T_Nm: np.ndarray, health: JetHealth) -> tuple[np.ndarray, np.nda
     return C, b
 
 
+def inertia_corners(I_B: np.ndarray, v_B: np.ndarray, unc_frac: float) -> np.ndarray:
+    """(K x 3) torques per unit bank acceleration, I v, for every inertia the FSW cannot tell
+    from its estimate: each element I_ij within (1 +- unc_frac) I_ij. The set of I v is a
+    zonotope; its bounding box's corners (8, or the one point I v when unc_frac is 0) hold it,
+    and the bank authority is smallest at one of them (module docstring, item 2)."""
+    I = np.asarray(I_B, float)
+    v = np.asarray(v_B, float)
+    Iv = I @ v
+    if unc_frac <= 0.0:
+        return Iv[None, :]
+    half = unc_frac * (np.abs(I) @ np.abs(v))
+    return np.array([Iv + half * np.array(s) for s in
+                     ((-1, -1, -1), (-1, -1, 1), (-1, 1, -1), (-1, 1, 1), (1, -1, -1), (1, -1, 1), (1, 1, -1), (1, 1, 1))])
+
+
+def bank_authority(C: np.ndarray, rhs: np.ndarray, W: np.ndarray) -> list[float]:
+    """[a+, a-]: the largest bank acceleration each way that every torque column W[k] (from
+    ``inertia_corners``) allows: C d_k - W[k] a = rhs for each k, 0 <= d_k <= 1 (one duty-cycle
+    set per inertia: the controller closes its loop on the true one). 0 when infeasible."""
+    p, K = C.shape[1], W.shape[0]
+    M = np.zeros((3 * K, K * p + 1))
+    for k in range(K):
+        M[3 * k:3 * k + 3, k * p:(k + 1) * p] = C
+        M[3 * k:3 * k + 3, -1] = -W[k]
+    r = np.tile(rhs, K)
+    lo, hi = np.concatenate([np.zeros(K * p), [-math.inf]]), np.concatenate([np.ones(K * p), [math.inf]])
+    out = [0.0, 0.0]
+    for k, sg in enumerate((1.0, -1.0)):
+        cost = np.zeros(K * p + 1)
+        cost[-1] = -sg
+        x = _lp(cost, M, r, r, lo, hi)
+        out[k] = max(0.0, sg * float(x[-1])) if x is not None else 0.0
+    return out
+
+
 def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: np.ndarray, A_aero: np.ndarray,
-                    trim_max_deg: float, authority_min_radps2: float, qbar_pa: float = float("nan")
-                    ) -> Controllability:
+                    trim_max_deg: float, authority_min_radps2: float, qbar_pa: float = float("nan"),
+                    inertia_unc_frac: float = 0.0, held_trim_rad=None) -> Controllability:
     """The duty-cycle LP (module docstring) for one jet health and flight condition.
 
     ``T_Nm`` (3 x n) torque matrix, ``I_B`` (3x3) inertia [kg m^2], ``v_B`` velocity direction
     in body axes, ``A_aero`` (3x2) from ``aero_moment_per_rad`` (zeros: jets only);
-    ``qbar_pa`` is only recorded."""
+    ``qbar_pa`` is only recorded. ``inertia_unc_frac``: the authority holds for every inertia
+    within that fraction of ``I_B``, element by element (``inertia_corners``; 0: ``I_B`` is
+    the truth). ``held_trim_rad`` (dalpha, beta): the authority with this trim flown (the
+    weaker-way trim search, item 2, is skipped; the smallest trim, item 1, is still reported)."""
     t0 = time.perf_counter()
     C, b = jet_columns(T_Nm, health)
     p = C.shape[1]
@@ -171,7 +209,10 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
     #    x = [d+ (p), d- (p), dalpha, beta, a+, a-, t]; max t, a+ >= t, -a- >= t. The trim may use
     #    the whole allowed offset once the jets alone cannot cancel the bias (else none: beta_r = 0)
     auth = [0.0, 0.0]
-    if math.isfinite(s_star):
+    if held_trim_rad is not None:
+        theta = np.asarray(held_trim_rad, float)
+        auth = bank_authority(C, -b - A @ theta, inertia_corners(I_B, v, inertia_unc_frac))
+    elif math.isfinite(s_star):
         box = (max(s_star, math.radians(trim_max_deg)) * (1.0 + 1e-9) + 1e-12) if s_star > 0.0 else 0.0
         M = np.zeros((8, 2 * p + 5))
         M[0:3, 0:p], M[3:6, p:2 * p] = C, C
@@ -188,15 +229,9 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
         x = _lp(cost, M, np.concatenate([rhs, [0.0, 0.0]]), np.concatenate([rhs, [inf, inf]]), lo, hi)
         if x is not None:
             theta = x[2 * p:2 * p + 2]
-            # 3. each way's own maximum with that trim held: x = [d, a]
-            M = np.hstack([C, -Iv[:, None]])
-            rhs = -b - A @ theta
-            lo, hi = np.concatenate([np.zeros(p), [-inf]]), np.concatenate([np.ones(p), [inf]])
-            for k, sg in enumerate((1.0, -1.0)):
-                cost = np.zeros(p + 1)
-                cost[-1] = -sg
-                x = _lp(cost, M, rhs, rhs, lo, hi)
-                auth[k] = max(0.0, sg * float(x[-1])) if x is not None else 0.0
+            # 3. each way's own maximum with that trim held, for every inertia the FSW cannot
+            #    tell from its estimate
+            auth = bank_authority(C, -b - A @ theta, inertia_corners(I_B, v, inertia_unc_frac))
     if not math.isfinite(s_star):
         reason = (f"stuck-on bias {np.linalg.norm(b):.0f} N m beyond what the jets and the aerodynamics "
                   f"can cancel at qbar {qbar_pa:.0f} Pa")
@@ -210,6 +245,6 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
         reason = ""
     return Controllability(
         authority_pos_radps2=auth[0], authority_neg_radps2=auth[1], bias_B_Nm=tuple(float(x) for x in b),
-        residual_Nm=residual, trim_alpha_deg=math.degrees(theta[0]) if math.isfinite(s_star) else inf,
-        trim_beta_deg=math.degrees(theta[1]) if math.isfinite(s_star) else inf, trim_needed_deg=trim_deg,
+        residual_Nm=residual, trim_alpha_deg=math.degrees(theta[0]) if math.isfinite(theta[0]) else inf,
+        trim_beta_deg=math.degrees(theta[1]) if math.isfinite(theta[1]) else inf, trim_needed_deg=trim_deg,
         qbar_pa=float(qbar_pa), controllable=not reason, reason=reason, solve_s=time.perf_counter() - t0)

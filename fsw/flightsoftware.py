@@ -148,7 +148,7 @@ class FlightSoftware:
         self.realtime = realtime
         self.controllability: Controllability | None = None   # the LP's answer at the last reconfiguration
         self._lp_worker: _LpWorker | None = None
-        self._lp_periodic = False      # the answer awaited is a periodic re-assessment
+        self._lp_periodic = (False, False)   # the answer awaited is (a periodic re-assessment, with the held trim)
         self._assess_pending = False
 
     # ---------------------------------------------------------------- RG1
@@ -176,7 +176,7 @@ class FlightSoftware:
             self.assess_controllability(t_s)
         if self._lp_worker is not None and self._lp_worker.ready():
             need, r = self._lp_worker.take()
-            self._apply_controllability(t_s, need, r, self._lp_periodic)     # re-planned from now
+            self._apply_controllability(t_s, need, r, *self._lp_periodic)     # re-planned from now
         if self.entry is not None:
             self.entry.steer(nav)
         self._hold_trim(nav.qbar_pa)
@@ -224,8 +224,12 @@ class FlightSoftware:
             self.events.emit(t_s, Severity.WARNING, "allocator", "alloc_short",
                              "ALLOCATION SHORT ON BANK AXIS", rate_limited=True)
 
-    def _lp_problem(self, t_s: float) -> tuple:
-        """(schedule's need, arguments of controllability()) for the health the allocator uses."""
+    def _lp_problem(self, t_s: float, held_trim_rad=None) -> tuple:
+        """(schedule's need, arguments of controllability()) for the health the allocator uses;
+        the authority promised for every inertia within the vehicle's stated uncertainty about
+        its nominal inertia (the box known to hold the truth). SAMI's inertia estimate is not
+        used as that knowledge: with the dead zone it stays at nominal or drifts along what the
+        tracking excites (campaign 777 run 13: I33 6,954 against a truth of 5,002 kg m^2)."""
         nav = self.nav.state
         veh = self.scenario.vehicle
         a = veh.aero
@@ -237,24 +241,26 @@ class FlightSoftware:
         A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta * d[0], a.C_malpha * d[1],
                                 a.C_nbeta * d[2])
         need = schedule_accel_need_radps2(self.scenario.bank_schedule, t_s)
-        args = (veh.torque_matrix_Nm, self.allocator_health().copy(), self.control.inertia_hat(), v_B, A,
-                self.params["guidance.trim_max_deg"], need, float(nav.qbar_pa))
+        args = (veh.torque_matrix_Nm, self.allocator_health().copy(), veh.inertia_kgm2, v_B, A,
+                self.params["guidance.trim_max_deg"], need, float(nav.qbar_pa), veh.inertia_uncertainty_frac,
+                held_trim_rad)
         return need, args
 
-    def assess_controllability(self, t_s: float, periodic: bool = False) -> None:
+    def assess_controllability(self, t_s: float, periodic: bool = False, held_trim_rad=None) -> None:
         """The duty-cycle LP (fsw/controllability.py) on the health the allocator now uses, with
         the FSW's own models: inertia estimate, velocity direction from navigation, the aero
         moment of its density model, nominal derivatives and current factors d_hat. In real time
         it runs on a background thread (tens of ms: longer than a control period); its answer is
         applied by the first cycle after it is ready. Batch and lockstep apply it here.
-        ``periodic``: a re-assessment of the same health (``reassess_step``)."""
-        need, args = self._lp_problem(t_s)
+        ``periodic``: a re-assessment of the same health (``reassess_step``); ``held_trim_rad``:
+        the authority with the trim offset the reference flies now (no new trim sought)."""
+        need, args = self._lp_problem(t_s, held_trim_rad)
         if not self.realtime:
-            self._apply_controllability(t_s, need, controllability(*args), periodic)
+            self._apply_controllability(t_s, need, controllability(*args), periodic, held_trim_rad is not None)
             return
         if self._lp_worker is None:
             self._lp_worker = _LpWorker()
-        self._lp_periodic = periodic
+        self._lp_periodic = (periodic, held_trim_rad is not None)
         self._lp_worker.submit(need, args)
 
     def reassess_step(self) -> None:
@@ -263,13 +269,23 @@ class FlightSoftware:
         early, at qbar near 0, gets its trim once the air can give it). Once a trim exists it is
         carried by its qbar scaling (``_hold_trim``) and the LP is not asked again: a fresh
         solve may return another of its equally good trims, and the reference's alpha/beta
-        would jump between them (campaign run 54: 1.3 deg -> 9.2 deg with re-solves at 1 Hz)."""
+        would jump between them (campaign run 54: 1.3 deg -> 9.2 deg with re-solves at 1 Hz).
+
+        While a trim is held, the authority is asked again with that trim as flown now: the
+        jets' share of the bias grows as the dynamic pressure falls (the offset is held within
+        guidance.trim_max_deg) and the aerodynamic factors are learned, so the authority found
+        at the reconfiguration's dynamic pressure does not hold for a reversal flown at the
+        entry's lowest (campaign 777 run 0: assessed at 6,400 Pa, reversal at 280 Pa)."""
         r = self.controllability
         if (r is None or self._assess_pending or self.cycles == 0 or r.bias_Nm == 0.0
-                or math.isfinite(r.trim_needed_deg)
                 or (self._lp_worker is not None and self._lp_worker.busy())):
             return
-        self.assess_controllability(self.t_s, periodic=True)
+        if self._trim_ref is not None:
+            g = self.guidance
+            self.assess_controllability(self.t_s, periodic=True,
+                                        held_trim_rad=(g.trim_offset_alpha_rad, g.trim_offset_beta_rad))
+        elif not math.isfinite(r.trim_needed_deg):
+            self.assess_controllability(self.t_s, periodic=True)
 
     def _hold_trim(self, qbar_pa: float) -> None:
         """The reference's alpha/beta offset that lets the aerodynamic moment absorb the part of
@@ -287,14 +303,28 @@ class FlightSoftware:
         g.trim_offset_alpha_rad = tr[0] * k
         g.trim_offset_beta_rad = tr[1] * k
 
-    def _apply_controllability(self, t_s: float, need: float, r: Controllability, periodic: bool = False) -> None:
+    def _apply_controllability(self, t_s: float, need: float, r: Controllability, periodic: bool = False,
+                               held: bool = False) -> None:
         """Event and telemetry of the LP's answer; the guidance re-planned to the weaker way's
         authority times ``guidance.authority_use`` (the scenario's limit stays the ceiling), never
         below what the schedule still needs (the reference then keeps the schedule's pace: the
         tracking, not the reference, shows what the jets cannot do). A periodic re-assessment
         whose answer reads the same as the last (the event's precision: 0.01 deg/s^2, 1 N m,
-        0.1 deg) and keeps its verdict changes nothing but the trim's dynamic pressure."""
+        0.1 deg) and keeps its verdict changes nothing but the trim's dynamic pressure.
+        ``held``: the answer with the held trim (``reassess_step``): the trim stays, and the
+        reference is only ever slowed by it (the authority it needs is no longer there), never
+        sped up again before the next reconfiguration (no re-shaping back and forth as the
+        dynamic pressure falls and rises)."""
         last, self.controllability = self.controllability, r
+        if held:
+            if last is not None and r.controllable != last.controllable and not r.controllable:
+                self.events.emit(t_s, Severity.WARNING, "guidance", "not_controllable",
+                                 f"NOT CONTROLLABLE: {r.reason}"[:50])
+            limit = self._reference_limit(need, r)[0]
+            if limit > 0.0 and math.degrees(self.guidance.profile.accel_limit_radps2 - limit) >= 0.005:
+                self.events.emit(t_s, Severity.NOTICE, "guidance", "controllability", r.text())
+                self._replan_to(t_s, need, r)
+            return
         if periodic and last is not None and r.text() == last.text() and r.controllable == last.controllable:
             self._set_trim_ref(r)
             return
@@ -313,17 +343,28 @@ class FlightSoftware:
         self._trim_ref = ((trim[0], trim[1], r.qbar_pa) if all(map(math.isfinite, (*trim, r.qbar_pa)))
                           and max(map(abs, trim)) > 0.0 and r.qbar_pa > 0.0 else None)
 
+    def _reference_limit(self, need: float, r: Controllability) -> tuple[float, bool]:
+        """(the reference's acceleration limit for the LP's answer, True when that is the
+        schedule's need because the authority is below it): ``guidance.authority_use`` of the
+        weaker way, within the scenario's limit. 0 when neither gives anything."""
+        accel = self.params["guidance.authority_use"] * min(r.authority_pos_radps2, r.authority_neg_radps2)
+        low = accel < need
+        accel = need if low else accel
+        return (min(self.scenario.bank_accel_limit_radps2, accel) if accel > 0.0 else 0.0), low
+
     def _replan_to(self, t_s: float, need: float, r: Controllability) -> None:
-        weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
-        accel = self.params["guidance.authority_use"] * weak
-        if accel < need:
+        limit, low = self._reference_limit(need, r)
+        if low:
+            weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
             self.events.emit(t_s, Severity.WARNING, "guidance", "authority_low",
                              f"BANK AUTH {np.degrees(weak):.2f} DEG/S2: REF KEPT AT NEED")
-            accel = need
-        if accel <= 0.0:
+        if limit <= 0.0:
             return
-        limit = min(self.scenario.bank_accel_limit_radps2, accel)
         prof = self.guidance.profile
+        # the same limit at the precision the event states (0.01 deg/s^2) is no new reference:
+        # answers of equal LPs differ in their last bits, and each re-plan would say so again
+        if abs(math.degrees(limit - prof.accel_limit_radps2)) < 0.005:
+            return
         if prof.replan(t_s, prof.rate_limit_radps, limit):
             self.events.emit(t_s, Severity.NOTICE, "guidance", "reference_reshaped",
                              f"REFERENCE ACCEL LIMIT {np.degrees(limit):.2f} DEG/S2")

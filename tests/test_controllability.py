@@ -69,6 +69,31 @@ def test_bank_authority_equals_the_hull_of_every_jet_pattern(name):
     assert r.controllable == (min(a_max, -a_min) > 0)
 
 
+@pytest.mark.parametrize("name", list(CONFIGS))
+def test_authority_for_an_uncertain_inertia_holds_for_every_inertia_in_the_stated_range(name):
+    """With each inertia element known to +-30 %, the authority promised is what the jets give
+    for the worst inertia of that range: no inertia in it (every vertex of the 6-element box,
+    hull truth) has less, and the box of I v it is computed on (its 8 corners, hull truth) has
+    one that gives exactly that much."""
+    h, u = CONFIGS[name], 0.3
+    hull, b = _hull(h)
+    r = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 0.0, inertia_unc_frac=u)
+    hv = np.array([I_NOM[0, 0], I_NOM[1, 1], I_NOM[2, 2], I_NOM[0, 1], I_NOM[0, 2], I_NOM[1, 2]])
+    worst = [math.inf, math.inf]
+    for s in itertools.product((1 - u, 1 + u), repeat=6):
+        x = hv * np.array(s)
+        I = np.array([[x[0], x[3], x[4]], [x[3], x[1], x[5]], [x[4], x[5], x[2]]])
+        a_max, a_min = _authority_truth(hull, b, I @ V_B)
+        worst = [min(worst[0], max(a_max, 0.0)), min(worst[1], max(-a_min, 0.0))]
+    assert r.authority_pos_radps2 <= worst[0] * (1 + 1e-6) and r.authority_neg_radps2 <= worst[1] * (1 + 1e-6)
+    Iv, half = I_NOM @ V_B, u * (np.abs(I_NOM) @ np.abs(V_B))
+    corners = [_authority_truth(hull, b, Iv + half * np.array(sg)) for sg in itertools.product((-1, 1), repeat=3)]
+    assert r.authority_pos_radps2 == pytest.approx(max(min(c[0] for c in corners), 0.0), rel=1e-6, abs=1e-9)
+    assert r.authority_neg_radps2 == pytest.approx(max(min(-c[1] for c in corners), 0.0), rel=1e-6, abs=1e-9)
+    nom = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 0.0)
+    assert r.authority_pos_radps2 >= nom.authority_pos_radps2 / (1 + u) ** 2   # the box costs < 1.3^2
+
+
 def test_nominal_jets_turn_about_the_velocity_vector_by_a_few_deg_per_s2_each_way():
     r = controllability(T, JetHealth(), I_NOM, V_B, NO_AERO, 5.0, 0.0)
     assert 3.0 < math.degrees(r.authority_pos_radps2) < 5.0

@@ -189,8 +189,9 @@ def test_reconfiguration_reports_the_lp_and_reshapes_to_its_weaker_way():
     r = f2.controllability
     assert r is not None and r.controllable
     # the same LP, asked directly with the FSW's models before flight (qbar 0, trim direction)
-    ref = controllability(SC.vehicle.torque_matrix_Nm, h2, f2.control.inertia_hat(),
-                          velocity_dir_B(SC.vehicle.aero.alpha_trim_rad), np.zeros((3, 2)), 5.0, 0.0)
+    ref = controllability(SC.vehicle.torque_matrix_Nm, h2, SC.vehicle.inertia_kgm2,
+                          velocity_dir_B(SC.vehicle.aero.alpha_trim_rad), np.zeros((3, 2)), 5.0, 0.0,
+                          inertia_unc_frac=SC.vehicle.inertia_uncertainty_frac)
     assert r.authority_neg_radps2 == pytest.approx(ref.authority_neg_radps2)
     weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
     use = f2.params["guidance.authority_use"]
@@ -201,6 +202,25 @@ def test_reconfiguration_reports_the_lp_and_reshapes_to_its_weaker_way():
     f1 = _fsw(JetHealth.of(failed=[1, 2, 17, 18]))         # case 1: half its weaker way is above 1 deg/s^2
     assert f1.guidance.profile.accel_limit_radps2 == SC.bank_accel_limit_radps2
     assert not any(e.code == "reference_reshaped" for e in f1.events.history)
+
+
+def test_an_answer_equal_to_the_event_precision_does_not_reshape_the_reference_again():
+    """Equal LPs answer in their last bits differently; a re-plan to a limit that reads the same
+    (0.01 deg/s^2, the event's precision) is no new reference and is not announced again."""
+    import dataclasses
+    f = _fsw(JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]))       # case 2: reshaped once
+    r = f.controllability
+    limit = f.guidance.profile.accel_limit_radps2
+    n = sum(e.code == "reference_reshaped" for e in f.events.history)
+    assert n == 1
+    for k, scale in enumerate((1 + 1e-12, 1 - 1e-9, 1 + 1e-4)):
+        f._replan_to(4.0 + k, 0.0, dataclasses.replace(r, authority_neg_radps2=r.authority_neg_radps2 * scale))
+    assert sum(e.code == "reference_reshaped" for e in f.events.history) == n
+    assert f.guidance.profile.accel_limit_radps2 == limit
+    f._replan_to(8.0, 0.0, dataclasses.replace(r, authority_neg_radps2=r.authority_neg_radps2 * 0.9))
+    assert sum(e.code == "reference_reshaped" for e in f.events.history) == n + 1
+    assert f.guidance.profile.accel_limit_radps2 == pytest.approx(0.9 * limit)
+    f.close()
 
 
 def test_no_authority_one_way_keeps_the_schedule_pace_and_says_so():
@@ -231,6 +251,11 @@ def test_the_lp_runs_off_the_loop_in_real_time_and_is_applied_when_ready():
         assert f.controllability is r and f.guidance.profile.accel_limit_radps2 < SC.bank_accel_limit_radps2
     finally:
         f.close()
+
+
+def need_of(f, t_s):
+    from fsw.controllability import schedule_accel_need_radps2
+    return schedule_accel_need_radps2(f.scenario.bank_schedule, t_s)
 
 
 def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows():
@@ -264,9 +289,37 @@ def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows(
         assert len(texts) == n_events + 1 and texts[-1] == r1.text()
         f.nav.state.qbar_pa = 5000.0
         f.t_s = 232.0
-        f.reassess_step()                                  # a trim exists: carried by its qbar scaling
-        assert f.controllability is r1
+        tr, limit = f._trim_ref, f.guidance.profile.accel_limit_radps2
+        f._hold_trim(5000.0)                               # what the control cycle does
+        f.reassess_step()          # a trim exists: carried by its qbar scaling, the authority asked with it
+        r2 = f.controllability
+        assert f._trim_ref is tr and r2 is not r1
+        assert r2.trim_alpha_deg == pytest.approx(r1.trim_alpha_deg * 3000.0 / 5000.0)
+        assert r2.trim_beta_deg == pytest.approx(r1.trim_beta_deg * 3000.0 / 5000.0)
+        # the same LP asked directly with that trim held
+        _, args = f._lp_problem(232.0, (math.radians(r2.trim_alpha_deg), math.radians(r2.trim_beta_deg)))
+        r3 = lp(*args)
+        assert (r2.authority_pos_radps2, r2.authority_neg_radps2) == (r3.authority_pos_radps2, r3.authority_neg_radps2)
+        # more air, more authority: the reference is not re-shaped, nothing said
+        assert min(r2.authority_pos_radps2, r2.authority_neg_radps2) >= min(r1.authority_pos_radps2,
+                                                                             r1.authority_neg_radps2)
+        assert f.guidance.profile.accel_limit_radps2 == limit
         assert sum(e.code == "controllability" for e in f.events.history) == n_events + 1
+        # less air than at the trim's solve: the jets take more of the bias, the authority drops
+        # and the reference is slowed to it (once: the same answer again changes nothing)
+        f.nav.state.qbar_pa = 200.0
+        f._hold_trim(200.0)
+        f.t_s = 233.0
+        f.reassess_step()
+        r4 = f.controllability
+        use = f.params["guidance.authority_use"]
+        weak4 = min(r4.authority_pos_radps2, r4.authority_neg_radps2)
+        assert weak4 < min(r1.authority_pos_radps2, r1.authority_neg_radps2)
+        assert f.guidance.profile.accel_limit_radps2 == pytest.approx(max(use * weak4, need_of(f, 233.0)))
+        n = len(f.events.history)
+        f.t_s = 234.0
+        f.reassess_step()
+        assert len(f.events.history) == n
     finally:
         f.close()
     g = _fsw(JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]))   # case 2: the jets cancel its bias alone

@@ -78,6 +78,10 @@ def test_npc_status_carries_the_flight_softwares_own_guidance_figures(guided):
     # no root / frozen flags follow the corrector's own criteria
     assert bool(m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT) == (abs(e.miss_m) > e.params["npc.tol_m"])
     assert not m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_FROZEN
+    # the same two figures as NAMED_VALUE_FLOAT, for stock ground stations (a tick apart)
+    nv = rig.gcs.state.named
+    assert nv["rtg_km"] == pytest.approx(m.range_to_go / 1e3, abs=2.0)
+    assert nv["miss_km"] == pytest.approx(m.predicted_miss / 1e3, abs=0.5)
     lp = rig.fsw.controllability
     assert bool(m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_LP) == (lp is not None)
     if lp is not None:
@@ -134,6 +138,7 @@ def test_profile_mode_says_not_available(tmp_path):
                               | F.ELLIPSLED_GUIDANCE_FLAGS_FINAL_REVERSAL)
         assert m.cycles == m.reversals == m.bank_sign == 0
         assert all(getattr(m, f) == 0.0 for f in FLOATS[:14])
+        assert "rtg_km" not in rig.gcs.state.named and "miss_km" not in rig.gcs.state.named
         lp = rig.fsw.controllability
         assert bool(m.flags & F.ELLIPSLED_GUIDANCE_FLAGS_LP) == (lp is not None)
         # the default rate, then the interval and one-shot services like every stream

@@ -105,6 +105,14 @@ def attitude(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool, bool,
                             ("berr_deg", math.degrees(bank_err)), ("mach", nav.mach),
                             ("qbar_pa", nav.qbar_pa), ("alt_km", nav.h_m * 1e-3)):
             yield mav.MAVLink_named_value_float_message(ms, name.encode(), float(value))
+        if fsw.entry is not None:          # guided: range to go and predicted miss, for stock stations
+            tgt, veh, rtg = target_range(fsw)
+            if rtg is not None:
+                yield mav.MAVLink_named_value_float_message(ms, b"rtg_km", rtg * 1e-3)
+                p = fsw.entry.pred_impact
+                if fsw.entry.cycles > 0 and _finite(p[0], p[1]):
+                    miss = _angle(_unit(float(p[0]), float(p[1])), _unit(*tgt)) * fsw.scenario.planet.radius_m
+                    yield mav.MAVLink_named_value_float_message(ms, b"miss_km", miss * 1e-3)
     if want[4]:
         yield entry_state(fsw, ms, C_LN)
 
@@ -225,6 +233,17 @@ def _finite(*xs: float) -> bool:
     return all(math.isfinite(x) for x in xs)
 
 
+def target_range(fsw) -> tuple:
+    """(target (lat, lon), vehicle (lat, lon) [rad], great-circle range to go [m]) from the
+    navigation position now; range None when there is no target or no finite position."""
+    scn = fsw.scenario
+    tgt = (scn.target_lat_rad, scn.target_lon_rad) if scn.target_lat_rad is not None else None
+    veh = lat_lon(fsw) if nav_valid(fsw) else None
+    if tgt is None or veh is None or not _finite(*tgt, *veh):
+        return tgt, veh, None
+    return tgt, veh, _angle(_unit(*veh), _unit(*tgt)) * scn.planet.radius_m
+
+
 def guidance_status(fsw, ms: int):
     """ELLIPSLED_GUIDANCE_STATUS: mode, target and range to go (navigation now), the
     predictor-corrector's last answer (mode npc), reversals and the controllability LP's last
@@ -233,13 +252,13 @@ def guidance_status(fsw, ms: int):
     scn, e, lp = fsw.scenario, fsw.entry, fsw.controllability
     R = scn.planet.radius_m
     flags = 0
-    tgt = (scn.target_lat_rad, scn.target_lon_rad) if scn.target_lat_rad is not None else None
-    veh = lat_lon(fsw) if nav_valid(fsw) else None
-    tlat = tlon = rtg = 0.0
-    if tgt is not None and veh is not None and _finite(*tgt, *veh):
+    tgt, veh, rtg = target_range(fsw)
+    tlat = tlon = 0.0
+    if rtg is not None:
         flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_TARGET
         tlat, tlon = tgt
-        rtg = _angle(_unit(*veh), _unit(*tgt)) * R
+    else:
+        rtg = 0.0
     plat = plon = palt = miss = down = cross = tgo = b0 = bcmd = krho = 0.0
     sign = cycles = overruns = reversals = rule = 0
     t_rev = 0.0

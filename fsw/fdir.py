@@ -215,6 +215,7 @@ class Fdir:
         self.health_version = 0
         self.detections: list[dict] = []
         self.nonfinite_count = 0
+        self.unknown_command_periods = 0     # periods whose command in force was not known (no evidence)
 
         n = n_jets
         self._cnt = np.zeros((3, n), dtype=np.int64)
@@ -278,11 +279,15 @@ class Fdir:
             self.events.emit(t_s, Severity.NOTICE, "fdir", "fdir_delay", f"FDIR DELAY {v:.2f} S")
 
     # ------------------------------------------------------------------ jet monitor
-    def update(self, t_s: float, u_cmd_prev: np.ndarray, chamber: np.ndarray) -> bool:
-        """One control period: ``u_cmd_prev`` is what the driver commanded for the period
-        that just ended, ``chamber`` the normalised chamber pressure measured over it.
-        Non-finite chamber samples are ignored for their jet (and reported, rate-limited).
-        Returns True when ``health_active`` changed during this call."""
+    def update(self, t_s: float, u_cmd_prev: np.ndarray | None, chamber: np.ndarray) -> bool:
+        """One control period: ``u_cmd_prev`` is the command in force over the period that
+        just ended (None: not known -- the plant held a command this FSW no longer has --
+        then the period is no evidence either way), ``chamber`` the normalised chamber
+        pressure measured over it. Non-finite chamber samples are ignored for their jet (and
+        reported, rate-limited). Returns True when ``health_active`` changed during this call."""
+        if u_cmd_prev is None:
+            self.unknown_command_periods += 1
+            return self._apply_due(t_s) if t_s + _T_EPS_S >= self._next_apply else False
         if u_cmd_prev.shape != (self.n,) or chamber.shape != (self.n,):
             raise ValueError(f"fdir.update: u_cmd_prev and chamber must have shape ({self.n},), "
                              f"got {u_cmd_prev.shape} and {chamber.shape}")

@@ -35,6 +35,7 @@ from .params import Param, ParamRegistry
 from . import executive
 
 Reply = tuple[CommandResult, str]
+COMMAND_RING = 64      # answers kept for FDIR (1.28 s at 50 Hz): a command held longer is not judged
 _MODE_CHOICES = ",".join(f"{int(m)} {m.name}" for m in Mode)
 
 GUIDANCE_PARAMS = [
@@ -143,6 +144,11 @@ class FlightSoftware:
         self.bank_err_rad = 0.0
         self._frame_views: tuple = (None,)
         self._zero_u = np.zeros(self.driver.n, dtype=np.uint8)   # jets off
+        # the commands this FSW answered frames with, by frame index: FDIR judges each jet by
+        # the command the plant reports it held (SENSORS.u_k), which in real time can be an
+        # older one than the last sent (a late answer: the plant held the one before)
+        self._sent = np.zeros((COMMAND_RING, self.driver.n), dtype=np.uint8)
+        self._sent_k = np.full(COMMAND_RING, -2, dtype=np.int64)
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self.realtime = realtime
@@ -166,7 +172,7 @@ class FlightSoftware:
                                       frame["accel_B"], frame["chamber"])
         self.k = self.monitor.last_k
         self.t_s = t_s
-        if self.fdir.update(t_s, self.driver.last_command, fv[6]):
+        if self.fdir.update(t_s, self._command_in_force(int(frame["u_k"])), fv[6]):
             self.allocator.set_health(self.fdir.health_active)
             self.reconfig_times.append(t_s)
             self._assess_pending = True
@@ -211,7 +217,23 @@ class FlightSoftware:
         self._check_bank_shortfall(t_s)
         self._have_prev = True
         self._tau_last[:] = self.tau_alloc_B
-        return self.driver.command(u_alloc, self.modes.jets_enabled)
+        return self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))
+
+    def _sent_for(self, u: np.ndarray) -> np.ndarray:
+        """Note ``u`` as this frame's answer (frame index self.k); returns u."""
+        i = self.k % COMMAND_RING
+        self._sent[i] = u
+        self._sent_k[i] = self.k
+        return u
+
+    def _command_in_force(self, u_k: int) -> np.ndarray | None:
+        """The command the plant held over the period just ended: the answer to frame
+        ``u_k``, jets off for -1, None when this FSW has no record of it (then FDIR takes the
+        period as no evidence)."""
+        if u_k == -1:
+            return self._zero_u
+        i = u_k % COMMAND_RING
+        return self._sent[i] if self._sent_k[i] == u_k else None
 
     def _check_bank_shortfall(self, t_s: float) -> None:
         ax = self.bank_axis_B
@@ -379,7 +401,7 @@ class FlightSoftware:
         self.monitor.tick(t_s, got_frame=False)
         if self.monitor.stale:
             return self._hold_off(t_s)
-        return self.driver.command(self._zero_u, False)
+        return self._sent_for(self.driver.command(self._zero_u, False))
 
     def _count_torque(self) -> None:
         self._tau_sum += self._tau_last
@@ -392,7 +414,7 @@ class FlightSoftware:
         self.tau_alloc_B[:] = 0.0
         self._tau_last[:] = 0.0
         self.alloc_short = False
-        return self.driver.command(self._zero_u, False)
+        return self._sent_for(self.driver.command(self._zero_u, False))
 
     # ---------------------------------------------------------------- RG2
     def slow_step(self) -> None:

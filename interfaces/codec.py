@@ -101,7 +101,7 @@ def schema_by_id(schema_id: int) -> Schema | None:
 
 
 # One line per payload type.
-register("SENSORS", 1, records.SENSORS, 1, keys.SENSORS)
+register("SENSORS", 1, records.SENSORS, 2, keys.SENSORS)
 register("JETS", 2, records.JETS, 1, keys.JETS)
 register("FAULT", 3, records.FAULT, 1, keys.FAULTS)
 register("EVENT", 4, records.EVENT, 1, keys.EVENTS)

@@ -15,6 +15,8 @@ from .vocabulary import FAULT_KINDS, N_JETS
 SENSORS = np.dtype([
     ("k", "<i8"),                  # step index
     ("t_ns", "<i8"),               # simulated time of the sample [ns]
+    ("u_k", "<i8"),                # step index of the jet command held over the interval that
+                                   # ended at this sample (JETS.k); -1: none (jets held off)
     ("omega_BN_B", "<f8", (3,)),   # rate gyro [rad/s], body axes
     ("sigma_BN", "<f8", (3,)),     # attitude MRP, |sigma| <= 1
     ("r_N", "<f8", (3,)),          # position, Mars-centred inertial [m]

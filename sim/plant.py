@@ -289,7 +289,7 @@ class Plant:
         s = self.sensors
         self._out = (s["omega_BN_B"], s["sigma_BN"], s["r_N"], s["v_N"], s["accel_B"], s["chamber"])
         self._sf = np.ndarray((_S_NF,), np.float64, buffer=s, offset=_S_F0)   # views for the one-call step
-        self._si = np.ndarray((2,), np.int64, buffer=s, offset=0)
+        self._si = np.ndarray((3,), np.int64, buffer=s, offset=0)     # k, t_ns, u_k
         self._tau_ext_zero = True
 
         # initial state: trim attitude at the scenario's bank; omega = omega_WN so that
@@ -316,10 +316,13 @@ class Plant:
         return self.k * self.dt_control_ns
 
     # ---- stepping ----
-    def step(self, u, tau_ext_B=None) -> np.ndarray:
+    def step(self, u, tau_ext_B=None, u_k: int | None = None) -> np.ndarray:
         """Integrate [t_k, t_k+1) with jet command u (18,) of 0/1 held, plus an optional
         ideal external torque tau_ext_B [N m] (open-loop and test use); return the sensor
-        record for k+1 (the same object every step)."""
+        record for k+1 (the same object every step). ``u_k``: the step index of the command
+        held (JETS.k; -1: none, jets held off), reported in the record as ``u_k`` so that the
+        FSW judges its jets by the command actually in force; default k (the answer to
+        frame k, as in lockstep and batch)."""
         if type(u) is not np.ndarray or u.dtype != np.uint8:
             u = _as_command(u)
         elif u.shape != (N_JETS,):
@@ -346,6 +349,7 @@ class Plant:
                              self._sf, self._si, self.k + 1, self.dt_control_ns)
         if st == STEP_BAD_U:
             raise ValueError("u must hold only 0 or 1")
+        self._si[2] = self.k if u_k is None else u_k
         nz.i += 1
         if st == STEP_NON_FINITE:
             self._status = STEP_NON_FINITE
@@ -365,6 +369,7 @@ class Plant:
         s = self.sensors
         s["k"] = self.k
         s["t_ns"] = self.k * self.dt_control_ns
+        s["u_k"] = -1                     # no command held before the first one
 
     def _refresh_aux(self) -> None:
         deriv(self.x, self.p, self._tau_tot, self._F_B, self._ws[0], self._C, self.aux, True)

@@ -100,7 +100,7 @@ def _fix_crc(b: bytearray) -> bytearray:
     (lambda b: b[:10], "size"),
     (lambda b: _fix_crc(bytearray(b"XL") + b[2:]), "magic"),
     (lambda b: _fix_crc(b[:2] + (2).to_bytes(2, "little") + b[4:]), "schema"),
-    (lambda b: _fix_crc(b[:4] + (2).to_bytes(2, "little") + b[6:]), "version"),
+    (lambda b: _fix_crc(b[:4] + (0x7FFF).to_bytes(2, "little") + b[6:]), "version"),
     (lambda b: _fix_crc(b[:6] + (1).to_bytes(2, "little") + b[8:]), "flags"),
     (lambda b: _fix_crc(b[:12] + (8).to_bytes(4, "little") + b[16:]), "size"),
     (lambda b: _fix_crc(b[:32] + (12345).to_bytes(4, "little") + b[36:]), "layout"),

@@ -78,6 +78,7 @@ class SimNode:
         self.dec_faults = Codec.for_schema("FAULT", on_reject=self._rejected)
         self.truth_rec = records.new(records.TRUTH)
         self.u = np.zeros(records.N_JETS, dtype=np.uint8)
+        self.u_k = -1                  # JETS.k of the command held (-1: none, jets off)
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
         self.sensor_seq = 0     # per publication: a frame sent again is a new sample, not a replay
         self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
@@ -158,12 +159,13 @@ class SimNode:
         if done:
             self.end_reason = reason
             return True
-        self.plant.step(self.u)
+        self.plant.step(self.u, u_k=self.u_k)
         return False
 
     def _take_command(self, rec) -> int:
         self.u[:] = rec["u"]
-        return int(rec["k"])
+        self.u_k = int(rec["k"])
+        return self.u_k
 
     # ------------------------------------------------------------------ lockstep
     def wait_command(self, k: int) -> bool:
@@ -252,6 +254,7 @@ class SimNode:
                 self.counts["missed_commands"] += 1
             if k - last_cmd_k >= self.args.miss_periods:
                 self.u[:] = 0
+                self.u_k = -1
                 if not holding and last_cmd_k >= 0:
                     holding = True
                     say(ROLE, f"t={self.plant.t_s:.2f}s no jet command for {k - last_cmd_k} periods: jets held off")

@@ -39,3 +39,30 @@ def test_sil_recording_matches_the_run(tmp_path):
     # the FDIR events reached the recording as text-log entries
     _, _, texts = _column(ents["/events"], "TextLog:text")
     assert any("JET 17 FAILED OFF" in str(t) for t in texts), texts[:10]
+
+
+def test_sil_guided_map_shows_each_guidance_answer_once_with_the_fsws_predicted_point(tmp_path):
+    """The Map tab of a guided SIL: the predicted deploy points reach the bridge in the FSW
+    state record (Zenoh), one per answer, equal to the FSW's own history of them (written by
+    the FSW process, not through Zenoh); the target once; the ground track every 10th step."""
+    import math
+    from interfaces.records import GUID_PREDICTION
+    out = tmp_path / "sil"
+    r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "run", "guided-nominal", "--lockstep", "--duration",
+                        "6", "--out", str(out), "--rerun", "file", "--no-plots"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    ents, _ = _read(out / "run.rrd")
+    h = np.load(out / "history.npz")
+    has = (h["guid_flags"] & GUID_PREDICTION) != 0
+    cyc = np.where(has, h["guid_cycles"], -1)
+    first = np.nonzero(has & (np.diff(np.concatenate(([-1], cyc))) != 0))[0]      # rows of a new answer
+    assert len(first) >= 5                                                       # ~1 Hz over 6 s
+    steps, _, pts = _column(ents["/map/predicted"], "Points3D:positions")
+    assert list(steps) == [int(k) for k in h["k"][first]]
+    np.testing.assert_allclose([p[0][0] for p in pts], np.degrees(h["pred_lon_rad"][first]), rtol=1e-6)
+    np.testing.assert_allclose([p[0][1] for p in pts], np.degrees(h["pred_lat_rad"][first]), rtol=1e-6)
+    _, _, tgt = _column(ents["/map/target"], "Points3D:positions")
+    assert len(tgt) == 1 and tgt[0][0][0] == pytest.approx(math.degrees(float(h["target_lon_rad"][0])))
+    steps, _, _ = _column(ents["/map/track"], "LineStrips3D:strips")
+    assert list(steps) == [int(k) for k in h["k"] if k % 10 == 0]

@@ -60,6 +60,11 @@ PARAMS = [
     Param("npc.hdot_tau_s", 0.5, 200.0, "s", "altitude-rate feedback: time to close on the limit altitude"),
     Param("npc.hdot_gain", 0.0, 1.0, "s/m", "altitude-rate feedback: change of cos(bank) per m/s"),
     Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
+    Param("npc.h_floor_m", 0.0, 5e4, "m", "predicted deploy altitude kept above this, range traded (0: off)"),
+    # a design bound of the floor's trade (the unit tests show it); no take-effect case from
+    # the guided-nominal start, where no trade within any bound reaches a floor
+    Param("npc.floor_miss_max_m", 0.0, 1e5, "m", "predicted deploy miss the altitude floor may trade up to",
+          ground_settable=False),
 ]
 
 # flat constants vector of the predictor (indices are compile-time constants)
@@ -121,10 +126,11 @@ def shaper_branch(phi, sign_now, turn, bank_signed):
 
 
 @njit(cache=True, nogil=True)
-def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
+def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux, bank_fix=math.nan):
     """dx = f(x), x = [r (3), v (3)] in the rotating planet-fixed frame (v planet-relative):
     r'' = g - D w1 + L l - 2 Omega x v - Omega x (Omega x r); w1 = v/V, w2 = (v x r)/|.|,
     w3 = w1 x w2, l = sin(bank) w2 - cos(bank) w3 (the plant's frames, spec 10-plant.md).
+    bank_fix: the signed bank flown instead of the law's (NaN: the law), for a shaped transition.
     aux: [h, V, load factor (g), heat rate (W/m^2), the law's bank magnitude (rad)]."""
     rx, ry, rz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
     r2 = rx * rx + ry * ry + rz * rz
@@ -153,7 +159,7 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux):
     hdot = (rx * vx + ry * vy + rz * vz) / r
     mag = path_limited_bank(b0 + (bf - b0) * f, h, hdot, n_g, q_heat, c[C_NLIM], c[C_QLIM], c[C_H],
                             c[C_HTAU], c[C_HGAIN])
-    bank = sign * mag
+    bank = sign * mag if math.isnan(bank_fix) else bank_fix
     e1x, e1y, e1z = vx / V, vy / V, vz / V
     hx, hy, hz = vy * rz - vz * ry, vz * rx - vx * rz, vx * ry - vy * rx
     hn = math.sqrt(hx * hx + hy * hy + hz * hz)
@@ -188,7 +194,83 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     effect then: the lateral mid-point of the shaped transition). out: final position (3)
     [m, planet-fixed], time of flight [s], peak load [g], peak heat rate [W/m^2], final
     altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT). The last step is
-    cut back linearly to the deploy condition."""
+    cut back linearly to the deploy condition. The law's bank is flown from the start."""
+    _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, np.empty(0), 0)
+
+
+# a shaped transition longer than this is not modelled past it (the law takes over)
+N_TRANSITION = 256
+
+
+@njit(cache=True, nogil=True)
+def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
+    """The reference's bank [rad, signed, on the shaper's branch] every t_sample [s] from now
+    while the BankShaper moves from its state towards bank_a and, from t_switch on, towards
+    bank_b (a reversal commanded then): the same branch rule and acceleration law, stepped
+    at the control period. shp: [phi, phidot, sign, turn, rate limit, acceleration limit,
+    control period, the magnitude commanded now]. The branch (which way round) is the one
+    the shaper takes for the command now, fixed for the prediction: in flight the new
+    answer arrives after the reversal has set off, and a branch that followed the
+    corrector's trial bank would flip near a 180 deg swing and make the miss function jump.
+    Returns the number of samples written to tab; the last is the first at which the
+    reference has settled on bank_b (<= 1 when it already has)."""
+    phi, phid, s_now, turn = shp[0], shp[1], shp[2], shp[3]
+    rate, accel, dtc, mag_now = shp[4], shp[5], shp[6], shp[7]
+    s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_a))
+    target = bank_a + turn
+    switched = t_switch <= 0.0
+    if switched:
+        s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+        target = bank_b + turn
+    per = max(1, int(round(t_sample / dtc)))
+    n = 0
+    k = 0
+    while n < tab.shape[0]:
+        if not switched and k * dtc >= t_switch - 1e-9:
+            switched = True
+            s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+            target = bank_b + turn
+        if k % per == 0:
+            tab[n] = phi
+            n += 1
+            if switched and abs(target - phi) < 1e-3 and abs(phid) < 1e-3:
+                break
+        a = shaper_accel(phi, phid, target, rate, accel, dtc)
+        phi += phid * dtc + 0.5 * a * dtc * dtc
+        phid += a * dtc
+        k += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def predict_shaped(x0, c, b0, bf, e0, ef, sign, dt, out, shp, t_switch=0.0):
+    """``predict``, but the bank first follows the reference shaper from its present state
+    (shp, see shaped_transition) to the law's bank at x0 (sign ``sign``, the magnitude with
+    the path-limit feedback) within the rate and acceleration limits the attitude chain is
+    given (the controllability LP's authority): a reversal in progress, or one just
+    commanded, is flown as the vehicle will fly it, through lift down when its shorter way
+    is that. With t_switch > 0, the reference keeps the other sign until then (a reversal
+    commanded at t_switch). Afterwards the law, as in ``predict``."""
+    dx = np.empty(6)
+    aux = np.empty(5)
+    _deriv(x0, c, b0, bf, e0, ef, sign, dx, aux, math.nan)
+    tab = np.empty(N_TRANSITION)
+    n = shaped_transition(shp, -sign * aux[4] if t_switch > 0.0 else sign * aux[4], t_switch, sign * aux[4],
+                          0.5 * dt, tab)
+    _fly(x0, c, b0, bf, e0, ef, sign, dt, out, 0.0, tab, n)
+
+
+@njit(cache=True, nogil=True)
+def _bank_at(tab, n, t, t_sample):
+    """The transition's bank at t (a multiple of t_sample), NaN once it has settled."""
+    j = int(round(t / t_sample))
+    return tab[j] if j < n - 1 else math.nan
+
+
+@njit(cache=True, nogil=True)
+def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
+    """The integration of ``predict`` and ``predict_shaped`` (tab: the transition's bank every
+    dt/2, n_tab samples; 0: none)."""
     x = x0.copy()
     xp = np.empty(6)
     k1 = np.empty(6)
@@ -207,20 +289,25 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     while t < c[C_T_MAX]:
         xp[:] = x
         sg = -sign if t < t_flip else sign
-        _deriv(x, c, b0, bf, e0, ef, sg, k1, aux)
+        bf0 = bf1 = bf2 = math.nan
+        if n_tab > 1:
+            bf0 = _bank_at(tab, n_tab, t, 0.5 * dt)
+            bf1 = _bank_at(tab, n_tab, t + 0.5 * dt, 0.5 * dt)
+            bf2 = _bank_at(tab, n_tab, t + dt, 0.5 * dt)
+        _deriv(x, c, b0, bf, e0, ef, sg, k1, aux, bf0)
         if aux[2] > nmax:
             nmax = aux[2]
         if aux[3] > qmax:
             qmax = aux[3]
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k1[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, k2, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k2, aux, bf1)
         for i in range(6):
             xt[i] = x[i] + 0.5 * dt * k2[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, k3, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k3, aux, bf1)
         for i in range(6):
             xt[i] = x[i] + dt * k3[i]
-        _deriv(xt, c, b0, bf, e0, ef, sg, k4, aux)
+        _deriv(xt, c, b0, bf, e0, ef, sg, k4, aux, bf2)
         for i in range(6):
             x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         t += dt
@@ -410,6 +497,7 @@ class LateralLogic:
         self.sign = 1.0 if sign0 >= 0 else -1.0
         self.t_last = -math.inf
         self.final = False            # the prediction has taken over (corridor off)
+        self._xr_rev_prev = math.nan  # xr_rev of the last update
         self.reversals: list[float] = []
         self.rules: list[str] = []    # which rule made each reversal
 
@@ -423,10 +511,15 @@ class LateralLogic:
         """New sign from the heading error dpsi [rad] at speed V, the predicted deploy
         crossranges [m] (NaN: no prediction), the predicted time to deploy and the time a
         reversal takes [s]; True when it reversed."""
+        prev, self._xr_rev_prev = self._xr_rev_prev, xr_rev
         if V < self.v_norev or t_s - self.t_last < self.gap_s or t_go_s < t_rev_s + self.t_settle:
             return False
         push = xr_keep - xr_rev
-        if push != 0.0 and push * xr_rev >= 0.0:        # NaN compares False
+        # the cycle nearest the crossing: now, if waiting one more cycle (xr_rev extrapolated
+        # linearly from the last) would overshoot by more than reversing now falls short; the
+        # crossrange a cycle is worth grows with speed (~1 km per second of delay at 1.8 km/s)
+        nxt = 2.0 * xr_rev - prev
+        if push != 0.0 and (push * xr_rev >= 0.0 or (push * nxt >= 0.0 and abs(nxt) > abs(xr_rev))):  # NaN: False
             rule = "final"
         elif not self.final and (dpsi > self.corridor(V) if self.sign > 0 else dpsi < -self.corridor(V)):
             rule = "corridor"
@@ -548,6 +641,9 @@ class EntryGuidance:
     arrives), and a cycle released while the previous one still computes is skipped."""
 
     STATS = 4096
+    REV_ITER = 3                       # predictions that re-solve phi_0 for the reversal predicted
+    FLOOR_STEP = math.radians(10.0)    # the floor search's march down from the range solution
+    FLOOR_RES = math.radians(0.5)      # ... and its bisection's resolution
 
     def __init__(self, scenario: Scenario, params: dict, events: EventLog, dt_control_s: float,
                  realtime: bool = False, apply_delay_s: float = 0.5):
@@ -574,7 +670,9 @@ class EntryGuidance:
         self.shaper = BankShaper(bank0, scenario.bank_rate_limit_radps, scenario.bank_accel_limit_radps2,
                                  dt_control_s)
         self.dt_control_s = dt_control_s
-        self.bank0 = abs(bank0)          # phi_0 solution (warm start of the next cycle)
+        self.bank0 = abs(bank0)          # phi_0 range solution (warm start of the next cycle)
+        self.bank0_cmd = abs(bank0)      # phi_0 commanded: the range solution, or the deploy-altitude floor's
+        self.floor_cycles = 0            # cycles whose answer traded range for the deploy-altitude floor
         self.bank_cmd = abs(bank0)       # magnitude commanded now (after the path limits)
         self.miss_m = math.nan           # predicted range miss z of the last solution [m]
         self.range_to_go_m = math.nan
@@ -595,6 +693,7 @@ class EntryGuidance:
         self.bank0_hist = np.zeros(self.STATS)
         self.miss_hist = np.zeros(self.STATS)
         self._x = np.zeros(6)
+        self._shp = None
         self._out = np.zeros(N_O)
         self._frozen = False
         self.realtime = realtime
@@ -621,16 +720,18 @@ class EntryGuidance:
         c[C_T_MAX] = 0.0                 # the initial derivative only
         x = np.array([self.R + 1e5, 0.0, 0.0, 0.0, 1e3, 0.0])
         predict(x, c, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, np.zeros(N_O), 0.0)
+        predict_shaped(x, c, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, np.zeros(N_O), np.array([0.0, 0.0, 1.0, 0.0, 0.1, 0.01, 0.02, 1.0]),
+                       1.0)
         path_limited_bank(1.0, 1e4, -1.0, 1.0, 1.0, 1.0, 1.0, self.H, 1.0, 0.0)
         shaper_accel(0.0, 0.0, 1.0, 1.0, 1.0, 0.02)
         shaper_branch(0.0, 1.0, 0.0, 1.0)
 
     # ------------------------------------------------------------------ prediction
-    def _z(self, x, e0, s_togo, sign):
+    def _z(self, x, e0, s_togo, sign, t_switch=0.0):
         out = self._out
 
         def z(b0):
-            predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], out, 0.0)
+            self._predict(x, b0, self.bank_f, e0, sign, out, t_switch)
             if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
                 # out of the atmosphere: far long. Its range so far says little, so the miss
                 # is made 1000 km plus a slope towards more bank: the corrector then walks
@@ -639,27 +740,115 @@ class EntryGuidance:
             return central_angle(x[:3], out[:3]) * self.R - s_togo
         return z
 
-    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan) -> dict:
+    def _predict(self, x, b0, bf, e0, sign, out, t_switch=0.0):
+        """The corrector's prediction: from the reference shaper's state when one is given
+        (the transition in progress flown within the attitude chain's limits; a reversal to
+        ``sign`` commanded at t_switch > 0), else the law from the start."""
+        if self._shp is None:
+            predict(x, self.c, b0, bf, e0, self.ef, sign, self.params["npc.dt_pred_s"], out, 0.0)
+        else:
+            predict_shaped(x, self.c, b0, bf, e0, self.ef, sign, self.params["npc.dt_pred_s"], out, self._shp,
+                           float(t_switch))
+
+    def _floor_bank(self, x, e0, s_togo, sign, h_floor, b_hi, h_hi):
+        """(phi_0, predictions): the largest phi_0 below b_hi (whose prediction deploys below
+        h_floor) whose predicted deploy altitude reaches h_floor, with the floor mode's
+        profile (phi_0 held to the end when below phi_f). The deploy altitude is not monotonic
+        in phi_0 (a steeper dive also slows the vehicle higher up), so no secant: steps of
+        FLOOR_STEP down to the first phi_0 that reaches the floor, then bisection between it
+        and the last that did not (the crossing nearest the range solution, least range
+        given up). A phi_0 that skips out or whose predicted miss exceeds
+        npc.floor_miss_max_m is refused, and so is everything below it (more lift up flies
+        further); without a crossing above the refused, the phi_0 of the highest deploy seen.
+        The miss bound keeps the trade from running away: flown long, the next range
+        solution needs more lift down, which deploys lower still."""
+        out = self._out
+        tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
+        miss_max = self.params["npc.floor_miss_max_m"]
+        b_bad, b_ok, b_lim, n = b_hi, math.nan, math.nan, 0
+        best_b, best_h = b_hi, h_hi
+        while n < n_max:
+            if not math.isnan(b_ok):
+                b = 0.5 * (b_ok + b_bad)
+            elif not math.isnan(b_lim):
+                b = 0.5 * (b_lim + b_bad)
+            else:
+                b = max(self.bank_lo, b_bad - self.FLOOR_STEP)
+            self._predict(x, b, min(self.bank_f, b), e0, sign, out)
+            n += 1
+            if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT or \
+                    abs(central_angle(x[:3], out[:3]) * self.R - s_togo) > miss_max:
+                b_lim = b
+            elif out[O_H] >= h_floor:
+                b_ok = b
+                if out[O_H] - h_floor <= tol:
+                    break
+            else:
+                b_bad = b
+                if out[O_H] > best_h:
+                    best_b, best_h = b, out[O_H]
+            if not math.isnan(b_ok):
+                if b_bad - b_ok < self.FLOOR_RES:
+                    break
+            elif (not math.isnan(b_lim) and b_bad - b_lim < self.FLOOR_RES) or b <= self.bank_lo:
+                break
+        return (best_b if math.isnan(b_ok) else b_ok), n
+
+    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
+              shp: np.ndarray | None = None, t_switch: float = 0.0) -> dict:
         """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
         t_flip given, one more prediction: the same phi_0 with a reversal taking effect
         t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
-        sign kept and reversed)."""
+        sign kept and reversed). shp: the reference shaper's state at x (shaped_transition),
+        None: the bank follows the law at once; with shp, the reversal is commanded t_switch
+        from now and flown through the shaper (t_flip unused)."""
         t0 = time.perf_counter_ns()
+        self._shp = shp
         self.c[C_KRHO], self.c[C_KLD] = k_rho, k_ld
         r = math.sqrt(float(x[:3] @ x[:3]))
         e0 = self.mu / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.R
+        dt = self.params["npc.dt_pred_s"]
         b0, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.bank_lo, self.bank_hi, self.bank0,
                                    self.params["npc.tol_m"], int(self.params["npc.max_iter"]))
+        b_range = b0
         # the prediction of the answer (the root-finder's last call may have been another)
-        predict(x, self.c, b0, self.bank_f, e0, self.ef, sign, self.params["npc.dt_pred_s"], self._out, 0.0)
+        self._predict(x, b0, self.bank_f, e0, sign, self._out)
+        bf, floor = self.bank_f, False
+        h_floor = self.params["npc.h_floor_m"]
+        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H] < h_floor and b0 > self.bank_lo:
+            # the range solution deploys too low: trade range for altitude (more lift up, so
+            # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
+            # fixed phi_f would otherwise take the lift-up away just where it counts), and
+            # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
+            floor = True
+            b0, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, b0, self._out[O_H])
+            n += nh
+            bf = min(self.bank_f, b0)
+            self._predict(x, b0, bf, e0, sign, self._out)
+            zb = (central_angle(x[:3], self._out[:3]) * self.R - s_togo if self._out[O_FLAG] == REACHED
+                  else math.nan)
+            ok = False
         rf = self._out[:3].copy()
-        res = {"bank0": b0, "miss_m": zb, "calls": n + 1, "ok": ok, "s_togo": s_togo,
+        res = {"bank0": b0, "b_range": b_range, "bank_f": bf, "floor": floor, "miss_m": zb, "calls": n + 1,
+               "ok": ok or floor, "s_togo": s_togo,
                "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
                "h_f": float(self._out[O_H]), "t_go": float(self._out[O_T]), "xr": math.nan, "xr_rev": math.nan}
         if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
             res["xr"] = crossrange(x[:3], self.target_u, rf, self.R)
-            predict(x, self.c, b0, self.bank_f, e0, self.ef, -sign, self.params["npc.dt_pred_s"], self._out, t_flip)
+            if shp is None:
+                predict(x, self.c, b0, bf, e0, self.ef, -sign, dt, self._out, t_flip)
+            elif floor:
+                self._predict(x, b0, bf, e0, -sign, self._out, t_switch)
+            else:
+                # the reversal commanded at the next cycle, flown through the shaper, with the
+                # phi_0 the corrector will then choose (a few secant steps from this one): the
+                # bank after a late reversal is often far from today's (the range left wants
+                # it), and with it the lateral lift the reversal has to null the crossrange
+                b_rev, _, nr, _ = solve_bank(self._z(x, e0, s_togo, -sign, t_switch), self.bank_lo, self.bank_hi,
+                                             b0, self.params["npc.tol_m"], self.REV_ITER)
+                self._predict(x, b_rev, bf, e0, -sign, self._out, t_switch)
+                res["calls"] += nr
             res["calls"] += 1
             if self._out[O_FLAG] == REACHED:
                 res["xr_rev"] = crossrange(x[:3], self.target_u, self._out[:3], self.R)
@@ -673,9 +862,9 @@ class EntryGuidance:
             self._go.clear()
             if self._stop:
                 return
-            x, sign, k_rho, k_ld, t_flip, t_s = self._job
+            x, sign, k_rho, k_ld, t_flip, shp, t_switch, t_s = self._job
             try:
-                res = self.solve(x, sign, k_rho, k_ld, t_flip)
+                res = self.solve(x, sign, k_rho, k_ld, t_flip, shp, t_switch)
             except Exception as e:      # noqa: BLE001 -- a fault in the correction must not stall the FSW
                 res = {"error": f"{type(e).__name__}: {e}"}
             res["t_s"], res["sign"] = t_s, sign
@@ -725,7 +914,10 @@ class EntryGuidance:
         # a reversal decided at the next cycle, in effect laterally at its shaped transition's
         # mid-point (half-way the lateral lift has turned over)
         t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
-        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, t_s)
+        sh = self.shaper
+        shp = np.array([sh.phi, sh.phid, sh._sign, sh._turn, sh.rate_limit_radps, sh.accel_limit_radps2, sh.dt,
+                        self.bank_cmd])
+        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp, period, t_s)
         self._go.set()
 
     def _apply(self, res: dict) -> None:
@@ -739,7 +931,13 @@ class EntryGuidance:
         self.k_rho_hist[i], self.t_hist[i] = self.estimator.k_rho, res["t_s"]
         self.bank0_hist[i], self.miss_hist[i] = res["bank0"], res["miss_m"]
         self.cycles += 1
-        self.bank0 = res["bank0"]
+        self.bank0 = res["b_range"]
+        self.bank0_cmd = res["bank0"]
+        if res["floor"]:
+            if self.floor_cycles == 0:
+                self.events.emit(res["t_s"], Severity.NOTICE, "guidance", "deploy_alt_floor",
+                                 f"DEPLOY ALT FLOOR: RANGE TRADED {res['miss_m'] / 1e3:+.1f} KM"[:50])
+            self.floor_cycles += 1
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat"], res["lon"])
         self.pred_h_m = res["h_f"]
@@ -776,7 +974,7 @@ class EntryGuidance:
         a = nav.accel_B
         n_g = math.sqrt(float(a @ a)) / self.c[C_G0]
         q = SUTTON_GRAVES_MARS * math.sqrt(max(nav.rho_kgpm3, 0.0) * self.estimator.k_rho / self.c[C_RN]) * V ** 3
-        self.bank_cmd = path_limited_bank(self.bank0, nav.h_m, hdot, n_g, q, self.n_lim, self.q_lim, self.H,
+        self.bank_cmd = path_limited_bank(self.bank0_cmd, nav.h_m, hdot, n_g, q, self.n_lim, self.q_lim, self.H,
                                           self.params["npc.hdot_tau_s"], self.params["npc.hdot_gain"])
         self.shaper.command(self.lateral.sign * self.bank_cmd)
 
@@ -830,7 +1028,7 @@ class EntryGuidance:
                 "compute_max_us": float(us.max()) if n else None,
                 "predictions_per_cycle_mean": float(calls.mean()) if n else None,
                 "predictions_per_cycle_max": int(calls.max()) if n else None,
-                "no_root": self.no_root, "overruns": self.overruns, "faults": self.faults,
+                "no_root": self.no_root, "floor_cycles": self.floor_cycles, "overruns": self.overruns, "faults": self.faults,
                 "reversal_times_s": list(self.lateral.reversals), "reversal_rules": list(self.lateral.rules),
                 "k_rho_final": self.estimator.k_rho, "k_ld_final": self.estimator.k_ld,
-                "bank0_final_deg": math.degrees(self.bank0)}
+                "bank0_final_deg": math.degrees(self.bank0_cmd)}

@@ -288,3 +288,123 @@ def test_a_correction_that_raises_keeps_the_command_and_never_stalls_the_run(mon
     assert fsw.entry.faults >= 3 and fsw.entry.cycles == 0
     assert any(e.code == "guidance_fault" and "INJECTED" in e.text.upper() for e in fsw.events.history)
     assert np.all(np.isfinite(h["bank_ref_rad"]))
+
+
+def test_shaped_transition_reverses_the_shorter_way_in_the_rest_to_rest_time():
+    """The predictor's model of the reference: a reversal at 136 deg goes through 180 deg
+    (lift down) and settles on -136 deg (224 on that branch) in the rest-to-rest time of the
+    trapezoidal rate profile within the limits (closed form, BankShaper.transition_s), and
+    with a switch at 5 s it holds 136 deg until then; below 90 deg it goes through 0."""
+    dtc, w, a, ts = 0.02, math.radians(8.0), math.radians(0.5), 0.5
+    sh = npc.BankShaper(0.0, w, a, dtc)
+    tab = np.zeros(npc.N_TRANSITION)
+    for phi0, t_switch in ((136.0, 0.0), (136.0, 5.0), (-40.0, 0.0)):
+        b = math.radians(phi0)
+        shp = np.array([b, 0.0, math.copysign(1.0, b), 0.0, w, a, dtc, abs(b)])
+        n = npc.shaped_transition(shp, b, t_switch, -b, ts, tab)
+        path = np.degrees(tab[:n])
+        swing = 2.0 * min(abs(b), math.pi - abs(b))
+        assert (n - 1) * ts == pytest.approx(t_switch + sh.transition_s(swing), abs=1.5), phi0   # + the settling tail
+        if phi0 > 90.0:
+            assert path[-1] == pytest.approx(224.0, abs=0.1) and path.max() <= 224.5            # the discrete braking overshoots a little
+        else:
+            assert path[-1] == pytest.approx(-40.0 + 80.0, abs=0.1) and path.min() >= -40.5
+        if t_switch:
+            assert np.all(path[: int(t_switch / ts)] == pytest.approx(phi0))
+        assert np.all(np.abs(np.diff(path)) <= math.degrees(w) * ts + 1e-6)        # the rate limit
+    # settled on the command already: nothing to model
+    shp = np.array([math.radians(70.0), 0.0, 1.0, 0.0, w, a, dtc, math.radians(70.0)])
+    assert npc.shaped_transition(shp, math.radians(70.0), 0.0, math.radians(70.0), ts, tab) == 1
+
+
+def test_predicting_through_the_shaper_once_settled_is_the_law_and_a_slow_reversal_through_lift_down_costs_range():
+    """From the entry state with the reference settled on the law's bank, predict_shaped is
+    predict bit for bit. With the reference at -120 deg and the law +120 deg, the reversal
+    goes through 180 deg at the shaper's pace: the slower the reversal (a lower acceleration
+    limit, as the controllability LP gives a degraded vehicle), the longer the lift points
+    down and the shorter the predicted range; with a fast shaper it approaches the instant
+    reversal of predict."""
+    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = npc.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    c = npc.predictor_constants(SCN, PARAMS)
+    b0, bf, dt = math.radians(120.0), math.radians(PARAMS["npc.bank_final_deg"]), PARAMS["npc.dt_pred_s"]
+    ref, out = np.zeros(npc.N_O), np.zeros(npc.N_O)
+    npc.predict(x, c, b0, bf, e0, ef, 1.0, dt, ref, 0.0)
+    npc.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, np.array([b0, 0.0, 1.0, 0.0, 0.1, 0.01, 0.02, b0]), 0.0)
+    assert np.array_equal(out, ref)
+
+    def range_km(accel_dps2):
+        shp = np.array([-b0, 0.0, -1.0, 0.0, math.radians(8.0), math.radians(accel_dps2), 0.02, b0])
+        npc.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, shp, 0.0)
+        assert out[npc.O_FLAG] == npc.REACHED
+        return npc.central_angle(x[:3], out[:3]) * SCN.planet.radius_m / 1e3
+    r_inst = npc.central_angle(x[:3], ref[:3]) * SCN.planet.radius_m / 1e3
+    r_slow, r_mid, r_fast = range_km(0.25), range_km(1.0), range_km(100.0)
+    assert r_slow < r_mid < r_fast
+    assert r_fast == pytest.approx(r_inst, abs=0.02 * r_inst)
+
+
+def test_deploy_altitude_floor_trades_range_for_altitude():
+    """From the plant's state 90 s into an entry flown at 90 deg, a target that the range
+    solution (phi_0 = 110 deg) reaches deploying at h_f: with the floor 500 m above h_f the
+    corrector gives up range (more lift up: the deploy point long) for a predicted deploy
+    altitude at the floor (within the corrector's tolerance); with the floor below h_f the
+    answer is the range solution; with the trade bounded, it stops at the bound. (From the entry interface the deploy altitude barely
+    depends on phi_0 and not monotonically: there the floor is a best effort.)"""
+    _, _, _, _, frames = fly_plant(SCN.with_(max_duration_s=95.0), lambda e: math.radians(90.0), every=200)
+    t, f, _ = [fr for fr in frames if fr[0] >= 90.0][0]
+    x = npc.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
+    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    out = np.zeros(npc.N_O)
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.floor_miss_max_m": 1e7})     # unbounded here
+    eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": 0.0}), npc.EventLog(), 0.02)
+    try:
+        npc.predict(x, eg.c, math.radians(110.0), eg.bank_f, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
+        target = out[:3] / np.linalg.norm(out[:3])
+        eg.target_u = target
+        eg.bank0 = math.radians(100.0)
+        free = eg.solve(x, 1.0, 1.0, 1.0)
+    finally:
+        eg.close()
+    assert free["ok"] and not free["floor"] and math.degrees(free["bank0"]) == pytest.approx(110.0, abs=0.5)
+    for floor_m, binds in ((free["h_f"] + 500.0, True), (free["h_f"] - 2000.0, False)):
+        eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": floor_m}), npc.EventLog(), 0.02)
+        try:
+            eg.target_u = target
+            eg.bank0 = math.radians(100.0)
+            res = eg.solve(x, 1.0, 1.0, 1.0)
+        finally:
+            eg.close()
+        assert res["floor"] is binds
+        if binds:
+            assert res["h_f"] >= floor_m - PARAMS["npc.tol_m"]
+            assert res["bank0"] < free["bank0"] and res["miss_m"] > 10e3         # long
+            assert res["b_range"] == pytest.approx(free["bank0"], abs=1e-6)     # next cycle's warm start
+            res_binds = res
+        else:
+            assert res["bank0"] == free["bank0"] and res["h_f"] == free["h_f"]
+    # a trade bounded to half that miss: the floor gives up less (below the floor, within the bound)
+    traded = res_binds["miss_m"]
+    p = dict(base, **{"npc.h_floor_m": free["h_f"] + 500.0, "npc.floor_miss_max_m": 0.5 * traded})
+    eg = npc.EntryGuidance(SCN, p, npc.EventLog(), 0.02)
+    try:
+        eg.target_u = target
+        eg.bank0 = math.radians(100.0)
+        res = eg.solve(x, 1.0, 1.0, 1.0)
+    finally:
+        eg.close()
+    assert res["floor"] and res["h_f"] < free["h_f"] + 500.0 - PARAMS["npc.tol_m"]
+    assert free["bank0"] >= res["bank0"] > res_binds["bank0"] and abs(res["miss_m"]) <= 0.5 * traded
+
+
+def test_final_reversal_at_the_cycle_nearest_the_crossing():
+    """A scripted 'reverse now' crossrange crossing zero between two cycles: the logic reverses
+    at the cycle on the nearer side, before the crossing when waiting would overshoot more."""
+    p = dict(PARAMS, **{"npc.v_norev_mps": 0.0})
+    for before, after, want in ((-0.3e3, 0.9e3, 10), (-0.9e3, 0.3e3, 11)):
+        lat = npc.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+        xr = {9: before - 1.2e3, 10: before, 11: after}
+        fired = [t for t in range(9, 12) if lat.update(float(t), 5000.0, 0.0, 20e3, xr[t])]
+        assert fired == [want] and lat.rules == ["final"]

@@ -4,7 +4,11 @@
 - ``flight``: the guided-nominal entry through ``ellipsled.batch.run``; every guidance cycle's
   compute time (worker thread, prediction + correction) and the control cycle's;
 - ``entry_state``: the cycle from the entry interface (longest prediction: 250 s of flight)
-  with the corrector started cold at the initial bank, repeated.
+  with the corrector started cold at the initial bank, repeated;
+- ``realtime``: the guided entry in the real-time SIL (plant and FSW processes; the whole
+  entry, 60 s with --quick): cycle slips by cause (the FSW's own work: overrun or a cycle
+  whose tasks took half the period; the host's late release), guidance cycles skipped or
+  late, the guidance compute beside the loop's guidance task (the hand-over only).
 
     python -m ellipsled.bench.guidance [--quick]
 """
@@ -56,7 +60,36 @@ def run(quick: bool) -> dict:
                 "deploy_miss_km": s.get("deploy_miss_km"), "end_reason": s.get("end_reason")})
     p99 = res["p99_us"]
     res["pass"] = bool(p99 is not None and p99 <= TARGET_P99_US)
+    res["realtime"] = realtime(quick)
     return res
+
+
+def realtime(quick: bool) -> dict:
+    """``ellipsled run guided-nominal --realtime``: slips by cause from the FSW's slip records."""
+    from .sil import run_command_available, sil_run
+    ok, why = run_command_available()
+    if not ok:
+        return {"own_slips": None, "own_slips_reason": why}
+    dur = 60.0 if quick else None
+    try:
+        r = sil_run("realtime", "guided-nominal", dur, timeout_s=(dur or 400.0) + 240.0)
+    except Exception as e:      # noqa: BLE001 -- a failed run is a figure with its reason
+        return {"own_slips": None, "own_slips_reason": f"{type(e).__name__}: {e}"}
+    fsw, s = r.get("fsw") or {}, r.get("summary") or {}
+    if not fsw:
+        return {"own_slips": None, "own_slips_reason": f"no fsw.json ({r['command']}, exit {r['exit_code']})"}
+    period_us = 1e6 * load_scenario("guided-nominal").dt_control_s
+    recs = fsw["executive"].get("slip_records", [])
+    # the deadline tests' rule (tests/deadlines.py): a late release whose tasks took half the
+    # period or more is the FSW's own too
+    own = [x for x in recs if x["cause"] != "late_release" or sum(x["tasks_us"].values()) >= 0.5 * period_us]
+    g, loop = fsw.get("guidance") or {}, (fsw.get("tasks_us") or {}).get("entry_guidance") or {}
+    return {"command": r["command"], "t_end_s": s.get("t_end_s"), "end_reason": s.get("end_reason"),
+            "slips": fsw.get("cycle_slips"), "slips_recorded": len(recs), "own_slips": len(own),
+            "late_release_slips": len(recs) - len(own),
+            "guidance_cycles": g.get("cycles"), "guidance_overruns": g.get("overruns"),
+            "guidance_p99_us": g.get("compute_p99_us"), "loop_guidance_task_p99_us": loop.get("p99"),
+            "deploy_miss_km": s.get("deploy_miss_km")}
 
 
 def rows(res: dict) -> list[Row]:
@@ -70,7 +103,23 @@ def rows(res: dict) -> list[Row]:
                 NO_TARGET, absolute=(gd.get("p99_us"), TARGET_P99_US, "<="), machine=speed(res)),
             row("  guidance cycle from entry interface, cold p50 / p99 [us]",
                 f"{fmt(es.get('p50_us'))} / {fmt(es.get('p99_us'))}",
-                f"{fmt(es.get('predictions_mean'))} predictions", "", "", NO_TARGET)]
+                f"{fmt(es.get('predictions_mean'))} predictions", "", "", NO_TARGET)] + realtime_rows(gd)
+
+
+def realtime_rows(gd: dict) -> list[Row]:
+    rt = gd.get("realtime") or {}
+    if not rt:
+        return []
+    own = rt.get("own_slips")
+    if own is None:
+        return [row("guided entry in real time (SIL): slips by the FSW's own work", "n/m",
+                    str(rt.get("own_slips_reason", ""))[:60], "", "0", None)]
+    return [row("guided entry in real time (SIL): slips by the FSW's own work",
+                f"{own} (host late releases {rt.get('late_release_slips')}; guidance skipped/late "
+                f"{rt.get('guidance_overruns')} of {rt.get('guidance_cycles')})",
+                f"loop's guidance task p99 {fmt(rt.get('loop_guidance_task_p99_us'))} us, its worker "
+                f"{fmt(rt.get('guidance_p99_us'))} us", f"{fmt(rt.get('t_end_s'))} s flown", "0 own slips, 0 skipped",
+                own == 0 and rt.get("guidance_overruns") == 0)]
 
 
 if __name__ == "__main__":

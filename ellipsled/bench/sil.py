@@ -56,10 +56,11 @@ def sil_run(mode: str, scenario: str, duration_s: float | None, timeout_s: float
         out = Path(d)
         summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").is_file() else None
         sil = json.loads((out / "sil.json").read_text()) if (out / "sil.json").is_file() else None
+        fsw = json.loads((out / "fsw.json").read_text()) if (out / "fsw.json").is_file() else None
         if sil is None and summary is None:
             raise RuntimeError(f"`{' '.join(cmd[2:])}` exit {r.returncode}, no summary.json/sil.json: "
                                f"{(r.stderr or r.stdout).strip()[-300:]}")
-        return {"summary": summary, "sil": sil, "wall_s": wall, "exit_code": r.returncode,
+        return {"summary": summary, "sil": sil, "fsw": fsw, "wall_s": wall, "exit_code": r.returncode,
                 "command": "ellipsled " + " ".join(cmd[3:])}
 
 

@@ -641,7 +641,6 @@ class EntryGuidance:
     arrives), and a cycle released while the previous one still computes is skipped."""
 
     STATS = 4096
-    REV_ITER = 3                       # predictions that re-solve phi_0 for the reversal predicted
     FLOOR_STEP = math.radians(10.0)    # the floor search's march down from the range solution
     FLOOR_RES = math.radians(0.5)      # ... and its bisection's resolution
 
@@ -795,13 +794,12 @@ class EntryGuidance:
         return (best_b if math.isnan(b_ok) else b_ok), n
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
-              shp: np.ndarray | None = None, t_switch: float = 0.0) -> dict:
+              shp: np.ndarray | None = None) -> dict:
         """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
         t_flip given, one more prediction: the same phi_0 with a reversal taking effect
         t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
         sign kept and reversed). shp: the reference shaper's state at x (shaped_transition),
-        None: the bank follows the law at once; with shp, the reversal is commanded t_switch
-        from now and flown through the shaper (t_flip unused)."""
+        None: the bank follows the law at once."""
         t0 = time.perf_counter_ns()
         self._shp = shp
         self.c[C_KRHO], self.c[C_KLD] = k_rho, k_ld
@@ -835,23 +833,20 @@ class EntryGuidance:
                "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
                "h_f": float(self._out[O_H]), "t_go": float(self._out[O_T]), "xr": math.nan, "xr_rev": math.nan}
         if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
-            res["xr"] = crossrange(x[:3], self.target_u, rf, self.R)
-            if shp is None:
-                predict(x, self.c, b0, bf, e0, self.ef, -sign, dt, self._out, t_flip)
-            elif floor:
-                self._predict(x, b0, bf, e0, -sign, self._out, t_switch)
-            else:
-                # the reversal commanded at the next cycle, flown through the shaper, with the
-                # phi_0 the corrector will then choose (a few secant steps from this one): the
-                # bank after a late reversal is often far from today's (the range left wants
-                # it), and with it the lateral lift the reversal has to null the crossrange
-                b_rev, _, nr, _ = solve_bank(self._z(x, e0, s_togo, -sign, t_switch), self.bank_lo, self.bank_hi,
-                                             b0, self.params["npc.tol_m"], self.REV_ITER)
-                self._predict(x, b_rev, bf, e0, -sign, self._out, t_switch)
-                res["calls"] += nr
+            # the lateral decision's pair, "keep" and "reverse at t_flip", both flown with the
+            # bank switching at once (the reversal at its shaped transition's mid-point) and
+            # this phi_0. Flying the pair through the shaper instead (and re-solving phi_0 for
+            # the reversed one) made the final rule fire at the first reversal, ~90 s, where the
+            # load limit's lift up sent the swing through lift up: lofted 150-200 km long in
+            # guided-case1/3/4 and 1 dispersed run of 24
+            predict(x, self.c, b0, bf, e0, self.ef, sign, dt, self._out, 0.0)
             res["calls"] += 1
             if self._out[O_FLAG] == REACHED:
-                res["xr_rev"] = crossrange(x[:3], self.target_u, self._out[:3], self.R)
+                res["xr"] = crossrange(x[:3], self.target_u, self._out[:3], self.R)
+                predict(x, self.c, b0, bf, e0, self.ef, -sign, dt, self._out, t_flip)
+                res["calls"] += 1
+                if self._out[O_FLAG] == REACHED:
+                    res["xr_rev"] = crossrange(x[:3], self.target_u, self._out[:3], self.R)
         res["ns"] = time.perf_counter_ns() - t0
         return res
 
@@ -862,9 +857,9 @@ class EntryGuidance:
             self._go.clear()
             if self._stop:
                 return
-            x, sign, k_rho, k_ld, t_flip, shp, t_switch, t_s = self._job
+            x, sign, k_rho, k_ld, t_flip, shp, t_s = self._job
             try:
-                res = self.solve(x, sign, k_rho, k_ld, t_flip, shp, t_switch)
+                res = self.solve(x, sign, k_rho, k_ld, t_flip, shp)
             except Exception as e:      # noqa: BLE001 -- a fault in the correction must not stall the FSW
                 res = {"error": f"{type(e).__name__}: {e}"}
             res["t_s"], res["sign"] = t_s, sign
@@ -917,7 +912,7 @@ class EntryGuidance:
         sh = self.shaper
         shp = np.array([sh.phi, sh.phid, sh._sign, sh._turn, sh.rate_limit_radps, sh.accel_limit_radps2, sh.dt,
                         self.bank_cmd])
-        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp, period, t_s)
+        self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp, t_s)
         self._go.set()
 
     def _apply(self, res: dict) -> None:

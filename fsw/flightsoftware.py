@@ -342,10 +342,8 @@ class FlightSoftware:
             if last is not None and r.controllable != last.controllable and not r.controllable:
                 self.events.emit(t_s, Severity.WARNING, "guidance", "not_controllable",
                                  f"NOT CONTROLLABLE: {r.reason}"[:50])
-            limit = self._reference_limit(need, r)[0]
-            if limit > 0.0 and math.degrees(self.guidance.profile.accel_limit_radps2 - limit) >= 0.005:
-                self.events.emit(t_s, Severity.NOTICE, "guidance", "controllability", r.text())
-                self._replan_to(t_s, need, r)
+            if self._reference_limit(need, r)[0] < self.guidance.profile.accel_limit_radps2:
+                self._replan_to(t_s, need, r)      # says so when the limit's text changes
             return
         if periodic and last is not None and r.text() == last.text() and r.controllable == last.controllable:
             self._set_trim_ref(r)
@@ -385,11 +383,11 @@ class FlightSoftware:
         prof = self.guidance.profile
         # the same limit at the precision the event states (0.01 deg/s^2) is no new reference:
         # answers of equal LPs differ in their last bits, and each re-plan would say so again
-        if abs(math.degrees(limit - prof.accel_limit_radps2)) < 0.005:
+        if _limit_text(limit) == _limit_text(prof.accel_limit_radps2):
             return
         if prof.replan(t_s, prof.rate_limit_radps, limit):
             self.events.emit(t_s, Severity.NOTICE, "guidance", "reference_reshaped",
-                             f"REFERENCE ACCEL LIMIT {np.degrees(limit):.2f} DEG/S2")
+                             f"REFERENCE ACCEL LIMIT {_limit_text(limit)} DEG/S2")
 
     def no_frame(self, t_s: float) -> np.ndarray:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards
@@ -617,6 +615,11 @@ class _LpWorker:
             self._stop = True
             self._cv.notify()
         self._thread.join(timeout=5.0)
+
+
+def _limit_text(accel_radps2: float) -> str:
+    """The reference's acceleration limit as events state it [deg/s^2]."""
+    return f"{math.degrees(accel_radps2):.2f}"
 
 
 def _jet_in(jet, lo: int) -> bool:

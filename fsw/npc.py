@@ -8,7 +8,8 @@ in-flight density estimate, C_L and C_D at trim. The pieces, each testable on it
   so no pole or heading singularity), RK4 in time, bank magnitude linear in energy,
   stopped at the deploy condition; compiled, and it releases the GIL (a real-time FSW runs
   it beside the control loop);
-- ``solve_bank``: the corrector, a safeguarded secant on the range miss z(phi_0);
+- ``solve_bank``: the corrector, a safeguarded secant on the range miss z(phi_0), over the
+  family ``bank_profile`` (the line in energy, a phi_0 bound held beyond it);
 - ``DensityEstimator``: K_rho = sensed drag / modelled drag, and K_LD likewise for L/D,
   low-pass filtered and bounded;
 - ``LateralLogic``: bank-sign reversals when the heading error to the target leaves a
@@ -72,7 +73,8 @@ C_MU, C_RE, C_OM, C_RHO_MODEL, C_RHO0, C_H, C_KRHO, C_KLD = 0, 1, 2, 3, 4, 5, 6,
 C_S_M, C_CL, C_CD, C_MACH_F, C_V_F, C_H_FLOOR, C_H_CEIL, C_T_MAX = 8, 9, 10, 11, 12, 13, 14, 15
 C_G0, C_RN, C_SG = 16, 17, 18
 C_NLIM, C_QLIM, C_HTAU, C_HGAIN = 19, 20, 21, 22   # path-limit feedback (0 limits: off)
-N_C = 23
+C_BLO, C_BHI = 23, 24     # the law's bank magnitude clipped to the phi_0 bounds (bank_profile)
+N_C = 25
 # predictor outputs
 O_R = 0                     # 3: final position, planet-fixed [m]
 O_T, O_NMAX, O_QMAX, O_H, O_V, O_FLAG = 3, 4, 5, 6, 7, 8
@@ -148,7 +150,8 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux, bank_fix=math.nan):
     D = q * c[C_CD]
     L = q * c[C_CL] * c[C_KLD]
     # bank magnitude linear in energy e = mu/r - V^2/2 (spec 60-guidance.md, longitudinal),
-    # then the same altitude-rate path-limit feedback the vehicle flies (EntryGuidance.steer):
+    # within the phi_0 bounds (a line from beyond one holds it: bank_profile), then the same
+    # altitude-rate path-limit feedback the vehicle flies (EntryGuidance.steer):
     # without it the prediction misses the lift-up the feedback adds near peak load, and the
     # corrector learns of that range only after it is flown
     e = mu / r - 0.5 * V * V
@@ -157,8 +160,8 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux, bank_fix=math.nan):
     n_g = math.sqrt(D * D + L * L) / c[C_G0]
     q_heat = c[C_SG] * math.sqrt(rho / c[C_RN]) * V * V * V
     hdot = (rx * vx + ry * vy + rz * vz) / r
-    mag = path_limited_bank(b0 + (bf - b0) * f, h, hdot, n_g, q_heat, c[C_NLIM], c[C_QLIM], c[C_H],
-                            c[C_HTAU], c[C_HGAIN])
+    mag = path_limited_bank(min(c[C_BHI], max(c[C_BLO], b0 + (bf - b0) * f)), h, hdot, n_g, q_heat, c[C_NLIM],
+                            c[C_QLIM], c[C_H], c[C_HTAU], c[C_HGAIN])
     bank = sign * mag if math.isnan(bank_fix) else bank_fix
     e1x, e1y, e1z = vx / V, vy / V, vz / V
     hx, hy, hz = vy * rz - vz * ry, vz * rx - vx * rz, vx * ry - vy * rx
@@ -429,6 +432,52 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
     return best[0], best[1], len(pts), abs(best[1]) <= tol
 
 
+HOLD_MAX = 1.0 - 1e-6    # bank_profile: a bound held to the deploy, within float reach
+
+
+def bank_profile(p: float, lo: float, hi: float, f: float) -> tuple[float, float]:
+    """The corrector's one-parameter family: (phi_0, phi_f) of the line in energy from the
+    bank now to phi_f at the deploy energy, which the predictor clips to the phi_0 bounds
+    [lo, hi]. Inside them phi_0 = p and phi_f = f. Beyond a bound (p up to profile_span's)
+    the family goes on with the bound held for the fraction k = (p - hi) / (hi - f) of the
+    energy to go (resp. (lo - p) / (f - lo)) and the line to f after it: phi_0 is then the
+    line's start above hi (below lo) that reaches the bound at k; k = 1 holds it to the end.
+
+    Why a held bound and not phi_0 pinned at it: the bank commanded is the profile's now,
+    and the next cycle re-anchors the profile at its own energy. A profile "from hi now to f
+    at the deploy" pinned at hi is re-anchored at hi every cycle and flown at hi to the end,
+    while every prediction had the bank leave it (guided-nominal after its final reversal:
+    165 deg for 57 s, each prediction 0.1-1 km off across and 0.6-1 km along; predicted
+    with 165 deg held, the deploy was the flown one within 10 m). A held bound is a profile
+    the next cycle finds again (the same line, clipped), so the predictions are the flight.
+    Continuous at the bounds and monotonic in range as p is."""
+    if p > hi and hi > f:
+        k = min((p - hi) / (hi - f), HOLD_MAX)
+        return (hi - f * k) / (1.0 - k), f
+    if p < lo and f > lo:
+        k = min((lo - p) / (f - lo), HOLD_MAX)
+        return (lo - f * k) / (1.0 - k), f
+    return p, f
+
+
+def profile_span(lo: float, hi: float, f: float) -> tuple[float, float]:
+    """The range of bank_profile's parameter: down to lo held to the end, up to hi held."""
+    return lo - max(0.0, f - lo), hi + max(0.0, hi - f)
+
+
+def profile_at(p: float, lo: float, hi: float, f: float, frac: float) -> float:
+    """bank_profile(p)'s parameter re-anchored at the fraction frac of its energy span: the
+    same profile from there on, as the next cycle's family writes it (its warm start: an
+    answer still within tolerance is then the profile already flown, not a new one)."""
+    b0, bf = bank_profile(p, lo, hi, f)
+    b = b0 + (bf - b0) * min(1.0, max(0.0, frac))
+    if b > hi and hi > f:
+        return hi + (b - hi) / (b - bf) * (hi - f)
+    if b < lo and f > lo:
+        return lo - (lo - b) / (bf - b) * (f - lo)
+    return b
+
+
 class DensityEstimator:
     """K_rho = sensed drag / modelled drag and K_LD = sensed L/D / model L/D, first-order
     low-pass filtered (time constant npc.k_tau_s), bounded to [k_min, k_max], held while
@@ -616,6 +665,7 @@ def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:
     c[C_NLIM] = params["npc.limit_frac"] * veh.max_load_g
     c[C_QLIM] = params["npc.limit_frac"] * veh.max_heat_rate_wcm2 * 1e4
     c[C_HTAU], c[C_HGAIN] = params["npc.hdot_tau_s"], params["npc.hdot_gain"]
+    c[C_BLO], c[C_BHI] = math.radians(params["npc.bank_min_deg"]), math.radians(params["npc.bank_max_deg"])
     return c
 
 
@@ -660,6 +710,7 @@ class EntryGuidance:
         self.bank_f = math.radians(params["npc.bank_final_deg"])
         self.bank_lo = math.radians(params["npc.bank_min_deg"])
         self.bank_hi = math.radians(params["npc.bank_max_deg"])
+        self.p_lo, self.p_hi = profile_span(self.bank_lo, self.bank_hi, self.bank_f)
         self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
         self.n_lim, self.q_lim = self.c[C_NLIM], self.c[C_QLIM]
         self.estimator = DensityEstimator(params, veh.S_ref_m2, veh.mass_kg, veh.aero.C_L, veh.aero.C_D)
@@ -669,9 +720,14 @@ class EntryGuidance:
         self.shaper = BankShaper(bank0, scenario.bank_rate_limit_radps, scenario.bank_accel_limit_radps2,
                                  dt_control_s)
         self.dt_control_s = dt_control_s
-        self.bank0 = abs(bank0)          # phi_0 range solution (warm start of the next cycle)
+        self.bank0 = abs(bank0)          # the range solution's parameter p (bank_profile: phi_0 within
+                                         # the bounds): the next cycle's warm start
+        self._p_e0 = math.nan            # energy at which bank0's profile starts
         self.bank0_cmd = abs(bank0)      # phi_0 commanded: the range solution, or the deploy-altitude floor's
+        self._line = (math.nan, abs(bank0), abs(bank0))   # the answer's profile flown: (e0, phi_0 of the
+                                         # line, phi_f), clipped to the phi_0 bounds as predicted
         self.floor_cycles = 0            # cycles whose answer traded range for the deploy-altitude floor
+        self.held_cycles = 0             # cycles whose range solution holds a phi_0 bound (bank_profile)
         self.bank_cmd = abs(bank0)       # magnitude commanded now (after the path limits)
         self.miss_m = math.nan           # predicted range miss z of the last solution [m]
         self.range_to_go_m = math.nan
@@ -729,13 +785,14 @@ class EntryGuidance:
     def _z(self, x, e0, s_togo, sign, t_switch=0.0):
         out = self._out
 
-        def z(b0):
-            self._predict(x, b0, self.bank_f, e0, sign, out, t_switch)
+        def z(p):
+            b0, bf = bank_profile(p, self.bank_lo, self.bank_hi, self.bank_f)
+            self._predict(x, b0, bf, e0, sign, out, t_switch)
             if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
                 # out of the atmosphere: far long. Its range so far says little, so the miss
                 # is made 1000 km plus a slope towards more bank: the corrector then walks
                 # out of the skip region instead of stalling on a flat function
-                return 1e6 + (self.bank_hi - b0) * 1e6
+                return 1e6 + (self.p_hi - p) * 1e6
             return central_angle(x[:3], out[:3]) * self.R - s_togo
         return z
 
@@ -807,20 +864,26 @@ class EntryGuidance:
         e0 = self.mu / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.R
         dt = self.params["npc.dt_pred_s"]
-        b0, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.bank_lo, self.bank_hi, self.bank0,
-                                   self.params["npc.tol_m"], int(self.params["npc.max_iter"]))
-        b_range = b0
+        p_warm = self.bank0
+        if math.isfinite(self._p_e0) and self.ef != self._p_e0:
+            p_warm = profile_at(p_warm, self.bank_lo, self.bank_hi, self.bank_f,
+                                (e0 - self._p_e0) / (self.ef - self._p_e0))
+        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.p_lo, self.p_hi, p_warm,
+                                  self.params["npc.tol_m"], int(self.params["npc.max_iter"]))
+        b_range = p
+        b0, bf = bank_profile(p, self.bank_lo, self.bank_hi, self.bank_f)
+        held = not self.bank_lo <= p <= self.bank_hi
         # the prediction of the answer (the root-finder's last call may have been another)
-        self._predict(x, b0, self.bank_f, e0, sign, self._out)
-        bf, floor = self.bank_f, False
+        self._predict(x, b0, bf, e0, sign, self._out)
+        floor = False
         h_floor = self.params["npc.h_floor_m"]
-        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H] < h_floor and b0 > self.bank_lo:
+        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H] < h_floor and p > self.bank_lo:
             # the range solution deploys too low: trade range for altitude (more lift up, so
             # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
             # fixed phi_f would otherwise take the lift-up away just where it counts), and
             # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
             floor = True
-            b0, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, b0, self._out[O_H])
+            b0, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, self.bank_hi), self._out[O_H])
             n += nh
             bf = min(self.bank_f, b0)
             self._predict(x, b0, bf, e0, sign, self._out)
@@ -828,7 +891,9 @@ class EntryGuidance:
                   else math.nan)
             ok = False
         rf = self._out[:3].copy()
-        res = {"bank0": b0, "b_range": b_range, "bank_f": bf, "floor": floor, "miss_m": zb, "calls": n + 1,
+        # phi_0 commanded: the profile's bank now (the line clipped to the bounds, as predicted)
+        res = {"bank0": min(self.bank_hi, max(self.bank_lo, b0)), "b_range": b_range, "e0": e0, "b_line": b0,
+               "bank_f": bf, "floor": floor, "held": held and not floor, "miss_m": zb, "calls": n + 1,
                "ok": ok or floor, "s_togo": s_togo,
                "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
                "h_f": float(self._out[O_H]), "t_go": float(self._out[O_T]), "xr": math.nan, "xr_rev": math.nan}
@@ -926,13 +991,15 @@ class EntryGuidance:
         self.k_rho_hist[i], self.t_hist[i] = self.estimator.k_rho, res["t_s"]
         self.bank0_hist[i], self.miss_hist[i] = res["bank0"], res["miss_m"]
         self.cycles += 1
-        self.bank0 = res["b_range"]
+        self.bank0, self._p_e0 = res["b_range"], res["e0"]
         self.bank0_cmd = res["bank0"]
+        self._line = (res["e0"], res["b_line"], res["bank_f"])
         if res["floor"]:
             if self.floor_cycles == 0:
                 self.events.emit(res["t_s"], Severity.NOTICE, "guidance", "deploy_alt_floor",
                                  f"DEPLOY ALT FLOOR: RANGE TRADED {res['miss_m'] / 1e3:+.1f} KM"[:50])
             self.floor_cycles += 1
+        self.held_cycles += bool(res["held"])
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat"], res["lon"])
         self.pred_h_m = res["h_f"]
@@ -947,7 +1014,8 @@ class EntryGuidance:
             self._frozen = True         # too close to the deploy for the range to respond
 
     def steer(self, nav) -> None:
-        """Every control period: the density estimate, the path limits, then the shaper."""
+        """Every control period: the density estimate, the last answer's bank profile at today's
+        energy, the path limits, then the shaper."""
         if nav.t_s >= self._due_t:
             if not self.realtime:
                 self._done.wait()
@@ -965,11 +1033,20 @@ class EntryGuidance:
         self.estimator.update(self.dt_control_s, nav.accel_B, nav.C_BN, nav.vrel_N, nav.rho_kgpm3)
         V = nav.V_rel_mps
         r = nav.r_N
-        hdot = float(nav.vrel_N @ r) / math.sqrt(float(r @ r))
+        rn = math.sqrt(float(r @ r))
+        hdot = float(nav.vrel_N @ r) / rn
         a = nav.accel_B
         n_g = math.sqrt(float(a @ a)) / self.c[C_G0]
         q = SUTTON_GRAVES_MARS * math.sqrt(max(nav.rho_kgpm3, 0.0) * self.estimator.k_rho / self.c[C_RN]) * V ** 3
-        self.bank_cmd = path_limited_bank(self.bank0_cmd, nav.h_m, hdot, n_g, q, self.n_lim, self.q_lim, self.H,
+        # the answer's profile at today's energy (the bank its prediction flew), not its start held
+        # for the cycle: the next answer, re-anchored, is then the same profile (profile_at)
+        e0, b_line, b_f = self._line
+        mag = self.bank0_cmd
+        if math.isfinite(e0) and self.ef != e0:
+            e = self.mu / rn - 0.5 * V * V
+            frac = min(1.0, max(0.0, (e - e0) / (self.ef - e0)))
+            mag = min(self.bank_hi, max(self.bank_lo, b_line + (b_f - b_line) * frac))
+        self.bank_cmd = path_limited_bank(mag, nav.h_m, hdot, n_g, q, self.n_lim, self.q_lim, self.H,
                                           self.params["npc.hdot_tau_s"], self.params["npc.hdot_gain"])
         self.shaper.command(self.lateral.sign * self.bank_cmd)
 
@@ -995,7 +1072,8 @@ class EntryGuidance:
         names, self._pending = set(self._pending), {}
         self.bank_f = math.radians(p["npc.bank_final_deg"])
         self.bank_lo, self.bank_hi = math.radians(p["npc.bank_min_deg"]), math.radians(p["npc.bank_max_deg"])
-        self.bank0 = min(self.bank_hi, max(self.bank_lo, self.bank0))      # the warm start within them
+        self.p_lo, self.p_hi = profile_span(self.bank_lo, self.bank_hi, self.bank_f)
+        self.bank0 = min(self.p_hi, max(self.p_lo, self.bank0))      # the warm start within them
         if "npc.h_deploy_m" in names:
             self.ef = deploy_energy(scn, p["npc.h_deploy_m"])
             self.lateral.v_lo = scn.end_speed_mps or scn.end_mach * atmosphere.speed_of_sound(p["npc.h_deploy_m"])
@@ -1023,7 +1101,8 @@ class EntryGuidance:
                 "compute_max_us": float(us.max()) if n else None,
                 "predictions_per_cycle_mean": float(calls.mean()) if n else None,
                 "predictions_per_cycle_max": int(calls.max()) if n else None,
-                "no_root": self.no_root, "floor_cycles": self.floor_cycles, "overruns": self.overruns, "faults": self.faults,
+                "no_root": self.no_root, "floor_cycles": self.floor_cycles, "held_cycles": self.held_cycles,
+                "overruns": self.overruns, "faults": self.faults,
                 "reversal_times_s": list(self.lateral.reversals), "reversal_rules": list(self.lateral.rules),
                 "k_rho_final": self.estimator.k_rho, "k_ld_final": self.estimator.k_ld,
                 "bank0_final_deg": math.degrees(self.bank0_cmd)}

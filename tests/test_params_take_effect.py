@@ -410,18 +410,19 @@ CASES = [
     # predictor-corrector (mode npc): the corrector's answer phi_0. A higher final bank flies
     # shorter: less bank is needed early; the bounds clip it; a deploy energy taken higher
     # reaches phi_f earlier (more lift): more bank early
-    Case("npc.bank_final_deg", 150.0, npc_after(lambda e, a: e.bank0), "<", at=10, scenario=GUIDED),
-    Case("npc.bank_max_deg", 90.0, npc_after(lambda e, a: e.bank0), "<", at=10, scenario=GUIDED),
-    Case("npc.bank_min_deg", 90.0, npc_after(lambda e, a: e.bank0), ">", at=10, scenario=GUIDED,
-         setup=ground(("param", "npc.bank_final_deg", 150.0))),
-    Case("npc.h_deploy_m", 30000.0, npc_after(lambda e, a: e.bank0), ">", at=10, scenario=GUIDED),
-    # ... its effort: predictions per cycle (a large correction needed: phi_f moved first); the
-    # integration step: another predicted deploy point, so another answer
+    Case("npc.bank_final_deg", 150.0, npc_after(lambda e, a: e.bank0_cmd), "<", at=10, scenario=GUIDED),
+    Case("npc.bank_max_deg", 90.0, npc_after(lambda e, a: e.bank0_cmd), "<", at=10, scenario=GUIDED),
+    # (bank_min: the range solution below it, the answer holds the bound: fsw/npc.py bank_profile)
+    Case("npc.bank_min_deg", 90.0, npc_after(lambda e, a: e.bank0_cmd == math.radians(90.0)), "==", (True, False),
+         at=10, scenario=GUIDED, setup=ground(("param", "npc.bank_final_deg", 150.0))),
+    Case("npc.h_deploy_m", 30000.0, npc_after(lambda e, a: e.bank0_cmd), ">", at=10, scenario=GUIDED),
+    # ... its effort: predictions per cycle (max_iter: a large correction needed, phi_f moved
+    # first; tol_m: the warm answers of the entry accepted sooner); the integration step:
+    # another predicted deploy point, so another answer
     Case("npc.max_iter", 1, npc_after(lambda e, a: int(e.calls[a].max())), "<", at=10, scenario=GUIDED,
          setup=ground(("param", "npc.bank_final_deg", 150.0))),
-    Case("npc.tol_m", 1e5, npc_after(lambda e, a: int(e.calls[a].max())), "<", at=10, scenario=GUIDED,
-         setup=ground(("param", "npc.bank_final_deg", 150.0))),
-    Case("npc.dt_pred_s", 10.0, npc_after(lambda e, a: (e.bank0, e.pred_h_m, e.t_go_s)), "!=", at=10,
+    Case("npc.tol_m", 1e5, npc_after(lambda e, a: int(e.calls[a].max())), "<", at=10, scenario=GUIDED),
+    Case("npc.dt_pred_s", 10.0, npc_after(lambda e, a: (e.bank0_cmd, e.pred_h_m, e.t_go_s)), "!=", at=10,
          scenario=GUIDED),
     # density estimate (true density 1.2 x the model)
     Case("npc.k_drag_min", 0.0, npc_after(lambda e, a: e.estimator.updates), ">", at=10, scenario=GUIDED),

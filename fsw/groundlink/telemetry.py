@@ -267,11 +267,11 @@ def guidance_status(fsw, ms: int):
         mode = mav.ELLIPSLED_GUIDANCE_MODE_NPC
         lat_f, lon_f = float(e.pred_impact[0]), float(e.pred_impact[1])
         if e.cycles > 0 and flags & mav.ELLIPSLED_GUIDANCE_FLAGS_TARGET and \
-                _finite(lat_f, lon_f, e.pred_h_m, e.t_go_s, e.bank0):
+                _finite(lat_f, lon_f, e.pred_h_m, e.t_go_s, e.bank0_cmd):
             miss, down, cross = deploy_errors(veh, tgt, (lat_f, lon_f), R)
             if _finite(miss, down, cross):
                 flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_PREDICTION
-                plat, plon, palt, tgo, b0 = lat_f, lon_f, e.pred_h_m, e.t_go_s, e.bank0
+                plat, plon, palt, tgo, b0 = lat_f, lon_f, e.pred_h_m, e.t_go_s, e.bank0_cmd
                 if not abs(e.miss_m) <= e.params["npc.tol_m"]:              # solve_bank's criterion
                     flags |= mav.ELLIPSLED_GUIDANCE_FLAGS_NO_ROOT
                 if e.t_go_s < e.params["npc.tgo_freeze_s"]:                # EntryGuidance holds phi_0

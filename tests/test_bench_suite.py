@@ -204,3 +204,16 @@ def test_latency_is_judged_against_the_udp_round_trip_of_the_sil_placement():
     del res["latency"]["sil_udp_p99_us"]                     # no SIL placement: the default one
     r = sil.latency_rows(res, "idle", s)[0]
     assert r[2] == "UDP round trip p99 100.0" and r[5] == "**FAIL** (ratio)"
+
+
+def test_shared_memory_variant_sends_every_frame_through_shared_memory_and_the_default_none():
+    """The payload variants measure what they name: with ``shm`` every frame each way
+    arrives as a Zenoh shared-memory reference; without it none does (two real processes
+    on loopback, a short paced run)."""
+    from ellipsled.bench import latency
+    n = 20
+    shm = latency.zenoh_roundtrip(n, 200.0, "default", shm=True, lowlatency=True)
+    plain = latency.zenoh_roundtrip(n, 200.0, "default", shm=False, lowlatency=False)
+    assert shm["n"] == n and plain["n"] == n
+    assert shm["shm_rx_client"] >= n and shm["shm_rx_echo"] >= n
+    assert plain["shm_rx_client"] == 0 and plain["shm_rx_echo"] == 0

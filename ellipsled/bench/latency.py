@@ -10,6 +10,12 @@ Round trips are paced (``rate_hz``) like a control loop, not back to back, so ea
 pays the wake-up of an idle process. Each echo runs in its own interpreter
 (``python -m ellipsled.bench.latency --echo udp|zenoh --port P``), started and ended by pid.
 
+Payload variants (``--variants``, not in the suite): the same Zenoh round trip with each frame
+put from a Zenoh shared-memory buffer (``zenoh.shm``; the receiver gets a reference into the
+segment instead of a copy through the socket), with the low-latency and the standard
+transport. Zenoh's own default sends a payload through shared memory only from 3 kB up
+(``transport/shared_memory/transport_optimization``); our frames are ~330 bytes.
+
 Two placements of the two processes:
 - ``default``: both SCHED_OTHER, anywhere (what a plain program gets);
 - ``sil``: as the real-time SIL places its nodes (``ellipsled run --realtime``, --rt): the
@@ -78,15 +84,40 @@ def _echo_udp(port: int, placement: str = "default") -> None:
         s.sendto(data, addr)
 
 
-def _echo_zenoh(port: int, placement: str = "default", rate_hz: float = 100.0) -> None:
+class _Putter:
+    """put() a frame's bytes as they are, or copied into a freshly allocated Zenoh
+    shared-memory buffer (``shm``); counts the frames received through shared memory."""
+
+    def __init__(self, pub, shm: bool):
+        import zenoh
+        self.pub, self.shm_rx = pub, 0
+        self._provider = zenoh.shm.ShmProvider.default_backend(1 << 20) if shm else None
+        self._policy = zenoh.shm.BlockOn(zenoh.shm.GarbageCollect()) if shm else None
+
+    def put(self, b: bytes) -> None:
+        if self._provider is None:
+            self.pub.put(b)
+            return
+        buf = self._provider.alloc(len(b), policy=self._policy)
+        buf[:] = b
+        self.pub.put(buf)
+
+    def received(self, smp) -> None:
+        if smp.payload.as_shm() is not None:
+            self.shm_rx += 1
+
+
+def _echo_zenoh(port: int, placement: str = "default", rate_hz: float = 100.0, shm: bool = False,
+                lowlatency: bool = True) -> None:
     from interfaces import records, transport
     from interfaces.codec import Codec
     from interfaces.keys import keys
     k = keys("bench-latency")
     fifo = _place(placement, ECHO_CPU)
-    ses = transport.open_session("sim", [transport.loopback(port)], [])
+    ses = transport.open_session("sim", [transport.loopback(port)], [], lowlatency=lowlatency)
     sub = transport.subscriber(ses, k.sensors)
     pub = transport.publisher(ses, k.jets)
+    out = _Putter(pub, shm)
     _raise_zenoh_threads(fifo, ECHO_CPU)
     # as the FSW node under SCHED_FIFO: release 100 us before the next frame is due, then spin
     # for it (3 ms at most); never a continuous spin (the kernel's real-time throttling
@@ -102,14 +133,16 @@ def _echo_zenoh(port: int, placement: str = "default", rate_hz: float = 100.0) -
             smp = transport.recv(sub, timeout_s=30.0, spin_s=spin)
             if smp is None:
                 return
+            out.received(smp)
             rec = dec.decode(smp.payload)
             if rec is None:
                 continue
             if int(rec["k"]) < 0:
+                print(f"SHM-RX {out.shm_rx}", flush=True)
                 return
             jets["k"] = rec["k"]
             jets["t_release_ns"] = rec["t_ns"]
-            pub.put(enc.encode(jets, seq, time.monotonic_ns()))
+            out.put(enc.encode(jets, seq, time.monotonic_ns()))
             seq += 1
             if fifo:
                 rt.sleep_until_ns(dec.last_t_pub_ns + period_ns - 100_000)
@@ -118,9 +151,11 @@ def _echo_zenoh(port: int, placement: str = "default", rate_hz: float = 100.0) -
 
 
 # --------------------------------------------------------------------------- clients
-def _start_echo(kind: str, port: int, placement: str = "default", rate_hz: float = 100.0) -> subprocess.Popen:
+def _start_echo(kind: str, port: int, placement: str = "default", rate_hz: float = 100.0,
+                shm: bool = False, lowlatency: bool = True) -> subprocess.Popen:
+    extra = (["--shm"] if shm else []) + ([] if lowlatency else ["--standard-transport"])
     p = subprocess.Popen([sys.executable, "-m", "ellipsled.bench.latency", "--echo", kind, "--port", str(port),
-                          "--placement", placement, "--rate", f"{rate_hz:g}"],
+                          "--placement", placement, "--rate", f"{rate_hz:g}", *extra],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     t_end = time.monotonic() + 30.0
     line = ""
@@ -186,21 +221,26 @@ def udp_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
     return _stats(rtt, lost)
 
 
-def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
+def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default", shm: bool = False,
+                    lowlatency: bool = True) -> dict:
+    """The Zenoh + codec round trip; ``shm``: both ends put their frames from shared-memory
+    buffers (the result then counts the frames each end received through shared memory:
+    ``shm_rx_client``, ``shm_rx_echo``); ``lowlatency``: the transport both ends use."""
     from interfaces import records, transport
     from interfaces.codec import Codec
     from interfaces.keys import keys
     port = transport.free_port()
-    p = _start_echo("zenoh", port, placement, rate_hz)
+    p = _start_echo("zenoh", port, placement, rate_hz, shm, lowlatency)
     fifo = _place(placement, CLIENT_CPU)
     spin = 0.003 if fifo else 0.0        # the plant node spins 3 ms for its command under SCHED_FIFO
     k = keys("bench-latency")
     ses = pub = sub = None
-    rtt, lost = [], 0
+    rtt, lost, echo_shm_rx = [], 0, None
     try:
-        ses = transport.open_session("fsw", [], [transport.loopback(port)])
+        ses = transport.open_session("fsw", [], [transport.loopback(port)], lowlatency=lowlatency)
         sub = transport.subscriber(ses, k.jets)
         pub = transport.publisher(ses, k.sensors)
+        out = _Putter(pub, shm)
         _raise_zenoh_threads(fifo, CLIENT_CPU)
         if not transport.wait_for_subscriber(pub, 10.0):
             raise RuntimeError("zenoh echo never matched the sensors publisher")
@@ -215,7 +255,7 @@ def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
             rec["k"] = i
             rec["t_ns"] = i
             t0 = time.perf_counter_ns()
-            pub.put(enc.encode(rec, i, time.monotonic_ns()))
+            out.put(enc.encode(rec, i, time.monotonic_ns()))
             while True:
                 smp = transport.recv(sub, timeout_s=1.0, spin_s=spin)
                 if smp is None:
@@ -223,17 +263,39 @@ def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
                     if p.poll() is not None or lost > 20:
                         raise RuntimeError(f"zenoh echo not answering (exit code {p.poll()}, {lost} lost)")
                     break
+                out.received(smp)
                 back = dec.decode(smp.payload)
                 if back is not None and int(back["k"]) == i:
                     if i >= 50:
                         rtt.append(time.perf_counter_ns() - t0)
                     break
         rec["k"] = -1
-        pub.put(enc.encode(rec, n + 60, 0))
+        out.put(enc.encode(rec, n + 60, 0))
+        try:
+            tail, _ = p.communicate(timeout=5.0)
+            echo_shm_rx = int(tail.split("SHM-RX")[-1].split()[0]) if "SHM-RX" in tail else None
+        except (subprocess.TimeoutExpired, ValueError, IndexError):
+            pass
     finally:
         transport.close(sub, pub, ses)
         _stop(p)
-    return _stats(rtt, lost)
+    st = _stats(rtt, lost)
+    st.update(shm=shm, lowlatency=lowlatency, shm_rx_client=out.shm_rx, shm_rx_echo=echo_shm_rx)
+    return st
+
+
+VARIANTS = (("low-latency, bytes", True, False), ("low-latency, shared memory", True, True),
+            ("standard, bytes", False, False), ("standard, shared memory", False, True))
+
+
+def variants(n: int, rate_hz: float, rounds: int = 2) -> dict:
+    """Each payload/transport variant's round trip (default placement), the variants
+    interleaved over ``rounds`` so that a change of the machine's load hits them alike."""
+    res = {name: [] for name, _, _ in VARIANTS}
+    for _ in range(rounds):
+        for name, lowlat, shm in VARIANTS:
+            res[name].append(zenoh_roundtrip(n, rate_hz, "default", shm=shm, lowlatency=lowlat))
+    return res
 
 
 def _in_child(n: int, rate_hz: float, placement: str) -> dict:
@@ -303,13 +365,28 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--placement", choices=("default", "sil"), default="default")
     ap.add_argument("--client", action="store_true", help="measure both round trips, print JSON")
+    ap.add_argument("--shm", action="store_true", help="(echo) put frames from Zenoh shared memory")
+    ap.add_argument("--standard-transport", action="store_true", help="(echo) Zenoh's standard transport")
+    ap.add_argument("--variants", action="store_true",
+                    help="the Zenoh round trip with bytes vs shared-memory payloads, low-latency vs standard transport")
     ap.add_argument("--n", type=int, default=1000)
     ap.add_argument("--rate", type=float, default=100.0)
     a = ap.parse_args(argv)
     if a.echo == "udp":
         _echo_udp(a.port, a.placement)
     elif a.echo == "zenoh":
-        _echo_zenoh(a.port, a.placement, a.rate)
+        _echo_zenoh(a.port, a.placement, a.rate, a.shm, not a.standard_transport)
+    elif a.variants:
+        import json
+        res = variants(a.n, a.rate)
+        print(json.dumps(res, indent=2))
+        print("| variant | p50 [us] per round | p99 [us] per round | frames received via shared memory (client / echo) |")
+        print("|---|---|---|---|")
+        for name, runs in res.items():
+            p50 = " / ".join(fmt(r["p50_us"]) for r in runs)
+            p99 = " / ".join(fmt(r["p99_us"]) for r in runs)
+            via = " / ".join(f"{r['shm_rx_client']}, {r['shm_rx_echo']}" for r in runs)
+            print(f"| {name} | {p50} | {p99} | {via} |")
     elif a.client:
         import json
         from common import rt

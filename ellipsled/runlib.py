@@ -89,7 +89,7 @@ def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
 def alloc_sample(fsw: FlightSoftware) -> dict:
     """One allocator demand, its health and its objective, for an offline optimality check."""
     hl = fsw.allocator_health()
-    return {"tau_d": fsw.u_cal_B.tolist(), "state": hl.state.tolist(), "eta": hl.eta.tolist(),
+    return {"tau_d": fsw.carry.demand_B.tolist(), "state": hl.state.tolist(), "eta": hl.eta.tolist(),
             "inhibited": hl.inhibited.tolist(), "objective": float(fsw.allocator.objective)}
 
 

@@ -20,6 +20,7 @@ from common.model import Scenario
 from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult
 
 from .allocation import Allocator
+from .allocation.carry import ShortfallCarry
 from .control import SamiController
 from .controllability import (Controllability, aero_moment_per_rad, controllability, velocity_dir_B,
                               schedule_accel_need_radps2)
@@ -125,6 +126,9 @@ class FlightSoftware:
         # (the rule SAMI's saturation awareness applies per body axis)
         self.bank_axis_B = velocity_dir_B(veh.aero.alpha_trim_rad)
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
+        # error feedback across cycles (fsw/allocation/carry.py): the allocator is asked for
+        # SAMI's demand plus the shortfall carried while the bank axis falls short
+        self.carry = ShortfallCarry(self.bank_axis_B, veh.torque_matrix_Nm)
         self.alloc_short = False
         self.alloc_short_cycles = 0
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
@@ -204,11 +208,12 @@ class FlightSoftware:
             u_cal = self._zero3
         self.u_cal_B[:] = u_cal
         t0 = time.perf_counter_ns()
-        u_alloc = self.allocator.solve(self.u_cal_B)
+        u_alloc = self.carry.solve(self.allocator, self.u_cal_B)
         self.alloc_ns = time.perf_counter_ns() - t0
         self.tau_alloc_B[:] = self.allocator.tau_B
         if self.allocator.tables_version != self._tables_version:      # new tables in use
             self._tables_version = self.allocator.tables_version
+            self.carry.reset()
             self.events.emit(t_s, Severity.NOTICE, "allocator", "reconfigured",
                              f"ALLOCATOR RECONFIGURED ({self.allocator.rebuild_time_s * 1e3:.1f} ms)")
         if self.allocator.degraded:
@@ -409,6 +414,7 @@ class FlightSoftware:
         """Jets off, nothing learnt: a rejected frame or stale sensors."""
         self._have_prev = False
         self.u_cal_B[:] = 0.0
+        self.carry.reset()
         self.tau_alloc_B[:] = 0.0
         self._tau_last[:] = 0.0
         self.alloc_short = False

@@ -66,8 +66,10 @@ def test_fault_tolerance_off_is_measurably_worse(runs):
     assert off["completed"]
     assert off["propellant_kg"] > 2.0 * on["propellant_kg"]
     assert off["jet_pulses"] > 2.0 * on["jet_pulses"]
-    assert off["alpha_dev_max_deg"] > 2.0 * on["alpha_dev_max_deg"]
-    assert off["beta_dev_max_deg"] > 2.0 * on["beta_dev_max_deg"]
+    # attitude excursions after the initial 5-degree transient: case 1's whole-run peak (0.40 deg
+    # of beta at 1.1 s, before the 2.5 s fault) is the start-up transient the nominal run has too
+    assert off["alpha_dev_max_after_transient_deg"] > 2.0 * on["alpha_dev_max_after_transient_deg"]
+    assert off["beta_dev_max_after_transient_deg"] > 2.0 * on["beta_dev_max_after_transient_deg"]
 
 
 def test_fault_tolerance_off_tracks_worse_once_the_initial_error_has_decayed(runs):

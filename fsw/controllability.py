@@ -43,6 +43,9 @@ from .lp import set_colwise_matrix, solve_or_none
 
 # HiGHS feasibility tolerance on the torque rows [N m]: far below one jet's torque
 _TOL_NM = 1e-7
+# The trim is an offset in a linear moment model about trim: an answer beyond a right angle is no
+# attitude the vehicle can fly (it appears when the dynamic pressure is near 0 and A -> 0)
+TRIM_PHYSICAL_DEG = 90.0
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,9 @@ class Controllability:
     def text(self) -> str:
         """One event line (<= 50 characters, one STATUSTEXT): bank authority +X / -Y deg/s^2,
         stuck-on bias Z N m, trim needed W deg."""
-        tr = "INF" if not math.isfinite(self.trim_needed_deg) else f"{self.trim_needed_deg:.1f}"
+        tr = ("INF" if not math.isfinite(self.trim_needed_deg) else
+              f">{TRIM_PHYSICAL_DEG:.0f}" if self.trim_needed_deg > TRIM_PHYSICAL_DEG else
+              f"{self.trim_needed_deg:.1f}")
         return (f"AUTH +{math.degrees(self.authority_pos_radps2):.2f}/-{math.degrees(self.authority_neg_radps2):.2f}"
                 f" DEG/S2 BIAS {self.bias_Nm:.0f}NM TRIM {tr}DEG")
 
@@ -235,6 +240,9 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
     if not math.isfinite(s_star):
         reason = (f"stuck-on bias {np.linalg.norm(b):.0f} N m beyond what the jets and the aerodynamics "
                   f"can cancel at qbar {qbar_pa:.0f} Pa")
+    elif trim_deg > max(trim_max_deg, TRIM_PHYSICAL_DEG):
+        reason = (f"no trim offset within {TRIM_PHYSICAL_DEG:.0f} deg absorbs the {residual:.0f} N m the jets cannot "
+                  f"cancel at qbar {qbar_pa:.0f} Pa (limit {trim_max_deg:g} deg)")
     elif trim_deg > trim_max_deg:
         reason = f"trim offset {trim_deg:.1f} deg needed to absorb {residual:.0f} N m (limit {trim_max_deg:g} deg)"
     elif min(auth) < authority_min_radps2 or min(auth) <= 0.0:

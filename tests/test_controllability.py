@@ -136,6 +136,25 @@ def test_without_dynamic_pressure_an_uncancelled_bias_has_no_trim_and_is_reporte
     assert r.authority_pos_radps2 == 0.0 and r.authority_neg_radps2 == 0.0
 
 
+def test_near_zero_dynamic_pressure_reports_no_physical_trim_instead_of_a_huge_angle():
+    """The linear trim answer grows as 1/qbar: at 0.01 Pa it is thousands of degrees. The reason
+    says no trim within a right angle absorbs the residual (with the qbar), the event text '>90'."""
+    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    A1 = aero_moment_per_rad(800.0, VEH.S_ref_m2, VEH.l_ref_m, VEH.aero.C_lbeta, VEH.aero.C_malpha, VEH.aero.C_nbeta)
+    r800 = controllability(T, h, I_NOM, V_B, A1, 5.0, 0.0, qbar_pa=800.0)
+    q = 0.01
+    r = controllability(T, h, I_NOM, V_B, A1 * (q / 800.0), 5.0, 0.0, qbar_pa=q)
+    # independent check of the scaling: the linear answer is (800 / q) times the one at 800 Pa
+    assert r.trim_needed_deg == pytest.approx(r800.trim_needed_deg * 800.0 / q, rel=1e-6)
+    assert r.trim_needed_deg > 90.0 and not r.controllable
+    assert r.reason.startswith("no trim offset within 90 deg absorbs the ")
+    assert f"at qbar {q:.0f} Pa" in r.reason and f"{r.residual_Nm:.0f} N m" in r.reason
+    assert "TRIM >90DEG" in r.text() and len(r.text()) <= 50
+    # below a right angle the angle itself is reported, as before
+    r9 = controllability(T, h, I_NOM, V_B, A1 * (r800.trim_needed_deg / 60.0), 5.0, 0.0, qbar_pa=1.0)
+    assert r9.reason.startswith("trim offset 60.0 deg needed")
+
+
 def test_authority_below_what_the_schedule_needs_is_not_controllable():
     h = JetHealth.of(failed=[1, 13, 16], degraded=[(6, .3), (7, .3)])
     r = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 0.0)

@@ -127,6 +127,31 @@ def shaper_branch(phi, sign_now, turn, bank_signed):
     return sign_now, turn
 
 
+def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
+    """The shaper's state (shaped_transition's shp) with a reversal to ``sign`` going the
+    other way round, or None: when no reversal is under way (the reference already on the
+    side of ``sign``: magnitude changes take the nearest way), or when the other way is not
+    the shorter one from the reference's state (braking included). The way a reversal
+    goes is chosen for the magnitude commanded when it starts; the corrector's next answer
+    can make the other way the shorter (a reversal begun at 92 deg through 180 deg, then a
+    10 deg command: 258 deg on through lift down, ~100 deg back through lift up). The way
+    round is the turn (a multiple of 2 pi) added to the command; the shaper keeps a given
+    turn until the reference has crossed to the commanded side."""
+    phi, phid, accel, mag = float(shp[0]), float(shp[1]), float(shp[5]), float(shp[7])
+    if math.sin(phi) * sign >= 0.0 or accel <= 0.0:
+        return None
+    s, turn = shaper_branch(phi, float(shp[2]), float(shp[3]), math.copysign(mag, sign))
+    target = math.copysign(mag, sign) + turn
+    other = target - math.copysign(2.0 * math.pi, target - phi)
+    # moving towards the present target, the other way first brakes: v^2/2a out and back
+    brake = phid * phid / accel if phid * (target - phi) > 0.0 else 0.0
+    if abs(other - phi) + brake >= abs(target - phi):
+        return None
+    alt = shp.copy()
+    alt[2], alt[3] = s, other - math.copysign(mag, sign)
+    return alt
+
+
 @njit(cache=True, nogil=True)
 def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux, bank_fix=math.nan):
     """dx = f(x), x = [r (3), v (3)] in the rotating planet-fixed frame (v planet-relative):
@@ -868,8 +893,25 @@ class EntryGuidance:
         if math.isfinite(self._p_e0) and self.ef != self._p_e0:
             p_warm = profile_at(p_warm, self.bank_lo, self.bank_hi, self.bank_f,
                                 (e0 - self._p_e0) / (self.ef - self._p_e0))
-        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.p_lo, self.p_hi, p_warm,
-                                  self.params["npc.tol_m"], int(self.params["npc.max_iter"]))
+        tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
+        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.p_lo, self.p_hi, p_warm, tol, n_max)
+        turn = math.nan
+        alt = None
+        if shp is not None and not abs(zb) <= self.params["npc.floor_miss_max_m"]:
+            alt = reversal_other_way(shp, sign)
+        if alt is not None:
+            # a reversal in progress whose way round costs more range than the guidance
+            # trades anywhere (npc.floor_miss_max_m): the other way (the reference braked and
+            # turned back, as the shaper would fly it) if that one's answer misses by less.
+            # Not for less: the lateral decision timed the reversal for the way it began, and
+            # turning round delays it (dispersed runs: 2-4 km across for < 1 km along)
+            self._shp = alt
+            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign), self.p_lo, self.p_hi, p_warm, tol, n_max)
+            n += na
+            if abs(za) < abs(zb) - tol:
+                p, zb, ok, turn = pa, za, oka, float(alt[3])
+            else:
+                self._shp = shp
         b_range = p
         b0, bf = bank_profile(p, self.bank_lo, self.bank_hi, self.bank_f)
         held = not self.bank_lo <= p <= self.bank_hi
@@ -893,7 +935,7 @@ class EntryGuidance:
         rf = self._out[:3].copy()
         # phi_0 commanded: the profile's bank now (the line clipped to the bounds, as predicted)
         res = {"bank0": min(self.bank_hi, max(self.bank_lo, b0)), "b_range": b_range, "e0": e0, "b_line": b0,
-               "bank_f": bf, "floor": floor, "held": held and not floor, "miss_m": zb, "calls": n + 1,
+               "bank_f": bf, "floor": floor, "held": held and not floor, "miss_m": zb, "calls": n + 1, "turn": turn,
                "ok": ok or floor, "s_togo": s_togo,
                "lat": math.asin(rf[2] / math.sqrt(float(rf @ rf))), "lon": math.atan2(rf[1], rf[0]),
                "h_f": float(self._out[O_H]), "t_go": float(self._out[O_T]), "xr": math.nan, "xr_rev": math.nan}
@@ -1004,6 +1046,13 @@ class EntryGuidance:
         self.pred_impact[:] = (res["lat"], res["lon"])
         self.pred_h_m = res["h_f"]
         self.t_go_s = res["t_go"]
+        sh = self.shaper
+        if math.isfinite(res["turn"]) and res["sign"] == sh._sign and math.sin(sh.phi) * sh._sign < 0.0:
+            # the reversal under way turned round (solve: no range solution the way it went)
+            sh.target += res["turn"] - sh._turn
+            sh._turn = res["turn"]
+            self.events.emit(res["t_s"], Severity.INFO, "guidance", "reversal_way",
+                             f"REVERSAL TURNED ROUND: MISS {res['miss_m'] / 1e3:+.1f} KM"[:50])
         if res["sign"] == self.lateral.sign:        # not for a sign left since the job started
             self.xr_keep_m, self.xr_rev_m = res["xr"], res["xr_rev"]
         if not res["ok"]:

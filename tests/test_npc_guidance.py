@@ -498,3 +498,39 @@ def test_guided_nominal_flies_what_it_predicted_after_the_final_reversal():
          for a, b in zip(np.asarray(h["pred_lat_rad"])[sel][::50], np.asarray(h["pred_lon_rad"])[sel][::50])]
     assert max(d) < 150.0, max(d)
     assert s["deploy_miss_km"] <= 1.0
+
+
+def test_a_reversal_turns_round_only_when_the_other_way_is_the_shorter():
+    """reversal_other_way on constructed shaper states (hand-worked angles): a reversal begun
+    at -92 deg through 180 deg (target +10 deg on that way: -350 deg, 258 deg on) may turn
+    round through 0 deg (102 deg, plus braking v^2/a when moving away from it); not when the
+    magnitude commanded keeps the way it began the shorter one, not once the reference is
+    on the commanded side, not when the braking makes the other way longer. The shaper's
+    transition flown with the other way goes back through 0 deg to +10 deg."""
+    d = math.radians
+    a, rate = d(1.0), d(8.0)
+
+    def shp(phi, phid, mag, turn, sign=1.0):
+        return np.array([d(phi), d(phid), sign, turn, rate, a, 0.02, d(mag)])
+    s0 = shp(-92.0, -2.0, 10.0, -2.0 * math.pi)           # on its way to -350 deg
+    alt = npc.reversal_other_way(s0, 1.0)
+    assert alt is not None and alt[3] == pytest.approx(0.0, abs=1e-12) and alt[2] == 1.0
+    assert np.array_equal(np.delete(alt, 3), np.delete(s0, 3))
+    assert npc.reversal_other_way(shp(-92.0, -2.0, 92.0, -2.0 * math.pi), 1.0) is None    # 176 < 184 deg
+    assert npc.reversal_other_way(shp(20.0, 2.0, 10.0, 0.0), 1.0) is None                   # on the + side
+    # moving at 8 deg/s towards -180: 64 deg of braking. From -92: 102 + 64 < 258; from -150:
+    # 160 + 64 > 200
+    assert npc.reversal_other_way(shp(-92.0, -8.0, 10.0, -2.0 * math.pi), 1.0) is not None
+    assert npc.reversal_other_way(shp(-150.0, -8.0, 10.0, -2.0 * math.pi), 1.0) is None
+    # a reversal begun at +70 deg through 0 deg, then 165 deg commanded: -165 deg is 235 deg on,
+    # +195 deg is 125 deg back (plus 4 deg of braking): it may turn round through 180 deg
+    back = npc.reversal_other_way(shp(70.0, -2.0, 165.0, 0.0, -1.0), -1.0)
+    assert back is not None and back[3] == pytest.approx(2.0 * math.pi, abs=1e-12)
+    tab = np.empty(npc.N_TRANSITION)
+    n = npc.shaped_transition(alt, d(10.0), 0.0, d(10.0), 0.5, tab)
+    path = np.degrees(tab[:n])
+    assert path.min() >= -92.0 - 2.0 ** 2 / 2.0 - 1e-6               # brakes within v^2/2a
+    assert path[-1] == pytest.approx(10.0, abs=0.1) and path.max() < 10.5           # back through 0 deg
+    assert np.all(np.diff(path[np.argmin(path):np.argmax(path) + 1]) >= 0.0)
+    n0 = npc.shaped_transition(s0, d(10.0), 0.0, d(10.0), 0.5, tab)
+    assert np.degrees(tab[n0 - 1]) == pytest.approx(-350.0, abs=0.1)   # the way it began

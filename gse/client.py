@@ -33,6 +33,7 @@ from pathlib import Path
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import FrameSplitter, parse_header
+from interfaces.mavlink.intake import kernel_drops
 from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, parse_udp
 
@@ -44,6 +45,27 @@ GCS_COMPONENT_ID = mav.MAV_COMP_ID_MISSIONPLANNER        # 190
 VEHICLE_SYSTEM_ID = 1
 VEHICLE_COMPONENT_ID = 1
 DEFAULT_LISTEN = DEFAULT_GCS                 # where the vehicle sends its telemetry
+# The ground end asks for a deep receive buffer: telemetry is fire-and-forget UDP, and a
+# console starved of CPU for a second or two (a busy laptop, a loaded 2-core SIL host)
+# would otherwise lose what the kernel cannot queue — events (STATUSTEXT) included. The
+# system default (~208 kB) holds ~150 small datagrams, about 1.5 s of the default streams;
+# 4 MiB (the kernel caps it at net.core.rmem_max) holds minutes. What is lost anyway is
+# counted from the kernel's own drop counter (stats["rx_kernel_drops"]) and shown.
+RX_BUFFER_BYTES = 4 << 20
+
+
+def _deep_receive_buffer(sock: socket.socket, size: int) -> None:
+    """Ask for ``size`` bytes of receive buffer: beyond net.core.rmem_max where the process
+    may (SO_RCVBUFFORCE, CAP_NET_ADMIN), else up to that cap (SO_RCVBUF); what was granted
+    is the socket's SO_RCVBUF (GroundClient.rx_buffer_bytes)."""
+    force = getattr(socket, "SO_RCVBUFFORCE", None)
+    if force is not None:
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, force, size)
+            return
+        except OSError:
+            pass
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
 
 
 def result_name(result: int | None) -> str:
@@ -158,6 +180,7 @@ class GroundClient:
                 self.sock.close()
                 raise OSError(f"ground client cannot listen on {listen}: {e.strerror or e}") from None
             self.sock.setblocking(False)
+            _deep_receive_buffer(self.sock, RX_BUFFER_BYTES)
         self.tlog = TlogWriter(tlog) if tlog is not None else None
         self._splitter = FrameSplitter()
         self.state = VehicleState()
@@ -166,7 +189,10 @@ class GroundClient:
         self.pending: list[PendingCommand] = []
         self._rx_times: deque[float] = deque(maxlen=4096)
         self._tx_times: deque[float] = deque(maxlen=4096)
-        self.stats = {"rx_datagrams": 0, "rx_frames": 0, "rx_messages": 0, "tx_frames": 0, "tx_errors": 0}
+        self.stats = {"rx_datagrams": 0, "rx_frames": 0, "rx_messages": 0, "tx_frames": 0, "tx_errors": 0,
+                      "rx_kernel_drops": 0}
+        self.rx_buffer_bytes = (self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+                                if self.sock is not None else 0)
         self._buf = bytearray(65536)
 
     # ---------------------------------------------------------------- basics
@@ -236,6 +262,9 @@ class GroundClient:
             except OSError:
                 continue
             n += self.feed(bytes(self._buf[:size]), addr, self.clock())
+        drops = kernel_drops(self.sock)
+        if drops is not None:
+            self.stats["rx_kernel_drops"] = drops
         self.service()
         return n
 

@@ -48,6 +48,13 @@ SEVERITY_STYLE = {Severity.EMERGENCY: "bold white on red", Severity.ALERT: "bold
                   Severity.DEBUG: "dim"}
 
 
+def _lost(c) -> tuple[str, str]:
+    """Datagrams the kernel dropped before the console read them (its socket full), shown
+    when there are any: telemetry and events this console never saw."""
+    n = getattr(c, "stats", {}).get("rx_kernel_drops", 0)
+    return (f"  LOST {n} datagrams", "bold red") if n else ("", "")
+
+
 def _mode_name(code: int) -> str:
     return Mode(code).name if code in Mode._value2member_map_ else str(code)
 
@@ -248,7 +255,7 @@ class GroundConsole(App):
             top = Text.assemble(
                 (f" {_mode_name(hb.custom_mode)} ", "bold"), (f"{status} ", style),
                 f"{armed}  link: hb {age:.1f}s ago  rx {c.rate_hz('rx'):.0f}/s  tx {c.rate_hz('tx'):.1f}/s  "
-                f"rejected {c.rejected}  vehicle {where}")
+                f"rejected {c.rejected}  vehicle {where}", _lost(c))
         if self.watch_only:
             label = self.watch_only
             if hasattr(c, "duration_s"):

@@ -37,6 +37,15 @@ from .signing import Reject, Rejection, SignedLink
 
 SO_MEMINFO = getattr(socket, "SO_MEMINFO", 55)       # Linux: the socket's memory counters
 SK_MEMINFO_DROPS = 8                                  # ... of which: datagrams dropped
+
+
+def kernel_drops(sock: socket.socket) -> int | None:
+    """Datagrams the kernel dropped at ``sock`` since it was opened (its receive buffer was
+    full), from the socket's own counter (SO_MEMINFO); None where there is none (not Linux)."""
+    try:
+        return _MEMINFO.unpack(sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, _MEMINFO.size))[SK_MEMINFO_DROPS]
+    except (OSError, struct.error):
+        return None
 _MEMINFO = struct.Struct("=9I")
 
 DEFAULT_MAX_DATAGRAMS = 256
@@ -72,10 +81,7 @@ class DatagramIntake:
         self.last_poll_ns = 0
 
     def _kernel_drops_total(self) -> int | None:
-        try:
-            return _MEMINFO.unpack(self.sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, _MEMINFO.size))[SK_MEMINFO_DROPS]
-        except (OSError, struct.error):         # not Linux: no drop counter
-            return None
+        return kernel_drops(self.sock)
 
     def _report(self, refused: dict) -> None:
         """The call's early refusals, one report per reason (what the first one was like):

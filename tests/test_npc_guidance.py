@@ -189,6 +189,29 @@ def test_ellipse_of_a_known_normal_sample():
     assert st["miss_p50_km"] == pytest.approx(np.median(np.hypot(down, cross)))
 
 
+def test_a_run_that_never_deployed_is_listed_not_put_in_the_ellipse():
+    """A skip-out's last point (2,900 km away) or a run that reached the end altitude first
+    has miss figures but no deploy point: counted and named, kept out of the percentiles and
+    the ellipse, and outside the requirement's share over all runs."""
+    from ellipsled.montecarlo.deploy import deploy_stats
+    rng = np.random.default_rng(4)
+    n = 400
+    down, cross = rng.normal(0.0, 2.0, n), rng.normal(0.0, 1.0, n)
+    base = {"deploy_miss_km": np.hypot(down, cross), "downrange_err_km": down, "crossrange_err_km": cross,
+            "end_reason": ["mach"] * n, "run_id": list(range(n))}
+    ref = deploy_stats(base)
+    rows = {k: list(v) for k, v in base.items()}
+    for k, v in {"deploy_miss_km": [2926.8, 4.0], "downrange_err_km": [2900.0, 3.9], "crossrange_err_km": [390.0, 0.8],
+                 "end_reason": ["timeout", "altitude"], "run_id": [n, n + 1]}.items():
+        rows[k] += v
+    st = deploy_stats(rows)
+    assert st["with_deploy"] == n and st["runs"] == n + 2
+    assert st["no_deploy"] == [{"run": n, "end_reason": "timeout"}, {"run": n + 1, "end_reason": "altitude"}]
+    for k in ("ellipse99_major_km", "ellipse99_minor_km", "miss_p99_km", "within_msl_requirement"):
+        assert st[k] == ref[k]
+    assert st["within_msl_requirement_all"] == pytest.approx(ref["within_msl_requirement"] * n / (n + 2))
+
+
 def test_guided_campaign_draws_entry_state_and_density_waves_and_keeps_the_default_draws():
     from ellipsled.montecarlo.campaign import apply_dispersion, draw_run, load_campaign
     from sim.dynamics import A_RHO, P_RHO_SCALE

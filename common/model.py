@@ -98,6 +98,9 @@ class Truth:
     density_waves: tuple[tuple[float, float, float], ...] = ()
 
 
+MAX_RHO_WAVES = 4      # density waves the plant's parameter vector holds (sim/dynamics.py)
+
+
 @dataclass(frozen=True)
 class SensorNoise:
     gyro_noise_radps: float
@@ -246,6 +249,57 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
     return out
 
 
+def _bank_schedule(g: Table) -> list[tuple[float, float]]:
+    """[guidance] bank_schedule: [[t_s, bank_deg], ...] with increasing times -> (t_s, rad)."""
+    sched_raw = g.raw("bank_schedule")
+    if not isinstance(sched_raw, list) or not sched_raw:
+        raise g.error("bank_schedule", "must be a non-empty list of [t_s, bank_deg] pairs")
+    sched = []
+    for i, pair in enumerate(sched_raw):
+        if (not isinstance(pair, list) or len(pair) != 2
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in pair)):
+            raise g.error("bank_schedule", f"entry {i + 1} must be [t_s, bank_deg] with finite numbers")
+        if abs(pair[1]) > 180:
+            raise g.error("bank_schedule", f"entry {i + 1}: bank must be within [-180, 180] deg, got {pair[1]}")
+        if sched and pair[0] <= sched[-1][0]:
+            raise g.error("bank_schedule", f"entry {i + 1}: times must increase")
+        sched.append((float(pair[0]), math.radians(pair[1])))
+    return sched
+
+
+def _angle(t: Table, name: str, limit_deg: float, open_: bool = False) -> float:
+    """An angle [rad] given as ``<name>_deg`` or, exactly, as ``<name>_rad`` (a pinned
+    campaign run writes radians so that it starts bit for bit where the campaign's run did);
+    within +-limit_deg (open bounds with ``open_``)."""
+    if t.has(f"{name}_rad"):
+        if t.has(f"{name}_deg"):
+            raise t.error(f"{name}_rad", f"give {name}_deg or {name}_rad, not both")
+        lim = math.radians(limit_deg)
+        return t.num(f"{name}_rad", lo=-lim, hi=lim, lo_open=open_, hi_open=open_)
+    return math.radians(t.num(f"{name}_deg", lo=-limit_deg, hi=limit_deg, lo_open=open_, hi_open=open_))
+
+
+def _density_waves(tr: Table) -> tuple[tuple[float, float, float], ...]:
+    """[truth] density_waves = [[amplitude, wavelength_m, phase_rad], ...] (a dispersed
+    campaign's altitude-correlated density, written by its pinned runs): at most
+    MAX_RHO_WAVES, finite, wavelengths above 0, amplitudes summing below 1."""
+    raw = tr.raw("density_waves", default=[])
+    if not isinstance(raw, list) or len(raw) > MAX_RHO_WAVES:
+        raise tr.error("density_waves", f"must be a list of at most {MAX_RHO_WAVES} [amplitude, wavelength_m, "
+                                        "phase_rad] triples")
+    waves = []
+    for i, w in enumerate(raw):
+        if (not isinstance(w, list) or len(w) != 3
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in w)):
+            raise tr.error("density_waves", f"entry {i + 1} must be [amplitude, wavelength_m, phase_rad], finite")
+        if w[1] <= 0:
+            raise tr.error("density_waves", f"entry {i + 1}: wavelength must be > 0, got {w[1]}")
+        waves.append((float(w[0]), float(w[1]), float(w[2])))
+    if sum(abs(a) for a, _, _ in waves) >= 1.0:
+        raise tr.error("density_waves", "amplitudes must sum below 1 (the density stays positive)")
+    return tuple(waves)
+
+
 def load_scenario(name_or_path: str | Path) -> Scenario:
     path = resolve("scenarios", name_or_path)
     root = Table(load_toml(path), path)
@@ -262,22 +316,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     end = root.table("end", default={})
     g = root.table("guidance")
     mode = g.str("mode", default="profile", choices=("profile", "npc"))
-    if mode == "npc" and not g.has("bank_schedule"):
-        # the reference starts at the initial bank; guidance commands the rest
-        g.data = {**g.data, "bank_schedule": [[0.0, ini.num("bank_deg", lo=-180, hi=180)]]}
-    sched_raw = g.raw("bank_schedule")
-    if not isinstance(sched_raw, list) or not sched_raw:
-        raise g.error("bank_schedule", "must be a non-empty list of [t_s, bank_deg] pairs")
-    sched = []
-    for i, pair in enumerate(sched_raw):
-        if (not isinstance(pair, list) or len(pair) != 2
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in pair)):
-            raise g.error("bank_schedule", f"entry {i + 1} must be [t_s, bank_deg] with finite numbers")
-        if abs(pair[1]) > 180:
-            raise g.error("bank_schedule", f"entry {i + 1}: bank must be within [-180, 180] deg, got {pair[1]}")
-        if sched and pair[0] <= sched[-1][0]:
-            raise g.error("bank_schedule", f"entry {i + 1}: times must increase")
-        sched.append((float(pair[0]), math.radians(pair[1])))
+    bank0_rad = _angle(ini, "bank", 180.0)
+    # npc without a schedule: the reference starts at the initial bank; guidance commands the rest
+    sched = [(0.0, bank0_rad)] if mode == "npc" and not g.has("bank_schedule") else _bank_schedule(g)
 
     tr = root.table("truth", default={})
     isc = tr.table("inertia_scale", default={})
@@ -289,6 +330,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         C_lbeta_scale=tr.num("C_lbeta_scale", default=1.0),
         C_malpha_scale=tr.num("C_malpha_scale", default=1.0),
         C_nbeta_scale=tr.num("C_nbeta_scale", default=1.0),
+        density_waves=_density_waves(tr),
     )
     I_truth = inertia_matrix(inertia_vector(vehicle.inertia_kgm2) * inertia_scale)
     if np.min(np.linalg.eigvalsh(I_truth)) <= 0:
@@ -341,11 +383,11 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         dt_control_s=dt_c, dt_integrator_s=dt_i,
         altitude_m=ini.num("altitude_m", lo=0, lo_open=True),
         speed_rel_mps=ini.num("speed_rel_mps", lo=0, lo_open=True),
-        flight_path_rad=math.radians(ini.num("flight_path_deg", lo=-90, hi=90, lo_open=True, hi_open=True)),
-        heading_rad=math.radians(ini.num("heading_deg", lo=-360, hi=360)),
-        latitude_rad=math.radians(ini.num("latitude_deg", lo=-89, hi=89)),
-        longitude_rad=math.radians(ini.num("longitude_deg", lo=-360, hi=360)),
-        bank0_rad=math.radians(ini.num("bank_deg", lo=-180, hi=180)),
+        flight_path_rad=_angle(ini, "flight_path", 90.0, open_=True),
+        heading_rad=_angle(ini, "heading", 360.0),
+        latitude_rad=_angle(ini, "latitude", 89.0),
+        longitude_rad=_angle(ini, "longitude", 360.0),
+        bank0_rad=bank0_rad,
         end_mach=end.num("mach", default=2.0, lo=0) if end_speed is None else 0.0,
         end_speed_mps=end_speed, guidance_mode=mode,
         target_lat_rad=target[0] if target else None, target_lon_rad=target[1] if target else None,

@@ -15,7 +15,7 @@ from numba import njit
 
 from common import atmosphere, mrp
 from common.frames import local_axes
-from common.model import Scenario, inertia_matrix, inertia_vector
+from common.model import MAX_RHO_WAVES, Scenario, inertia_matrix, inertia_vector
 
 # ---- flat parameter vector p (indices are compile-time constants in the kernels) ----
 P_MU, P_RE, P_OMEGA, P_J2, P_USE_J2 = 0, 1, 2, 3, 4
@@ -27,7 +27,6 @@ P_I = 23        # 9 entries, row-major truth inertia [kg m^2]
 P_IINV = 32     # 9 entries, its inverse
 P_RHO_NWAVE = 41   # number of altitude waves of the density perturbation (0: none)
 P_RHO_WAVE = 42    # MAX_RHO_WAVES x (amplitude, wavelength [m], phase [rad])
-MAX_RHO_WAVES = 4
 N_P = P_RHO_WAVE + 3 * MAX_RHO_WAVES
 
 # ---- derived outputs at the end of a step (aux) ----

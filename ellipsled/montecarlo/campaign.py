@@ -315,8 +315,9 @@ def _toml(d: dict, prefix: str = "") -> list[str]:
 
 def pinned_scenario_toml(camp: Campaign, base_file: str | Path, run_id: int, master_seed: int | None = None) -> str:
     """Run ``run_id`` of a campaign as a stand-alone scenario file: the base scenario file with
-    the run's seed, truth dispersions, initial bank and flight-path angle, FDIR delay, time cap
-    and fault events. Flying it flies that run (angles pass through degrees: equal to ~1e-15)."""
+    the run's seed, truth dispersions (density waves included), initial bank and flight-path
+    angle, entry state (speed, heading, position) when the campaign disperses it, FDIR delay,
+    time cap and fault events. Flying it flies that run bit for bit (angles in radians)."""
     master_seed = camp.master_seed if master_seed is None else master_seed
     raw = load_toml(Path(base_file))
     from common.model import load_scenario
@@ -329,10 +330,27 @@ def pinned_scenario_toml(camp: Campaign, base_file: str | Path, run_id: int, mas
     sc["seed"] = int(seed)
     if camp.max_duration_s is not None:
         sc["max_duration_s"] = float(camp.max_duration_s)
-    ini["flight_path_deg"] = float(ini["flight_path_deg"]) + d["flight_path_offset_deg"]
-    ini["bank_deg"] = math.degrees(base.bank_schedule[0][1]) + d["bank0_err_deg"]
+    # the initial state as apply_dispersion makes it (one place computes the offsets), its
+    # angles in radians: a value through degrees and back can differ in the last bit, and a
+    # guided run's deploy point moved 0.25 km across from that alone
+    run = apply_dispersion(base, d, seed, sc["name"])
+    g = raw.setdefault("guidance", {})
+    if "bank_schedule" not in g:
+        # npc: the base's reference starts at the base's initial bank, not at the run's
+        # dispersed one (the bank error is the attitude's, not the reference's)
+        g["bank_schedule"] = [[0.0, float(ini["bank_deg"])]]
+    angles = {"flight_path": run.flight_path_rad, "bank": run.bank0_rad}
+    if "speed_offset_mps" in d:
+        ini["speed_rel_mps"] = run.speed_rel_mps
+        angles.update(heading=run.heading_rad, latitude=run.latitude_rad, longitude=run.longitude_rad)
+    for k, v in angles.items():
+        ini.pop(f"{k}_deg", None)
+        ini[f"{k}_rad"] = v
     raw["truth"] = {"inertia_scale": {k: d[f"inertia_scale_{k}"] for k in INERTIA_KEYS},
                     "density_scale": d["density_scale"], **{f"{k}_scale": d[f"{k}_scale"] for k in AERO_KEYS}}
+    if d.get("density_waves"):
+        w = d["density_waves"]
+        raw["truth"]["density_waves"] = [list(w[i:i + 3]) for i in range(0, len(w) - 2, 3)]
     raw.setdefault("fsw", {}).setdefault("fdir", {})["delay_s"] = d["fdir_delay_s"]
     faults = []
     for kind, key in (("off", "jets_failed_off"), ("stuck", "jets_stuck_on")):

@@ -80,6 +80,7 @@ def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
         "propellant_kg": float(fsw.driver.propellant_kg),
         "jet_pulses_per_jet": [int(x) for x in fsw.driver.pulses],
         "cycle_slips": int(slips),
+        "alloc_modulated": int(fsw.carry.modulated_cycles),
         "events": len(fsw.events.history),
         "alloc_samples": alloc_samples,
         **({"guidance": fsw.entry.stats()} if fsw.entry is not None else {}),
@@ -162,6 +163,8 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
                       "max_us": float(np.max(au)) if len(au) else None,
                       "degraded": int(np.sum(h["alloc_degraded"])),
                       "short": int(np.sum(h["alloc_short"])),
+                      # cycles flown by the duty-cycle modulator (fsw/allocation/dutycycle.py)
+                      "modulated": rep.get("alloc_modulated"),
                       "box": box_name(params["allocator.spill_jets"]),
                       "optimality_gap_max": gap, "optimality_checked": checked},
         "fdir": {"detections": dets, "false_alarms": false_alarms, "missed": missed},
@@ -240,7 +243,7 @@ def format_summary(s: dict) -> str:
         f" {s['control_effort_applied']:.3g} (commanded {s['control_effort_cmd']:.3g},"
         f" undeliverable {f(s['control_effort_undeliverable_share'], '{:.0%}')})",
         f"  allocator: {a['solves']} solves, p50 {f(a['p50_us'], '{:.1f}')} us, p99 {f(a['p99_us'], '{:.1f}')} us,"
-        f" degraded {a['degraded']}, short on the bank axis {a.get('short')}, optimality gap {f(a['optimality_gap_max'], '{:.2g}')} ({a['optimality_checked']} checked)",
+        f" degraded {a['degraded']}, short on the bank axis {a.get('short')}, modulated {a.get('modulated')}, optimality gap {f(a['optimality_gap_max'], '{:.2g}')} ({a['optimality_checked']} checked)",
         f"  FDIR: {len(s['fdir']['detections'])} detections, {s['fdir']['false_alarms']} false alarms,"
         f" missed {s['fdir']['missed']}; cycle slips {s['cycle_slips']}",
     ] + ([f"  deploy: miss {s['deploy_miss_km']:.2f} km (downrange {s['downrange_err_km']:+.2f}, crossrange "

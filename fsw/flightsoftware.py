@@ -20,7 +20,7 @@ from common.model import Scenario
 from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult
 
 from .allocation import Allocator
-from .allocation.carry import ShortfallCarry
+from .allocation.dutycycle import DutyCycleRealiser
 from .control import SamiController
 from .controllability import (Controllability, aero_moment_per_rad, controllability, velocity_dir_B,
                               schedule_accel_need_radps2)
@@ -126,9 +126,9 @@ class FlightSoftware:
         # (the rule SAMI's saturation awareness applies per body axis)
         self.bank_axis_B = velocity_dir_B(veh.aero.alpha_trim_rad)
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
-        # error feedback across cycles (fsw/allocation/carry.py): the allocator is asked for
-        # SAMI's demand plus the shortfall carried while the bank axis falls short
-        self.carry = ShortfallCarry(self.bank_axis_B, veh.torque_matrix_Nm)
+        # while the bank axis falls short, the duty-cycle LP's average realised over cycles
+        # (fsw/allocation/dutycycle.py) instead of one pattern per cycle
+        self.carry = DutyCycleRealiser(self.bank_axis_B, veh.torque_matrix_Nm, veh.thrust_N)
         self.alloc_short = False
         self.alloc_short_cycles = 0
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
@@ -210,7 +210,7 @@ class FlightSoftware:
         t0 = time.perf_counter_ns()
         u_alloc = self.carry.solve(self.allocator, self.u_cal_B)
         self.alloc_ns = time.perf_counter_ns() - t0
-        self.tau_alloc_B[:] = self.allocator.tau_B
+        self.tau_alloc_B[:] = self.carry.tau_B
         if self.allocator.tables_version != self._tables_version:      # new tables in use
             self._tables_version = self.allocator.tables_version
             self.carry.reset()

@@ -1,0 +1,149 @@
+"""The duty-cycle LP's average realised over control cycles (sigma-delta per jet).
+
+One cycle's allocation picks one jet pattern, the exact optimum for that cycle's demand. Once
+failures leave no pattern that gives bank torque without pitch/yaw spill, the same pattern wins
+cycle after cycle and the bank axis gets a fraction of what the jets hold on average: averaged
+over cycles an on/off jet acts as its duty cycle d_j in [0, 1] (fsw/controllability.py), and the
+average torque b + C d can be one no single pattern gives (campaign 2026 run 82: the weak way
+needs patterns that spill pitch/yaw held by the trim's aerodynamic moment).
+
+While the bank axis is short (the demand alone leaves it short by more than rounding to its
+finest jet explains: the same verdict as fsw/allocation/carry.py), each cycle solves the
+continuous relaxation of the allocator's own problem without its per-cycle box,
+
+    minimise   sum_i w_i |u_i - (b + C d)_i| + sum_k c_k d_k   over 0 <= d <= 1,
+
+C the usable jets' columns eta_k T_k, b the stuck-on bias, w and c the allocator's weights and
+penalties (HiGHS, single-threaded, the model built once per health and warm-started from the
+previous cycle's basis), and fires each jet by a first-order sigma-delta on its duty cycle:
+acc_k += d_k; fire when acc_k >= 1/2; acc_k -= fired. The accumulator stays in [-1/2, 1/2), so
+over any run of N short cycles the jets' mean firing equals the mean d within 1/N per jet, and
+the mean torque b + C mean(d) within sum_k |C_k| / N. A cycle that is not short flies the exact
+allocator's answer and clears the accumulators (a new run of short cycles starts from zero).
+
+The paper's sign box (allocator.spill_jets 0) is flown as before: no modulation. While an
+asynchronous reconfiguration is pending (real time: the interim model) neither.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .model import N_AXES
+
+
+class DutyCycleRealiser:
+    """Wraps one allocator's answer; arrays preallocated (HiGHS's solution copy aside)."""
+
+    def __init__(self, bank_axis_B: np.ndarray, torque_matrix_Nm: np.ndarray, thrust_N: np.ndarray) -> None:
+        T = np.asarray(torque_matrix_Nm, dtype=float)
+        self.axis = np.asarray(bank_axis_B, dtype=float).copy()
+        inc = np.abs(self.axis @ T)
+        # the bank shortfall that rounding to the finest jet explains: half its increment
+        self.round_Nm = 0.5 * float(np.min(inc[inc > 0.0]))
+        self._thrust = np.asarray(thrust_N, dtype=float)
+        n = T.shape[1]
+        self.u = np.zeros(n, dtype=np.uint8)      # the answer flown (modulated cycles)
+        self.tau_B = np.zeros(N_AXES)             # modelled torque of the answer flown [N m]
+        self.demand_B = np.zeros(N_AXES)          # the demand it was solved for [N m]
+        self.avg_B = np.zeros(N_AXES)             # b + C d of the last LP [N m]
+        self.d = np.zeros(n)                      # duty cycles of the last LP (0 for unusable jets)
+        self.acc = np.zeros(n)                    # sigma-delta accumulators
+        self.modulated = False                    # the last answer came from the modulator
+        self.modulated_cycles = 0
+        self._uf = np.zeros(n)
+        self._rhs = np.zeros(N_AXES)
+        self._rows = np.arange(N_AXES, dtype=np.int32)
+        self._tables = None                       # the allocator tables the LP was built for
+        self._h = None
+        self._idx = np.zeros(0, dtype=np.int64)   # usable jets (the LP's first columns)
+        self._cols = np.zeros((N_AXES, n))
+        self._bias = np.zeros(N_AXES)
+
+    def _short(self, u_B: np.ndarray, tau_B: np.ndarray) -> bool:
+        a = self.axis
+        d = a[0] * u_B[0] + a[1] * u_B[1] + a[2] * u_B[2]
+        got = a[0] * tau_B[0] + a[1] * tau_B[1] + a[2] * tau_B[2]
+        return ((d - got) if d >= 0.0 else (got - d)) > self.round_Nm
+
+    def _build(self, allocator) -> None:
+        """The LP of the allocator's active tables: columns [d (p), r+ (3), r- (3)],
+        rows C d - r+ + r- = u - b."""
+        import highspy
+        from fsw.lp import set_colwise_matrix
+        t = allocator._tables
+        self._tables = t
+        self._idx = np.flatnonzero(t.usable)
+        self._cols[:] = t.cols
+        self._bias[:] = t.bias
+        self.u[:] = 0
+        self.acc[:] = 0.0
+        p = len(self._idx)
+        M = np.zeros((N_AXES, p + 2 * N_AXES))
+        M[:, :p] = t.cols[:, self._idx]
+        M[:, p:p + N_AXES] = -np.eye(N_AXES)
+        M[:, p + N_AXES:] = np.eye(N_AXES)
+        lp = highspy.HighsLp()
+        lp.num_col_ = p + 2 * N_AXES
+        lp.num_row_ = N_AXES
+        lp.col_cost_ = np.concatenate([allocator.penalty_per_N * self._thrust[self._idx], t.w, t.w])
+        lp.col_lower_ = np.zeros(p + 2 * N_AXES)
+        lp.col_upper_ = np.concatenate([np.ones(p), np.full(2 * N_AXES, highspy.kHighsInf)])
+        lp.row_lower_ = np.zeros(N_AXES)
+        lp.row_upper_ = np.zeros(N_AXES)
+        set_colwise_matrix(lp, M)
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+        h.setOptionValue("threads", 1)
+        h.passModel(lp)
+        self._h = h
+
+    def duty_cycles(self, allocator, u_B: np.ndarray) -> np.ndarray:
+        """d (n jets; 0 for unusable ones): the LP's optimum for demand ``u_B`` on the
+        allocator's active model. Sets ``avg_B`` = b + C d."""
+        if self._tables is not allocator._tables:
+            self._build(allocator)
+        np.subtract(u_B, self._bias, out=self._rhs)
+        h = self._h
+        h.changeRowsBounds(N_AXES, self._rows, self._rhs, self._rhs)
+        h.run()
+        x = h.getSolution().col_value
+        self.d[:] = 0.0
+        for q, k in enumerate(self._idx):
+            v = x[q]
+            self.d[k] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
+        np.dot(self._cols, self.d, out=self.avg_B)
+        self.avg_B += self._bias
+        return self.d
+
+    def solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
+        """The jets array to fly for demand ``u_B`` [N m]: the allocator's exact answer, or while
+        the bank axis is short the sigma-delta of the LP's duty cycles. ``tau_B`` is the
+        modelled torque of the answer flown."""
+        jets = allocator.solve(u_B)
+        self.demand_B[:] = u_B
+        if (allocator.rejected or allocator.reconfig_pending or not allocator._tables.spill_box
+                or not self._short(u_B, allocator.tau_B)):
+            self.tau_B[:] = allocator.tau_B
+            if self.modulated:
+                self.acc[:] = 0.0
+                self.modulated = False
+            return jets
+        self.duty_cycles(allocator, u_B)
+        self.acc += self.d
+        u = self.u
+        for k in self._idx:
+            if self.acc[k] >= 0.5:
+                u[k] = 1
+                self.acc[k] -= 1.0
+            else:
+                u[k] = 0
+        self._uf[:] = u
+        np.dot(self._cols, self._uf, out=self.tau_B)
+        self.tau_B += self._bias
+        self.modulated = True
+        self.modulated_cycles += 1
+        return u
+
+    def reset(self) -> None:
+        self.acc[:] = 0.0
+        self.modulated = False

@@ -129,6 +129,7 @@ class FlightSoftware:
         # while the bank axis falls short, the duty-cycle LP's average realised over cycles
         # (fsw/allocation/dutycycle.py) instead of one pattern per cycle
         self.carry = DutyCycleRealiser(self.bank_axis_B, veh.torque_matrix_Nm, veh.thrust_N)
+        self.carry.short_min_Nm = self._bank_short_min_Nm
         self.alloc_short = False
         self.alloc_short_cycles = 0
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
@@ -207,6 +208,7 @@ class FlightSoftware:
         else:
             u_cal = self._zero3
         self.u_cal_B[:] = u_cal
+        self.carry.short_frac = self.params["control.shortfall_frac"]
         t0 = time.perf_counter_ns()
         u_alloc = self.carry.solve(self.allocator, self.u_cal_B)
         self.alloc_ns = time.perf_counter_ns() - t0

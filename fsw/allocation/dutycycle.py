@@ -40,6 +40,11 @@ class DutyCycleRealiser:
         inc = np.abs(self.axis @ T)
         # the bank shortfall that rounding to the finest jet explains: half its increment
         self.round_Nm = 0.5 * float(np.min(inc[inc > 0.0]))
+        # the FSW's own rule for a short bank axis (FlightSoftware._check_bank_shortfall): a
+        # demand above short_min_Nm that gets less than (1 - short_frac) of itself; 0, 0: any
+        # shortfall beyond rounding
+        self.short_min_Nm = 0.0
+        self.short_frac = 0.0
         self._thrust = np.asarray(thrust_N, dtype=float)
         n = T.shape[1]
         self.u = np.zeros(n, dtype=np.uint8)      # the answer flown (modulated cycles)
@@ -63,7 +68,9 @@ class DutyCycleRealiser:
         a = self.axis
         d = a[0] * u_B[0] + a[1] * u_B[1] + a[2] * u_B[2]
         got = a[0] * tau_B[0] + a[1] * tau_B[1] + a[2] * tau_B[2]
-        return ((d - got) if d >= 0.0 else (got - d)) > self.round_Nm
+        if abs(d) <= self.short_min_Nm:
+            return False
+        return ((d - got) if d >= 0.0 else (got - d)) > max(self.round_Nm, self.short_frac * abs(d))
 
     def _build(self, allocator) -> None:
         """The LP of the allocator's active tables: columns [d (p), r+ (3), r- (3)],

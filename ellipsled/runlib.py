@@ -80,7 +80,7 @@ def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
         "propellant_kg": float(fsw.driver.propellant_kg),
         "jet_pulses_per_jet": [int(x) for x in fsw.driver.pulses],
         "cycle_slips": int(slips),
-        "alloc_modulated": int(fsw.carry.modulated_cycles),
+        "alloc_modulated": int(fsw.dutycycle.modulated_cycles),
         "events": len(fsw.events.history),
         "alloc_samples": alloc_samples,
         **({"guidance": fsw.entry.stats()} if fsw.entry is not None else {}),
@@ -90,7 +90,7 @@ def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
 def alloc_sample(fsw: FlightSoftware) -> dict:
     """One allocator demand, its health and its objective, for an offline optimality check."""
     hl = fsw.allocator_health()
-    return {"tau_d": fsw.carry.demand_B.tolist(), "state": hl.state.tolist(), "eta": hl.eta.tolist(),
+    return {"tau_d": fsw.dutycycle.demand_B.tolist(), "state": hl.state.tolist(), "eta": hl.eta.tolist(),
             "inhibited": hl.inhibited.tolist(), "objective": float(fsw.allocator.objective)}
 
 

@@ -128,8 +128,8 @@ class FlightSoftware:
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
         # while the bank axis falls short, the duty-cycle LP's average realised over cycles
         # (fsw/allocation/dutycycle.py) instead of one pattern per cycle
-        self.carry = DutyCycleRealiser(self.bank_axis_B, veh.torque_matrix_Nm, veh.thrust_N)
-        self.carry.short_min_Nm = self._bank_short_min_Nm
+        self.dutycycle = DutyCycleRealiser(self.bank_axis_B, veh.torque_matrix_Nm, veh.thrust_N)
+        self.dutycycle.short_min_Nm = self._bank_short_min_Nm
         self.alloc_short = False
         self.alloc_short_cycles = 0
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
@@ -208,14 +208,14 @@ class FlightSoftware:
         else:
             u_cal = self._zero3
         self.u_cal_B[:] = u_cal
-        self.carry.short_frac = self.params["control.shortfall_frac"]
+        self.dutycycle.short_frac = self.params["control.shortfall_frac"]
         t0 = time.perf_counter_ns()
-        u_alloc = self.carry.solve(self.allocator, self.u_cal_B)
+        u_alloc = self.dutycycle.solve(self.allocator, self.u_cal_B)
         self.alloc_ns = time.perf_counter_ns() - t0
-        self.tau_alloc_B[:] = self.carry.tau_B
+        self.tau_alloc_B[:] = self.dutycycle.tau_B
         if self.allocator.tables_version != self._tables_version:      # new tables in use
             self._tables_version = self.allocator.tables_version
-            self.carry.reset()
+            self.dutycycle.reset()
             self.events.emit(t_s, Severity.NOTICE, "allocator", "reconfigured",
                              f"ALLOCATOR RECONFIGURED ({self.allocator.rebuild_time_s * 1e3:.1f} ms)")
         if self.allocator.degraded:
@@ -416,7 +416,7 @@ class FlightSoftware:
         """Jets off, nothing learnt: a rejected frame or stale sensors."""
         self._have_prev = False
         self.u_cal_B[:] = 0.0
-        self.carry.reset()
+        self.dutycycle.reset()
         self.tau_alloc_B[:] = 0.0
         self._tau_last[:] = 0.0
         self.alloc_short = False

@@ -155,3 +155,19 @@ def test_a_delivered_or_rejected_demand_clears_the_accumulators_and_health_chang
     for _ in range(50):
         jets = dc.solve(al, -300.0 * AXIS)
         assert dc.modulated and not np.any(jets[~RUN82.usable()])
+
+
+def test_the_fsws_gate_leaves_small_or_mostly_delivered_demands_to_the_exact_answer():
+    """As FlightSoftware sets it: modulated only for a bank demand above two of the largest
+    bank-axis jet increments that the exact answer delivers less than half of."""
+    al, dc = _setup(RUN190)
+    dc.short_min_Nm = 2.0 * float(np.max(np.abs(AXIS @ T)))
+    dc.short_frac = 0.5
+    for u in (20.0 * AXIS, 0.9 * dc.short_min_Nm * AXIS):
+        jets = dc.solve(al, u).copy()
+        assert not dc.modulated and np.array_equal(jets, al.solve(u))
+    u = 3.0 * dc.short_min_Nm * AXIS
+    al.solve(u)
+    assert abs(AXIS @ al.tau_B) < 0.5 * abs(AXIS @ u)     # the exact answer: short by the rule
+    dc.solve(al, u)
+    assert dc.modulated

@@ -442,15 +442,6 @@ class Allocator:
         self.penalty_per_N = vals["allocator.penalty_per_N"]
         self.spill_jets = vals["allocator.spill_jets"]
         self.spill = spill_of(self._T, self.spill_jets)
-        # the shortfall a caller may carry to the next cycle's demand (error feedback,
-        # fsw/flightsoftware.py), per axis: the same weighted size w_i e_i on every axis, the
-        # box allowance's smallest (a demand beyond reach then pushes every short axis
-        # equally hard, in the objective's own units, and the objective keeps its priorities;
-        # 0 with the sign box)
-        ws = self.w * self.spill
-        pos = self.w > 0.0
-        c = float(np.min(ws[pos])) if np.any(pos) else 0.0
-        self.carry_max = np.where(pos, c / np.where(pos, self.w, 1.0), 0.0)
         self.fault_tolerance = bool(vals["allocator.fault_tolerance"])
         self._gen += 1
         self._cache.clear()

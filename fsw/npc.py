@@ -840,9 +840,13 @@ class EntryGuidance:
         and the last that did not (the crossing nearest the range solution, least range
         given up). A phi_0 that skips out or whose predicted miss exceeds
         npc.floor_miss_max_m is refused, and so is everything below it (more lift up flies
-        further); without a crossing above the refused, the phi_0 of the highest deploy seen.
-        The miss bound keeps the trade from running away: flown long, the next range
-        solution needs more lift down, which deploys lower still."""
+        further); without a crossing above the refused, the phi_0 of the highest deploy seen,
+        and NaN when no phi_0 tried deploys higher than the range solution (then the range
+        solution stays: the floor's profile from b_hi is another flight, not a trade — a
+        range solution beyond the phi_0 bound, flown as the floor's line from the bound,
+        was predicted 61-104 km long for three cycles of a dispersed run). The miss bound
+        keeps the trade from running away: flown long, the next range solution needs more
+        lift down, which deploys lower still."""
         out = self._out
         tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
         miss_max = self.params["npc.floor_miss_max_m"]
@@ -873,7 +877,7 @@ class EntryGuidance:
                     break
             elif (not math.isnan(b_lim) and b_bad - b_lim < self.FLOOR_RES) or b <= self.bank_lo:
                 break
-        return (best_b if math.isnan(b_ok) else b_ok), n
+        return (b_ok if not math.isnan(b_ok) else best_b if best_h > h_hi else math.nan), n
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
               shp: np.ndarray | None = None) -> dict:
@@ -924,14 +928,17 @@ class EntryGuidance:
             # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
             # fixed phi_f would otherwise take the lift-up away just where it counts), and
             # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
-            floor = True
-            b0, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, self.bank_hi), self._out[O_H])
+            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, self.bank_hi), self._out[O_H])
             n += nh
-            bf = min(self.bank_f, b0)
-            self._predict(x, b0, bf, e0, sign, self._out)
-            zb = (central_angle(x[:3], self._out[:3]) * self.R - s_togo if self._out[O_FLAG] == REACHED
-                  else math.nan)
-            ok = False
+            if math.isnan(b_fl):        # no trade deploys higher: the range solution's prediction again
+                self._predict(x, b0, bf, e0, sign, self._out)
+            else:
+                floor = True
+                b0, bf = b_fl, min(self.bank_f, b_fl)
+                self._predict(x, b0, bf, e0, sign, self._out)
+                zb = (central_angle(x[:3], self._out[:3]) * self.R - s_togo if self._out[O_FLAG] == REACHED
+                      else math.nan)
+                ok = False
         rf = self._out[:3].copy()
         # phi_0 commanded: the profile's bank now (the line clipped to the bounds, as predicted)
         res = {"bank0": min(self.bank_hi, max(self.bank_lo, b0)), "b_range": b_range, "e0": e0, "b_line": b0,

@@ -418,8 +418,47 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
         res = eg.solve(x, 1.0, 1.0, 1.0)
     finally:
         eg.close()
-    assert res["floor"] and res["h_f"] < free["h_f"] + 500.0 - PARAMS["npc.tol_m"]
+    assert res["h_f"] < free["h_f"] + 500.0 - PARAMS["npc.tol_m"]
     assert free["bank0"] >= res["bank0"] > res_binds["bank0"] and abs(res["miss_m"]) <= 0.5 * traded
+    assert res["floor"] == (res["bank0"] < free["bank0"])      # a trade is flagged; none is the range solution
+
+
+def test_deploy_altitude_floor_without_a_higher_deploy_keeps_the_range_solution():
+    """From the plant's state 90 s into an entry flown at 90 deg, a target 8 km short of the
+    shortest flight (the phi_0 bound, 120 deg here, held: no root, the range solution beyond
+    the bound). With the floor above that deploy and a 2 km trade bound, every trade is
+    refused (all miss by more): the answer is the range solution's held-bound flight, not the
+    floor's line from the bound (a different flight: 61-104 km long in a dispersed run)."""
+    _, _, _, _, frames = fly_plant(SCN.with_(max_duration_s=95.0), lambda e: math.radians(90.0), every=200)
+    t, f, _ = [fr for fr in frames if fr[0] >= 90.0][0]
+    x = npc.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
+    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.bank_max_deg": 120.0, "npc.floor_miss_max_m": 2000.0})
+    out = np.zeros(npc.N_O)
+    hi = math.radians(120.0)
+    npc.predict(x, npc.predictor_constants(SCN, base), hi, hi, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
+    r_end = out[:3] / np.linalg.norm(out[:3])
+    axis = np.cross(x[:3], r_end)
+    axis /= np.linalg.norm(axis)
+    ang = -8e3 / SCN.planet.radius_m
+    target = r_end * math.cos(ang) + np.cross(axis, r_end) * math.sin(ang)
+    res = {}
+    for name, h_floor in (("free", 0.0), ("floor", None)):
+        eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": 0.0}), npc.EventLog(), 0.02)
+        try:
+            eg.target_u = target
+            eg.bank0 = math.radians(100.0)
+            if h_floor is None:
+                eg.params["npc.h_floor_m"] = res["free"]["h_f"] + 500.0
+            res[name] = eg.solve(x, 1.0, 1.0, 1.0)
+        finally:
+            eg.close()
+    free, fl = res["free"], res["floor"]
+    assert not free["ok"] and free["held"] and free["miss_m"] > 5e3       # beyond the bound, long
+    assert not fl["floor"] and fl["held"]
+    for k in ("bank0", "b_line", "bank_f", "miss_m", "h_f"):
+        assert fl[k] == free[k], k
 
 
 def test_final_reversal_at_the_cycle_nearest_the_crossing():

@@ -44,6 +44,7 @@ class Keys:
     alive_bridge: str
     alive_console: str
     alive_any: str       # wildcard over every liveliness token of this prefix
+    ready_fsw: str       # the FSW's second token: warmed up, its real-time loop about to lock on
 
     def alive(self, role: str) -> str:
         if role not in ROLES:
@@ -83,4 +84,5 @@ def keys(prefix_or_vehicle: str) -> Keys:
         alive_bridge=f"{prefix}/{ALIVE}/bridge",
         alive_console=f"{prefix}/{ALIVE}/console",
         alive_any=f"{prefix}/{ALIVE}/*",
+        ready_fsw=f"{prefix}/{ALIVE}/fsw/ready",
     )

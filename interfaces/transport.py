@@ -15,6 +15,7 @@ Rules kept here so that process shells cannot get them wrong:
 from __future__ import annotations
 
 import json
+import math
 import socket
 import time
 from pathlib import Path
@@ -163,12 +164,17 @@ def declare_alive(session: zenoh.Session, k: Keys, role: str) -> zenoh.Livelines
 
 
 def wait_for_alive(session: zenoh.Session, key: str, timeout_s: float,
-                   poll_s: float = 0.005) -> bool:
-    """Wait (interruptibly) until a liveliness token matching ``key`` exists."""
+                   poll_s: float = 0.005, every=None, every_s: float = 0.02) -> bool:
+    """Wait (interruptibly) until a liveliness token matching ``key`` exists; ``every()``,
+    if given, is called at once and then every ``every_s`` while waiting."""
     sub = session.liveliness().declare_subscriber(key, zenoh.handlers.FifoChannel(16), history=True)
     try:
         deadline = time.monotonic() + timeout_s
+        t_every = -math.inf
         while True:
+            if every is not None and time.monotonic() - t_every >= every_s:
+                every()
+                t_every = time.monotonic()
             s = sub.try_recv()
             if s is not None and s.kind == zenoh.SampleKind.PUT:
                 return True

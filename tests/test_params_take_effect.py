@@ -447,8 +447,10 @@ CASES = [
     Case("npc.v_norev_mps", 8000.0, reverses("hi", 30.0), "==", (False, True), at=10, scenario=GUIDED),
     Case("npc.tgo_freeze_s", 300.0, reverses("hi", 30.0, t_go_s=100.0, t_rev_s=10.0), "==", (False, True),
          at=10, scenario=GUIDED),
-    # the deploy-altitude floor: one far above any deploy binds in every answer
-    Case("npc.h_floor_m", 30000.0, npc_after(lambda e, a: e.floor_cycles), ">", at=10, scenario=GUIDED),
+    # the deploy-altitude floor: one far above any deploy puts the floor's search for a range
+    # trade into every answer (predictor calls per answer; this early in the entry every trade
+    # it tries misses by more than npc.floor_miss_max_m, so it keeps the range solution)
+    Case("npc.h_floor_m", 30000.0, npc_after(lambda e, a: float(np.sum(e.calls[a]))), ">", at=10, scenario=GUIDED),
 ]
 
 

@@ -74,6 +74,7 @@ class FswNode:
         self.sub_fault_log = transport.subscriber(self.session, self.K.fault_log) if self.fsw.fdir.oracle else None
         self.dec_fault_log = Codec.for_schema("FAULT_APPLIED", on_reject=self._rejected)
         self.token = transport.declare_alive(self.session, self.K, ROLE)
+        self.ready = None       # real time: a second token once warmed up (the plant starts on it)
         # a restarted plant takes over the sensor key after 1 s of silence, not before
         self.dec_sensors = Codec.for_schema("SENSORS", guard=SequenceGuard(takeover_after_s=1.0),
                                             on_reject=self._rejected)
@@ -297,11 +298,16 @@ class FswNode:
         # warm up on the plant's first frame, then phase-lock to a frame that arrives after
         # the warm-up (locking to the first one would start tens of ms behind): release
         # rt-offset after each publication
-        if self._next_good_frame() is None:
+        warm_k = self._next_good_frame()
+        if warm_k is None:
             return
         self._warm_up()
+        # the plant starts its clock on this token (until then it offers frame warm_k again)
+        self.ready = self.session.liveliness().declare_token(self.K.ready_fsw)
         transport.latest(self.sub_sensors)              # frames that came during the warm-up
-        lock = self._next_good_frame()
+        lock = warm_k
+        while lock is not None and lock <= warm_k:      # a frame of the running clock, not an offer
+            lock = self._next_good_frame()
         if lock is None:
             return
         period = self.topo.executive.period_ns
@@ -363,7 +369,7 @@ class FswNode:
         if self.link is not None:
             self.link.flush_events()
             self.link.close()
-        transport.close(self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
+        transport.close(self.ready, self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
                         self.pub_faults, self.sub_fault_log, self.session)
 
 

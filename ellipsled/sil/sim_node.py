@@ -82,7 +82,7 @@ class SimNode:
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
         self.sensor_seq = 0     # per publication: a frame sent again is a new sample, not a replay
         self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
-                       "resent_frames": 0,
+                       "resent_frames": 0, "warmup_frames": 0,
                        "faults_applied": 0}
         self.rejects: dict[str, int] = {}
         # one latency per step at most: preallocated, nothing grows during the run
@@ -265,6 +265,18 @@ class SimNode:
                 return
         self.end_reason = self.end_reason or "stopped"
 
+    def _await_ready(self) -> None:
+        """Real time: the clock starts when the FSW has warmed up (its ``ready`` token), not
+        before — the warm-up runs on a sensor frame, so frame k=0 is offered every 20 ms
+        meanwhile (counted: warmup_frames). Warmed up on a frame of a plant that was already
+        flying, the FSW lost ~0.9 s of commands at every start. An FSW that never says ready
+        (an older one) costs wait_peers, then the run starts anyway, said in the log."""
+        def offer() -> None:
+            self.publish_sensors()
+            self.counts["warmup_frames"] += 1
+        if not transport.wait_for_alive(self.session, self.K.ready_fsw, self.args.wait_peers, every=offer):
+            say(ROLE, f"the FSW has not said it is ready within {self.args.wait_peers:g} s: starting anyway")
+
     # ------------------------------------------------------------------ main
     def run(self) -> int:
         a = self.args
@@ -276,6 +288,8 @@ class SimNode:
             self.end_reason = "no_fsw"
             self.message = f"no FSW{' or bridge' if a.wait_bridge else ''} joined within {a.wait_peers:g} s"
         else:
+            if a.mode == "realtime":
+                self._await_ready()
             wall0 = time.perf_counter()
             (self.run_realtime if a.mode == "realtime" else self.run_lockstep)()
             self.wall_s = time.perf_counter() - wall0

@@ -5,13 +5,15 @@ bare SCHED_FIFO sleeper (seen on the machines here: 6.4 ms max over 40 s at load
 Tests of the FSW's deadlines therefore ask which slips the FSW's own work caused."""
 from __future__ import annotations
 
+from fsw.executive import own_slips
 
-def own_overruns(fsw: dict, period_us: float = 20_000.0) -> list[dict]:
-    """The slip records not explained by a late release: the cycle overran by its own
-    tasks, or its tasks took half the period or more. Every slip must be recorded (the
-    executive keeps the first 32), else every record counts."""
+
+def own_overruns(fsw: dict, period_us: float = 20_000.0, last_k: int | None = None) -> list[dict]:
+    """The slip records not explained by a late release (fsw.executive.own_slips: the cycle
+    overran by its own tasks, or its tasks took half the period or more), up to the plant's
+    last step ``last_k`` if given. Every slip must be recorded (the executive keeps the first
+    32), else every record counts."""
     records = fsw["executive"].get("slip_records", [])
     if len(records) != min(fsw["cycle_slips"], 32):
         return records or [{"cause": "unrecorded", "slips": fsw["cycle_slips"]}]
-    return [r for r in records
-            if r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us]
+    return own_slips(records, period_us, last_k)

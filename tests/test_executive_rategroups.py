@@ -10,7 +10,7 @@ import pytest
 
 from common.events import EventLog, Severity
 from common.rt import sleep_until_ns
-from fsw.executive import PARAMS, Executive, LockstepClock, RealTimeClock
+from fsw.executive import PARAMS, Executive, LockstepClock, RealTimeClock, own_slips
 from fsw.params import load_params
 
 MS = 1_000_000
@@ -283,3 +283,12 @@ def test_parameters_from_the_defaults_file_and_bad_configuration():
     with pytest.raises(RuntimeError):
         ex2.run(1)
     assert math.isclose(p["executive.deadline_frac"], 1.0)
+
+
+def test_own_slips_keeps_overruns_and_heavy_late_releases_up_to_the_plants_last_step():
+    recs = [{"k": 10, "cause": "overrun", "tasks_us": {"control": 21000.0}},
+            {"k": 11, "cause": "late_release", "tasks_us": {"control": 300.0}},      # the host's
+            {"k": 12, "cause": "late_release", "tasks_us": {"control": 10000.0}},    # half a period: own
+            {"k": 3015, "cause": "overrun", "tasks_us": {"groundlink": 16700.0}}]    # the plant had gone
+    assert [r["k"] for r in own_slips(recs, 20000.0)] == [10, 12, 3015]
+    assert [r["k"] for r in own_slips(recs, 20000.0, last_k=3000)] == [10, 12]

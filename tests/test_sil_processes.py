@@ -180,6 +180,10 @@ def _deadline_problems(sil: dict, s: dict, out: Path) -> list[str]:
         p.append(f"jitter p99 {sil['jitter_p99_us']} us")
     if not sil["latency_samples"] >= 0.95 * 1000:
         p.append(f"only {sil['latency_samples']} commands in time")
+    # the FSW releases 100 us before each publication: a frame older than a quarter period
+    # at its input task means the phase lock took a late frame for the plant's schedule
+    if not sil["fsw_frame_age_p50_us"] < 5000:
+        p.append(f"FSW frame age p50 {sil['fsw_frame_age_p50_us']} us")
     if not sil["latency_p99_us"] < 20000:
         p.append(f"latency p99 {sil['latency_p99_us']} us")
     if not s["bank_err_max_after_fault_deg"] < 5.0:

@@ -22,6 +22,7 @@ import numpy as np
 from common.model import load_scenario
 from ellipsled.batch import run as batch_run
 from common.events import EventLog
+from fsw.executive import own_slips
 from fsw.npc import PARAMS, EntryGuidance, planet_fixed
 from fsw.params import load_params
 from sim.dynamics import initial_translation
@@ -80,9 +81,9 @@ def realtime(quick: bool) -> dict:
         return {"own_slips": None, "own_slips_reason": f"no fsw.json ({r['command']}, exit {r['exit_code']})"}
     period_us = 1e6 * load_scenario("guided-nominal").dt_control_s
     recs = fsw["executive"].get("slip_records", [])
-    # the deadline tests' rule (tests/deadlines.py): a late release whose tasks took half the
-    # period or more is the FSW's own too
-    own = [x for x in recs if x["cause"] != "late_release" or sum(x["tasks_us"].values()) >= 0.5 * period_us]
+    # the deadline tests' rule, up to the plant's last step (after it the plant has gone)
+    last_k = round(s["t_end_s"] * 1e6 / period_us) if s.get("t_end_s") is not None else None
+    own = own_slips(recs, period_us, last_k)
     g, loop = fsw.get("guidance") or {}, (fsw.get("tasks_us") or {}).get("entry_guidance") or {}
     return {"command": r["command"], "t_end_s": s.get("t_end_s"), "end_reason": s.get("end_reason"),
             "slips": fsw.get("cycle_slips"), "slips_recorded": len(recs), "own_slips": len(own),

@@ -294,6 +294,8 @@ class FswNode:
                 return int(self.frame["k"])
         return None
 
+    LOCK_FRAMES = 10        # real time: frames the phase lock takes the plant's schedule from
+
     def run_realtime(self) -> None:
         # warm up on the plant's first frame, then phase-lock to a frame that arrives after
         # the warm-up (locking to the first one would start tens of ms behind): release
@@ -311,10 +313,18 @@ class FswNode:
         if lock is None:
             return
         period = self.topo.executive.period_ns
-        t_pub = self.dec_sensors.last_t_pub_ns
+        # the plant's schedule: step k published at origin + k * period, never earlier, often
+        # later in its first steps (its own first-call costs: step 1 came 32 ms late, step 2
+        # 13 ms, then on time) — so the earliest origin over LOCK_FRAMES frames, not the first
+        origin = self.dec_sensors.last_t_pub_ns - lock * period
+        for _ in range(self.LOCK_FRAMES - 1):
+            k = self._next_good_frame()
+            if k is None:
+                return
+            origin, lock = min(origin, self.dec_sensors.last_t_pub_ns - k * period), k
         # tick k of the executive is the plant's step k; the first is the step after this
         # frame's (this one is already a few hundred us old)
-        self.topo.executive.clock.start(t_pub - lock * period + int(self.args.rt_offset_us * 1e3), k0=lock + 1)
+        self.topo.executive.clock.start(origin + int(self.args.rt_offset_us * 1e3), k0=lock + 1)
         self.next_k = lock + 1
         self.n_frames = 0                               # frame ages from here on
         while not self.stop:

@@ -96,6 +96,7 @@ class FswNode:
         self.answers_repeated = 0
         self.last_frame_wall = 0.0
         self.next_k = 0
+        self.lock_source = None     # the plant whose steps the real-time ticks are locked to
         self.jitter_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)   # every tick, whole run
         # real time: how long after the plant published it each frame reached this loop
         self.frame_age_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
@@ -153,14 +154,24 @@ class FswNode:
                 self._rejected("fault_log", str(e))
 
     def _newest_frame(self):
-        """Real time: the newest fresh frame (waiting briefly for the one due), or None."""
+        """Real time: the newest fresh frame (waiting briefly for the one due), or None.
+
+        Due at tick k is the plant's step k (the phase lock made them one), not merely the
+        step after the last one flown: once a frame came after its tick's wait (through the
+        router, once in ~10 s), "the next after the last" took that late frame at the
+        following tick, and every later one a period late, for good (every answer then missed
+        the plant's deadline: 300-800 of 1,000 commands). After the plant changed (a restart
+        counts its steps anew) the step after the last one flown is due."""
         deadline = now_ns() + int(self.args.frame_wait_us * 1e3)
+        due = self.next_k
+        if self.source_id == self.lock_source:
+            due = max(due, self.topo.executive.cycle.k)
         got = False
         while True:
             s, _ = transport.latest(self.sub_sensors)
             if s is not None and self._accept(s):
                 got = True
-                if int(self.frame["k"]) >= self.next_k:
+                if int(self.frame["k"]) >= due:
                     break
             if now_ns() >= deadline:
                 break
@@ -316,16 +327,21 @@ class FswNode:
         # the plant's schedule: step k published at origin + k * period, never earlier, often
         # later in its first steps (its own first-call costs: step 1 came 32 ms late, step 2
         # 13 ms, then on time) — so the earliest origin over LOCK_FRAMES frames, not the first
-        origin = self.dec_sensors.last_t_pub_ns - lock * period
+        origins = [self.dec_sensors.last_t_pub_ns - lock * period]
         for _ in range(self.LOCK_FRAMES - 1):
             k = self._next_good_frame()
             if k is None:
                 return
-            origin, lock = min(origin, self.dec_sensors.last_t_pub_ns - k * period), k
+            origins.append(self.dec_sensors.last_t_pub_ns - k * period)
+            lock = k
+        origin = min(origins)
+        say(ROLE, f"phase lock on step {lock}: plant's publications {[round((o - origin) / 1e3) for o in origins]} us "
+                  f"after the earliest")
         # tick k of the executive is the plant's step k; the first is the step after this
         # frame's (this one is already a few hundred us old)
         self.topo.executive.clock.start(origin + int(self.args.rt_offset_us * 1e3), k0=lock + 1)
         self.next_k = lock + 1
+        self.lock_source = self.source_id
         self.n_frames = 0                               # frame ages from here on
         while not self.stop:
             if self.sub_fault_log is not None:

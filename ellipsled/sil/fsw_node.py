@@ -2,8 +2,9 @@
 
 The same FlightSoftware and Topology (rate groups) as the batch runner. Lockstep: each
 sensor frame that arrives is a tick. Real time: releases at absolute times on the
-monotonic clock, phase-locked to the plant's publication of step 0 plus --rt-offset-us;
-each release takes the newest sensor frame (waiting up to --frame-wait-us for the one due).
+monotonic clock, phase-locked to the plant's schedule (the earliest of its first publications
+once it runs, plus --rt-offset-us): tick k is step k, and each release takes the newest
+sensor frame (waiting up to --frame-wait-us for step k's).
 Out: the jet command (fsw/jets), the FSW state for viewers (fsw/state), events
 (fsw/events), ground injections forwarded to the plant (sim/faults), and the MAVLink
 ground link when a signing key is given.
@@ -308,8 +309,8 @@ class FswNode:
     LOCK_FRAMES = 10        # real time: frames the phase lock takes the plant's schedule from
 
     def run_realtime(self) -> None:
-        # warm up on the plant's first frame, then phase-lock to a frame that arrives after
-        # the warm-up (locking to the first one would start tens of ms behind): release
+        # warm up on the plant's first frame (it offers that frame until we say ready, then
+        # starts its clock), then phase-lock to the frames of the running clock: release
         # rt-offset after each publication
         warm_k = self._next_good_frame()
         if warm_k is None:

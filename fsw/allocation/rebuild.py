@@ -15,7 +15,8 @@ class Rebuilder:
     the pre-build queue. Results wait in ``done`` (dict, key -> Tables) until the
     allocator takes them; the control thread never waits on this object's lock."""
 
-    def __init__(self) -> None:
+    def __init__(self, build=build_tables) -> None:
+        self._build = build                   # the table builder (tests wrap it to inject delays)
         self._cv = threading.Condition()
         self._request = None                  # (key, usable, cols, bias, c, w): newest wins
         self._queue: deque = deque()          # pre-builds, same tuples
@@ -89,7 +90,7 @@ class Rebuilder:
                 return
             key, usable, cols, bias, c, w, spill = job
             try:
-                tables = build_tables(usable, cols, bias, c, w, spill, self._ws)
+                tables = self._build(usable, cols, bias, c, w, spill, self._ws)
             except Exception as e:  # noqa: BLE001 - handed to the allocator, never lost
                 tables = e
             with self._cv:

@@ -97,3 +97,15 @@ def test_a_run_shows_no_library_warnings(sil):
     noise = [line for line in (out + err).splitlines() if LIBRARY_WARNING.search(line)]
     assert noise == []
     assert "rerun: recording to" in err          # the product's own line about the footer-less stream
+
+
+def test_rerun_loads_with_the_file_sink_target_filtered_and_rust_log_left_as_it_was():
+    from gse.viz.rerun_log import FILE_SINK_TARGET, rerun_log_filter
+    assert rerun_log_filter(None) == f"warn,{FILE_SINK_TARGET}=error"          # the SDK's default, less that line
+    assert rerun_log_filter("debug") == f"debug,{FILE_SINK_TARGET}=error"      # the user's filter kept
+    assert rerun_log_filter(f"info,{FILE_SINK_TARGET}=warn") == f"info,{FILE_SINK_TARGET}=warn"   # theirs wins
+    code = "import os, gse.viz; print(os.environ.get('RUST_LOG', 'unset'))"
+    for env, seen in (({}, "unset"), ({"RUST_LOG": "info"}, "info")):
+        r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                           env={**{k: v for k, v in os.environ.items() if k != "RUST_LOG"}, **env})
+        assert r.returncode == 0 and r.stdout.strip() == seen, r.stderr

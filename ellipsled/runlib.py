@@ -222,7 +222,7 @@ def end_reason_of(reason: str, duration_s: float | None) -> str:
 # End reasons of a run that completed: the deploy conditions (Mach, speed, altitude) or the
 # requested duration. Any other (timeout, non_finite, fsw_timeout, no_fsw, stopped) did not.
 COMPLETED_END_REASONS = ("mach", "speed", "altitude", "duration")
-EXIT_COMPLETED, EXIT_NOT_COMPLETED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_COMPLETED, EXIT_NOT_COMPLETED = 0, 1
 
 EXIT_CODES_HELP = f"""\
 exit codes (batch and run alike, for the same request):
@@ -231,8 +231,8 @@ exit codes (batch and run alike, for the same request):
   {EXIT_NOT_COMPLETED}    the run did not complete: the scenario's time cap reached first
        (timeout), a non-finite state (non_finite), the flight software silent
        (fsw_timeout, no_fsw), stopped, or no complete records to judge
-  {EXIT_USAGE}    bad command line or configuration (nothing flown)
-  {EXIT_INTERRUPTED}  interrupted (Ctrl-C)"""
+  2    bad command line or configuration (nothing flown)
+  130  interrupted (Ctrl-C)"""
 
 
 def exit_code(end_reason: str) -> int:

@@ -63,7 +63,7 @@ def test_pyarrow_reads_the_folder_as_one_table(results):
 
 
 def test_pandas_reads_the_folder_as_one_frame(results):
-    pd = pytest.importorskip("pandas")
+    import pandas as pd
     df = pd.read_parquet(results).sort_values("run_id").reset_index(drop=True)
     assert list(df["run_id"]) == list(range(RUNS))
     assert list(df.columns) == RECORD_SCHEMA.names
@@ -90,3 +90,17 @@ def test_a_row_outside_the_schema_is_refused_before_it_is_written(tmp_path):
     assert st.parts() == []
     st.append([{"run_id": 7, "t_end_s": 3}])                       # an integer where a float is declared
     assert pq.read_table(st.parts()[0]).column("t_end_s").type == pa.float64()
+
+
+def test_a_folder_of_the_earlier_format_is_not_resumed(tmp_path):
+    """Its parts have per-part column types: new parts beside them would not make one table."""
+    import json
+    from ellipsled.montecarlo.engine import FORMAT, META_FILE, prepare_out
+    camp = load_campaign("default")
+    out = tmp_path / "mc"
+    prepare_out(out, camp, 1, 10.0)
+    meta = json.loads((out / META_FILE).read_text())
+    assert meta["format"] == FORMAT == 2
+    (out / META_FILE).write_text(json.dumps(dict(meta, format=1)))
+    with pytest.raises(ValueError, match="format 1.*choose another --out"):
+        prepare_out(out, camp, 1, 10.0)

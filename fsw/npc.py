@@ -786,6 +786,7 @@ class EntryGuidance:
         self._go = threading.Event()
         self._done = threading.Event()
         self._job = None
+        self._correct = self.solve      # the worker's job (tests wrap it to inject delays)
         self._stop = False
         self._warm_up()
         self._thread = threading.Thread(target=self._worker, name="npc-guidance", daemon=True)
@@ -973,7 +974,7 @@ class EntryGuidance:
                 return
             x, sign, k_rho, k_ld, t_flip, shp, t_s = self._job
             try:
-                res = self.solve(x, sign, k_rho, k_ld, t_flip, shp)
+                res = self._correct(x, sign, k_rho, k_ld, t_flip, shp)
             except Exception as e:      # noqa: BLE001 -- a fault in the correction must not stall the FSW
                 res = {"error": f"{type(e).__name__}: {e}"}
             res["t_s"], res["sign"] = t_s, sign

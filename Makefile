@@ -23,8 +23,11 @@ $(STAMP): requirements.lock pyproject.toml
 run: $(STAMP)
 	$(BIN)/ellipsled run case1 --out runs/latest
 
+# Two workers for every test that asserts no wall-clock figure (real-time SIL runs one at a
+# time among them: marker realtime), then the few timing tests alone (marker timing).
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m "not timing"
+	$(BIN)/python -m pytest -q -m timing
 
 bench: $(STAMP)
 	$(BIN)/ellipsled bench --out runs/bench.json

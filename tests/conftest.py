@@ -6,6 +6,15 @@ import os
 import pytest
 
 
+def pytest_collection_modifyitems(config, items):
+    """Real-time SIL runs (marker ``realtime``: SCHED_FIFO processes that spin while they wait)
+    run one at a time on one xdist worker: two of them at the same FIFO priority on the same
+    CPUs would take turns at each other's deadlines. Other tests run beside them, below FIFO."""
+    for item in items:
+        if item.get_closest_marker("realtime") is not None:
+            item.add_marker(pytest.mark.xdist_group("realtime"))
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _fault_free_twin_cache(tmp_path_factory):
     """Fault-free twins (ellipsled/reference.py) are cached in this session's temp folder,

@@ -103,6 +103,7 @@ def test_sil_absent_gives_null_and_reason():
             assert rt[regime][k] is None and rt[regime][f"{k}_reason"] == "nope"
 
 
+@pytest.mark.realtime
 def test_realtime_loop_child_reports_shape():
     r = jitter.run_child(1.0, priority=jitter.PRIORITY, cpu=None)
     assert 40 <= r["cycles"] <= 51

@@ -170,13 +170,18 @@ print(json.dumps({"late_us": late, "job": seen, "switch_us": rep["gil_switch_us"
 """
 
 
+@pytest.mark.timing
 @pytest.mark.skipif(not _can_rt(), reason="needs root (CAP_SYS_NICE)")
 def test_a_background_job_below_the_loop_cannot_hold_its_release_back():
     """One CPU, a SCHED_FIFO loop and a background thread computing in long GIL-free calls:
     at the loop's own priority the job is never preempted (FIFO has no time slices) and
     releases come tens of ms late; run_below_loop puts it one priority down, and the loop
     wakes within a GIL switch interval of its release. The same-priority run is the
-    control: it shows the harm is real on this machine."""
+    control: it shows the harm is real on this machine.
+
+    Timing: the releases are judged on the wall clock (2 ms at most late, measured ~0.15 ms
+    idle and beside stress-ng on both CPUs): it needs root for SCHED_FIFO, whose priority
+    is what keeps other load off the loop's CPU."""
     def fly(mode):
         out = subprocess.run([sys.executable, "-c", BACKGROUND_CHILD, mode], cwd=ROOT, capture_output=True,
                              text=True, timeout=120)
@@ -185,4 +190,4 @@ def test_a_background_job_below_the_loop_cannot_hold_its_release_back():
     same, below = fly("same"), fly("below")
     assert below["fifo"] and below["job"] == {"policy": "fifo", "priority": 19} and below["switch_us"] == 250
     assert max(same["late_us"]) > 20_000, same["late_us"]          # a hash of 64 MB: ~30-100 ms
-    assert sorted(below["late_us"])[-2] < 2_000, below["late_us"]  # generous: one outlier allowed
+    assert max(below["late_us"]) < 2_000, below["late_us"]

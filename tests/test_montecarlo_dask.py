@@ -143,7 +143,7 @@ def test_killing_a_worker_mid_campaign_loses_no_run(campaign_file, cluster, tmp_
     assert sorted(r["run_id"] for r in rows) == list(range(6))                  # none lost, none twice
     assert all(r["status"] == "ok" for r in rows if r["run_id"] != BREAK)
     redone = [r for r in rows if r["run_id"] in killed["runs"] and r["run_id"] != BREAK]
-    assert redone and any(r["worker"] != killed["worker"] for r in redone)     # re-run on another worker
+    assert redone and any(r["worker"] != killed["worker"] for r in redone)     # done again on another worker
     assert res.interrupted is False and res.recorded == 6
     with Client(cluster.scheduler_address) as c:                                # cluster left running (not ours)
         pids = c.run(os.getpid)

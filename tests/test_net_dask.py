@@ -70,7 +70,7 @@ def test_tls_campaign_across_hosts_loses_no_run_when_a_worker_host_is_torn_down(
     pki.init(d, [hosts.addr("sched")])
     tls = ["--tls-ca-file", str(d / "ca.pem"), "--tls-cert", str(d / "dask.pem"), "--tls-key", str(d / "dask.key")]
     # a host that vanishes sends nothing more: the scheduler declares its worker dead after
-    # this time without a heartbeat (Dask's default is 5 minutes) and re-runs its tasks
+    # this time without a heartbeat (Dask's default is 5 minutes) and runs its tasks again elsewhere
     env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL="8s")
     addr = _cluster(hosts, d, env)
     assert addr.startswith("tls://")

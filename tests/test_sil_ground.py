@@ -17,7 +17,7 @@ from gse.tlog import read_records
 
 from tests.ground_procs import start_ground_sil, stop
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 PY = [sys.executable, "-m", "ellipsled.cli"]
 
 

@@ -25,7 +25,7 @@ from pymavlink import mavftp, mavutil
 from ellipsled.history import History
 from tests.ground_procs import start_ground_sil, stop
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 MSG_PROTOCOL_VERSION, MSG_COMPONENT_METADATA = 300, 397
 
 

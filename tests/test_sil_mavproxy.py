@@ -35,7 +35,7 @@ from tests.ground_procs import start_ground_sil, stop
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is not installed (requirements.lock pins it, "
                                        "installed with --no-deps)")
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 # a line of MAVProxy's console, once its prompts ("MAV> ", "Mode(1)> ") are stripped
 _PROMPT = re.compile(r"^(?:\S*> )+")

@@ -33,6 +33,7 @@ from interfaces.vocabulary import (DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_HEALTH, F
                                    NOMINAL)
 
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
+from .frame_timing import due_step, phase_origin_ns, take_due_frame  # noqa: E402
 
 ROLE = "fsw"
 
@@ -154,33 +155,23 @@ class FswNode:
             except ValueError as e:      # a bad record is refused, never passed on
                 self._rejected("fault_log", str(e))
 
-    def _newest_frame(self):
-        """Real time: the newest fresh frame (waiting briefly for the one due), or None.
+    def _fetch_frame(self) -> int | None:
+        """The step of the newest sensor frame that decoded, or None."""
+        s, _ = transport.latest(self.sub_sensors)
+        return int(self.frame["k"]) if s is not None and self._accept(s) else None
 
-        Due at tick k is the plant's step k (the phase lock made them one), not merely the
-        step after the last one flown: once a frame came after its tick's wait (through the
-        router, once in ~10 s), "the next after the last" took that late frame at the
-        following tick, and every later one a period late, for good (every answer then missed
-        the plant's deadline: 300-800 of 1,000 commands). After the plant changed (a restart
-        counts its steps anew) the step after the last one flown is due."""
-        deadline = now_ns() + int(self.args.frame_wait_us * 1e3)
-        due = self.next_k
-        if self.source_id == self.lock_source:
-            due = max(due, self.topo.executive.cycle.k)
-        got = False
-        while True:
-            s, _ = transport.latest(self.sub_sensors)
-            if s is not None and self._accept(s):
-                got = True
-                if int(self.frame["k"]) >= due:
-                    break
-            if now_ns() >= deadline:
-                break
-            if not self.spin:       # with --rt, Zenoh's threads preempt this spin (one priority up)
-                time.sleep(20e-6)
-        if not got:
+    def _pause(self) -> None:
+        if not self.spin:           # with --rt, Zenoh's threads preempt this spin (one priority up)
+            time.sleep(20e-6)
+
+    def _newest_frame(self):
+        """Real time: the newest fresh frame (waiting briefly for the one due), or None."""
+        due = due_step(self.next_k, self.topo.executive.cycle.k, self.source_id == self.lock_source)
+        k = take_due_frame(self._fetch_frame, due, now_ns() + int(self.args.frame_wait_us * 1e3), now_ns,
+                           self._pause)
+        if k is None:
             return None
-        self.next_k = int(self.frame["k"]) + 1
+        self.next_k = k + 1
         return self.frame
 
     # ------------------------------------------------------------------ outputs
@@ -328,16 +319,16 @@ class FswNode:
         # the plant's schedule: step k published at origin + k * period, never earlier, often
         # later in its first steps (its own first-call costs: step 1 came 32 ms late, step 2
         # 13 ms, then on time) — so the earliest origin over LOCK_FRAMES frames, not the first
-        origins = [self.dec_sensors.last_t_pub_ns - lock * period]
+        frames = [(lock, self.dec_sensors.last_t_pub_ns)]
         for _ in range(self.LOCK_FRAMES - 1):
             k = self._next_good_frame()
             if k is None:
                 return
-            origins.append(self.dec_sensors.last_t_pub_ns - k * period)
+            frames.append((k, self.dec_sensors.last_t_pub_ns))
             lock = k
-        origin = min(origins)
-        say(ROLE, f"phase lock on step {lock}: plant's publications {[round((o - origin) / 1e3) for o in origins]} us "
-                  f"after the earliest")
+        origin = phase_origin_ns(frames, period)
+        say(ROLE, f"phase lock on step {lock}: plant's publications "
+                  f"{[round((t - k * period - origin) / 1e3) for k, t in frames]} us after the earliest")
         # tick k of the executive is the plant's step k; the first is the step after this
         # frame's (this one is already a few hundred us old)
         self.topo.executive.clock.start(origin + int(self.args.rt_offset_us * 1e3), k0=lock + 1)

@@ -1,0 +1,39 @@
+"""Which sensor frame a real-time FSW release flies: the phase lock to the plant's schedule and
+the frame due at each tick. Plain functions over step indices and nanoseconds; the FSW
+process supplies the transport and the clock (tests supply scripted ones)."""
+from __future__ import annotations
+
+from typing import Callable, Iterable
+
+
+def phase_origin_ns(frames: Iterable[tuple[int, int]], period_ns: int) -> int:
+    """The plant's schedule from (step, publication time [ns]) pairs: step k is published at
+    origin + k * period, never earlier and often later in its first steps (its own first-call
+    costs), so the origin is the earliest the frames imply, not the first frame's."""
+    return min(t_pub_ns - k * period_ns for k, t_pub_ns in frames)
+
+
+def due_step(next_k: int, cycle_k: int, locked_plant: bool) -> int:
+    """The plant step a release waits for. While the plant is the one the ticks are locked
+    to, tick k flies step k: a frame that came after its tick's wait must not make every
+    later tick take the previous period's frame. After the plant changed (a restart counts
+    its steps anew) the step after the last one flown is due."""
+    return max(next_k, cycle_k) if locked_plant else next_k
+
+
+def take_due_frame(fetch: Callable[[], int | None], due: int, deadline_ns: int,
+                   now_ns: Callable[[], int], pause: Callable[[], None]) -> int | None:
+    """Take frames until step ``due`` or a later one has come, or the deadline has passed.
+    ``fetch()``: the step of the newest frame accepted since the last call, or None.
+    Returns the step of the newest frame taken (it may be older than ``due``), or None when
+    no frame came at all."""
+    got = None
+    while True:
+        k = fetch()
+        if k is not None:
+            got = k
+            if k >= due:
+                return got
+        if now_ns() >= deadline_ns:
+            return got
+        pause()

@@ -1,0 +1,86 @@
+"""Which frame a real-time FSW release flies (ellipsled/sil/frame_timing.py), on scripted
+frames and a scripted clock: the phase lock takes the plant's schedule from the earliest of
+its first publications, each tick flies its own step, and one frame that comes after its
+tick's wait costs that tick only."""
+from __future__ import annotations
+
+from ellipsled.sil.frame_timing import due_step, phase_origin_ns, take_due_frame
+
+MS = 1_000_000
+PERIOD = 20 * MS
+
+
+class ScriptedPlant:
+    """Frames published at scripted times; a clock the waiting loop advances by pausing."""
+
+    def __init__(self, arrivals: dict[int, int], pause_ns: int = 20_000):
+        self.arrivals = arrivals          # step -> arrival time at the FSW [ns]
+        self.now = 0
+        self.pause_ns = pause_ns
+        self.taken = -1
+
+    def fetch(self) -> int | None:
+        """The newest frame arrived since the last call, as the transport's `latest` gives it."""
+        come = [k for k, t in self.arrivals.items() if t <= self.now and k > self.taken]
+        if not come:
+            return None
+        self.taken = max(come)
+        return self.taken
+
+    def pause(self) -> None:
+        self.now += self.pause_ns
+
+    def clock(self) -> int:
+        return self.now
+
+
+def test_the_lock_takes_the_earliest_origin_not_the_first_frames():
+    # steps 1 and 2 published 32 and 13 ms late (the plant's first calls), then on time
+    origin = 5 * MS
+    late = {1: 32 * MS, 2: 13 * MS}
+    frames = [(k, origin + k * PERIOD + late.get(k, 0) + (k % 3) * 10_000) for k in range(1, 11)]
+    assert phase_origin_ns(frames, PERIOD) == origin                       # steps 3, 6, 9: on time
+    assert phase_origin_ns(frames[:1], PERIOD) == origin + 32 * MS + 10_000  # the first alone: late
+
+
+def test_a_release_takes_the_frame_due_when_it_comes_within_the_wait():
+    plant = ScriptedPlant({7: 100 * MS, 8: 120 * MS + 500_000})
+    plant.now = 120 * MS                                  # release 0.5 ms before step 8's frame
+    k = take_due_frame(plant.fetch, due=8, deadline_ns=123 * MS, now_ns=plant.clock, pause=plant.pause)
+    assert k == 8 and 120 * MS + 500_000 <= plant.now < 121 * MS
+
+
+def test_a_release_whose_frame_misses_the_wait_flies_the_newest_it_has():
+    plant = ScriptedPlant({7: 100 * MS, 8: 126 * MS})
+    plant.now = 120 * MS
+    k = take_due_frame(plant.fetch, due=8, deadline_ns=123 * MS, now_ns=plant.clock, pause=plant.pause)
+    assert k == 7 and plant.now >= 123 * MS               # waited the whole wait, no longer
+    nothing = ScriptedPlant({})
+    assert take_due_frame(nothing.fetch, 0, 1 * MS, nothing.clock, nothing.pause) is None
+
+
+def test_one_late_frame_costs_its_tick_only_while_locked_to_the_plant():
+    """Ticks 10..29, frames on time but step 15's after its tick's wait: tick 15 has no new
+    frame (no answer), tick 16 flies step 16 (not 15, a period late), and so on for good."""
+    wait = 3 * MS
+    arrivals = {k: k * PERIOD + 300_000 for k in range(9, 40)}
+    arrivals[15] = 15 * PERIOD + wait + 2 * MS            # after tick 15's wait, before tick 16
+    plant = ScriptedPlant(arrivals)
+    flown, next_k = {}, 10
+    for tick in range(10, 30):
+        plant.now = max(plant.now, tick * PERIOD)
+        due = due_step(next_k, tick, locked_plant=True)
+        k = take_due_frame(plant.fetch, due, tick * PERIOD + wait, plant.clock, plant.pause)
+        flown[tick] = k
+        if k is not None:
+            next_k = k + 1
+    assert flown[15] is None
+    assert all(flown[t] == t for t in range(10, 30) if t != 15), flown
+    # the rule it replaced: "the step after the last one flown" is a period late from tick 16 on
+    assert due_step(15, 16, locked_plant=False) == 15
+
+
+def test_after_a_plant_restart_the_step_after_the_last_one_flown_is_due():
+    # a new plant counts from 0: the executive's tick number means nothing to it
+    assert due_step(next_k=1, cycle_k=4_000, locked_plant=False) == 1
+    assert due_step(next_k=1, cycle_k=4_000, locked_plant=True) == 4_000

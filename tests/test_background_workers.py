@@ -6,7 +6,8 @@ on them is its blocked time (tests/threadtime.py), not its wall time.
 
 The rules proven here:
 - the loop never waits on a worker: it keeps cycling while a job is held, and a job's
-  computing costs it less than a control period of waiting;
+  computing costs it less than a control period of waiting (the predictor's kernels are
+  built nogil);
 - LP: the newest request wins: an answer to a request overtaken by a newer one (still
   solving, or solved and not yet taken) is never applied; an answer is applied by the first
   control cycle after it is ready;
@@ -298,6 +299,16 @@ def test_a_guidance_job_that_holds_the_gil_for_a_control_period_is_caught():
     """The check above is not blind: a correction that keeps the GIL 1.5 periods is measured."""
     worst = _worst_wait_on_the_guidance(GIL_HOLD_S)
     assert worst >= PERIOD_NS, f"a 30-ms hold measured as {worst / 1e6:.2f} ms"
+
+
+def test_the_corrections_compiled_kernels_release_the_gil():
+    """The module's promise that the loop runs while the predictor computes: every compiled
+    kernel of fsw/npc.py is built nogil."""
+    from numba.core.registry import CPUDispatcher
+    from fsw import npc
+    kernels = [v for v in vars(npc).values() if isinstance(v, CPUDispatcher)]
+    assert len(kernels) >= 8
+    assert [k.py_func.__name__ for k in kernels if not k.targetoptions.get("nogil")] == []
 
 
 def test_a_guidance_answer_is_applied_at_its_due_step_not_before():

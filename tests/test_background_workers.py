@@ -45,7 +45,7 @@ from fsw.health import JetHealth
 from fsw.topology import Topology
 from sim.plant import Plant
 from tests import threadtime
-from tests.threadtime import BlockedMeter
+from tests.threadtime import BlockedMeter, LongestCCall
 
 PERIOD_NS = 20_000_000                       # the 50 Hz control period
 GIL_HOLD_S = 1.5 * PERIOD_NS * 1e-9          # a job that keeps the GIL this long must be caught
@@ -160,6 +160,60 @@ def test_an_lp_job_that_holds_the_gil_for_a_control_period_is_caught():
     """The check above is not blind: an LP job that keeps the GIL 1.5 periods is measured."""
     worst = _worst_wait_on_the_lp(GIL_HOLD_S)
     assert worst >= PERIOD_NS, f"a 30-ms hold measured as {worst / 1e6:.2f} ms"
+
+
+def _gil_keeping_burn(cpu_ns: float):
+    """One C call that keeps the GIL for at least ``cpu_ns`` of this host's CPU: a big-integer
+    power, its exponent doubled until it takes that long (in this thread's CPU time)."""
+    e = 1 << 12
+    while True:
+        t0 = time.thread_time_ns()
+        pow(3, e)
+        if time.thread_time_ns() - t0 >= cpu_ns:
+            return lambda: pow(3, e)
+        e *= 2
+
+
+def _longest_c_call_of_the_lp(burn=None) -> LongestCCall:
+    """The LP asked for three healths (seven stuck on; no authority one way; the campaign's
+    four failed and two stuck on) on a real-time FSW, each answer applied by a cycle; every
+    job profiled. ``burn()``: called first in each job."""
+    fl = _Flight("nominal")
+    f = fl.fsw
+    meter = LongestCCall()
+    solve = f._lp_worker._solve
+
+    def job(*args):
+        if burn is not None:
+            burn()
+        return solve(*args)
+    f._lp_worker._solve = meter.wrap(job)
+    try:
+        for h in (JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]),
+                  JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)]),
+                  JetHealth.of(failed=[1, 2, 10, 16], stuck=[6, 12])):
+            before = f.controllability
+            f.fdir.health_active = h
+            f.health_changed()
+            _until(f._lp_worker.ready)
+            fl.step()
+            assert f.controllability is not before
+    finally:
+        fl.close()
+    return meter
+
+
+def test_no_lp_solve_keeps_the_gil_for_a_control_period():
+    """Host-independent: no C call of the LP's job burns a control period of CPU, so none can
+    keep the loop from the GIL that long by computing."""
+    m = _longest_c_call_of_the_lp()
+    assert 0 < m.worst_ns < PERIOD_NS, f"{m.worst_name} ran {m.worst_ns / 1e6:.2f} ms of CPU in one call"
+
+
+def test_an_lp_job_that_computes_a_control_period_in_one_c_call_is_seen():
+    """The check above is not blind: a job that first burns 1.5 periods in one C call."""
+    m = _longest_c_call_of_the_lp(_gil_keeping_burn(1.5 * PERIOD_NS))
+    assert m.worst_ns >= PERIOD_NS and m.worst_name == "pow"
 
 
 def test_the_fsw_flies_on_while_the_lp_is_held_and_applies_its_answer_at_the_next_cycle():
@@ -305,6 +359,38 @@ def test_a_guidance_job_that_holds_the_gil_for_a_control_period_is_caught():
     """The check above is not blind: a correction that keeps the GIL 1.5 periods is measured."""
     worst = _worst_wait_on_the_guidance(GIL_HOLD_S)
     assert worst >= PERIOD_NS, f"a 30-ms hold measured as {worst / 1e6:.2f} ms"
+
+
+def _longest_c_call_of_the_guidance(burn=None) -> LongestCCall:
+    """Three corrections of a real-time guided flight, each profiled; ``burn()`` first in each."""
+    meter = LongestCCall()
+
+    def job(correct, *a):
+        if burn is not None:
+            burn()
+        return correct(*a)
+    fl = _guided(job)
+    eg = fl.fsw.entry
+    eg._correct = meter.wrap(eg._correct)
+    try:
+        t_end = time.monotonic() + SANITY_S
+        while eg.cycles < 3:
+            assert time.monotonic() < t_end, "the guidance never answered"
+            fl.step()
+    finally:
+        fl.close()
+    return meter
+
+
+def test_no_correction_keeps_the_gil_for_a_control_period():
+    """Host-independent: no C call of the correction burns a control period of CPU."""
+    m = _longest_c_call_of_the_guidance()
+    assert 0 < m.worst_ns < PERIOD_NS, f"{m.worst_name} ran {m.worst_ns / 1e6:.2f} ms of CPU in one call"
+
+
+def test_a_correction_that_computes_a_control_period_in_one_c_call_is_seen():
+    m = _longest_c_call_of_the_guidance(_gil_keeping_burn(1.5 * PERIOD_NS))
+    assert m.worst_ns >= PERIOD_NS and m.worst_name == "pow"
 
 
 def test_the_corrections_compiled_kernels_release_the_gil():

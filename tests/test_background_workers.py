@@ -1,15 +1,17 @@
 """The FSW's background workers -- the controllability LP (fsw/flightsoftware.py ``_LpWorker``)
 and the predictor-corrector's correction (fsw/npc.py ``EntryGuidance``) -- judged by their
 logic, not by the host: each worker's job is injected (held on an Event the test controls,
-or made to keep the GIL for a known time with a C call). Only the four blocked-time tests
-measure time (what the loop slept beside a job, tests/threadtime.py); they are marked
-``timing``: they need CPUs free of other load (on a loaded host the loop can sit on the run
-queue while a job holds the GIL, and the meter books that wait to the host).
+or made to keep the GIL for a known time with a C call). That no job keeps the loop from
+the GIL a control period by computing is judged in the job's own CPU time per C call
+(tests/threadtime.py LongestCCall), the same on any host. The four blocked-time tests (what
+the loop slept beside a job, BlockedMeter) also see a job that keeps the GIL while it
+sleeps; they are marked ``timing``: they need CPUs free of other load (on a loaded host the
+loop can sit on the run queue while a job holds the GIL, and the meter books that wait to
+the host).
 
 The rules proven here:
-- the loop never waits on a worker: it keeps cycling while a job is held, and a job's
-  computing costs it less than a control period of waiting (the predictor's kernels are
-  built nogil);
+- the loop never waits on a worker: it keeps cycling while a job is held, no C call of a
+  job computes for a control period, and the predictor's kernels are built nogil;
 - LP: the newest request wins: an answer to a request overtaken by a newer one (still
   solving, or solved and not yet taken) is never applied; an answer is applied by the first
   control cycle after it is ready;

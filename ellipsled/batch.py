@@ -20,8 +20,8 @@ from interfaces.vocabulary import FAULT_HEALTH, MARK_NAMES, NOMINAL
 from sim.plant import Plant
 
 from .history import History, record_fsw, record_truth
-from .runlib import (alloc_sample, end_reason_of, fault_free_reference, format_summary, fsw_report, judge, prepare,
-                     prepare_args)
+from .runlib import (alloc_sample, end_reason_of, exit_code, fault_free_reference, format_summary, fsw_report, judge,
+                     prepare, prepare_args)
 from .terminal import RunProgress, files_written
 
 
@@ -96,11 +96,11 @@ def write_outputs(summary: dict, h: History, out: Path, plots: bool = True) -> N
 def main(args) -> int:
     scn = prepare_args(args)
     with RunProgress(f"{scn.name} batch", scn.max_duration_s) as bar:
-        summary, h, fsw = run(scn, seed=args.seed, on_progress=bar.update)
+        summary, h, fsw = run(scn, seed=args.seed, duration_s=args.duration, on_progress=bar.update)
     write_outputs(summary, h, Path(args.out), plots=not args.no_plots)
     if getattr(args, "rrd", False):
         from gse.viz import record_history
         print(f"wrote {record_history(h, fsw.events.history, Path(args.out) / 'run.rrd')}")
     print(format_summary(summary))
     print(files_written(Path(args.out)))
-    return 0 if summary["completed"] else 1
+    return exit_code(summary["end_reason"])

@@ -27,7 +27,9 @@ def _add_plant(sub):
 
 
 def _add_batch(sub):
-    p = sub.add_parser("batch", help="fly a scenario: plant and FSW in one process, lockstep")
+    from ellipsled.runlib import EXIT_CODES_HELP
+    p = sub.add_parser("batch", help="fly a scenario: plant and FSW in one process, lockstep",
+                       epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None, help="scenario name (data/scenarios) or .toml path")
     p.add_argument("--out", required=True, help="output folder (summary.json, history.npz, PNG plots)")
     p.add_argument("--from-campaign", metavar="DIR", default=None,
@@ -96,7 +98,9 @@ def _add_params(sub):
 def _add_sil(sub):
     from ellipsled.sil import fsw_node, launcher, sim_node
 
-    p = sub.add_parser("run", help="the SIL: plant, flight software and viewers as processes over Zenoh")
+    from ellipsled.runlib import EXIT_CODES_HELP
+    p = sub.add_parser("run", help="the SIL: plant, flight software and viewers as processes over Zenoh",
+                       epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     launcher.add_arguments(p)
     p.set_defaults(func=launcher.main)
     p = sub.add_parser("sim", help="the plant process of the SIL")

@@ -180,7 +180,7 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
     extra["identification"] = params.get("fdir.mode", "detect")
     if extra["identification"] == "oracle":
         extra["test_mode"] = "oracle identification: the plant's fault log given to FDIR at the fault time"
-    completed = end_reason in ("mach", "speed", "altitude", "duration")
+    completed = end_reason in COMPLETED_END_REASONS
     if scn.target_lat_rad is not None:
         g = rep.get("guidance", {})
         extra.update(deploy_figures(h, target_lat_rad=scn.target_lat_rad, target_lon_rad=scn.target_lon_rad,
@@ -213,7 +213,31 @@ def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> f
 
 
 def end_reason_of(reason: str, duration_s: float | None) -> str:
+    """The run's end reason from the plant's: its time limit reached is the requested
+    ``duration`` when the command line asked for one (``--duration``), else the scenario's
+    own time cap (``timeout``: the flight did not get to parachute deployment)."""
     return "duration" if duration_s is not None and reason == "timeout" else reason
+
+
+# End reasons of a run that completed: the deploy conditions (Mach, speed, altitude) or the
+# requested duration. Any other (timeout, non_finite, fsw_timeout, no_fsw, stopped) did not.
+COMPLETED_END_REASONS = ("mach", "speed", "altitude", "duration")
+EXIT_COMPLETED, EXIT_NOT_COMPLETED = 0, 1
+
+EXIT_CODES_HELP = f"""\
+exit codes (batch and run alike, for the same request):
+  {EXIT_COMPLETED}    the run completed: it reached deployment (end reason mach, speed or
+       altitude) or the requested --duration (end reason duration)
+  {EXIT_NOT_COMPLETED}    the run did not complete: the scenario's time cap reached first
+       (timeout), a non-finite state (non_finite), the flight software silent
+       (fsw_timeout, no_fsw), stopped, or no complete records to judge
+  2    bad command line or configuration (nothing flown)
+  130  interrupted (Ctrl-C)"""
+
+
+def exit_code(end_reason: str) -> int:
+    """The process exit code of a run that ended for ``end_reason`` (batch and SIL)."""
+    return EXIT_COMPLETED if end_reason in COMPLETED_END_REASONS else EXIT_NOT_COMPLETED
 
 
 def fault_free_reference(h: History, scn: Scenario, seed: int, faults_applied: list,

@@ -21,8 +21,9 @@ from pathlib import Path
 
 import numpy as np
 import psutil
-import rerun as rr
 
+from gse.viz import rerun_log  # noqa: F401, I001  (before rerun loads: its log filter, gse/viz/rerun_log.py)
+import rerun as rr
 from gse.viz.logger import SCALAR_CHANNELS, SOURCE_FIELDS, RerunLogger
 from gse.viz.sinks import open_sinks
 from interfaces.records import GUID_NPC, GUID_PREDICTION, GUID_TARGET

@@ -272,10 +272,11 @@ def dispersion_columns(disp: dict) -> dict:
 
 
 def dispersion_from_columns(row: dict) -> dict:
-    """Inverse of ``dispersion_columns`` (JSON floats round-trip exactly)."""
+    """Inverse of ``dispersion_columns`` (JSON floats round-trip exactly). A null column is a
+    dispersion the campaign does not draw (the record declares every one)."""
     out = {}
     for k, v in row.items():
-        if not k.startswith("disp.") or k[5:] in ("n_failed_off", "n_stuck_on", "n_degraded"):
+        if not k.startswith("disp.") or k[5:] in ("n_failed_off", "n_stuck_on", "n_degraded") or v is None:
             continue
         out[k[5:]] = tuple(json.loads(v)) if isinstance(v, str) else v
     return out

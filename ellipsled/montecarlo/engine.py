@@ -31,16 +31,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from common.config import resolve
-from common.model import Scenario, load_scenario
+import pyarrow as pa
 
-from .campaign import Campaign, Criteria, apply_dispersion, campaign_base, dispersion_columns, draw_run, load_campaign
+from common.config import resolve
+from common.model import INERTIA_KEYS, Scenario, load_scenario
+
+from .campaign import (AERO_KEYS, Campaign, Criteria, apply_dispersion, campaign_base, dispersion_columns, draw_run,
+                       load_campaign)
 from .store import ResultStore, flatten
 
 META_FILE = "campaign.json"
 SCENARIO_FILE = "scenario.toml"
 RESULTS_DIR = "results.parquet"
-FORMAT = 1
+FORMAT = 2      # 2: every part file has RECORD_SCHEMA (1: column types inferred per part)
 
 # summary.json figures that measure the machine, not the flight: not reproducible run to run.
 TIMING_COLUMNS = frozenset({"wall_s", "realtime_factor", "cycle_slips", "events", "allocator.p50_us",
@@ -52,6 +55,68 @@ RECORD_ONLY_COLUMNS = frozenset({"worker", "host", "pid", "run_wall_s", "run_cpu
 def is_reproducible_column(name: str) -> bool:
     """True for the columns a re-run of the same record must reproduce bit for bit."""
     return not (name in TIMING_COLUMNS or name in RECORD_ONLY_COLUMNS or name.startswith("control_cycle."))
+
+
+# -- the record of one run ----------------------------------------------------------------
+# Every column a run's row can hold, with its type: the same schema in every part file of
+# DIR/results.parquet, so pyarrow, pandas and DuckDB read the folder as one table as it is
+# (a column null in one part and text in another made them refuse it). A row is the run's own
+# fields (execute_run), its dispersions (campaign.dispersion_columns) and summary.json
+# flattened (store.flatten: nested tables as "a.b", lists as JSON text); a column a run has no
+# value for is null in its row. A row with a column not declared here is refused
+# (store.check_columns): declare a new summary figure here when adding it.
+_F, _I, _B, _S = pa.float64(), pa.int64(), pa.bool_(), pa.string()
+
+
+def _cols(t, *names: str) -> list:
+    return [(n, t) for n in names]
+
+
+RECORD_SCHEMA = pa.schema(
+    # the run
+    [("run_id", _I), ("seed", _I), ("status", _S), ("success", _B), ("failed_criteria", _S), ("error", _S),
+     ("traceback", _S), ("worker", _S), ("host", _S), ("pid", _I), ("run_wall_s", _F), ("run_cpu_s", _F)]
+    # its dispersions (jet sets, eta and density waves as JSON lists)
+    + _cols(_F, *(f"disp.inertia_scale_{k}" for k in INERTIA_KEYS), "disp.density_scale",
+            *(f"disp.{k}_scale" for k in AERO_KEYS), "disp.bank0_err_deg", "disp.flight_path_offset_deg",
+            "disp.fdir_delay_s", "disp.fault_t_s", "disp.speed_offset_mps", "disp.heading_offset_deg",
+            "disp.north_offset_km", "disp.east_offset_km")
+    + _cols(_S, "disp.jets_failed_off", "disp.jets_stuck_on", "disp.jets_degraded", "disp.degraded_eta",
+            "disp.density_waves")
+    + _cols(_I, "disp.n_failed_off", "disp.n_stuck_on", "disp.n_degraded")
+    # summary.json (ellipsled/metrics.py summarize, ellipsled/runlib.py judge)
+    + [("scenario", _S), ("completed", _B), ("end_reason", _S), ("nonfinite", _B), ("identification", _S),
+       ("test_mode", _S)]
+    + _cols(_F, "t_end_s", "bank_err_max_after_fault_deg", "bank_err_rms_deg", "bank_err_fault_attrib_max_deg",
+            "bank_err_fault_attrib_t_max_s", "bank_err_max_after_transient_deg", "bank_err_rms_after_transient_deg",
+            "bank_err_sched_max_after_fault_deg", "settle_time_after_reconfig_s", "settle_time_0p2deg_s",
+            "settle_time_fault_attrib_0p2deg_s", "recovery_time_fault_attrib_s", "fault_t_s", "reconfig_t_s",
+            "alpha_dev_max_deg", "beta_dev_max_deg", "alpha_dev_max_after_transient_deg",
+            "beta_dev_max_after_transient_deg", "omega_err_max_degps", "control_effort_applied",
+            "control_effort_cmd", "control_effort_undeliverable_share", "adaptive_param_drift_last20pct",
+            "h_end_m", "mach_end", "qbar_max_pa", "propellant_kg", "wall_s", "realtime_factor")
+    + _cols(_S, "reversals", "theta_hat_final", "adaptive.names", "adaptive.final", "adaptive.drift_last20pct",
+            "adaptive.truth", "adaptive.rel_err", "jet_pulses_per_jet", "fdir.detections", "fdir.missed")
+    + _cols(_I, "jet_pulses", "cycle_slips", "events", "fdir.false_alarms")
+    + _cols(_F, "control_cycle.compute_p50_us", "control_cycle.compute_p99_us", "control_cycle.compute_max_us")
+    + [("control_cycle.compute_overruns", _I)]
+    + _cols(_I, "allocator.solves", "allocator.degraded", "allocator.short", "allocator.modulated",
+            "allocator.optimality_checked")
+    + _cols(_F, "allocator.p50_us", "allocator.p99_us", "allocator.max_us", "allocator.optimality_gap_max")
+    + [("allocator.box", _S), ("controllability.controllable", _B), ("controllability.reason", _S)]
+    + _cols(_F, "controllability.authority_pos_degps2", "controllability.authority_neg_degps2",
+            "controllability.need_degps2", "controllability.bias_Nm", "controllability.residual_Nm",
+            "controllability.trim_needed_deg", "controllability.qbar_min_pa")
+    # guided entries (deploy figures, the predictor-corrector's statistics)
+    + _cols(_F, "deploy_miss_km", "deploy_alt_km", "downrange_err_km", "crossrange_err_km", "peak_heat_rate_wcm2",
+            "peak_load_g", "gamma_positive_max_alt_km", "limits.load_g", "limits.heat_rate_wcm2")
+    + [("skip", _B), ("guidance_mode", _S), ("reversal_count", _I)]
+    + _cols(_I, "guidance.cycles", "guidance.predictions_per_cycle_max", "guidance.no_root", "guidance.floor_cycles",
+            "guidance.held_cycles", "guidance.overruns", "guidance.faults")
+    + _cols(_F, "guidance.compute_p50_us", "guidance.compute_p99_us", "guidance.compute_max_us",
+            "guidance.predictions_per_cycle_mean", "guidance.k_rho_final", "guidance.k_ld_final",
+            "guidance.bank0_final_deg")
+    + _cols(_S, "guidance.reversal_times_s", "guidance.reversal_rules"))
 
 
 @dataclass(frozen=True)
@@ -123,7 +188,10 @@ def prepare_out(out: Path, camp: Campaign, master_seed: int, duration_s: float |
     path = out / META_FILE
     if path.exists():
         old = json.loads(path.read_text())
-        for key in ("format", "master_seed", "duration_s"):
+        if old.get("format") != FORMAT:
+            raise ValueError(f"{out}: holds results of format {old.get('format')!r}, this version writes format "
+                             f"{FORMAT} (one schema for every part file); choose another --out")
+        for key in ("master_seed", "duration_s"):
             if old.get(key) != meta[key]:
                 raise ValueError(f"{out}: holds a campaign with {key} = {old.get(key)!r}, not {meta[key]!r}; "
                                  "resume with the same settings or choose another --out")
@@ -270,7 +338,7 @@ def run_campaign(campaign: Campaign | str | Path, out: str | Path, *, runs: int 
     out.mkdir(parents=True, exist_ok=True)
     with _exclusive(out):
         base = prepare_out(out, camp, master_seed, duration_s)
-        store = ResultStore(out / RESULTS_DIR)
+        store = ResultStore(out / RESULTS_DIR, RECORD_SCHEMA)
         done = set(store.run_ids())
         todo = [i for i in range(runs) if i not in done]
         t_start = time.monotonic()
@@ -357,6 +425,7 @@ def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, w
                        "failed_criteria": "raised", "error": f"{type(e).__name__}: {e}",
                        **dispersion_columns(disp)}
             fut.release()
+            store.check(row)      # a row that does not fit the schema stops the campaign here, not at a flush
             buf.append(row)
             res.new += 1
             res.failed_new += row["status"] != "ok"

@@ -2,9 +2,11 @@
 
 Each append writes one new part file atomically (temporary name, fsync, rename), so a
 reader (or a resumed campaign) sees whole parts only, whatever happened to the writer.
-Any Parquet reader opens the folder as one table (``pyarrow.dataset.dataset(DIR /
-"results.parquet")``); column types are unified across parts (a column that is all null in
-one part takes its type from the others).
+A campaign's store writes every part with the same explicit schema (the run record's,
+engine.RECORD_SCHEMA: every column, its type fixed), so any Parquet reader opens the folder
+as one table as it is: ``pyarrow.dataset.dataset(DIR / "results.parquet")``,
+``pandas.read_parquet(...)``, DuckDB's ``read_parquet('.../*.parquet')``. Without a schema
+(ad-hoc tables, tests) each column's type is inferred from its values.
 """
 from __future__ import annotations
 
@@ -51,18 +53,41 @@ def _column(values: list) -> pa.Array:
                     pa.string())
 
 
-def rows_to_table(rows: list[dict]) -> pa.Table:
-    names: dict[str, None] = {}
-    for r in rows:
-        names.update(dict.fromkeys(r))
-    return pa.table({n: _column([r.get(n) for r in rows]) for n in names})
+def check_columns(rows: list[dict], schema: pa.Schema) -> None:
+    """ValueError naming the columns of ``rows`` that ``schema`` does not declare."""
+    extra = sorted({n for r in rows for n in r} - set(schema.names))
+    if extra:
+        ids = sorted({r.get("run_id") for r in rows if set(r) - set(schema.names)}, key=str)
+        raise ValueError(f"run {', '.join(map(str, ids))}: columns not declared in the record's schema: "
+                         f"{', '.join(extra)}")
+
+
+def rows_to_table(rows: list[dict], schema: pa.Schema | None = None) -> pa.Table:
+    """The rows as a table: with ``schema``, exactly its columns and types (absent values
+    null; an undeclared column or a value of another type is a ValueError); without, the
+    columns of the rows with types inferred from their values."""
+    if schema is None:
+        names: dict[str, None] = {}
+        for r in rows:
+            names.update(dict.fromkeys(r))
+        return pa.table({n: _column([r.get(n) for r in rows]) for n in names})
+    check_columns(rows, schema)
+    cols = []
+    for f in schema:
+        try:
+            cols.append(pa.array([r.get(f.name) for r in rows], f.type))
+        except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, OverflowError) as e:
+            raise ValueError(f"column {f.name}: not {f.type}: {e}") from None
+    return pa.Table.from_arrays(cols, schema=schema)
 
 
 class ResultStore:
-    """Append-only rows of one campaign, one part file per append."""
+    """Append-only rows of one campaign, one part file per append. ``schema``: the one every
+    part is written with (None: inferred per part, for ad-hoc stores)."""
 
-    def __init__(self, root: str | Path):
+    def __init__(self, root: str | Path, schema: pa.Schema | None = None):
         self.root = Path(root)
+        self.schema = schema
         if self.root.exists() and not self.root.is_dir():
             raise ValueError(f"{self.root}: expected a Parquet dataset folder, found a file")
         self.root.mkdir(parents=True, exist_ok=True)
@@ -75,7 +100,7 @@ class ResultStore:
     def append(self, rows: list[dict]) -> Path | None:
         if not rows:
             return None
-        table = rows_to_table(rows)
+        table = rows_to_table(rows, self.schema)
         name = f"part-{len(self.parts()):06d}-{uuid.uuid4().hex[:12]}.parquet"
         tmp = self.root / f".tmp-{name}"
         pq.write_table(table, tmp)
@@ -88,6 +113,11 @@ class ResultStore:
         finally:
             os.close(dfd)
         return self.root / name
+
+    def check(self, row: dict) -> None:
+        """ValueError if ``row`` would not fit this store's schema (before buffering it)."""
+        if self.schema is not None:
+            rows_to_table([row], self.schema)
 
     def run_ids(self) -> list[int]:
         """Every recorded run_id, duplicates included (there should be none)."""

@@ -29,8 +29,8 @@ from pathlib import Path
 from ellipsled.argtypes import positive_float
 from ellipsled.history import History, merge
 from ellipsled.procs import stop_process
-from ellipsled.runlib import (add_variant_arguments, fault_free_reference, format_summary, judge, prepare_args,
-                              variant_argv)
+from ellipsled.runlib import (EXIT_NOT_COMPLETED, add_variant_arguments, exit_code, fault_free_reference,
+                              format_summary, judge, prepare_args, variant_argv)
 from ellipsled.terminal import ProgressFile, RunProgress, files_written
 from interfaces import transport
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE
@@ -264,7 +264,7 @@ class Launcher:
         except (OSError, ValueError, KeyError) as e:
             self.say(f"no complete records to summarize ({e}); see the logs")
             print(files_written(self.out))
-            return 1
+            return EXIT_NOT_COMPLETED
         scn = prepare_args(a)
         seed = scn.seed if a.seed is None else a.seed
         faults = [tuple(x) for x in sim_info["faults_applied"]]
@@ -299,7 +299,7 @@ class Launcher:
                   f" release jitter p50 {f(sil['jitter_p50_us'])} us p99 {f(sil['jitter_p99_us'])} us"
                   f" max {f(sil['jitter_max_us'])} us; slips {sil['slips']}")
         print(files_written(self.out))
-        return 0 if summary["completed"] else 1
+        return exit_code(summary["end_reason"])
 
 
 

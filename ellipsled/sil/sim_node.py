@@ -296,8 +296,8 @@ class SimNode:
         if self.message:
             say(ROLE, self.message)
         self.write()
-        say(ROLE, f"end: {self.end_reason} at t={self.plant.t_s:.2f} s")
-        return 0 if self.end_reason in ("mach", "altitude", "timeout") else 3
+        say(ROLE, f"end: {end_reason_of(self.end_reason, self.args.duration)} at t={self.plant.t_s:.2f} s")
+        return 0 if self.end_reason in ("mach", "speed", "altitude", "timeout") else 3
 
     def write(self) -> None:
         if not self.args.out:

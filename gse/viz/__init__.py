@@ -7,6 +7,7 @@
 - ``record_history`` (record.py): the same recording from a finished batch run;
 - ``bridge_main`` (bridge.py): the ``ellipsled viz`` process (Zenoh -> RerunLogger).
 """
+from gse.viz import rerun_log  # noqa: F401  (first: Rerun's log filter, before any module loads rerun)
 from gse.viz.blueprint import default_blueprint
 from gse.viz.logger import RerunLogger, VehicleGlyph, glyph_from_vehicle
 from gse.viz.record import record_history

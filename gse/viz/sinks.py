@@ -21,7 +21,9 @@ footer's manifest entry of every chunk in memory until the file is closed (about
 per chunk; a full entry at 50 Hz sends ~15,500 chunks, so +28 MB growing linearly), with
 no API to bound it. ``Sinks.close`` then adds the footer with ``rerun rrd optimize`` (a
 separate process, after the run; it also compacts the chunks, ~40 MB -> ~17 MB for a full
-entry). If that fails the streamed file is kept: valid, readable, without a footer.
+entry). If that fails the streamed file is kept: valid, readable, without a footer. The SDK
+warns of the missing footer on every such sink: that line is filtered where Rerun's logger is
+configured (rerun_log.py), the user is told by the bridge's own line instead.
 """
 from __future__ import annotations
 

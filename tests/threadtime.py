@@ -10,6 +10,7 @@ thread of its process. That is a property of the code, the same on a quiet or a 
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 
@@ -42,3 +43,36 @@ class BlockedMeter:
 
     def close(self) -> None:
         os.close(self._fd)
+
+
+class LongestCCall:
+    """The longest single C call a job made, in its own thread's CPU time [ns]. Python bytecode
+    gives the GIL up every switch interval; only a C call can keep it longer, so this bounds
+    from above any stretch of CPU work in which the job kept the GIL from the loop. CPU time
+    is the thread's own: the same on a quiet or a loaded host. Blind to a C call that keeps
+    the GIL while it sleeps or blocks (no CPU): the blocked-time tests see those.
+
+    ``wrap(job)`` profiles each call of ``job`` in the thread that makes it."""
+
+    def __init__(self) -> None:
+        self.worst_ns = 0
+        self.worst_name = ""
+        self._starts: list[int] = []
+
+    def _hook(self, frame, event, arg) -> None:
+        if event == "c_call":
+            self._starts.append(time.thread_time_ns())
+        elif event in ("c_return", "c_exception") and self._starts:
+            took = time.thread_time_ns() - self._starts.pop()
+            if took > self.worst_ns:
+                self.worst_ns, self.worst_name = took, getattr(arg, "__qualname__", repr(arg))
+
+    def wrap(self, job):
+        def profiled(*args):
+            sys.setprofile(self._hook)
+            try:
+                return job(*args)
+            finally:
+                sys.setprofile(None)
+                self._starts.clear()
+        return profiled

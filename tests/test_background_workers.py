@@ -5,9 +5,9 @@ or made to keep the GIL for a known time with a C call). That no job keeps the l
 the GIL a control period by computing is judged in the job's own CPU time per C call
 (tests/threadtime.py LongestCCall), the same on any host. The four blocked-time tests (what
 the loop slept beside a job, BlockedMeter) also see a job that keeps the GIL while it
-sleeps; they are marked ``timing``: they need CPUs free of other load (on a loaded host the
-loop can sit on the run queue while a job holds the GIL, and the meter books that wait to
-the host).
+sleeps; they judge the wall clock (marked ``timing``), with the loop SCHED_FIFO as in the
+real-time FSW and the jobs one priority below it, so other load on the machine cannot sit
+in the loop's waits (they need root).
 
 The rules proven here:
 - the loop never waits on a worker: it keeps cycling while a job is held, no C call of a
@@ -47,13 +47,12 @@ from fsw.health import JetHealth
 from fsw.topology import Topology
 from sim.plant import Plant
 from tests import threadtime
-from tests.threadtime import BlockedMeter, LongestCCall
+from tests.threadtime import BlockedMeter, LongestCCall, gil_keeping_burn
 
 PERIOD_NS = 20_000_000                       # the 50 Hz control period
 GIL_HOLD_S = 1.5 * PERIOD_NS * 1e-9          # a job that keeps the GIL this long must be caught
 SANITY_S = 30.0                              # only against a hang: no outcome depends on it
 usleep = ctypes.PyDLL(None).usleep           # PyDLL: the call keeps the GIL
-needs_schedstat = pytest.mark.skipif(not threadtime.available(), reason="needs Linux per-thread schedstat")
 
 
 def _until(cond) -> None:
@@ -119,6 +118,11 @@ def _worst_wait_on_the_lp(hold_s: float = 0.0) -> int:
     are applied (so every solve ran inside it). Returns the longest time one loop iteration
     slept [ns]. ``hold_s``: each solve first holds the GIL that long, the fault this
     measurement exists to catch."""
+    with threadtime.as_the_realtime_loop():
+        return _measure_the_loop_beside_the_lp(hold_s)
+
+
+def _measure_the_loop_beside_the_lp(hold_s: float) -> int:
     fl = _Flight("nominal")
     f = fl.fsw
     solve = f._lp_worker._solve
@@ -149,31 +153,17 @@ def _worst_wait_on_the_lp(hold_s: float = 0.0) -> int:
         fl.close()
 
 
-@pytest.mark.timing
-@needs_schedstat
+@threadtime.loop_timing
 def test_the_loop_never_waits_a_control_period_on_the_lp():
     worst = _worst_wait_on_the_lp()
     assert worst < PERIOD_NS, f"the loop waited {worst / 1e6:.2f} ms on the LP"
 
 
-@pytest.mark.timing
-@needs_schedstat
+@threadtime.loop_timing
 def test_an_lp_job_that_holds_the_gil_for_a_control_period_is_caught():
     """The check above is not blind: an LP job that keeps the GIL 1.5 periods is measured."""
     worst = _worst_wait_on_the_lp(GIL_HOLD_S)
     assert worst >= PERIOD_NS, f"a 30-ms hold measured as {worst / 1e6:.2f} ms"
-
-
-def _gil_keeping_burn(cpu_ns: float):
-    """One C call that keeps the GIL for at least ``cpu_ns`` of this host's CPU: a big-integer
-    power, its exponent doubled until it takes that long (in this thread's CPU time)."""
-    e = 1 << 12
-    while True:
-        t0 = time.thread_time_ns()
-        pow(3, e)
-        if time.thread_time_ns() - t0 >= cpu_ns:
-            return lambda: pow(3, e)
-        e *= 2
 
 
 def _longest_c_call_of_the_lp(burn=None) -> LongestCCall:
@@ -214,7 +204,7 @@ def test_no_lp_solve_keeps_the_gil_for_a_control_period():
 
 def test_an_lp_job_that_computes_a_control_period_in_one_c_call_is_seen():
     """The check above is not blind: a job that first burns 1.5 periods in one C call."""
-    m = _longest_c_call_of_the_lp(_gil_keeping_burn(1.5 * PERIOD_NS))
+    m = _longest_c_call_of_the_lp(gil_keeping_burn(1.5 * PERIOD_NS))
     assert m.worst_ns >= PERIOD_NS and m.worst_name == "pow"
 
 
@@ -341,22 +331,21 @@ def _worst_wait_on_the_guidance(hold_s: float = 0.0) -> int:
         if hold_s > 0.0:
             usleep(int(hold_s * 1e6))
         return correct(*a)
-    fl = _guided(holding_the_gil)
-    try:
-        return _worst_blocked(fl, lambda: fl.fsw.entry.cycles >= 3)
-    finally:
-        fl.close()
+    with threadtime.as_the_realtime_loop():
+        fl = _guided(holding_the_gil)
+        try:
+            return _worst_blocked(fl, lambda: fl.fsw.entry.cycles >= 3)
+        finally:
+            fl.close()
 
 
-@pytest.mark.timing
-@needs_schedstat
+@threadtime.loop_timing
 def test_the_loop_never_waits_a_control_period_on_the_guidance():
     worst = _worst_wait_on_the_guidance()
     assert worst < PERIOD_NS, f"the loop waited {worst / 1e6:.2f} ms on the guidance"
 
 
-@pytest.mark.timing
-@needs_schedstat
+@threadtime.loop_timing
 def test_a_guidance_job_that_holds_the_gil_for_a_control_period_is_caught():
     """The check above is not blind: a correction that keeps the GIL 1.5 periods is measured."""
     worst = _worst_wait_on_the_guidance(GIL_HOLD_S)
@@ -391,7 +380,7 @@ def test_no_correction_keeps_the_gil_for_a_control_period():
 
 
 def test_a_correction_that_computes_a_control_period_in_one_c_call_is_seen():
-    m = _longest_c_call_of_the_guidance(_gil_keeping_burn(1.5 * PERIOD_NS))
+    m = _longest_c_call_of_the_guidance(gil_keeping_burn(1.5 * PERIOD_NS))
     assert m.worst_ns >= PERIOD_NS and m.worst_name == "pow"
 
 

@@ -316,3 +316,42 @@ def test_text_from_the_link_reaches_events_with_control_characters_escaped(rig):
     settle(rig)
     texts = [e.text for e in rig.fsw.events.history if e.source == "link" and "UNKNOWN" in e.text]
     assert texts and all(c.isprintable() for t in texts for c in t) and "\\x1b[2J\\x07X" in texts[0], texts
+
+
+def test_the_bench_flood_mix_changes_nothing_and_events_still_go_out_each_tick(rig):
+    """The benchmark's hostile mix (ellipsled/bench/flood.py: random, malformed, unsigned,
+    forged, multi-frame, MAVLink 1, unsigned reads, the vehicle's own signed frames sent
+    back), 1,000 datagrams from one socket: no command or parameter takes effect, no peer
+    is made, and an FDIR event emitted meanwhile goes to the ground in the tick after it."""
+    from ellipsled.bench.flood import Flood
+    fl = Flood(3, reflect=[rig.gl.link.pack(vehicle_heartbeat())])
+    evil = attacker_socket()
+    params0 = dict(rig.fsw.params)
+    sent = []
+    send = rig.gl._send
+    rig.gl._send = lambda msg, *a, **kw: (sent.append(msg), send(msg, *a, **kw))
+    kinds = set()
+    try:
+        for burst in range(10):
+            for _ in range(100):
+                kind, data = fl.next()
+                kinds.add(kind)
+                evil.sendto(data, rig.gl.address)
+            while True:                                  # what the vehicle answered: to reflect
+                try:
+                    fl.take(evil.recv(65536))
+                except BlockingIOError:
+                    break
+            sent.clear()
+            rig.fsw.events.emit(rig.fsw.t_s, mav.MAV_SEVERITY_ERROR, "fdir", "jet_failed_off", f"JET {burst + 1} FAILED OFF")
+            rig.fly(5)                                   # one RG2 tick
+            texts = [m.text for m in sent if m.get_type() == "STATUSTEXT"]
+            assert f"JET {burst + 1} FAILED OFF" in texts, texts
+        settle(rig, 0.3)
+    finally:
+        evil.close()
+    assert {"multiframe", "mavlink1", "reflected", "reads"} <= kinds
+    st = rig.gl.stats
+    assert st["commands_accepted"] == 0 and st["params_set"] == 0 and st["peers_added"] == 0, st
+    assert rig.fsw.driver.armed and dict(rig.fsw.params) == params0 and not rig.gl.peers
+    assert rig.gl.link.counts[Reject.OWN_SYSTEM] > 0 and rig.gl.link.counts[Reject.GARBAGE] > 0

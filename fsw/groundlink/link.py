@@ -189,7 +189,8 @@ class GroundLink:
         self.stats = {"rx_datagrams": 0, "rx_bytes": 0, "rx_messages": 0, "tx_frames": 0,
                       "tx_bytes": 0, "tx_errors": 0, "refused_early": 0, "kernel_drops": 0,
                       "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0, "ftp_deferred": 0,
-                      "reads_limited": 0, "reads_unknown": 0, "peers_added": 0, "refused_senders": 0}
+                      "reads_limited": 0, "reads_unknown": 0, "peers_added": 0, "refused_senders": 0,
+                      "commands_accepted": 0, "params_set": 0}
         self.tick_ns_max = 0
         self.send_ns_peak = 0
 
@@ -374,6 +375,8 @@ class GroundLink:
             name, why = self.params_in.set(msg)
             if why:
                 self._refuse("param_unknown" if name is None else "param_refused", why)
+            elif name is not None:
+                self.stats["params_set"] += 1
             if name is not None:
                 self._send(self.params_in.value_msg(name), extra=addr)     # new value, or unchanged
 
@@ -465,6 +468,8 @@ class GroundLink:
         if result != CommandResult.ACCEPTED and why:
             self._refuse("cmd_refused", why)
         self.commands[result] = self.commands.get(result, 0) + 1
+        if result == CommandResult.ACCEPTED:
+            self.stats["commands_accepted"] += 1
         ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent())
         # to the requester only: another ground station waiting on the same command id

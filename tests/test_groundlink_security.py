@@ -355,3 +355,31 @@ def test_the_bench_flood_mix_changes_nothing_and_events_still_go_out_each_tick(r
     assert st["commands_accepted"] == 0 and st["params_set"] == 0 and st["peers_added"] == 0, st
     assert rig.fsw.driver.armed and dict(rig.fsw.params) == params0 and not rig.gl.peers
     assert rig.gl.link.counts[Reject.OWN_SYSTEM] > 0 and rig.gl.link.counts[Reject.GARBAGE] > 0
+
+
+def test_an_unsigned_parameter_list_goes_to_the_requester_at_the_read_pace(rig):
+    """Keyless, a stock ground station still gets the whole list, to its own address only;
+    one 20-byte request cannot make the vehicle send more than the read pace allows."""
+    from fsw.groundlink.link import READ_BURST, READ_RATE_HZ
+    evil = attacker_socket()
+    to_requester = []
+    send = rig.gl._send
+    rig.gl._send = lambda msg, *a, only=None, **kw: (
+        to_requester.append(msg) if only == evil.getsockname() and msg.get_type() == "PARAM_VALUE" else None,
+        send(msg, *a, only=only, **kw))
+    try:
+        unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        evil.sendto(mav.MAVLink_param_request_list_message(1, 1).pack(unsigned), rig.gl.address)
+        assert rig.exchange(lambda: rig.gl.stats["rx_datagrams"] >= 1)
+        assert len(to_requester) <= READ_BURST
+        n_params = len(rig.gl.param_names)
+        ticks = 0
+        while len(to_requester) < n_params:
+            before = len(to_requester)
+            rig.fly(5)                                     # one RG2 tick: 0.1 s
+            ticks += 1
+            assert len(to_requester) - before <= READ_RATE_HZ * 0.1 + 1
+            assert ticks < 100
+        assert sorted(m.param_index for m in to_requester) == list(range(n_params))
+    finally:
+        evil.close()

@@ -22,9 +22,11 @@ Who the link listens to:
   signed *command-class* frame (COMMAND_LONG, COMMAND_INT, PARAM_SET, FTP: what must be
   signed) addressed to this vehicle; a signed heartbeat or read makes none;
 - read-only requests (PARAM_REQUEST_READ/LIST, MISSION_REQUEST_LIST), which may come
-  unsigned, are answered to the requester only, within ``READ_RATE_HZ`` (burst
-  ``READ_BURST``) per unsigned sender and within the tick's reply budget; an unknown id
-  read unsigned is counted, not told one event per request.
+  unsigned, are answered to the requester only and within the tick's reply budget; an
+  unsigned sender gets at most ``READ_RATE_HZ`` requests and answer frames a second
+  (after a burst of ``READ_BURST``: a parameter list goes out at that pace), so no
+  unsigned request is an amplifier; an unknown id read unsigned is counted, not told one
+  event per request.
 
 Downlink per tick, beyond the telemetry streams: at most ``max_tx_per_tick`` frames of
 events and answers to requests; answers (parameter lists included) take at most
@@ -103,7 +105,7 @@ _ADDRESSED = frozenset({mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMM
 COMMAND_CLASS = _ADDRESSED - ALLOW_UNSIGNED
 FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends (~1.5 ms of packing)
 EVENT_SHARE = 16                 # frames a tick no answer to a request can take from the events
-READ_RATE_HZ = 10.0              # read-only requests answered per second and unsigned sender ...
+READ_RATE_HZ = 10.0              # read-only requests and answer frames per second and unsigned sender ...
 READ_BURST = 30.0                # ... after a burst of this many (a ground station connecting)
 MAX_READ_SENDERS = 64            # unsigned senders whose read budget is remembered
 MAX_PARAM_LISTS = 4              # parameter lists queued at once (one per requester)
@@ -170,7 +172,7 @@ class GroundLink:
         self._drops_reported = 0
 
         self.peers: dict[tuple[str, int], float] = {}                     # addr -> last signed command
-        self._param_lists: OrderedDict[tuple[str, int], deque[str]] = OrderedDict()   # requester -> names left
+        self._param_lists: OrderedDict[tuple[str, int], tuple[deque[str], bool]] = OrderedDict()  # requester -> (names left, signed)
         self._read_budget: OrderedDict[tuple[str, int], list[float]] = OrderedDict()  # sender -> [tokens, t]
         self._reply_budget = self.max_tx_per_tick - EVENT_SHARE          # this tick's answers left
         self._next_due = {name: 0.0 for name in self.rates_hz}
@@ -359,7 +361,7 @@ class GroundLink:
         elif mid == mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL and signed:
             self._ftp(msg, addr)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
-            self._queue_param_list(addr)
+            self._queue_param_list(addr, signed)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
             name, why = self.params_in.read(msg)
             if name is not None:
@@ -384,9 +386,9 @@ class GroundLink:
     def _for_me(msg) -> bool:
         return msg.target_system in (0, SYSTEM_ID) and msg.target_component in (0, COMPONENT_ID)
 
-    def _may_read(self, addr) -> bool:
-        """One unsigned read-only request from ``addr`` within its budget (READ_RATE_HZ,
-        burst READ_BURST; the last MAX_READ_SENDERS senders remembered); counted when not."""
+    def _take_read(self, addr) -> bool:
+        """One unit of ``addr``'s unsigned read budget (a token bucket: READ_RATE_HZ, burst
+        READ_BURST; the last MAX_READ_SENDERS senders remembered), if it has one."""
         now = self.clock()
         b = self._read_budget.get(addr)
         if b is None:
@@ -399,6 +401,13 @@ class GroundLink:
             b[1] = now
         if b[0] >= 1.0:
             b[0] -= 1.0
+            return True
+        return False
+
+    def _may_read(self, addr) -> bool:
+        """One unsigned read-only request from ``addr`` within its budget; counted and told
+        (one throttled event) when not."""
+        if self._take_read(addr):
             return True
         self.stats["reads_limited"] += 1
         self.intake.count_sender(addr)
@@ -415,15 +424,25 @@ class GroundLink:
         self._reply_budget -= 1
         self._send(msg, only=addr)
 
-    def _queue_param_list(self, addr) -> None:
-        """A parameter list for ``addr``, sent a few a tick from the reply budget; one list
-        per requester at a time, at most MAX_PARAM_LISTS requesters."""
+    def _queue_param_list(self, addr, signed: bool) -> None:
+        """A parameter list for ``addr``, sent from the reply budget (and, unsigned, at the
+        requester's read pace); one list per requester at a time, at most MAX_PARAM_LISTS."""
         if addr in self._param_lists:
             return
         if len(self._param_lists) >= MAX_PARAM_LISTS:
             self.stats["reads_limited"] += 1
             return
-        self._param_lists[addr] = deque(self.params_in.names)
+        self._param_lists[addr] = (deque(self.params_in.names), signed)
+
+    def _send_param_lists(self) -> None:
+        for addr in list(self._param_lists):
+            names, signed = self._param_lists[addr]
+            while names and self._reply_budget > 0 and (signed or self._take_read(addr)):
+                self._reply(self.params_in.value_msg(names.popleft()), addr)
+            if not names:
+                del self._param_lists[addr]
+            if self._reply_budget <= 0:
+                return
 
     def _add_peer(self, addr) -> None:
         now = self.clock()
@@ -580,11 +599,7 @@ class GroundLink:
                 if any(want_pos):
                     for msg in tm.position(fsw, ms, C_LN, want_pos):
                         self._send(msg)
-        while self._param_lists and self._reply_budget > 0:
-            addr, names = next(iter(self._param_lists.items()))
-            self._reply(self.params_in.value_msg(names.popleft()), addr)
-            if not names:
-                del self._param_lists[addr]
+        self._send_param_lists()
         self.fsw.events.release_held(fsw.t_s)
         self._send_events(EVENT_SHARE + self._reply_budget)      # their share, and what answers left
         self._reply_budget = self.max_tx_per_tick - EVENT_SHARE

@@ -427,7 +427,9 @@ class GroundLink:
     def _queue_param_list(self, addr, signed: bool) -> None:
         """A parameter list for ``addr``, sent from the reply budget (and, unsigned, at the
         requester's read pace); one list per requester at a time, at most MAX_PARAM_LISTS."""
-        if addr in self._param_lists:
+        if addr in self._param_lists:              # a signed request lifts the pace of an unsigned one
+            names, was_signed = self._param_lists[addr]
+            self._param_lists[addr] = (names, was_signed or signed)
             return
         if len(self._param_lists) >= MAX_PARAM_LISTS:
             self.stats["reads_limited"] += 1

@@ -122,7 +122,7 @@ class DatagramIntake:
         because ``over_budget()`` said so."""
         i = 0
         st = self.stats
-        link, rejected = self.link, self.link.verifier
+        link, verifier = self.link, self.link.verifier
         while i < size:
             if i and over_budget():
                 return i
@@ -152,10 +152,10 @@ class DatagramIntake:
             if not iflags & framing.IFLAG_SIGNED and msgid not in self.allow_unsigned:
                 refuse(addr, Reject.UNSIGNED, sysid, compid, msgid)
                 continue
-            before = rejected.rejected
+            before = verifier.rejected
             msgs = link.receive_single(view[j:i])
-            if rejected.rejected != before:
-                self.count_sender(addr, rejected.rejected - before)
+            if verifier.rejected != before:
+                self.count_sender(addr, verifier.rejected - before)
             for msg in msgs:
                 handle(msg, addr)
         return None

@@ -496,6 +496,21 @@ def test_stream_timestamps_survive_a_restart_beside_the_key_file(tmp_path):
     assert len(run_b.receive(ahead.pack(inject_cmd()))) == 1          # the ground's next frame
 
 
+def test_frames_signed_behind_the_receivers_clock_cost_no_write_and_are_refused_after_a_restart(tmp_path):
+    """The start-time rule covers them: the state file is written only for frames signed
+    ahead of the receiver's clock, of the messages it is asked to persist."""
+    state = tmp_path / "k.streams"
+    behind = Signer(KEY, system_id=GCS_SYS, component_id=GCS_COMP, clock=Clock(T0 - 0.5))
+    frame = behind.pack(inject_cmd())
+    ahead = Signer(KEY, system_id=GCS_SYS, component_id=GCS_COMP, link_id=1, clock=Clock(T0 + 5))
+    run_a = vehicle(Clock(T0 - 1), state_path=state, persist_msgids={mav.MAVLINK_MSG_ID_COMMAND_LONG})
+    run_a.verifier.clock = Clock(T0)                                  # the flight goes on
+    assert len(run_a.receive(frame)) == 1 and not state.exists()
+    assert len(run_a.receive(ahead.pack(heartbeat()))) == 1 and not state.exists()     # not a command
+    run_b = vehicle(Clock(T0 + 1), state_path=state)
+    assert run_b.receive(frame) == [] and run_b.counts[Reject.STALE_TIMESTAMP] == 1
+
+
 def test_an_unreadable_stream_state_is_reported_and_the_start_time_rule_still_holds(tmp_path, caplog):
     state = tmp_path / "k.streams"
     state.write_text("{not json")

@@ -158,7 +158,8 @@ class GroundLink:
 
         self.link = SignedLink(key, system_id=SYSTEM_ID, component_id=COMPONENT_ID,
                                allow_unsigned=ALLOW_UNSIGNED, on_reject=self._on_reject,
-                               state_path=stream_state_path(key) if stream_state == "beside-key" else stream_state)
+                               state_path=stream_state_path(key) if stream_state == "beside-key" else stream_state,
+                               persist_msgids=COMMAND_CLASS)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.bind(bind_addr)

@@ -450,7 +450,7 @@ def test_a_guidance_answer_late_for_its_due_step_is_an_overrun_and_the_previous_
         assert eg.cycles == 1 and (eg.bank0_cmd, eg._line) == kept
         _fly_through(fl, t_rel + 1.0)                    # the next release, still computing
         # counted; its event ("SKIPPED") throttled with the overrun's (one code, 1 s apart)
-        assert eg.overruns == 2 and len(overruns()) == 1 and fl.fsw.events._held["guidance_overrun"] == 1
+        assert eg.overruns == 2 and len(overruns()) == 1 and fl.fsw.events._held["guidance_overrun"][0] == 1
         assert eg._job[-1] == t_rel and len(n_jobs) <= 2  # no new job released
         assert eg.cycles == 1 and (eg.bank0_cmd, eg._line) == kept
         go.set()

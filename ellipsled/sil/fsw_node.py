@@ -22,6 +22,7 @@ from common import rt
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.events import EventLog, Severity  # noqa: E402
+from ellipsled import argtypes  # noqa: E402
 from ellipsled.history import History, guidance_fields, record_fsw  # noqa: E402
 from ellipsled.runlib import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock  # noqa: E402
@@ -40,17 +41,17 @@ ROLE = "fsw"
 
 def add_arguments(p) -> None:
     add_common_arguments(p)
-    p.add_argument("--rt-offset-us", type=float, default=-100.0,
+    p.add_argument("--rt-offset-us", type=argtypes.offset_us, default=-100.0,
                    help="real time: release this long after the plant publishes a step (negative: "
                         "before; the input task then waits for the frame, whose arrival, handled by "
                         "Zenoh's threads one priority up, cannot delay the release)")
-    p.add_argument("--frame-wait-us", type=float, default=3000.0,
+    p.add_argument("--frame-wait-us", type=argtypes.wait_us, default=3000.0,
                    help="real time: at a release, wait this long at most for the frame due")
     p.add_argument("--gcs", default=DEFAULT_GCS, help="ground station address (MAVLink)")
     p.add_argument("--mavlink-bind", default=DEFAULT_VEHICLE, help="the vehicle's MAVLink address")
     p.add_argument("--signing-key", default=None,
                    help="MAVLink signing key file (or $ELLIPSLED_SIGNING_KEY_FILE); no key = no ground link")
-    p.add_argument("--wait-peers", type=float, default=30.0)
+    p.add_argument("--wait-peers", type=argtypes.timeout_s, default=30.0)
 
 
 class FswNode:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from common.rt import sleep_until_ns
+from ellipsled import argtypes
 from ellipsled.history import History, record_truth
 from ellipsled.runlib import end_reason_of, prepare_args
 from ellipsled.terminal import ProgressFile
@@ -32,15 +33,15 @@ ROLE = "sim"
 
 def add_arguments(p) -> None:
     add_common_arguments(p)
-    p.add_argument("--speed", type=float, default=1.0, help="real time: simulated seconds per wall second")
-    p.add_argument("--fsw-timeout", type=float, default=10.0,
+    p.add_argument("--speed", type=argtypes.speed, default=1.0, help="real time: simulated seconds per wall second")
+    p.add_argument("--fsw-timeout", type=argtypes.timeout_s, default=10.0,
                    help="lockstep: end the run when the FSW has not answered for this long [s]")
-    p.add_argument("--wait-peers", type=float, default=30.0, help="how long to wait for the FSW at start [s]")
-    p.add_argument("--resend-s", type=float, default=0.5,
+    p.add_argument("--wait-peers", type=argtypes.timeout_s, default=30.0, help="how long to wait for the FSW at start [s]")
+    p.add_argument("--resend-s", type=argtypes.timeout_s, default=0.5,
                    help="lockstep: publish the sensor frame again after this long without its answer (the "
                         "frame or the answer was lost, e.g. while a router restarts) [s]")
     p.add_argument("--wait-bridge", action="store_true", help="also wait for the Rerun bridge before step 0")
-    p.add_argument("--miss-periods", type=int, default=3,
+    p.add_argument("--miss-periods", type=argtypes.int_range(1, 1000), default=3,
                    help="real time: hold jets off after this many periods without a fresh command")
     p.add_argument("--progress-file", default=None, metavar="PATH",
                    help="keep the simulated time reached in this file (ellipsled run's progress bar)")

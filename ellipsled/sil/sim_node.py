@@ -47,6 +47,21 @@ def add_arguments(p) -> None:
                    help="keep the simulated time reached in this file (ellipsled run's progress bar)")
 
 
+def command_refusal(rec, k: int) -> str | None:
+    """Why the plant at step ``k`` refuses a decoded jet command it cannot have been sent: an
+    answer to a step it has not published yet (one far ahead would make every genuine answer
+    look stale), a negative step, or a valve state other than 0 (closed) or 1 (open). None
+    when the command may fly."""
+    kc = int(rec["k"])
+    if kc > k:
+        return "future_step"
+    if kc < 0:
+        return "negative_step"
+    if int(rec["u"].max()) > 1:
+        return "u_range"
+    return None
+
+
 class SimNode:
     def __init__(self, args):
         self.args = args
@@ -100,6 +115,14 @@ class SimNode:
         self.rejects[reason] = self.rejects.get(reason, 0) + 1
         if self.rejects[reason] in (1, 10, 100, 1000):
             say(ROLE, f"rejected payload ({reason}): {detail} [{self.rejects[reason]} so far]")
+
+    def _refused(self, rec, k: int) -> bool:
+        """A decoded jet command the plant at step k refuses (``command_refusal``): counted
+        in ``rejects`` with the decoder's refusals, never flown."""
+        why = command_refusal(rec, k)
+        if why is not None:
+            self._rejected(why, f"JETS k={int(rec['k'])} u max {int(rec['u'].max())} at plant step {k}")
+        return why is not None
 
     # ------------------------------------------------------------------ faults
     def apply_faults(self) -> None:
@@ -189,7 +212,7 @@ class SimNode:
                     return False
                 continue
             rec = self.dec_jets.decode(s.payload.to_bytes())
-            if rec is None:
+            if rec is None or self._refused(rec, k):
                 continue
             kc = int(rec["k"])
             if kc == k:
@@ -234,7 +257,7 @@ class SimNode:
                 if s is None:
                     break
                 rec = self.dec_jets.decode(s.payload.to_bytes())
-                if rec is None:
+                if rec is None or self._refused(rec, k):
                     continue
                 kc = int(rec["k"])
                 if kc < last_cmd_k:

@@ -158,6 +158,14 @@ def latest(sub: zenoh.Subscriber) -> tuple[zenoh.Sample | None, int]:
         newest, skipped = s, skipped + 1
 
 
+def drain(sub: zenoh.Subscriber) -> list[zenoh.Sample]:
+    """Every sample waiting in the subscriber, oldest first."""
+    out = []
+    while (s := sub.try_recv()) is not None:
+        out.append(s)
+    return out
+
+
 def declare_alive(session: zenoh.Session, k: Keys, role: str) -> zenoh.LivelinessToken:
     """Announce this process (liveliness token ``<prefix>/alive/<role>``)."""
     return session.liveliness().declare_token(k.alive(role))

@@ -157,9 +157,12 @@ class FswNode:
                 self._rejected("fault_log", str(e))
 
     def _fetch_frame(self) -> int | None:
-        """The step of the newest sensor frame that decoded, or None."""
-        s, _ = transport.latest(self.sub_sensors)
-        return int(self.frame["k"]) if s is not None and self._accept(s) else None
+        """The step of the newest sensor frame that decodes, or None: the samples waiting are
+        judged newest first, so garbage published after a genuine frame cannot hide it."""
+        for s in reversed(transport.drain(self.sub_sensors)):
+            if self._accept(s):
+                return int(self.frame["k"])
+        return None
 
     def _pause(self) -> None:
         if not self.spin:           # with --rt, Zenoh's threads preempt this spin (one priority up)

@@ -52,6 +52,9 @@ def add_arguments(p) -> None:
     p.add_argument("--signing-key", default=None,
                    help="MAVLink signing key file (or $ELLIPSLED_SIGNING_KEY_FILE); no key = no ground link")
     p.add_argument("--wait-peers", type=argtypes.timeout_s, default=30.0)
+    p.add_argument("--plant-gone-s", type=argtypes.timeout_s, default=15.0,
+                   help="leave when the plant's liveliness has been gone this long (a restarted plant "
+                        "that is back sooner is flown on) [s]")
 
 
 class FswNode:
@@ -77,6 +80,7 @@ class FswNode:
         self.sub_fault_log = transport.subscriber(self.session, self.K.fault_log) if self.fsw.fdir.oracle else None
         self.dec_fault_log = Codec.for_schema("FAULT_APPLIED", on_reject=self._rejected)
         self.token = transport.declare_alive(self.session, self.K, ROLE)
+        self.plant = transport.Presence(self.session, self.K.alive_sim)
         self.ready = None       # real time: a second token once warmed up (the plant starts on it)
         # a restarted plant takes over the sensor key after 1 s of silence, not before
         self.dec_sensors = Codec.for_schema("SENSORS", guard=SequenceGuard(takeover_after_s=1.0),
@@ -163,6 +167,19 @@ class FswNode:
             if self._accept(s):
                 return int(self.frame["k"])
         return None
+
+    def _running(self) -> bool:
+        """Neither stopped (signal) nor left alone: a plant whose liveliness has been gone for
+        --plant-gone-s is not coming back, and an FSW without one must not linger holding its
+        ground link."""
+        if self.stop:
+            return False
+        gone_s = self.plant.gone_for_s()
+        if gone_s < self.args.plant_gone_s:
+            return True
+        say(ROLE, f"the plant has been gone for {gone_s:.1f} s: leaving")
+        self.stop.requested = True
+        return False
 
     def _pause(self) -> None:
         if not self.spin:           # with --rt, Zenoh's threads preempt this spin (one priority up)
@@ -270,7 +287,7 @@ class FswNode:
 
     def run_lockstep(self) -> None:
         warm = False
-        while not self.stop:
+        while self._running():
             s = transport.recv(self.sub_sensors, 0.1)
             source = self.source_id
             if s is None or not self._accept(s):
@@ -295,7 +312,7 @@ class FswNode:
 
     def _next_good_frame(self) -> int | None:
         """Wait (interruptibly) for the next frame that decodes; its step, or None on stop."""
-        while not self.stop:
+        while self._running():
             s = transport.recv(self.sub_sensors, 0.1)
             if s is not None and self._accept(s):
                 return int(self.frame["k"])
@@ -339,7 +356,7 @@ class FswNode:
         self.next_k = lock + 1
         self.lock_source = self.source_id
         self.n_frames = 0                               # frame ages from here on
-        while not self.stop:
+        while self._running():
             if self.sub_fault_log is not None:
                 self._take_fault_log()
             self.topo.tick()
@@ -391,7 +408,7 @@ class FswNode:
         if self.link is not None:
             self.link.flush_events()
             self.link.close()
-        transport.close(self.ready, self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
+        transport.close(self.ready, self.token, self.plant, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
                         self.pub_faults, self.sub_fault_log, self.session)
 
 

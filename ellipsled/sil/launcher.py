@@ -28,7 +28,7 @@ from pathlib import Path
 
 from ellipsled import argtypes
 from ellipsled.history import History, merge
-from ellipsled.procs import stop_process
+from ellipsled.procs import die_with_parent, stop_process
 from ellipsled.runlib import (EXIT_NOT_COMPLETED, add_variant_arguments, exit_code, fault_free_reference,
                               format_summary, judge, prepare_args, variant_argv)
 from ellipsled.terminal import ProgressFile, RunProgress, files_written
@@ -145,7 +145,9 @@ class Launcher:
         path = self.out / f"{role}.log"
         log = open(path, "w")
         self.logs.append(log)
-        self.children[role] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        # a launcher killed outright takes its children with it (the kernel signals them)
+        self.children[role] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                               preexec_fn=die_with_parent())
         if self.relay is not None:
             self.relay.follow(path)
 

@@ -85,7 +85,7 @@ def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
         "jet_pulses_per_jet": [int(x) for x in fsw.driver.pulses],
         "cycle_slips": int(slips),
         "alloc_modulated": int(fsw.dutycycle.modulated_cycles),
-        "events": len(fsw.events.history),
+        "events": fsw.events.total,
         "alloc_samples": alloc_samples,
         **({"guidance": fsw.entry.stats()} if fsw.entry is not None else {}),
     }

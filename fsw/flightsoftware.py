@@ -587,10 +587,13 @@ class FlightSoftware:
 
 class _LpWorker:
     """One background thread for the controllability LP in real time: the newest request
-    wins (a request overtaken by a newer health is dropped); the loop polls ``ready``."""
+    wins (a request overtaken by a newer health is dropped, and so is an answer not yet
+    taken); the loop polls ``ready``. ``solve``: the job, controllability() (tests wrap it
+    to inject delays)."""
 
-    def __init__(self):
+    def __init__(self, solve=controllability):
         import threading
+        self._solve = solve
         self._cv = threading.Condition()
         self._job = None
         self._result = None
@@ -602,6 +605,7 @@ class _LpWorker:
     def submit(self, need: float, args: tuple) -> None:
         with self._cv:
             self._job = (need, args)
+            self._result = None                # an answer to an older request is stale
             self._cv.notify()
 
     def ready(self) -> bool:
@@ -626,7 +630,7 @@ class _LpWorker:
                     return
                 (need, args), self._job = self._job, None
                 self._running = True
-            r = controllability(*args)
+            r = self._solve(*args)
             with self._cv:
                 self._running = False
                 if self._job is None:          # else a newer health is queued: this answer is stale

@@ -759,6 +759,7 @@ class EntryGuidance:
         self.pred_impact = np.full(2, math.nan)   # predicted deploy point (lat, lon) [rad]
         self.pred_h_m = math.nan
         self.t_go_s = math.inf           # predicted time to deploy (last solution, from its state)
+        self._t_answer = math.nan        # release time of the last answer applied (its state's time)
         self.xr_keep_m = math.nan        # predicted deploy crossrange, sign kept [m, + left]
         self.xr_rev_m = math.nan         # ... reversed at the next cycle
         self._t_cycle = math.nan         # release time of the last cycle
@@ -786,6 +787,7 @@ class EntryGuidance:
         self._go = threading.Event()
         self._done = threading.Event()
         self._job = None
+        self._correct = self.solve      # the worker's job (tests wrap it to inject delays)
         self._stop = False
         self._warm_up()
         self._thread = threading.Thread(target=self._worker, name="npc-guidance", daemon=True)
@@ -973,7 +975,7 @@ class EntryGuidance:
                 return
             x, sign, k_rho, k_ld, t_flip, shp, t_s = self._job
             try:
-                res = self.solve(x, sign, k_rho, k_ld, t_flip, shp)
+                res = self._correct(x, sign, k_rho, k_ld, t_flip, shp)
             except Exception as e:      # noqa: BLE001 -- a fault in the correction must not stall the FSW
                 res = {"error": f"{type(e).__name__}: {e}"}
             res["t_s"], res["sign"] = t_s, sign
@@ -997,8 +999,9 @@ class EntryGuidance:
         self.range_to_go_m = ang * self.R
         V = nav.V_rel_mps
         # the crossranges were predicted from the last cycle's state, the reversal in them
-        # commanded one cycle later (now)
-        t_go = self.t_go_s - (t_s - self._t_cycle) if math.isfinite(self._t_cycle) else math.inf
+        # commanded one cycle later (now); the time to deploy is aged from the answer's own
+        # release (a late answer's is older than the last cycle)
+        t_go = self.t_go_s - (t_s - self._t_answer) if math.isfinite(self._t_answer) else math.inf
         if self.lateral.update(t_s, V, dpsi, self.xr_keep_m, self.xr_rev_m, t_go,
                                self.shaper.reversal_s(self.bank_cmd)):
             self.xr_keep_m = self.xr_rev_m = math.nan      # for the sign just left
@@ -1052,7 +1055,7 @@ class EntryGuidance:
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat"], res["lon"])
         self.pred_h_m = res["h_f"]
-        self.t_go_s = res["t_go"]
+        self.t_go_s, self._t_answer = res["t_go"], res["t_s"]
         sh = self.shaper
         if math.isfinite(res["turn"]) and res["sign"] == sh._sign and math.sin(sh.phi) * sh._sign < 0.0:
             # the reversal under way turned round (solve: no range solution the way it went)

@@ -5,9 +5,15 @@ types is turned into requests by gse/commands.py.
 
 Addressing: the client listens on ``listen`` (default udp:127.0.0.1:14550, where the
 vehicle sends its telemetry; "port 0" = ephemeral) and sends to ``vehicle`` if given,
-else to the source address of the vehicle's first accepted frame. The vehicle answers the
-sender of every accepted signed frame, so a client on an ephemeral port with
-``vehicle="udp:127.0.0.1:14555"`` works while another client (the console) holds 14550.
+else to the source address of the vehicle's first verified frame. The vehicle sends its
+telemetry to the sender of every accepted signed command, and answers requests to their
+sender, so a client on an ephemeral port with ``vehicle="udp:127.0.0.1:14555"`` works
+while another client (the console) holds 14550.
+
+Whom it believes, with a key: only frames of the vehicle (system 1) whose signature
+verified — an unsigned HEARTBEAT cannot set the mode, ARMED or the link age shown — and
+only from the address of the first one verified (``vehicle_source``: the vehicle is
+pinned; frames of system 1 from elsewhere are dropped and counted, ``rx_foreign``).
 
 Signing: every frame sent is signed with the key (commands and parameter writes must be);
 each client should use its own ``link_id`` when several share one key and system/component
@@ -15,7 +21,11 @@ id (the console uses 0, the CLI a per-process one), so their timestamp streams s
 
 Watching without the key (``key=None``: the view-only console, a recorded log): frames
 whose CRC is right are decoded without checking their signature, and nothing is sent; what
-is shown is then unverified, and it authorises nothing. ``listen=None`` opens no socket:
+is shown is then unverified, and it authorises nothing.
+
+Text fields from the link (STATUSTEXT, parameter and value names) are kept with their
+control characters escaped (``framing.printable_text``): what is printed cannot act on the
+operator's terminal. ``listen=None`` opens no socket:
 frames come from ``feed`` (gse/replay.py drives it from a .tlog).
 
 Nothing here blocks except the explicit waiting calls (``wait_*``, ``command``,
@@ -32,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.framing import FrameSplitter, parse_header
+from interfaces.mavlink.framing import FrameSplitter, parse_header, printable_text
 from interfaces.mavlink.intake import kernel_drops
 from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, parse_udp
@@ -171,6 +181,7 @@ class GroundClient:
         self.view_only = key is None
         self.vehicle_addr: tuple[str, int] | None = parse_udp(vehicle, "vehicle") if vehicle else None
         self._vehicle_fixed = self.vehicle_addr is not None
+        self.vehicle_source: tuple[str, int] | None = None        # pinned: first verified vehicle frame's address
         self.sock = None
         if listen is not None:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -190,7 +201,7 @@ class GroundClient:
         self._rx_times: deque[float] = deque(maxlen=4096)
         self._tx_times: deque[float] = deque(maxlen=4096)
         self.stats = {"rx_datagrams": 0, "rx_frames": 0, "rx_messages": 0, "tx_frames": 0, "tx_errors": 0,
-                      "rx_kernel_drops": 0}
+                      "rx_kernel_drops": 0, "rx_unsigned": 0, "rx_foreign": 0}
         self.rx_buffer_bytes = (self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
                                 if self.sock is not None else 0)
         self._buf = bytearray(65536)
@@ -280,11 +291,17 @@ class GroundClient:
         for msg in self.link.receive(data):
             if msg.get_srcSystem() != VEHICLE_SYSTEM_ID:
                 continue
-            if not msg.get_signed():        # only a vehicle heartbeat may be unsigned
-                if msg.get_type() != "HEARTBEAT":
+            if not self.view_only:
+                if not msg.get_signed():    # authorises nothing, shows nothing
+                    self.stats["rx_unsigned"] += 1
                     continue
-            if not self._vehicle_fixed and addr is not None and self.vehicle_addr != addr and msg.get_signed():
-                self.vehicle_addr = addr
+                if self.vehicle_source is None:
+                    self.vehicle_source = addr
+                    if not self._vehicle_fixed and addr is not None:
+                        self.vehicle_addr = addr
+                elif addr != self.vehicle_source:
+                    self.stats["rx_foreign"] += 1
+                    continue
             self._rx_times.append(now)
             self.stats["rx_messages"] += 1
             self._update(msg, now)
@@ -299,10 +316,10 @@ class GroundClient:
         if t == "HEARTBEAT":
             st.last_heartbeat_t = now
         elif t == "STATUSTEXT":
-            st.events.append(StatusText(now, msg.severity, _text(msg.text)))
+            st.events.append(StatusText(now, msg.severity, printable_text(msg.text)))
             st.events_total += 1
         elif t == "NAMED_VALUE_FLOAT":
-            st.named[_text(msg.name)] = msg.value
+            st.named[printable_text(msg.name)] = msg.value
         elif t == "COMMAND_ACK":
             st.acks.append(Ack(now, msg.command, msg.result))
             for p in self.pending:
@@ -310,7 +327,7 @@ class GroundClient:
                     p.result, p.done = msg.result, True
                     break
         elif t == "PARAM_VALUE":
-            st.params[_text(msg.param_id)] = msg.param_value
+            st.params[printable_text(msg.param_id)] = msg.param_value
             st.param_count = msg.param_count
 
     # ---------------------------------------------------------------- rates
@@ -437,12 +454,6 @@ def float32_equal(a: float, b: float) -> bool:
         return struct.pack("<f", a) == struct.pack("<f", b)
     except (OverflowError, struct.error):
         return False
-
-
-def _text(raw) -> str:
-    if isinstance(raw, bytes):
-        raw = raw.decode("ascii", "replace")
-    return str(raw).rstrip("\x00")
 
 
 def load_key(path: str | os.PathLike[str] | None) -> SigningKey:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import random
+import re
 import socket
 import time
 
@@ -126,7 +127,6 @@ def test_rejection_events_are_rate_limited_but_every_rejection_is_counted(rig):
     ev = link_events(rig)
     # the 31 rejections are all accounted for in the 2 events: a tick's alike refusals are
     # reported once ("30x"), the rate limiter holds the rest ("+N suppressed")
-    import re
     told = sum(int((re.search(r"rejected (\d+)x", e.text) or [0, 1])[1])
                + sum(int(n) for n in re.findall(r"\(\+(\d+) suppressed\)", e.text)) for e in ev)
     assert len(ev) == 2 and told == 31, [e.text for e in ev]
@@ -195,3 +195,191 @@ def test_a_tick_without_slack_before_the_cycle_deadline_leaves_datagrams_waiting
     rig.gl.tick(rig.frame, deadline_ns=time.monotonic_ns() + 10_000_000_000)  # slack to spare
     assert rig.gl.stats["rx_datagrams"] == before["rx_datagrams"] + 5
     assert rig.gl.stats["rx_deferred"] == before["rx_deferred"] + 1
+
+
+# --------------------------------------------------------------------------- who may steer the link
+
+def attacker_socket():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.setblocking(False)
+    return s
+
+
+def vehicle_heartbeat():
+    return mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GENERIC, mav.MAV_AUTOPILOT_GENERIC, 0, 0,
+                                         mav.MAV_STATE_ACTIVE, 3)
+
+
+def test_a_reflected_vehicle_signed_frame_is_refused_and_makes_no_peer(rig):
+    """A frame the vehicle signed itself (sniffed off the link, or asked for by an unsigned
+    read) sent back from another address, alone or behind another frame in one datagram:
+    refused for its system id, no telemetry peer made."""
+    evil = attacker_socket()
+    try:
+        unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        read = mav.MAVLink_param_request_list_message(1, 1).pack(unsigned)
+        evil.sendto(rig.gl.link.pack(vehicle_heartbeat()), rig.gl.address)
+        evil.sendto(read + rig.gl.link.pack(vehicle_heartbeat()), rig.gl.address)
+        settle(rig)
+        assert evil.getsockname() not in rig.gl.peers and rig.gl.stats["peers_added"] == 0
+        assert rig.gl.link.counts[Reject.OWN_SYSTEM] == 2
+        assert rig.gl.refused_by_sender[evil.getsockname()] == 2
+    finally:
+        evil.close()
+
+
+def test_only_a_signed_command_class_frame_makes_a_telemetry_peer(rig):
+    """A key holder's signed HEARTBEAT or read is not a request for telemetry; its signed
+    command is."""
+    other = Signer(rig.key, system_id=255, component_id=190, link_id=7)
+    s = attacker_socket()
+    try:
+        hb = mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+        s.sendto(other.pack(hb), rig.gl.address)
+        s.sendto(other.pack(mav.MAVLink_param_request_read_message(1, 1, b"", 0)), rig.gl.address)
+        settle(rig)
+        assert rig.gl.link.verifier.accepted_signed == 2 and s.getsockname() not in rig.gl.peers
+        s.sendto(other.pack(ARM_OFF), rig.gl.address)
+        settle(rig)
+        assert s.getsockname() in rig.gl.peers and rig.gl.stats["peers_added"] == 1
+    finally:
+        s.close()
+
+
+def test_a_command_captured_in_one_run_is_refused_in_the_next_with_the_same_key(tmp_path):
+    """Run A accepts a signed injection (signed 30 s ahead: within the clock tolerance, and
+    after run B's start); run B, a new link with the same key file, refuses its replay."""
+    a = Rig(tmp_path)
+    inject = mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_INJECT_FAILURE, 0, mav.FAILURE_UNIT_SYSTEM_MOTOR,
+                                              mav.FAILURE_TYPE_OFF, 18, 0, 0, 0, 0)
+    ground = Signer(a.key, system_id=255, component_id=190, link_id=4, clock=lambda: time.time() + 30.0)
+    captured = ground.pack(inject)
+    try:
+        a.fly(3)
+        send_raw(a, captured)
+        assert a.exchange(lambda: len(a.gcs.state.acks) == 1)
+        assert a.injected == [(18, "off", 1.0)]
+    finally:
+        a.close()
+    b = Rig(tmp_path, key=a.key)
+    try:
+        b.fly(3)
+        send_raw(b, captured)
+        settle(b)
+        assert b.injected == [] and not b.gcs.state.acks
+        assert b.gl.link.counts[Reject.REPLAY] == 1
+    finally:
+        b.close()
+
+
+def test_unknown_id_reads_are_counted_per_sender_and_told_in_one_throttled_event(rig):
+    evil = attacker_socket()
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    n = 100
+    try:
+        for i in range(n):
+            evil.sendto(mav.MAVLink_param_request_read_message(1, 1, b"NO_SUCH_%d" % i, -1).pack(unsigned),
+                        rig.gl.address)
+        assert rig.exchange(lambda: rig.gl.stats["rx_datagrams"] >= n)
+        link_ev = [e for e in rig.fsw.events.history if e.source == "link"]
+        assert len(link_ev) <= 2, [e.text for e in link_ev]          # one per kind, not one per request
+        assert rig.gl.refused_by_sender[evil.getsockname()] == n
+        assert rig.gl.stats["reads_unknown"] + rig.gl.stats["reads_limited"] == n
+        rig.fly(60)                                                 # 1.2 s: the held ones are told
+        told = [e.text for e in rig.fsw.events.history if e.code == "param_unknown_read"]
+        total = sum(1 + sum(int(k) for k in re.findall(r"\(\+(\d+) suppressed\)", t)) for t in told)
+        assert len(told) == 2 and total == rig.gl.stats["reads_unknown"], told
+    finally:
+        evil.close()
+
+
+def test_events_keep_their_share_of_the_downlink_whatever_is_requested(rig):
+    from fsw.groundlink.link import EVENT_SHARE
+    rig.gl.max_tx_per_tick = EVENT_SHARE + 4
+    rig.gl.tick(rig.frame)
+    sent = []
+    send = rig.gl._send
+    rig.gl._send = lambda msg, *a, **kw: (sent.append(msg.get_type()), send(msg, *a, **kw))
+    rig.gcs.param_request_list()                    # 63 parameters asked for
+    assert rig.exchange(lambda: "PARAM_VALUE" in sent)
+    sent.clear()
+    for i in range(40):
+        rig.fsw.events.emit(rig.fsw.t_s, mav.MAV_SEVERITY_CRITICAL, "test", f"fdir{i}", f"FDIR EVENT {i}")
+    rig.gl.tick(rig.frame)
+    assert sent.count("STATUSTEXT") >= EVENT_SHARE and sent.count("PARAM_VALUE") <= 4, sent
+
+
+def test_text_from_the_link_reaches_events_with_control_characters_escaped(rig):
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    send_raw(rig, mav.MAVLink_param_request_read_message(1, 1, b"\x1b[2J\x07X", -1).pack(unsigned))
+    settle(rig)
+    texts = [e.text for e in rig.fsw.events.history if e.source == "link" and "UNKNOWN" in e.text]
+    assert texts and all(c.isprintable() for t in texts for c in t) and "\\x1b[2J\\x07X" in texts[0], texts
+
+
+def test_the_bench_flood_mix_changes_nothing_and_events_still_go_out_each_tick(rig):
+    """The benchmark's hostile mix (ellipsled/bench/flood.py: random, malformed, unsigned,
+    forged, multi-frame, MAVLink 1, unsigned reads, the vehicle's own signed frames sent
+    back), 1,000 datagrams from one socket: no command or parameter takes effect, no peer
+    is made, and an FDIR event emitted meanwhile goes to the ground in the tick after it."""
+    from ellipsled.bench.flood import Flood
+    fl = Flood(3, reflect=[rig.gl.link.pack(vehicle_heartbeat())])
+    evil = attacker_socket()
+    params0 = dict(rig.fsw.params)
+    sent = []
+    send = rig.gl._send
+    rig.gl._send = lambda msg, *a, **kw: (sent.append(msg), send(msg, *a, **kw))
+    kinds = set()
+    try:
+        for burst in range(10):
+            for _ in range(100):
+                kind, data = fl.next()
+                kinds.add(kind)
+                evil.sendto(data, rig.gl.address)
+            while True:                                  # what the vehicle answered: to reflect
+                try:
+                    fl.take(evil.recv(65536))
+                except BlockingIOError:
+                    break
+            sent.clear()
+            rig.fsw.events.emit(rig.fsw.t_s, mav.MAV_SEVERITY_ERROR, "fdir", "jet_failed_off", f"JET {burst + 1} FAILED OFF")
+            rig.fly(5)                                   # one RG2 tick
+            texts = [m.text for m in sent if m.get_type() == "STATUSTEXT"]
+            assert f"JET {burst + 1} FAILED OFF" in texts, texts
+        settle(rig, 0.3)
+    finally:
+        evil.close()
+    assert {"multiframe", "mavlink1", "reflected", "reads"} <= kinds
+    st = rig.gl.stats
+    assert st["commands_accepted"] == 0 and st["params_set"] == 0 and st["peers_added"] == 0, st
+    assert rig.fsw.driver.armed and dict(rig.fsw.params) == params0 and not rig.gl.peers
+    assert rig.gl.link.counts[Reject.OWN_SYSTEM] > 0 and rig.gl.link.counts[Reject.GARBAGE] > 0
+
+
+def test_an_unsigned_parameter_list_goes_to_the_requester_at_the_read_pace(rig):
+    """Keyless, a stock ground station still gets the whole list, to its own address only;
+    one 20-byte request cannot make the vehicle send more than the read pace allows."""
+    from fsw.groundlink.link import READ_BURST, READ_RATE_HZ
+    evil = attacker_socket()
+    to_requester = []
+    send = rig.gl._send
+    rig.gl._send = lambda msg, *a, only=None, **kw: (
+        to_requester.append(msg) if only == evil.getsockname() and msg.get_type() == "PARAM_VALUE" else None,
+        send(msg, *a, only=only, **kw))
+    try:
+        unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        evil.sendto(mav.MAVLink_param_request_list_message(1, 1).pack(unsigned), rig.gl.address)
+        assert rig.exchange(lambda: rig.gl.stats["rx_datagrams"] >= 1)
+        assert len(to_requester) <= READ_BURST
+        n_params = len(rig.gl.param_names)
+        ticks = 0
+        while len(to_requester) < n_params:
+            before = len(to_requester)
+            rig.fly(5)                                     # one RG2 tick: 0.1 s
+            ticks += 1
+            assert len(to_requester) - before <= READ_RATE_HZ * 0.1 + 1
+            assert ticks < 100
+        assert sorted(m.param_index for m in to_requester) == list(range(n_params))
+    finally:
+        evil.close()

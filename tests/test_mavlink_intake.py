@@ -9,6 +9,7 @@ import socket
 import time
 
 import pytest
+from pymavlink.dialects.v10 import common as v10
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
@@ -176,5 +177,38 @@ def test_a_calls_alike_refusals_are_counted_each_and_reported_once():
         assert b.poll() == 3
         assert b.link.counts[Reject.GARBAGE] == 3 and len(seen) == 1
         assert seen[0].text() == "link rejected 3x garbage"
+    finally:
+        b.close()
+
+
+def test_every_frame_of_a_datagram_is_judged_on_its_own(b):
+    """Beside a genuine command in one datagram: a signed message the vehicle does not take,
+    a MAVLink 1 heartbeat (which may be unsigned, but not MAVLink 1), a frame with the
+    receiver's own system id; each refused as it would be alone, the command passed on."""
+    b.intake.own_sysid = 1
+    v1 = v10.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(v10.MAVLink(None, srcSystem=255, srcComponent=190))
+    telemetry = b.ground.pack(mav.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0))
+    own = Signer(b.key, system_id=1, component_id=1).pack(mav.MAVLink_heartbeat_message(0, 8, 0, 0, 4, 3))
+    b.send(b.ground.pack(ARM) + telemetry + v1)      # a MAVLink 1 frame ends the datagram
+    b.send(own + b.ground.pack(ARM))
+    assert b.poll() == 2
+    assert [m.get_type() for m in b.got] == ["COMMAND_LONG", "COMMAND_LONG"]
+    c = b.link.counts
+    assert (c[Reject.GARBAGE], c[Reject.UNKNOWN_MESSAGE], c[Reject.OWN_SYSTEM]) == (1, 1, 1)
+    assert sum(b.intake.refused_by_sender.values()) == 3
+
+
+def test_the_time_budget_is_checked_before_each_frame_and_what_it_leaves_waits():
+    b = Bench(budget_us=1000.0, clock_ns=stepping_clock(300_000))
+    try:
+        b.send(b"".join(b.ground.pack(ARM) for _ in range(4)))
+        b.poll()
+        first = len(b.got)
+        assert first < 4 and b.intake.stats["frames_deferred"] == 1
+        while len(b.got) < 4:
+            n = len(b.got)
+            b.intake.poll(lambda msg, addr: b.got.append(msg))
+            assert len(b.got) > n
+        assert all(m.get_type() == "COMMAND_LONG" for m in b.got) and not b.link.counts[Reject.REPLAY]
     finally:
         b.close()

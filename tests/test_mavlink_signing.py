@@ -19,7 +19,8 @@ from pymavlink.dialects.v20 import common as stock
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import FrameSplitter, parse_header
 from interfaces.mavlink.signing import (
-    KEY_ENV, REPO_ROOT, Reject, SignedLink, Signer, SigningKey, SigningKeyError, signing_timestamp)
+    KEY_ENV, REPO_ROOT, Reject, SignedLink, Signer, SigningKey, SigningKeyError, signing_timestamp,
+    stream_state_path)
 
 T0 = 1_760_000_000.0            # fake Unix time [s] (2025-10)
 TS0 = signing_timestamp(T0)
@@ -466,3 +467,55 @@ def test_key_cli_writes_and_checks_a_key(tmp_path, capsys):
     assert signing.main(["new-key", str(path)]) == 1          # refuses to overwrite
     out = capsys.readouterr().out
     assert key.key_id in out and key.secret.hex() not in out
+
+
+# --------------------------------------------------------------------------- replay across restarts
+
+
+def test_nothing_signed_before_the_verifier_started_is_accepted():
+    veh = vehicle(Clock(T0))
+    earlier = Signer(KEY, system_id=GCS_SYS, component_id=GCS_COMP, link_id=3, clock=Clock(T0 - 5))
+    assert veh.receive(earlier.pack(inject_cmd())) == []            # within max_age_s, but before start
+    assert veh.counts[Reject.STALE_TIMESTAMP] == 1
+    assert len(veh.receive(ground().pack(inject_cmd()))) == 1       # signed at the start: accepted
+
+
+def test_stream_timestamps_survive_a_restart_beside_the_key_file(tmp_path):
+    path = tmp_path / "ground.key"
+    KEY.write_file(path)
+    key = SigningKey.from_file(path)
+    state = stream_state_path(key)
+    assert state == tmp_path / "ground.key.streams"
+    ahead = Signer(KEY, system_id=GCS_SYS, component_id=GCS_COMP, link_id=2, clock=Clock(T0 + 30))
+    frame = ahead.pack(inject_cmd())
+    run_a = vehicle(Clock(T0), state_path=state)
+    assert len(run_a.receive(frame)) == 1
+    assert (state.stat().st_mode & 0o777) == 0o600 and not list(tmp_path.glob("*.tmp"))
+    run_b = vehicle(Clock(T0 + 1), state_path=state)                   # restarted, same key
+    assert run_b.receive(frame) == [] and run_b.counts[Reject.REPLAY] == 1
+    assert len(run_b.receive(ahead.pack(inject_cmd()))) == 1          # the ground's next frame
+
+
+def test_frames_signed_behind_the_receivers_clock_cost_no_write_and_are_refused_after_a_restart(tmp_path):
+    """The start-time rule covers them: the state file is written only for frames signed
+    ahead of the receiver's clock, of the messages it is asked to persist."""
+    state = tmp_path / "k.streams"
+    behind = Signer(KEY, system_id=GCS_SYS, component_id=GCS_COMP, clock=Clock(T0 - 0.5))
+    frame = behind.pack(inject_cmd())
+    ahead = Signer(KEY, system_id=GCS_SYS, component_id=GCS_COMP, link_id=1, clock=Clock(T0 + 5))
+    run_a = vehicle(Clock(T0 - 1), state_path=state, persist_msgids={mav.MAVLINK_MSG_ID_COMMAND_LONG})
+    run_a.verifier.clock = Clock(T0)                                  # the flight goes on
+    assert len(run_a.receive(frame)) == 1 and not state.exists()
+    assert len(run_a.receive(ahead.pack(heartbeat()))) == 1 and not state.exists()     # not a command
+    run_b = vehicle(Clock(T0 + 1), state_path=state)
+    assert run_b.receive(frame) == [] and run_b.counts[Reject.STALE_TIMESTAMP] == 1
+
+
+def test_an_unreadable_stream_state_is_reported_and_the_start_time_rule_still_holds(tmp_path, caplog):
+    state = tmp_path / "k.streams"
+    state.write_text("{not json")
+    with caplog.at_level(logging.WARNING):
+        veh = vehicle(Clock(T0), state_path=state)
+    assert "unreadable" in caplog.text
+    old = Signer(KEY, system_id=GCS_SYS, component_id=GCS_COMP, clock=Clock(T0 - 1))
+    assert veh.receive(old.pack(inject_cmd())) == [] and veh.counts[Reject.STALE_TIMESTAMP] == 1

@@ -9,15 +9,54 @@ thread of its process. That is a property of the code, the same on a quiet or a 
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 import threading
 import time
+
+import pytest
 
 SCHEDSTAT = "/proc/thread-self/schedstat"
 
 
 def available() -> bool:
     return os.path.exists(SCHEDSTAT)
+
+
+LOOP_PRIORITY = 20          # SCHED_FIFO priority of a measured loop (background jobs: one below)
+
+
+def can_run_as_the_loop() -> bool:
+    """Whether this process may make a thread SCHED_FIFO (root or CAP_SYS_NICE)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(LOOP_PRIORITY))
+    except (OSError, AttributeError):
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
+
+
+def loop_timing(test):
+    """Marks of a test that judges a loop's waits on the wall clock (``timing``: run alone),
+    with the loop SCHED_FIFO (``as_the_realtime_loop``): it needs root and schedstat."""
+    test = pytest.mark.skipif(not can_run_as_the_loop(), reason="needs root (SCHED_FIFO)")(test)
+    test = pytest.mark.skipif(not available(), reason="needs Linux per-thread schedstat")(test)
+    return pytest.mark.timing(test)
+
+
+@contextlib.contextmanager
+def as_the_realtime_loop():
+    """The calling thread runs SCHED_FIFO, as the real-time FSW's loop does: threads it starts
+    meanwhile inherit that and background jobs step one priority below it
+    (common.rt.run_below_loop). Other load on the machine (SCHED_OTHER) then never takes the
+    loop's CPU, so the loop's waits are its own: waits for the GIL on a job of its process.
+    Back to SCHED_OTHER afterwards."""
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(LOOP_PRIORITY))
+    try:
+        yield
+    finally:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 class BlockedMeter:
@@ -42,3 +81,48 @@ class BlockedMeter:
 
     def close(self) -> None:
         os.close(self._fd)
+
+
+class LongestCCall:
+    """The longest single C call a job made, in its own thread's CPU time [ns]. Python bytecode
+    gives the GIL up every switch interval; only a C call can keep it longer, so this bounds
+    from above any stretch of CPU work in which the job kept the GIL from the loop. CPU time
+    is the thread's own: the same on a quiet or a loaded host. Blind to a C call that keeps
+    the GIL while it sleeps or blocks (no CPU): the blocked-time tests see those.
+
+    ``wrap(job)`` profiles each call of ``job`` in the thread that makes it."""
+
+    def __init__(self) -> None:
+        self.worst_ns = 0
+        self.worst_name = ""
+        self._starts: list[int] = []
+
+    def _hook(self, frame, event, arg) -> None:
+        if event == "c_call":
+            self._starts.append(time.thread_time_ns())
+        elif event in ("c_return", "c_exception") and self._starts:
+            took = time.thread_time_ns() - self._starts.pop()
+            if took > self.worst_ns:
+                self.worst_ns, self.worst_name = took, getattr(arg, "__qualname__", repr(arg))
+
+    def wrap(self, job):
+        def profiled(*args):
+            sys.setprofile(self._hook)
+            try:
+                return job(*args)
+            finally:
+                sys.setprofile(None)
+                self._starts.clear()
+        return profiled
+
+
+def gil_keeping_burn(cpu_ns: float):
+    """One C call that keeps the GIL for at least ``cpu_ns`` of this host's CPU: a big-integer
+    power, its exponent doubled until it takes that long (in this thread's CPU time)."""
+    e = 1 << 12
+    while True:
+        t0 = time.thread_time_ns()
+        pow(3, e)
+        if time.thread_time_ns() - t0 >= cpu_ns:
+            return lambda: pow(3, e)
+        e *= 2

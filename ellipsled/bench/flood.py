@@ -11,9 +11,17 @@ sends, at ``rate`` datagrams per second (paced every millisecond), a seeded mix 
 | badsig      | COMMAND_LONG / PARAM_SET signed with another key (current and future time) |
 | replay      | genuine signed frames captured earlier (``--replay FILE``, .tlog records)  |
 | oversized   | a 60,000-byte datagram of back-to-back bad frames and noise               |
+| reads       | unsigned read-only requests: PARAM_REQUEST_READ (known and unknown ids),  |
+|             | PARAM_REQUEST_LIST, MISSION_REQUEST_LIST (their answers come back here)  |
+| reflected   | frames the vehicle signed itself, sent back to it: its answers to the     |
+|             | reads above, and its HEARTBEATs sniffed off the link (``--reflect FILE``) |
+| multiframe  | 2-4 frames in one datagram: an unsigned command, a read, a forged signed  |
+|             | command, a MAVLink 1 frame, a reflected frame                             |
+| mavlink1    | MAVLink 1 frames (cannot be signed): HEARTBEAT, COMMAND_LONG, PARAM_SET   |
 
 Loopback only (the target must be 127.0.0.1). Prints one JSON line at the end: the count
-sent per kind and the achieved rate. Nothing here knows the vehicle's key.
+sent per kind, the achieved rate, and how many vehicle-signed frames came back to reflect.
+Nothing here knows the vehicle's key.
 """
 from __future__ import annotations
 
@@ -22,34 +30,58 @@ import json
 import random
 import socket
 import sys
+import threading
 import time
+from collections import deque
+
+from pymavlink.dialects.v10 import common as v10
 
 from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.framing import parse_header
 from interfaces.mavlink.signing import Signer, SigningKey
 
 from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
-TARGETS = {"slips": 0, "groundlink_max_us_max": 20_000.0}   # a ground-link tick within one period
+TARGETS = {"slips": 0, "groundlink_max_us_max": 20_000.0,    # a ground-link tick within one period
+           "state_changes": 0, "peers_added": 0, "fdir_event_latency_s_max": 1.0}
 
 # share of each kind in the mix (oversized datagrams are few: each is 60 kB)
-MIX = {"random": 20, "malformed": 20, "unsigned": 15, "badsig": 25, "replay": 18, "oversized": 2}
+MIX = {"random": 12, "malformed": 12, "unsigned": 10, "badsig": 14, "replay": 10, "oversized": 2,
+       "reads": 10, "reflected": 10, "multiframe": 12, "mavlink1": 8}
+REFLECT_POOL = 64                # vehicle-signed frames kept to send back
 OVERSIZED_BYTES = 60_000
 DISARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0)
 SAFE = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_SET_MODE, 0, 2, 0, 0, 0, 0, 0, 0)
 PARAM = mav.MAVLink_param_set_message(1, 1, b"C_LAMBDA_RADPS", 50.0, mav.MAV_PARAM_TYPE_REAL32)
+READS = (mav.MAVLink_param_request_read_message(1, 1, b"C_LAMBDA_RADPS", -1),
+         mav.MAVLink_param_request_read_message(1, 1, b"NO_SUCH_PARAM", -1),
+         mav.MAVLink_param_request_read_message(1, 1, b"", 3),
+         mav.MAVLink_param_request_list_message(1, 1),
+         mav.MAVLink_mission_request_list_message(1, 1, 0))
+V1 = (v10.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3),
+      v10.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0),
+      v10.MAVLink_param_set_message(1, 1, b"C_LAMBDA_RADPS", 50.0, mav.MAV_PARAM_TYPE_REAL32))
+
+
+def vehicle_signed(frame: bytes) -> bool:
+    """A signed MAVLink 2 frame of the vehicle (system 1): worth reflecting."""
+    hdr = parse_header(frame)
+    return hdr is not None and hdr.version == 2 and hdr.signed and hdr.sysid == 1
 
 
 class Flood:
     """Datagram maker; ``next()`` returns (kind, datagram)."""
 
-    def __init__(self, seed: int = 1, replay: list[bytes] | None = None):
+    def __init__(self, seed: int = 1, replay: list[bytes] | None = None, reflect: list[bytes] | None = None):
         self.rng = random.Random(seed)
         self.replay = replay or []
+        self.reflect: deque[bytes] = deque((f for f in reflect or () if vehicle_signed(f)), maxlen=REFLECT_POOL)
         self.forger = Signer(SigningKey.generate(), system_id=255, component_id=190, link_id=0)
         # a forged frame a day ahead: a verify-after-store link would lock the ground out
         self.future = Signer(SigningKey.generate(), system_id=255, component_id=190, link_id=0,
                              clock=lambda: time.time() + 86_400.0)
         self.unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.v1 = v10.MAVLink(None, srcSystem=255, srcComponent=190)
         kinds = [k for k in MIX if k != "replay" or self.replay]
         self.kinds, self.weights = kinds, [MIX[k] for k in kinds]
         self._oversized = self._make_oversized()
@@ -73,8 +105,46 @@ class Flood:
             f[-15] ^= 0xFF                                            # CRC wrong
         return bytes(f)
 
+    def take(self, data: bytes) -> None:
+        """A datagram that came back from the vehicle: its signed frames go to the pool."""
+        i = 0
+        while i < len(data):
+            hdr = parse_header(data, i)
+            if hdr is None or hdr.frame_len > len(data) - i:
+                return
+            frame = data[i:i + hdr.frame_len]
+            if vehicle_signed(frame):
+                self.reflect.append(frame)
+            i += hdr.frame_len
+
+    def _read(self) -> bytes:
+        return self.rng.choice(READS).pack(self.unsigned)
+
+    def _mavlink1(self) -> bytes:
+        return self.rng.choice(V1).pack(self.v1)
+
+    def _multiframe(self) -> bytes:
+        parts = [DISARM.pack(self.unsigned), self._read(), self.forger.pack(SAFE)]
+        if self.reflect:
+            parts.append(self.rng.choice(self.reflect))
+        self.rng.shuffle(parts)
+        parts = parts[:self.rng.randrange(2, len(parts) + 1)]
+        if self.rng.random() < 0.3:
+            parts.append(self._mavlink1())
+        return b"".join(parts)
+
     def next(self) -> tuple[str, bytes]:
         kind = self.rng.choices(self.kinds, self.weights)[0]
+        if kind == "reflected" and not self.reflect:
+            kind = "reads"                     # nothing to reflect yet: ask for something to
+        if kind == "reads":
+            return kind, self._read()
+        if kind == "reflected":
+            return kind, self.rng.choice(self.reflect)
+        if kind == "multiframe":
+            return kind, self._multiframe()
+        if kind == "mavlink1":
+            return kind, self._mavlink1()
         if kind == "random":
             return kind, self.rng.randbytes(self.rng.randrange(1, 301))
         if kind == "malformed":
@@ -90,21 +160,34 @@ class Flood:
 
 
 def send(target: tuple[str, int], rate: float, seconds: float, seed: int = 1,
-         replay: list[bytes] | None = None) -> dict:
-    """Flood ``target`` for ``seconds`` at ``rate`` datagrams/s; what was sent, by kind."""
+         replay: list[bytes] | None = None, reflect: list[bytes] | None = None, flood: Flood | None = None) -> dict:
+    """Flood ``target`` for ``seconds`` at ``rate`` datagrams/s; what was sent, by kind.
+    What the vehicle sends back (answers to the reads) is kept to reflect. ``flood``: a
+    Flood to use (another thread may add to its reflect pool)."""
     if target[0] != "127.0.0.1":
         raise ValueError("the flood stays on loopback: target must be 127.0.0.1")
-    fl = Flood(seed, replay)
+    fl = flood or Flood(seed, replay, reflect)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 << 20)
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
     counts = {k: 0 for k in MIX}
-    errors = 0
+    errors = back = 0
     t0 = time.monotonic()
     sent = 0
     while True:
         now = time.monotonic()
         if now - t0 >= seconds:
             break
+        while True:                          # the vehicle's answers: frames it signed
+            try:
+                fl.take(sock.recv(65536))
+                back += 1
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:                  # an ICMP error reported here: go on
+                errors += 1
+                break
         due = int((now - t0) * rate) + 1
         while sent < due:
             kind, data = fl.next()
@@ -118,7 +201,7 @@ def send(target: tuple[str, int], rate: float, seconds: float, seed: int = 1,
     elapsed = time.monotonic() - t0
     sock.close()
     return {"sent": sent, "seconds": elapsed, "rate_per_s": sent / elapsed, "by_kind": counts,
-            "send_errors": errors}
+            "send_errors": errors, "answers_received": back, "reflect_pool": len(fl.reflect)}
 
 
 # ------------------------------------------------------------------ benchmark
@@ -205,19 +288,97 @@ def _free_udp() -> int:
         return s.getsockname()[1]
 
 
-def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, timeout_s: float = 300.0) -> dict:
-    """One real-time SIL (``ellipsled run nominal --realtime``), flooded for ``flood_s`` from
-    its first jet command (None: quiet): the FSW's cycle compute, ground-link task cost and
-    slips from its fsw.json."""
+class GroundWatch:
+    """The ground station of a benchmark run, in a thread: listens where the vehicle sends
+    its telemetry, with the key (GroundClient: only verified vehicle frames), and notes when
+    each STATUSTEXT arrived and the vehicle's SYSTEM_TIME (Unix time against mission time);
+    it also gives the vehicle's HEARTBEATs, as sniffed off the link, to the flood's reflect
+    pool. Sends nothing."""
+
+    def __init__(self, key: SigningKey, port: int, flood: Flood | None):
+        from gse.client import GroundClient
+        self.client = GroundClient(key, listen=None)
+        self.flood = flood
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", port))
+        self.sock.settimeout(0.05)
+        self.arrivals: list[tuple[float, str]] = []          # (Unix s, text) of each STATUSTEXT
+        self.offsets_s: list[float] = []                      # Unix time - mission time, per SYSTEM_TIME
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="ground-watch", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+        self.sock.close()
+
+    def _loop(self) -> None:
+        st = self.client.state
+        while not self._stop.is_set():
+            try:
+                data, addr = self.sock.recvfrom(65536)
+            except (socket.timeout, InterruptedError):
+                continue
+            except OSError:
+                return
+            now = time.time()
+            n_ev, n_time = st.events_total, st.rx_counts.get("SYSTEM_TIME", 0)
+            if self.client.feed(data, addr, now) and self.flood is not None:
+                hdr = parse_header(data)
+                if hdr is not None and hdr.msgid == mav.MAVLINK_MSG_ID_HEARTBEAT and vehicle_signed(data):
+                    self.flood.reflect.append(bytes(data[:hdr.frame_len]))
+            for ev in list(st.events)[len(st.events) - (st.events_total - n_ev):]:
+                self.arrivals.append((ev.t_unix_s, ev.text))
+            if st.rx_counts.get("SYSTEM_TIME", 0) != n_time:
+                m = st.latest["SYSTEM_TIME"]
+                self.offsets_s.append(m.time_unix_usec * 1e-6 - m.time_boot_ms * 1e-3)
+
+    def event_latencies(self, event_log: list[dict], source: str = "fdir") -> tuple[int, list[float]]:
+        """The FSW's events of ``source`` (fsw.json's event_log, mission time) against their
+        arrival here: (how many there were, the latency [s] of each that arrived)."""
+        import statistics
+        from interfaces.mavlink.framing import printable_text
+        evs = [e for e in event_log if e["source"] == source]
+        if not evs or not self.offsets_s:
+            return len(evs), []
+        offset = statistics.median(self.offsets_s)
+        out = []
+        for e in evs:
+            sent = e["t_s"] + offset
+            text = printable_text(e["text"][:50])
+            got = [t for t, x in self.arrivals if x == text and t >= sent - 0.5]
+            if got:
+                out.append(max(0.0, got[0] - sent))
+        return len(evs), out
+
+
+def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, timeout_s: float = 300.0,
+            scenario: str = "case1") -> dict:
+    """One real-time SIL (``ellipsled run SCENARIO --realtime``), flooded for ``flood_s``
+    from its first jet command (None: quiet), watched by a ground station: the FSW's cycle
+    compute, ground-link task cost and slips from its fsw.json; what the flood changed
+    (commands accepted, parameters set, telemetry peers added: none of it is genuine); how
+    late the FDIR events (case1: jets fail at 2.5 s, under the flood) reached the ground."""
     import subprocess
     import tempfile
     from pathlib import Path
     with tempfile.TemporaryDirectory(prefix="bench-flood-") as d:
+        key_file = Path(d) / "keys" / "signing.key"
+        key_file.parent.mkdir()
+        key = SigningKey.generate()
+        key.write_file(key_file)
         vehicle, gcs = _free_udp(), _free_udp()
+        fl = Flood(1) if flood_s else None
+        watch = GroundWatch(key, gcs, fl)
+        watch.start()
         log_path = Path(d) / "run.log"
         with open(log_path, "w") as log:
-            run = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", "run", "nominal", "--realtime",
+            run = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", "run", scenario, "--realtime",
                                     "--duration", f"{duration_s:g}", "--out", d, "--rerun", "none", "--no-plots",
+                                    "--signing-key", str(key_file),
                                     "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
                                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
             sent = None
@@ -228,33 +389,41 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
                         raise RuntimeError(f"the SIL did not fly: {log_path.read_text()[-300:]}")
                     time.sleep(0.1)
                 if flood_s:
-                    sent = send(("127.0.0.1", vehicle), rate, flood_s)
+                    sent = send(("127.0.0.1", vehicle), rate, flood_s, flood=fl)
                 run.wait(timeout_s)
             finally:
                 if run.poll() is None:
                     run.kill()
                     run.wait(10)
+                watch.stop()
         fsw = json.loads((Path(d) / "fsw.json").read_text())
     ex, gl = fsw["executive"], fsw["tasks_us"].get("groundlink", {})
+    link = fsw.get("ground_link") or {}
+    n_fdir, lat = watch.event_latencies(fsw.get("event_log", []))
     return {"compute_p50_us": ex["compute_p50_us"], "compute_p99_us": ex["compute_p99_us"],
             "compute_max_us": ex["compute_max_us"], "slips": ex["slips"],
             "groundlink_p50_us": gl.get("p50"), "groundlink_p99_us": gl.get("p99"), "groundlink_max_us": gl.get("max"),
-            "jitter_p99_us": fsw.get("jitter_p99_us"), "ground_link": fsw.get("ground_link"), "flood": sent,
-            "duration_s": duration_s}
+            "jitter_p99_us": fsw.get("jitter_p99_us"), "ground_link": link, "flood": sent,
+            "state_changes": (link.get("commands_accepted", 0) + link.get("params_set", 0)) if link else None,
+            "peers_added": link.get("peers_added") if link else None,
+            "fdir_events": n_fdir, "fdir_events_received": len(lat),
+            "fdir_latency_max_s": max(lat) if lat and len(lat) == n_fdir else None,
+            "duration_s": duration_s, "scenario": scenario}
 
 
 def run(quick: bool) -> dict:
     """Benchmark section: the real-time SIL quiet and flooded (same run of the suite), and
     the receive work per RG2 tick in process."""
     dur, flood_s = (20.0, 10.0) if quick else (40.0, 20.0)
-    res = {"figure": "real-time SIL with a ground flood of 2,500 datagrams/s vs quiet: cycle compute, "
-                     "ground-link task cost per RG2 tick, slips",
+    res = {"figure": "real-time SIL (case1) with a ground flood of 2,500 datagrams/s vs quiet: cycle compute, "
+                     "ground-link task cost per RG2 tick, slips; what the flood changed; FDIR events to the ground",
            "quiet": sil_run(dur, None), "flood": sil_run(dur, flood_s), "receive": receive_cost(quick),
            "targets": dict(TARGETS)}
     f, q = res["flood"], res["quiet"]
     res.update(flood_compute_p99_us=f["compute_p99_us"], flood_compute_max_us=f["compute_max_us"],
                flood_groundlink_p99_us=f["groundlink_p99_us"], flood_groundlink_max_us=f["groundlink_max_us"],
-               flood_slips=f["slips"], quiet_compute_p99_us=q["compute_p99_us"],
+               flood_slips=f["slips"], flood_state_changes=f["state_changes"], flood_peers_added=f["peers_added"],
+               flood_fdir_latency_max_s=f["fdir_latency_max_s"], quiet_compute_p99_us=q["compute_p99_us"],
                quiet_groundlink_p99_us=q["groundlink_p99_us"], quiet_groundlink_max_us=q["groundlink_max_us"])
     return res
 
@@ -265,6 +434,8 @@ def rows(res: dict) -> list[Row]:
         return []
     gl_max = TARGETS["groundlink_max_us_max"]
     rc = fl.get("receive") or {}
+    changes, peers, lat = fl.get("flood_state_changes"), fl.get("flood_peers_added"), fl.get("flood_fdir_latency_max_s")
+    lat_max = TARGETS["fdir_event_latency_s_max"]
     return [row(f"real-time SIL under a ground flood ({fmt(g(fl, 'flood', 'flood', 'rate_per_s'))} datagrams/s): "
                 "cycle compute p99 / max [us]",
                 f"{fmt(fl.get('flood_compute_p99_us'))} / {fmt(fl.get('flood_compute_max_us'))}",
@@ -278,6 +449,13 @@ def rows(res: dict) -> list[Row]:
                 f"{fmt(ratio(fl.get('flood_groundlink_max_us'), gl_max))}x period (max)",
                 f"max < {gl_max:,.0f} (a period)", NO_TARGET,
                 absolute=(fl.get("flood_groundlink_max_us"), gl_max, "<="), machine=speed(res)),
+            row("  under the flood: state changes / telemetry peers added / FDIR events to the ground, max latency [s]",
+                f"{fmt(changes)} / {fmt(peers)} / {fmt(lat)}",
+                f"FDIR events received {fmt(g(fl, 'flood', 'fdir_events_received'))} of "
+                f"{fmt(g(fl, 'flood', 'fdir_events'))}; quiet max {fmt(g(fl, 'quiet', 'fdir_latency_max_s'))}",
+                "", f"0 / 0 / <= {lat_max:g}",
+                None if None in (changes, peers, lat) else (changes == TARGETS["state_changes"]
+                                                            and peers == TARGETS["peers_added"] and lat <= lat_max)),
             row("  receive work per tick, in process, flood: intake / previous path p99 [us]",
                 f"{fmt(g(rc, 'flood_intake', 'p99_us'))} / {fmt(g(rc, 'flood_previous', 'p99_us'))}",
                 f"quiet {fmt(g(rc, 'quiet', 'p99_us'))}; genuine commands through: "
@@ -294,10 +472,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=12.0)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--replay", default=None, metavar="FILE.tlog", help="genuine frames to replay")
+    ap.add_argument("--reflect", default=None, metavar="FILE.tlog",
+                    help="frames sniffed off the link: those the vehicle signed are sent back to it")
     a = ap.parse_args(argv)
     replay = [f for _, f in read_records(a.replay)] if a.replay else None
+    reflect = [f for _, f in read_records(a.reflect)] if a.reflect else None
     print("flooding", flush=True)
-    res = send(parse_udp(a.target, "target"), a.rate, a.seconds, a.seed, replay)
+    res = send(parse_udp(a.target, "target"), a.rate, a.seconds, a.seed, replay, reflect)
     print(json.dumps(res), flush=True)
     return 0
 

@@ -228,12 +228,11 @@ class FswNode:
         self.pub_state.put(self.enc_state.encode(st, fsw.k, t))
 
     def _publish_events(self, cyc) -> None:
-        hist = self.events.history
-        while self.events_sent < len(hist):
-            e = hist[self.events_sent]
+        first, new = self.events.since(self.events_sent)
+        for seq, e in enumerate(new, first):
             rec = event_record(int(round(e.t_s * 1e9)), int(e.severity), e.source, e.code, e.text)
-            self.pub_events.put(self.enc_events.encode(rec, self.events_sent, now_ns()))
-            self.events_sent += 1
+            self.pub_events.put(self.enc_events.encode(rec, seq, now_ns()))
+        self.events_sent = first + len(new)
 
     def inject(self, jet: int, kind: str, eta: float) -> bool:
         """Ground fault injection: forwarded to the plant. ValueError when the plant could

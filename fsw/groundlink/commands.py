@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable
 
 from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.framing import printable_text
 from interfaces.records import FAULT_NAMES
 from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult, Mode, Severity
 
@@ -143,8 +144,10 @@ class ParamProtocol:
 
     @staticmethod
     def id_text(raw) -> str:
-        s = raw.decode("ascii", "replace") if isinstance(raw, bytes) else str(raw)
-        return s.rstrip("\x00")[:PARAM_ID_LEN]
+        """A parameter id as received, for lookup and for the events that name it
+        (control characters escaped: the event goes to the ground's terminals)."""
+        return printable_text(raw.rstrip(b"\x00")[:PARAM_ID_LEN] if isinstance(raw, bytes)
+                              else str(raw).rstrip("\x00")[:PARAM_ID_LEN])
 
     def lookup(self, raw_id) -> str | None:
         return self._name_of_id.get(self.id_text(raw_id).upper())

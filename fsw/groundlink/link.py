@@ -11,8 +11,26 @@ signature work; the receive buffer sized to one tick's budget, the kernel droppi
 excess), answers what arrived, then sends the telemetry that is due; it never blocks and
 never raises on anything from the network. What the link refused and dropped is in
 ``stats``, in SYS_STATUS (errors_comm: rejections; errors_count1: datagrams dropped on the
-full queue; errors_count2: datagrams refused before verification) and, while a flood
-lasts, in a rate-limited WARNING event.
+full queue; errors_count2: datagrams refused before verification), per sender in
+``refused_by_sender``, and, while a flood lasts, in one throttled WARNING event per kind
+(EventLog rate limit; what it held is told once its interval is over).
+
+Who the link listens to:
+- the vehicle's own system id is refused from the link (a frame the vehicle signed and
+  someone sent back verifies: same key, fresh timestamp);
+- a telemetry peer (an address that gets the telemetry besides ``gcs``) is made only by a
+  signed *command-class* frame (COMMAND_LONG, COMMAND_INT, PARAM_SET, FTP: what must be
+  signed) addressed to this vehicle; a signed heartbeat or read makes none;
+- read-only requests (PARAM_REQUEST_READ/LIST, MISSION_REQUEST_LIST), which may come
+  unsigned, are answered to the requester only and within the tick's reply budget; an
+  unsigned sender gets at most ``READ_RATE_HZ`` requests and answer frames a second
+  (after a burst of ``READ_BURST``: a parameter list goes out at that pace), so no
+  unsigned request is an amplifier; an unknown id read unsigned is counted, not told one
+  event per request.
+
+Downlink per tick, beyond the telemetry streams: at most ``max_tx_per_tick`` frames of
+events and answers to requests; answers (parameter lists included) take at most
+``max_tx_per_tick - EVENT_SHARE``, so events always keep ``EVENT_SHARE`` frames a tick.
 
 Why in the control thread and not a receive thread: a Python thread that verifies
 datagrams holds the GIL, and the control loop then waits for it up to the interpreter's
@@ -25,12 +43,12 @@ import logging
 import math
 import socket
 import time
-from collections import deque
+from collections import OrderedDict, deque
 from collections.abc import Callable, Mapping
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
-from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
+from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey, stream_state_path
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, Severity, parse_udp
 
 from . import metadata
@@ -83,7 +101,14 @@ _ADDRESSED = frozenset({mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMM
                         mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST, mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
                         mav.MAVLINK_MSG_ID_PARAM_SET, mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST,
                         mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL})
+# Frames that must be signed, and only they make a telemetry peer (see the module docstring).
+COMMAND_CLASS = _ADDRESSED - ALLOW_UNSIGNED
 FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends (~1.5 ms of packing)
+EVENT_SHARE = 16                 # frames a tick no answer to a request can take from the events
+READ_RATE_HZ = 10.0              # read-only requests and answer frames per second and unsigned sender ...
+READ_BURST = 30.0                # ... after a burst of this many (a ground station connecting)
+MAX_READ_SENDERS = 64            # unsigned senders whose read budget is remembered
+MAX_PARAM_LISTS = 4              # parameter lists queued at once (one per requester)
 
 
 class GroundLink:
@@ -96,8 +121,11 @@ class GroundLink:
     bind     "udp:HOST:PORT" the link listens on (port 0 = ephemeral; see ``address``).
     inject   callback forwarding a fault injection to the plant (may be None).
     rates    {stream: Hz} overriding DEFAULT_RATES_HZ.
-    clock    monotonic time [s] for telemetry scheduling (tests pass a fake one).
+    clock    monotonic time [s] for telemetry scheduling and read budgets (tests pass a fake one).
     wall_clock  Unix time [s] for SYSTEM_TIME.
+    stream_state  where the signing streams' last timestamps are kept across restarts:
+             "beside-key" (the key file's name + ".streams"; none for a key not read from a
+             file), a path, or None (only the start-time rule refuses older frames).
     """
 
     SEND_MARGIN_NS = 1_000_000       # kept free before the deadline beyond the send side's peak
@@ -106,9 +134,12 @@ class GroundLink:
                  inject: InjectFn | None = None, rates: Mapping[str, float] | None = None,
                  clock: Callable[[], float] = time.monotonic, wall_clock: Callable[[], float] = time.time,
                  max_rx_per_tick: int = 256,
-                 rx_budget_us: float = 2000.0, max_tx_per_tick: int = 64, peer_timeout_s: float = 10.0, max_peers: int = 4):
+                 rx_budget_us: float = 2000.0, max_tx_per_tick: int = 64, peer_timeout_s: float = 10.0, max_peers: int = 4,
+                 stream_state: str | None = "beside-key"):
         if not isinstance(key, SigningKey):
             raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
+        if not int(max_tx_per_tick) > EVENT_SHARE:
+            raise ValueError(f"max_tx_per_tick must be > {EVENT_SHARE} (the events' share), got {max_tx_per_tick}")
         self.fsw = fsw
         self.clock = clock
         self.wall_clock = wall_clock
@@ -126,7 +157,9 @@ class GroundLink:
         self.params_in = ParamProtocol(fsw)
 
         self.link = SignedLink(key, system_id=SYSTEM_ID, component_id=COMPONENT_ID,
-                               allow_unsigned=ALLOW_UNSIGNED, on_reject=self._on_reject)
+                               allow_unsigned=ALLOW_UNSIGNED, on_reject=self._on_reject,
+                               state_path=stream_state_path(key) if stream_state == "beside-key" else stream_state,
+                               persist_msgids=COMMAND_CLASS)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.bind(bind_addr)
@@ -135,11 +168,14 @@ class GroundLink:
             raise OSError(f"ground link cannot bind {bind}: {e.strerror or e}") from None
         self.sock.setblocking(False)
         self.intake = DatagramIntake(self.sock, self.link, accept=_ADDRESSED | {mav.MAVLINK_MSG_ID_HEARTBEAT},
-                                     max_datagrams=self.max_rx_per_tick, budget_us=rx_budget_us)
+                                     max_datagrams=self.max_rx_per_tick, budget_us=rx_budget_us,
+                                     own_sysid=SYSTEM_ID)
         self._drops_reported = 0
 
-        self.peers: dict[tuple[str, int], float] = {}                     # addr -> last signed rx
-        self._param_queue: deque[str] = deque()
+        self.peers: dict[tuple[str, int], float] = {}                     # addr -> last signed command
+        self._param_lists: OrderedDict[tuple[str, int], tuple[deque[str], bool]] = OrderedDict()  # requester -> (names left, signed)
+        self._read_budget: OrderedDict[tuple[str, int], list[float]] = OrderedDict()  # sender -> [tokens, t]
+        self._reply_budget = self.max_tx_per_tick - EVENT_SHARE          # this tick's answers left
         self._next_due = {name: 0.0 for name in self.rates_hz}
         self._sensors = None                           # latest sensor frame given to tick()
         self.files = metadata.build(fsw.registry, fsw.scenario.vehicle.name)
@@ -155,7 +191,9 @@ class GroundLink:
         self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
         self.stats = {"rx_datagrams": 0, "rx_bytes": 0, "rx_messages": 0, "tx_frames": 0,
                       "tx_bytes": 0, "tx_errors": 0, "refused_early": 0, "kernel_drops": 0,
-                      "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0, "ftp_deferred": 0}
+                      "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0, "ftp_deferred": 0,
+                      "reads_limited": 0, "reads_unknown": 0, "peers_added": 0, "refused_senders": 0,
+                      "commands_accepted": 0, "params_set": 0}
         self.tick_ns_max = 0
         self.send_ns_peak = 0
 
@@ -266,6 +304,7 @@ class GroundLink:
         st["rx_datagrams"], st["rx_bytes"] = ist["datagrams"], ist["bytes"]
         st["refused_early"], st["kernel_drops"] = ist["refused_early"], ist["kernel_drops"]
         st["rx_budget_hits"] = ist["budget_hits"]
+        st["refused_senders"] = len(self.intake.refused_by_sender)
         st["rx_poll_max_us"] = max(st["rx_poll_max_us"], self.intake.last_poll_ns * 1e-3)
         dropped = ist["kernel_drops"] - self._drops_reported
         if dropped > 0:
@@ -282,6 +321,11 @@ class GroundLink:
             log.exception("ground link: handling %s failed", msg.get_type())
 
     @property
+    def refused_by_sender(self) -> dict[tuple[str, int], int]:
+        """Refusals per sender address (the last senders refused; see DatagramIntake)."""
+        return dict(self.intake.refused_by_sender)
+
+    @property
     def rejections(self) -> int:
         """Frames and datagrams refused so far, all reasons (SigningVerifier counts)."""
         return self.link.verifier.rejected
@@ -296,14 +340,17 @@ class GroundLink:
         parameter writes only when signed and addressed to this vehicle."""
         signed = bool(msg.get_signed())
         mid = msg.get_msgId()
-        if signed:
-            self._add_peer(addr)
         if mid == mav.MAVLINK_MSG_ID_HEARTBEAT:
             if msg.type == mav.MAV_TYPE_GCS:
                 self.ground_heartbeat_t = self.clock()
-        elif mid not in _ADDRESSED or not self._for_me(msg):
             return
-        elif mid == mav.MAVLINK_MSG_ID_COMMAND_LONG and signed:
+        if mid not in _ADDRESSED or not self._for_me(msg):
+            return
+        if signed and mid in COMMAND_CLASS and msg.get_srcSystem() != SYSTEM_ID:
+            self._add_peer(addr)
+        elif not signed and not self._may_read(addr):
+            return
+        if mid == mav.MAVLINK_MSG_ID_COMMAND_LONG and signed:
             self._command(msg, addr, [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                                       msg.param7])
         elif mid == mav.MAVLINK_MSG_ID_COMMAND_INT and signed:
@@ -311,21 +358,28 @@ class GroundLink:
             self._command(msg, addr, [msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y),
                                       msg.z])
         elif mid == mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST:
-            self._send(self.services.mission_count(msg), only=addr)
+            self._reply(self.services.mission_count(msg), addr)
         elif mid == mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL and signed:
             self._ftp(msg, addr)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
-            self._param_queue.extend(n for n in self.params_in.names if n not in self._param_queue)
+            self._queue_param_list(addr, signed)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
             name, why = self.params_in.read(msg)
-            if name is None:
+            if name is not None:
+                self._reply(self.params_in.value_msg(name), addr)
+            elif signed:
                 self._refuse("param_unknown", why)
-            else:
-                self._send(self.params_in.value_msg(name), extra=addr)
+            else:                                # counted, told in one throttled event
+                self.stats["reads_unknown"] += 1
+                self.intake.count_sender(addr)
+                self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", "param_unknown_read",
+                                     why[:tm.STATUSTEXT_LEN], rate_limited=True)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_SET and signed:
             name, why = self.params_in.set(msg)
             if why:
                 self._refuse("param_unknown" if name is None else "param_refused", why)
+            elif name is not None:
+                self.stats["params_set"] += 1
             if name is not None:
                 self._send(self.params_in.value_msg(name), extra=addr)     # new value, or unchanged
 
@@ -333,8 +387,70 @@ class GroundLink:
     def _for_me(msg) -> bool:
         return msg.target_system in (0, SYSTEM_ID) and msg.target_component in (0, COMPONENT_ID)
 
+    def _take_read(self, addr) -> bool:
+        """One unit of ``addr``'s unsigned read budget (a token bucket: READ_RATE_HZ, burst
+        READ_BURST; the last MAX_READ_SENDERS senders remembered), if it has one."""
+        now = self.clock()
+        b = self._read_budget.get(addr)
+        if b is None:
+            if len(self._read_budget) >= MAX_READ_SENDERS:
+                self._read_budget.popitem(last=False)
+            b = self._read_budget[addr] = [READ_BURST, now]
+        else:
+            self._read_budget.move_to_end(addr)
+            b[0] = min(READ_BURST, b[0] + (now - b[1]) * READ_RATE_HZ)
+            b[1] = now
+        if b[0] >= 1.0:
+            b[0] -= 1.0
+            return True
+        return False
+
+    def _may_read(self, addr) -> bool:
+        """One unsigned read-only request from ``addr`` within its budget; counted and told
+        (one throttled event) when not."""
+        if self._take_read(addr):
+            return True
+        self.stats["reads_limited"] += 1
+        self.intake.count_sender(addr)
+        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", "reads_limited",
+                             f"link reads limited: {addr[0]}:{addr[1]}"[:tm.STATUSTEXT_LEN], rate_limited=True)
+        return False
+
+    def _reply(self, msg, addr) -> None:
+        """An answer to a read-only request, to the requester, within the tick's reply budget
+        (what is over it is dropped and counted: the requester asks again)."""
+        if self._reply_budget <= 0:
+            self.stats["reads_limited"] += 1
+            return
+        self._reply_budget -= 1
+        self._send(msg, only=addr)
+
+    def _queue_param_list(self, addr, signed: bool) -> None:
+        """A parameter list for ``addr``, sent from the reply budget (and, unsigned, at the
+        requester's read pace); one list per requester at a time, at most MAX_PARAM_LISTS."""
+        if addr in self._param_lists:              # a signed request lifts the pace of an unsigned one
+            names, was_signed = self._param_lists[addr]
+            self._param_lists[addr] = (names, was_signed or signed)
+            return
+        if len(self._param_lists) >= MAX_PARAM_LISTS:
+            self.stats["reads_limited"] += 1
+            return
+        self._param_lists[addr] = (deque(self.params_in.names), signed)
+
+    def _send_param_lists(self) -> None:
+        for addr in list(self._param_lists):
+            names, signed = self._param_lists[addr]
+            while names and self._reply_budget > 0 and (signed or self._take_read(addr)):
+                self._reply(self.params_in.value_msg(names.popleft()), addr)
+            if not names:
+                del self._param_lists[addr]
+            if self._reply_budget <= 0:
+                return
+
     def _add_peer(self, addr) -> None:
         now = self.clock()
+        if addr not in self.peers:
+            self.stats["peers_added"] += 1
         self.peers[addr] = now
         for a, t in list(self.peers.items()):
             if now - t > self.peer_timeout_s:
@@ -374,6 +490,8 @@ class GroundLink:
         if result != CommandResult.ACCEPTED and why:
             self._refuse("cmd_refused", why)
         self.commands[result] = self.commands.get(result, 0) + 1
+        if result == CommandResult.ACCEPTED:
+            self.stats["commands_accepted"] += 1
         ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent())
         # to the requester only: another ground station waiting on the same command id
@@ -484,11 +602,10 @@ class GroundLink:
                 if any(want_pos):
                     for msg in tm.position(fsw, ms, C_LN, want_pos):
                         self._send(msg)
-        budget = self.max_tx_per_tick
-        while self._param_queue and budget > 0:
-            self._send(self.params_in.value_msg(self._param_queue.popleft()))
-            budget -= 1
-        self._send_events(budget)
+        self._send_param_lists()
+        self.fsw.events.release_held(fsw.t_s)
+        self._send_events(EVENT_SHARE + self._reply_budget)      # their share, and what answers left
+        self._reply_budget = self.max_tx_per_tick - EVENT_SHARE
 
     def flush_events(self, max_frames: int = 256) -> None:
         """Send the events not sent yet (at most ``max_frames``): at shutdown, so what the
@@ -499,13 +616,14 @@ class GroundLink:
             log.exception("ground link: flushing events failed")
 
     def _send_events(self, budget: int) -> None:
-        """Every event of ``fsw.events.history`` as a STATUSTEXT (read by index, so another
-        consumer may ``drain()`` the queue)."""
-        hist = self.fsw.events.history
-        if self._event_index > len(hist):         # history was reset by its owner
+        """Every event of the FSW's event history as a STATUSTEXT, at most ``budget`` (read
+        by sequence number, so another consumer may ``drain()`` the queue; events the
+        history's ring dropped before they went out are skipped)."""
+        events = self.fsw.events
+        if self._event_index > events.total:      # a new event log
             self._event_index = 0
-        while self._event_index < len(hist) and budget > 0:
-            ev = hist[self._event_index]
-            self._event_index += 1
-            budget -= 1
+        first, new = events.since(self._event_index)
+        for ev in new[:max(0, budget)]:
             self._send(tm.statustext(ev.severity, ev.text))
+            first += 1
+        self._event_index = first

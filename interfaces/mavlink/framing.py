@@ -39,6 +39,25 @@ def crc_extra_table() -> dict[int, int]:
     return {msgid: cls.crc_extra for msgid, cls in _dialect.mavlink_map.items()}
 
 
+def _escaped(c: str) -> str:
+    if " " <= c <= "~" and c != "\\":
+        return c
+    if c == "\\":
+        return "\\\\"
+    return f"\\x{ord(c):02x}" if ord(c) < 0x100 else f"\\u{ord(c):04x}"
+
+
+def printable_text(raw) -> str:
+    """A text field from the link (bytes or str) as it may be shown or logged: trailing
+    NULs dropped, every character outside printable ASCII (control characters, escape
+    sequences, other bytes) and the backslash written as an escape (``\\x1b``, ``\\\\``),
+    so what a sender puts in a field cannot act on a terminal."""
+    s = (raw.decode("latin-1") if isinstance(raw, (bytes, bytearray)) else str(raw)).rstrip("\x00")
+    if s.isascii() and s.isprintable() and "\\" not in s:
+        return s
+    return "".join(_escaped(c) for c in s)
+
+
 class FrameHeader(NamedTuple):
     version: int        # 1 or 2
     payload_len: int

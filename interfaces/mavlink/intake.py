@@ -9,15 +9,22 @@ vehicle:
 | refused                                   | counted as (signing.Reject) |
 |-------------------------------------------|-----------------------------|
 | longer than ``max_datagram_bytes``        | MALFORMED ("oversized")     |
-| not starting with a MAVLink 2 frame       | GARBAGE                     |
-| a single frame cut short                  | TRUNCATED                   |
+| a MAVLink 1 frame                         | GARBAGE ("MAVLink 1")       |
+| not a MAVLink 2 frame                     | GARBAGE                     |
+| a frame cut short                         | TRUNCATED                   |
+| the receiver's own system id (``own_sysid``) | OWN_SYSTEM               |
 | a message id the vehicle does not take    | UNKNOWN_MESSAGE             |
 | unsigned, and not allowed unsigned        | UNSIGNED                    |
 
-A datagram holding exactly one frame (what ground stations send) goes to
-``SignedLink.receive_single``: signature first (one HMAC, which also authenticates the
-CRC bytes), then decoding. A datagram of several frames takes the general path
-(``SignedLink.receive``), bounded by ``max_datagram_bytes``.
+Every frame of a datagram is judged on its own: a datagram is read as frames laid end
+to end (what a ground station sends is one), each refused or passed by the rules above
+and then given to ``SignedLink.receive_single`` (signature first: one HMAC, which also
+authenticates the CRC bytes; then decoding). Bytes that are not a frame where one should
+start end the datagram (the rest is refused with them). The time budget is checked before
+each frame: frames of a datagram left when it is spent are kept for the next call.
+
+Refusals are also counted per sender address (``refused_by_sender``: the last
+``max_senders`` senders refused; the others' refusals together in ``refused_other_senders``).
 
 What the budget leaves waits in the socket for the next call; the socket's receive buffer
 is sized to about one call's budget (``rcvbuf_bytes``), so the backlog, and the age of a
@@ -30,6 +37,7 @@ from __future__ import annotations
 import socket
 import struct
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Collection
 
 from . import framing
@@ -52,13 +60,15 @@ DEFAULT_MAX_DATAGRAMS = 256
 DEFAULT_BUDGET_US = 2000.0
 DEFAULT_MAX_DATAGRAM_BYTES = 4 * framing.MAX_FRAME_LEN        # a few frames; a ground station sends one
 RCVBUF_PER_DATAGRAM = 1024      # the kernel doubles it: ~2 kB of accounting per small datagram
+DEFAULT_MAX_SENDERS = 64
 
 
 class DatagramIntake:
     def __init__(self, sock: socket.socket, link: SignedLink, *, accept: Collection[int],
                  max_datagrams: int = DEFAULT_MAX_DATAGRAMS,
                  budget_us: float = DEFAULT_BUDGET_US, max_datagram_bytes: int = DEFAULT_MAX_DATAGRAM_BYTES,
-                 rcvbuf_bytes: int | None = None, clock_ns: Callable[[], int] = time.perf_counter_ns):
+                 rcvbuf_bytes: int | None = None, clock_ns: Callable[[], int] = time.perf_counter_ns,
+                 own_sysid: int | None = None, max_senders: int = DEFAULT_MAX_SENDERS):
         if max_datagrams < 1 or not budget_us > 0 or max_datagram_bytes < framing.MAX_FRAME_LEN:
             raise ValueError("intake: max_datagrams >= 1, budget_us > 0, max_datagram_bytes >= one frame")
         self.sock = sock
@@ -74,8 +84,13 @@ class DatagramIntake:
         want = int(rcvbuf_bytes) if rcvbuf_bytes is not None else self.max_datagrams * RCVBUF_PER_DATAGRAM
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, want)
         self.rcvbuf_bytes = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self.own_sysid = own_sysid
+        self.max_senders = int(max_senders)
+        self.refused_by_sender: OrderedDict[tuple[str, int], int] = OrderedDict()
+        self.refused_other_senders = 0
+        self._rest: tuple[bytes, tuple[str, int]] | None = None      # frames a spent budget left
         self.stats = {"datagrams": 0, "bytes": 0, "refused_early": 0, "kernel_drops": 0,
-                      "budget_hits": 0, "rx_errors": 0}
+                      "budget_hits": 0, "rx_errors": 0, "frames": 0, "frames_deferred": 0}
         self._drops0 = self._kernel_drops_total()
         self.kernel_counts = self._drops0 is not None
         self.last_poll_ns = 0
@@ -90,6 +105,61 @@ class DatagramIntake:
             self.stats["refused_early"] += count
             self.link.verifier.reject(Rejection(reason, sysid, compid, msgid, -1, detail, count))
 
+    def count_sender(self, addr, n: int = 1) -> None:
+        """``n`` more refusals from ``addr`` (kept for the last ``max_senders`` senders)."""
+        by = self.refused_by_sender
+        if addr in by:
+            by[addr] += n
+            by.move_to_end(addr)
+            return
+        if len(by) >= self.max_senders:
+            self.refused_other_senders += by.popitem(last=False)[1]
+        by[addr] = n
+
+    def _frames(self, view, size: int, addr, handle, refuse, over_budget) -> int | None:
+        """Judge and pass on the frames of one datagram (``view[:size]``), laid end to end.
+        Returns None when done, or the offset of the first frame left for the next call
+        because ``over_budget()`` said so."""
+        i = 0
+        st = self.stats
+        link, verifier = self.link, self.link.verifier
+        while i < size:
+            if i and over_budget():
+                return i
+            b0 = view[i]
+            if b0 == framing.MAGIC_V1:
+                refuse(addr, Reject.GARBAGE, detail="MAVLink 1")
+                return None
+            if size - i < framing.HEADER_LEN_V2 + framing.CRC_LEN or b0 != framing.MAGIC_V2:
+                refuse(addr, Reject.GARBAGE, detail=f"{size - i} bytes, not MAVLink 2")
+                return None
+            plen, iflags = view[i + 1], view[i + 2]
+            frame_len = framing.HEADER_LEN_V2 + plen + framing.CRC_LEN \
+                + (framing.SIGNATURE_LEN if iflags & framing.IFLAG_SIGNED else 0)
+            sysid, compid = view[i + 5], view[i + 6]
+            msgid = view[i + 7] | view[i + 8] << 8 | view[i + 9] << 16
+            if frame_len > size - i:
+                refuse(addr, Reject.TRUNCATED, sysid, compid, msgid, f"{size - i} of {frame_len} bytes")
+                return None
+            j, i = i, i + frame_len
+            st["frames"] += 1
+            if sysid == self.own_sysid:
+                refuse(addr, Reject.OWN_SYSTEM, sysid, compid, msgid, "the receiver's own system id")
+                continue
+            if msgid not in self.accept:
+                refuse(addr, Reject.UNKNOWN_MESSAGE, sysid, compid, msgid, "not taken by the vehicle")
+                continue
+            if not iflags & framing.IFLAG_SIGNED and msgid not in self.allow_unsigned:
+                refuse(addr, Reject.UNSIGNED, sysid, compid, msgid)
+                continue
+            before = verifier.rejected
+            msgs = link.receive_single(view[j:i])
+            if verifier.rejected != before:
+                self.count_sender(addr, verifier.rejected - before)
+            for msg in msgs:
+                handle(msg, addr)
+        return None
+
     def poll(self, handle: Callable[[object, tuple[str, int]], None], budget_ns: int | None = None) -> int:
         """Read and pass on what the budget allows; ``handle(msg, addr)`` gets every
         verified, decoded message. ``budget_ns``: this call's time, if less than the
@@ -101,14 +171,26 @@ class DatagramIntake:
         buf, view = self._buf, self._view
         refused: dict = {}            # reason -> [count, first sysid, compid, msgid, detail]
 
-        def refuse(reason, sysid=-1, compid=-1, msgid=-1, detail=""):
+        def refuse(addr, reason, sysid=-1, compid=-1, msgid=-1, detail=""):
+            self.count_sender(addr)
             r = refused.get(reason)
             if r is None:
                 refused[reason] = [1, sysid, compid, msgid, detail]
             else:
                 r[0] += 1
+
+        def over_budget() -> bool:
+            return self.clock_ns() - t0 >= budget
+
+        if self._rest is not None and budget > 0:
+            rest, addr = self._rest
+            self._rest = None
+            at = self._frames(memoryview(rest), len(rest), addr, handle, refuse, over_budget)
+            if at is not None:
+                self._rest = (rest[at:], addr)
+                st["frames_deferred"] += 1
         while True:
-            if n >= self.max_datagrams or self.clock_ns() - t0 >= budget:
+            if self._rest is not None or n >= self.max_datagrams or over_budget():
                 st["budget_hits"] += 1
                 break
             try:
@@ -124,30 +206,12 @@ class DatagramIntake:
             st["datagrams"] += 1
             st["bytes"] += size
             if size > self.max_datagram_bytes:
-                refuse(Reject.MALFORMED, detail=f"oversized datagram, {size} bytes")
+                refuse(addr, Reject.MALFORMED, detail=f"oversized datagram, {size} bytes")
                 continue
-            if size < framing.HEADER_LEN_V2 + framing.CRC_LEN or buf[0] != framing.MAGIC_V2:
-                refuse(Reject.GARBAGE, detail=f"{size} bytes, not MAVLink 2")
-                continue
-            plen, iflags = buf[1], buf[2]
-            frame_len = framing.HEADER_LEN_V2 + plen + framing.CRC_LEN \
-                + (framing.SIGNATURE_LEN if iflags & framing.IFLAG_SIGNED else 0)
-            sysid, compid, msgid = buf[5], buf[6], buf[7] | buf[8] << 8 | buf[9] << 16
-            if frame_len > size:
-                refuse(Reject.TRUNCATED, sysid, compid, msgid, f"{size} of {frame_len} bytes")
-                continue
-            if frame_len == size:            # one frame: refuse what cannot be for the vehicle, cheaply
-                if msgid not in self.accept:
-                    refuse(Reject.UNKNOWN_MESSAGE, sysid, compid, msgid, "not taken by the vehicle")
-                    continue
-                if not iflags & framing.IFLAG_SIGNED and msgid not in self.allow_unsigned:
-                    refuse(Reject.UNSIGNED, sysid, compid, msgid)
-                    continue
-                msgs = self.link.receive_single(view[:size])
-            else:
-                msgs = self.link.receive(view[:size])
-            for msg in msgs:
-                handle(msg, addr)
+            at = self._frames(view, size, addr, handle, refuse, over_budget)
+            if at is not None:
+                self._rest = (bytes(view[at:size]), addr)
+                st["frames_deferred"] += 1
         if refused:
             self._report(refused)
         if self.kernel_counts:

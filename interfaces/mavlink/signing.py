@@ -38,11 +38,27 @@ is a short one-way fingerprint operators can compare between the two ends.
 Clocks: both ends must agree within ``max_future_s`` / ``max_age_s`` (default 60 s);
 frames more than that ahead of or behind the receiver's clock are rejected. Every sender
 sharing a key needs its own (system id, component id, link id).
+
+Replay across restarts: a verifier accepts nothing signed before it was created (its
+clock then: the process start), which refuses in a later run every frame signed before
+the receiver's clock at acceptance. What that rule leaves is a frame signed *ahead* of the
+receiver's clock (the sender's clock runs fast, up to ``max_future_s``): given a
+``state_path`` (the vehicle: the key file's name + ``.streams``, ``stream_state_path``),
+the verifier starts from the last timestamps saved there, and saves them, atomically (a
+temporary file renamed over it) and before the frame is passed on, whenever it accepts
+such a frame (of a message in ``persist_msgids``, if given: the vehicle's commands; a
+replayed heartbeat changes nothing). So a frame captured in one run is refused in any
+later run with the same key, and the file is written only when a sender's clock is ahead
+(a write costs the receiving thread ~0.2 ms, ms on a busy disk). This assumes the
+receiver's wall clock does not step back across a restart. A state file that cannot be
+read is reported and ignored; one that cannot be written is reported and counted
+(``persist_errors``).
 """
 from __future__ import annotations
 
 import hashlib
 import hmac
+import json
 import logging
 import os
 import secrets
@@ -89,13 +105,14 @@ class SigningKeyError(ValueError):
 class SigningKey:
     """A 32-byte MAVLink signing secret. ``repr`` shows only the source and ``key_id``."""
 
-    __slots__ = ("_secret", "source")
+    __slots__ = ("_secret", "source", "path")
 
     def __init__(self, secret: bytes, source: str = "<memory>"):
         if not isinstance(secret, (bytes, bytearray)) or len(secret) != KEY_LEN_BYTES:
             raise SigningKeyError(f"signing key from {source}: must be {KEY_LEN_BYTES} bytes")
         self._secret = bytes(secret)
         self.source = source
+        self.path: Path | None = None       # the key file it was read from, if any
 
     @property
     def secret(self) -> bytes:
@@ -164,7 +181,9 @@ class SigningKey:
         except UnicodeDecodeError:
             raise SigningKeyError(f"signing key from {p}: contains characters that are not "
                                   f"hexadecimal digits") from None
-        return cls.from_hex(text, str(p))
+        key = cls.from_hex(text, str(p))
+        key.path = p
+        return key
 
     def write_file(self, path: str | os.PathLike[str]) -> Path:
         """Write as 64 hex characters + newline, mode 0600; refuses to overwrite or to
@@ -178,6 +197,12 @@ class SigningKey:
         with os.fdopen(fd, "w", encoding="ascii") as f:
             f.write(self._secret.hex() + "\n")
         return p
+
+
+def stream_state_path(key: SigningKey) -> Path | None:
+    """Where a verifier using ``key`` keeps its streams' last timestamps: beside the key
+    file (its name + ``.streams``); None for a key that did not come from a file."""
+    return None if key.path is None else key.path.with_name(key.path.name + ".streams")
 
 
 def _refuse_inside_repo(p: Path) -> None:
@@ -200,11 +225,12 @@ class Reject(str, Enum):
     BAD_SIGNATURE = "bad_signature"         # wrong key, tampered byte, forged frame
     REPLAY = "replay"                       # timestamp not newer than the stream's last
     FUTURE_TIMESTAMP = "future_timestamp"   # > max_future_s ahead of the local clock
-    STALE_TIMESTAMP = "stale_timestamp"     # > max_age_s behind the local clock
+    STALE_TIMESTAMP = "stale_timestamp"     # > max_age_s behind the local clock, or before the verifier started
     BAD_CRC = "bad_crc"                     # splitter: complete candidate, CRC mismatch
     UNKNOWN_MESSAGE = "unknown_message"     # splitter: message id not in the dialect
     TRUNCATED = "truncated"                 # splitter: datagram ends inside a frame
-    GARBAGE = "garbage"                     # splitter: bytes outside any frame
+    GARBAGE = "garbage"                     # splitter: bytes outside any frame; intake: MAVLink 1
+    OWN_SYSTEM = "own_system"               # intake: claims the receiver's own system id
     DECODE_ERROR = "decode_error"           # pymavlink could not decode a verified frame
 
 
@@ -243,14 +269,17 @@ class SigningVerifier:
     """Checks one raw frame at a time; stream state changes only on a valid signature.
 
     Order of checks: framing (length, flags) -> signed? -> signature -> timestamp window
-    -> strictly newer than the stream's last accepted timestamp -> accept and record.
+    (not after now + max_future_s, not before now - max_age_s nor before the verifier's
+    creation) -> strictly newer than the stream's last accepted timestamp -> record (and
+    save, with a ``state_path``) -> accept.
     """
 
     def __init__(self, key: SigningKey, *,
                  allow_unsigned: Collection[int] = ALLOW_UNSIGNED_DEFAULT,
                  max_future_s: float = 60.0, max_age_s: float | None = 60.0,
                  clock: Callable[[], float] = time.time,
-                 on_reject: RejectHook | None = None):
+                 on_reject: RejectHook | None = None, state_path: str | os.PathLike[str] | None = None,
+                 persist_msgids: Collection[int] | None = None):
         if not isinstance(key, SigningKey):
             raise TypeError("key must be a SigningKey")
         if not max_future_s >= 0.0 or (max_age_s is not None and not max_age_s >= 0.0):
@@ -264,7 +293,49 @@ class SigningVerifier:
         self.counts: dict[Reject, int] = {r: 0 for r in Reject}
         self.accepted_signed = 0
         self.accepted_unsigned = 0
-        self._streams: dict[tuple[int, int, int], int] = {}
+        self.not_before = signing_timestamp(clock())     # nothing signed before this verifier existed
+        self.state_path = None if state_path is None else Path(state_path)
+        self.persist_msgids = None if persist_msgids is None else frozenset(int(m) for m in persist_msgids)
+        self.persist_errors = 0
+        self.persisted = 0
+        self._streams: dict[tuple[int, int, int], int] = self._load_streams()
+
+    def _load_streams(self) -> dict[tuple[int, int, int], int]:
+        """The streams saved at ``state_path`` (empty if none; a bad file is reported and
+        ignored: the start-time rule still refuses every earlier frame)."""
+        if self.state_path is None:
+            return {}
+        try:
+            raw = json.loads(self.state_path.read_text(encoding="ascii"))
+            out = {}
+            for k, ts in raw.items():
+                sysid, compid, link_id = (int(x) for x in k.split("/"))
+                if not (isinstance(ts, int) and 0 <= ts <= TIMESTAMP_MAX
+                        and all(0 <= x <= 255 for x in (sysid, compid, link_id))):
+                    raise ValueError(k)
+                out[(sysid, compid, link_id)] = ts
+            return out
+        except FileNotFoundError:
+            return {}
+        except (OSError, ValueError, AttributeError, UnicodeDecodeError) as e:
+            log.warning("signing stream state %s unreadable (%s): ignored", self.state_path, type(e).__name__)
+            return {}
+
+    def _save_streams(self) -> None:
+        """Write every stream's last timestamp to ``state_path`` atomically."""
+        p = self.state_path
+        tmp = p.with_name(f"{p.name}.{os.getpid()}.tmp")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w", encoding="ascii") as f:
+                json.dump({f"{s}/{c}/{lk}": ts for (s, c, lk), ts in self._streams.items()}, f)
+            os.replace(tmp, p)
+            self.persisted += 1
+        except OSError as e:
+            self.persist_errors += 1
+            if self.persist_errors == 1:
+                log.warning("signing stream state %s cannot be written (%s): replay across restarts is "
+                            "refused by the start-time rule only", p, e.strerror or e)
 
     def stream_timestamp(self, sysid: int, compid: int, link_id: int) -> int | None:
         """Last accepted signing timestamp of a stream, or None if none yet."""
@@ -322,11 +393,17 @@ class SigningVerifier:
         if self.max_age_ticks is not None and ts < now - self.max_age_ticks:
             return self._no(Reject.STALE_TIMESTAMP, True, sysid, compid, msgid, link_id, ts,
                             f"{(now - ts) / TICKS_PER_S:.1f} s behind")
+        if ts < self.not_before:
+            return self._no(Reject.STALE_TIMESTAMP, True, sysid, compid, msgid, link_id, ts,
+                            f"{(self.not_before - ts) / TICKS_PER_S:.1f} s before start")
         stream = (sysid, compid, link_id)
         last = self._streams.get(stream)
         if last is not None and ts <= last:
             return self._no(Reject.REPLAY, True, sysid, compid, msgid, link_id, ts)
         self._streams[stream] = ts          # only now: the signature is valid
+        if self.state_path is not None and ts >= now \
+                and (self.persist_msgids is None or msgid in self.persist_msgids):
+            self._save_streams()            # ahead of this clock: the start-time rule would not cover it
         self.accepted_signed += 1
         return Verdict(True, None, True, sysid, compid, msgid, link_id, ts)
 
@@ -417,12 +494,14 @@ class SignedLink:
     def __init__(self, key: SigningKey, *, system_id: int, component_id: int,
                  link_id: int = 0, allow_unsigned: Collection[int] = ALLOW_UNSIGNED_DEFAULT,
                  max_future_s: float = 60.0, max_age_s: float | None = 60.0,
-                 clock: Callable[[], float] = time.time, on_reject: RejectHook | None = None):
+                 clock: Callable[[], float] = time.time, on_reject: RejectHook | None = None,
+                 state_path: str | os.PathLike[str] | None = None, persist_msgids: Collection[int] | None = None):
         self.signer = Signer(key, system_id=system_id, component_id=component_id,
                              link_id=link_id, clock=clock)
         self.verifier = SigningVerifier(key, allow_unsigned=allow_unsigned,
                                         max_future_s=max_future_s, max_age_s=max_age_s,
-                                        clock=clock, on_reject=on_reject)
+                                        clock=clock, on_reject=on_reject, state_path=state_path,
+                                        persist_msgids=persist_msgids)
         self.splitter = framing.FrameSplitter()
         self.stats = LinkStats()
         self._decoder = dialect.MAVLink(None)   # no secret key: pymavlink never checks

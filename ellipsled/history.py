@@ -53,9 +53,10 @@ def rows_for(duration_s: float, dt_s: float) -> int:
     return int(math.ceil(duration_s / dt_s)) + 2
 
 
-def budget_refusal(duration_s: float, dt_s: float, budget_bytes: int = HISTORY_BUDGET_BYTES) -> str | None:
+def budget_refusal(duration_s: float, dt_s: float, budget_bytes: int | None = None) -> str | None:
     """Why a run of ``duration_s`` at step ``dt_s`` is refused (its history beyond the
-    memory budget), or None when it fits."""
+    memory budget, default HISTORY_BUDGET_BYTES), or None when it fits."""
+    budget_bytes = HISTORY_BUDGET_BYTES if budget_bytes is None else budget_bytes
     need = rows_for(duration_s, dt_s) * row_bytes()
     if need <= budget_bytes:
         return None

@@ -82,3 +82,23 @@ def test_a_run_whose_history_exceeds_the_memory_budget_is_refused_naming_the_bud
     # a scenario's own max_duration_s is held to the same budget
     scn = runlib.prepare("nominal")
     assert rows_for(scn.max_duration_s, scn.dt_control_s) * row_bytes() <= HISTORY_BUDGET_BYTES
+
+
+def test_a_campaign_whose_runs_exceed_the_memory_budget_is_refused_before_any_run(tmp_path, monkeypatch):
+    import ellipsled.history as history
+    from ellipsled.montecarlo.engine import run_campaign
+    monkeypatch.setattr(history, "HISTORY_BUDGET_BYTES", 1_000_000, raising=False)   # ~1,100 rows: 22 s
+    with pytest.raises(ValueError, match="memory budget"):
+        run_campaign("default", tmp_path / "mc", runs=1, duration_s=60.0, workers=1, progress=False)
+    assert not list((tmp_path / "mc").rglob("*.parquet"))          # nothing flown
+
+
+def test_a_campaign_file_asking_for_more_runs_than_the_bound_is_refused(tmp_path):
+    from common.config import DATA_DIR
+    from ellipsled.montecarlo.campaign import MAX_RUNS, load_campaign
+    src = (DATA_DIR / "campaigns" / "default.toml").read_text()
+    import re
+    path = tmp_path / "big.toml"
+    path.write_text(re.sub(r"(?m)^runs = \d+", f"runs = {MAX_RUNS * 1000}", src, count=1))
+    with pytest.raises(ConfigError, match=r"campaign\.runs: must be <= "):
+        load_campaign(path)

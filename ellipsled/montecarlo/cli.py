@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import NamedTuple
 
 from common.model import Scenario
-import os
-
 from ellipsled import argtypes
 from ellipsled.argtypes import nonneg_int
 
-# a campaign of a million runs already takes weeks on a cluster; each run id is held in memory
-MAX_RUNS = 1_000_000
+from .campaign import MAX_RUNS
 
 
 def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:

@@ -80,7 +80,7 @@ class FswNode:
         self.sub_fault_log = transport.subscriber(self.session, self.K.fault_log) if self.fsw.fdir.oracle else None
         self.dec_fault_log = Codec.for_schema("FAULT_APPLIED", on_reject=self._rejected)
         self.token = transport.declare_alive(self.session, self.K, ROLE)
-        self.plant = transport.Presence(self.session, self.K.alive_sim)
+        self.plant_presence = transport.Presence(self.session, self.K.alive_sim)
         self.ready = None       # real time: a second token once warmed up (the plant starts on it)
         # a restarted plant takes over the sensor key after 1 s of silence, not before
         self.dec_sensors = Codec.for_schema("SENSORS", guard=SequenceGuard(takeover_after_s=1.0),
@@ -174,7 +174,7 @@ class FswNode:
         ground link."""
         if self.stop:
             return False
-        gone_s = self.plant.gone_for_s()
+        gone_s = self.plant_presence.gone_for_s()
         if gone_s < self.args.plant_gone_s:
             return True
         say(ROLE, f"the plant has been gone for {gone_s:.1f} s: leaving")
@@ -407,8 +407,8 @@ class FswNode:
         if self.link is not None:
             self.link.flush_events()
             self.link.close()
-        transport.close(self.ready, self.token, self.plant, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
-                        self.pub_faults, self.sub_fault_log, self.session)
+        transport.close(self.ready, self.token, self.plant_presence, self.sub_sensors, self.pub_jets, self.pub_state,
+                        self.pub_events, self.pub_faults, self.sub_fault_log, self.session)
 
 
 def main(args) -> int:

@@ -34,7 +34,8 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
     tls.add_argument("--tls-ca-file", default=None, metavar="PEM", help="CA certificate(s)")
     tls.add_argument("--tls-cert", default=None, metavar="PEM", help="this client's certificate")
     tls.add_argument("--tls-key", default=None, metavar="PEM", help="this client's private key")
-    p.add_argument("--workers", type=argtypes.int_range(1, os.cpu_count() or 1), default=None,
+    # (a few per core at most: each is a process with its own compiled kernels and run history)
+    p.add_argument("--workers", type=argtypes.int_range(1, 4 * (os.cpu_count() or 1)), default=None,
                    help="worker processes of the embedded cluster (default: one per core)")
     p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop every run after S s of flight")
     p.add_argument("--seed", type=argtypes.seed, default=None, help="master seed (default: the campaign's)")

@@ -6,6 +6,7 @@ the file, the field (dotted path) and the reason, e.g.
 """
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from pathlib import Path
@@ -14,6 +15,8 @@ from typing import Any, Iterable
 import numpy as np
 
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
+# the flight-software parameters' defaults: every parameter a scenario's [fsw] may override
+FSW_DEFAULTS_FILE = DATA_DIR / "fsw" / "default.toml"
 
 _MISSING = object()
 
@@ -65,6 +68,7 @@ class Table:
         return ConfigError(self.file, self._name(key), reason)
 
     def has(self, key: str) -> bool:
+        self._used.add(key)         # a name the reader knows, present or not
         return key in self.data
 
     def _get(self, key: str, default: Any) -> Any:
@@ -146,10 +150,19 @@ class Table:
         return self._get(key, default)
 
     def reject_unknown(self) -> None:
-        """Fail on keys nobody read: catches typos such as ``mass_kgg``."""
+        """Fail on keys nobody read: catches typos such as ``mass_kgg`` (the nearest valid
+        name is suggested)."""
         unknown = sorted(set(self.data) - self._used)
         if unknown:
-            raise self.error(unknown[0], "unknown field (misspelt?)")
+            raise self.error(unknown[0], unknown_key(unknown[0], self._used))
+
+
+def unknown_key(key: str, valid) -> str:
+    """The reason for refusing ``key``: unknown, with the nearest of the ``valid`` names."""
+    near = difflib.get_close_matches(key, sorted(valid), n=1, cutoff=0.6)
+    if near:
+        return f"unknown key (did you mean {near[0]}?)"
+    return f"unknown key (valid: {', '.join(sorted(valid))})" if valid else "unknown key (no keys here)"
 
 
 def check_bounds(t: Table, key: str, v: float, lo, hi, lo_open=False, hi_open=False) -> None:

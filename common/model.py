@@ -12,7 +12,7 @@ import numpy as np
 
 from interfaces.vocabulary import FAULT_KINDS, N_JETS
 
-from .config import Table, load_toml, resolve
+from .config import FSW_DEFAULTS_FILE, Table, load_toml, resolve
 
 INERTIA_KEYS = ("I11", "I22", "I33", "I12", "I13", "I23")
 
@@ -300,6 +300,23 @@ def _density_waves(tr: Table) -> tuple[tuple[float, float, float], ...]:
     return tuple(waves)
 
 
+def _fsw_overrides(root: Table) -> dict:
+    """[fsw.<section>] overrides of the flight software's parameters: every section and key
+    one of the defaults file's (data/fsw/default.toml), so that a misspelt override is
+    refused with the nearest name instead of flown silently. Values are checked against
+    their bounds by the flight software's parameter registry."""
+    fsw = root.table("fsw", default={})
+    defaults = load_toml(FSW_DEFAULTS_FILE)
+    for section in defaults:
+        if fsw.has(section):
+            sec = fsw.table(section)
+            for key in defaults[section]:
+                sec.has(key)
+            sec.reject_unknown()
+    fsw.reject_unknown()
+    return fsw.data
+
+
 def load_scenario(name_or_path: str | Path) -> Scenario:
     path = resolve("scenarios", name_or_path)
     root = Table(load_toml(path), path)
@@ -371,9 +388,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     end_speed = end.num("speed_mps", default=None, lo=0, lo_open=True)
     if end_speed is not None and end.has("mach"):
         raise end.error("speed_mps", "give the deploy condition as mach or as speed_mps, not both")
-    fsw = root.raw("fsw", default={})
-    if not isinstance(fsw, dict):
-        raise root.error("fsw", "must be a table")
+    fsw = _fsw_overrides(root)
 
     out = Scenario(
         name=s.str("name"), description=s.str("description", default=""), file=str(path),

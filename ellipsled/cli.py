@@ -11,14 +11,14 @@ from common import rt
 rt.single_threaded_numerics()
 
 from common.config import ConfigError  # noqa: E402
-from ellipsled.argtypes import positive_float  # noqa: E402
+from ellipsled import argtypes  # noqa: E402
 
 
 def _add_plant(sub):
     p = sub.add_parser("plant", help="open-loop plant run: attitude held on the reference by an ideal torque")
     p.add_argument("scenario", nargs="?", default="nominal", help="scenario name (data/scenarios) or .toml path")
     p.add_argument("--out", default="runs/plant", help="output folder (plant_summary.json)")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=argtypes.seed, default=None)
 
     def run(a):
         from sim.openloop import main as plant_main
@@ -34,10 +34,10 @@ def _add_batch(sub):
     p.add_argument("--out", required=True, help="output folder (summary.json, history.npz, PNG plots)")
     p.add_argument("--from-campaign", metavar="DIR", default=None,
                    help="re-fly one run of a Monte Carlo campaign folder from its record")
-    p.add_argument("--run", type=int, default=None, metavar="ID", help="run_id within --from-campaign")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--run", type=argtypes.nonneg_int, default=None, metavar="ID", help="run_id within --from-campaign")
+    p.add_argument("--seed", type=argtypes.seed, default=None)
     p.add_argument("--ft-off", action="store_true", help="fault tolerance off (paper figure 5)")
-    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--rrd", action="store_true", help="also write DIR/run.rrd, the Rerun recording of the run")
     from ellipsled.runlib import add_variant_arguments
@@ -62,8 +62,8 @@ def _add_batch(sub):
 def _add_report(sub):
     p = sub.add_parser("report", help="fly every paper case and write report.md (paper claims vs measured)")
     p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--seed", type=argtypes.seed, default=None)
+    p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--reuse", action="store_true",
                    help="write the report from the runs a previous report left in OUT/runs (nothing flown)")
 

@@ -36,6 +36,35 @@ FSW_FIELDS = tuple(k for k in FIELDS if k not in TRUTH_FIELDS)
 
 _DTYPES = {"k": np.int64, "guid_cycles": np.int64, "guid_flags": np.uint8, "jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8, "alloc_short": np.uint8}
 
+# Every process preallocates its run's history (nothing grows while flying; the pages are
+# locked under --rt). A run whose history would not fit this budget is refused before it
+# starts (runlib.prepare) instead of failing, or swapping, mid-flight.
+HISTORY_BUDGET_BYTES = 2 * 1024**3
+
+
+def row_bytes() -> int:
+    """Bytes of one history row (every field, both sides)."""
+    return sum(int(np.dtype(_DTYPES.get(k, np.float64)).itemsize * math.prod(shp))
+               for k, shp in FIELDS.items() if k not in TRUTH_FIELDS) + TRUTH.itemsize
+
+
+def rows_for(duration_s: float, dt_s: float) -> int:
+    """Rows a run of ``duration_s`` at control step ``dt_s`` preallocates."""
+    return int(math.ceil(duration_s / dt_s)) + 2
+
+
+def budget_refusal(duration_s: float, dt_s: float, budget_bytes: int | None = None) -> str | None:
+    """Why a run of ``duration_s`` at step ``dt_s`` is refused (its history beyond the
+    memory budget, default HISTORY_BUDGET_BYTES), or None when it fits."""
+    budget_bytes = HISTORY_BUDGET_BYTES if budget_bytes is None else budget_bytes
+    need = rows_for(duration_s, dt_s) * row_bytes()
+    if need <= budget_bytes:
+        return None
+    longest = (budget_bytes // row_bytes() - 2) * dt_s
+    return (f"{duration_s:g} s at a {dt_s:g}-s control step needs {need / 1e9:.3g} GB of run history per "
+            f"process, beyond the memory budget of {budget_bytes / 1024**3:g} GiB "
+            f"(ellipsled.history.HISTORY_BUDGET_BYTES): at most {longest:.0f} s")
+
 
 class History:
     def __init__(self, n_max: int):

@@ -12,10 +12,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from common.config import ConfigError
 from common.model import Scenario, inertia_vector, load_scenario
 from interfaces.vocabulary import FAULT_HEALTH, HEALTH_NAMES
 
-from .history import History
+from .history import History, budget_refusal
 from .metrics import deploy_figures, summarize, wrap_deg
 
 if TYPE_CHECKING:       # the plant process imports this module, never the FSW
@@ -48,6 +49,9 @@ def prepare(scenario: Scenario | str, ft_off: bool = False, duration_s: float | 
                         name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
     if duration_s is not None:
         scn = scn.with_(max_duration_s=float(duration_s))
+    why = budget_refusal(scn.max_duration_s, scn.dt_control_s)
+    if why is not None:
+        raise ConfigError(scn.file, "--duration" if duration_s is not None else "scenario.max_duration_s", why)
     return scn
 
 

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from common.config import DATA_DIR, ConfigError, load_toml
+from common.config import FSW_DEFAULTS_FILE, ConfigError, load_toml, unknown_key
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,7 @@ class Param:
         return v
 
 
-DEFAULT_FILE = DATA_DIR / "fsw" / "default.toml"
+DEFAULT_FILE = FSW_DEFAULTS_FILE
 
 
 def load_params(params: list[Param], overrides: dict | None = None,
@@ -145,6 +145,11 @@ class ParamRegistry:
                 if p.name in self.table:
                     raise ValueError(f"{p.name}: declared by {self.table[p.name].owner} and by {owner}")
                 self.table[p.name] = replace(p, owner=owner)
+        # every name in the defaults file and in the overrides is a declared parameter: a
+        # misspelt one is refused (with the nearest name), never ignored
+        for where, names in ((str(file), _flatten(load_toml(file))), ("parameter overrides", _flatten(overrides or {}))):
+            for name in sorted(set(names) - set(self.table)):
+                raise ConfigError(where, name, unknown_key(name, self.table))
         self.values: dict[str, float] = load_params(list(self.table.values()), overrides, file)
         self.defaults = dict(self.values)        # the values at start (file + scenario)
         self._hooks: dict[str, Hook] = {}

@@ -158,9 +158,36 @@ def latest(sub: zenoh.Subscriber) -> tuple[zenoh.Sample | None, int]:
         newest, skipped = s, skipped + 1
 
 
+def drain(sub: zenoh.Subscriber) -> list[zenoh.Sample]:
+    """Every sample waiting in the subscriber, oldest first."""
+    out = []
+    while (s := sub.try_recv()) is not None:
+        out.append(s)
+    return out
+
+
 def declare_alive(session: zenoh.Session, k: Keys, role: str) -> zenoh.LivelinessToken:
     """Announce this process (liveliness token ``<prefix>/alive/<role>``)."""
     return session.liveliness().declare_token(k.alive(role))
+
+
+class Presence:
+    """Whether the process holding a liveliness token is there, polled (no callback thread):
+    ``gone_for_s()`` is how long its token has been gone, 0 while it is there or before it
+    was ever seen."""
+
+    def __init__(self, session: zenoh.Session, key: str, now=time.monotonic):
+        self.sub = session.liveliness().declare_subscriber(key, zenoh.handlers.FifoChannel(64), history=True)
+        self.now = now
+        self.gone_since: float | None = None
+
+    def gone_for_s(self) -> float:
+        while (s := self.sub.try_recv()) is not None:
+            self.gone_since = None if s.kind == zenoh.SampleKind.PUT else self.now()
+        return 0.0 if self.gone_since is None else self.now() - self.gone_since
+
+    def undeclare(self) -> None:
+        self.sub.undeclare()
 
 
 def wait_for_alive(session: zenoh.Session, key: str, timeout_s: float,

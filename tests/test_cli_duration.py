@@ -23,7 +23,7 @@ def test_a_bad_duration_is_refused_naming_the_option(cmd, value, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert "--duration" in err
-    assert ("must be a number" in err) if value == "ten" else ("must be a finite number > 0" in err)
+    assert ("must be a number" in err) if value == "ten" else ("must be a finite number" in err)
 
 
 def test_positive_finite_durations_pass_unchanged():

@@ -55,7 +55,7 @@ VEHICLE_CASES = [
     ("mass_kg = 1200.0", "mass_kg = nan", "vehicle.mass_kg", "finite"),
     ("S_ref_m2 = 11.04\n", "", "vehicle.S_ref_m2", "missing"),
     ("mass_kg = 1200.0", "mass_kgg = 1200.0", "vehicle.mass_kg", "missing"),
-    ("l_ref_m = 3.75", "l_ref_m = 3.75\nlref_m = 3.75", "vehicle.lref_m", "unknown field"),
+    ("l_ref_m = 3.75", "l_ref_m = 3.75\nlref_m = 3.75", "vehicle.lref_m", "unknown key"),
     ("I12 = -21.0", "I12 = -6000.0", "vehicle.inertia_kgm2", "positive definite"),
     ("I11 = 2109.0", "I11 = 20000.0", "vehicle.inertia_kgm2", "triangle inequality"),
     ("I22 = 5053.0", "I22 = 0.0", "vehicle.inertia_kgm2.I22", "must be > 0"),
@@ -93,7 +93,7 @@ SCENARIO_CASES = [
     ("[60.0, -85.0], [130.0, 60.0]", "[160.0, -85.0], [130.0, 60.0]", "guidance.bank_schedule", "times must increase"),
     ("[60.0, -85.0]", "[60.0, -185.0]", "guidance.bank_schedule", r"within \[-180, 180\]"),
     ("rate_limit_dps = 8.0", "rate_limit_dps = 0.0", "guidance.rate_limit_dps", "must be > 0"),
-    ("I11 = 1.20,", "I11 = 1.20, I14 = 1.0,", "truth.inertia_scale.I14", "unknown field"),
+    ("I11 = 1.20,", "I11 = 1.20, I14 = 1.0,", "truth.inertia_scale.I14", "unknown key"),
     ("I12 = 1.30,", "I12 = 300.0,", "truth.inertia_scale.I11", "not positive definite"),
     ("density_scale = 1.20", "density_scale = -1.0", "truth.density_scale", "must be > 0"),
     ("flight_path_deg = -12.0", "flight_path_deg = -12.0\nflight_path_rad = -0.2", "initial.flight_path_rad",
@@ -109,7 +109,7 @@ SCENARIO_CASES = [
      "truth.density_waves", "at most 4"),
     ("gyro_bias_radps = [0.0, 0.0, 0.0]", "gyro_bias_radps = [0.0, 0.0]", "sensors.gyro_bias_radps", "3 elements"),
     ("chamber_noise = 0.02", "chamber_noise = 2.0", "sensors.chamber_noise", "<= 1"),
-    ("[end]", "[ends]", "ends", "unknown field"),
+    ("[end]", "[ends]", "ends", "unknown key"),
     ('vehicle = "ellipsled"', 'vehicle = "elipsled"', "<file>", "no vehicle named"),
 ]
 
@@ -136,7 +136,7 @@ FAULT_CASES = [
     ("jets = [1]\nkind = \"degraded\"\neta = 1.0", "faults[0].eta", "< 1"),
     ("jets = [1]\nkind = \"degraded\"\neta = 0.0", "faults[0].eta", "> 0"),
     ("jets = [1]\nkind = \"off\"\neta = 0.5", "faults[0].eta", "degraded\" only"),
-    ("jets = [1]\nkind = \"off\"\nwhen = 3.0", "faults[0].when", "unknown field"),
+    ("jets = [1]\nkind = \"off\"\nwhen = 3.0", "faults[0].when", "unknown key"),
 ]
 
 
@@ -146,7 +146,7 @@ GUIDED_CASES = [
     ("[target]\nlatitude_deg = 0.0\n", "[nottarget]\nlatitude_deg = 0.0\n", "target", "needs a \\[target\\]"),
     ("latitude_deg = 0.0\nlongitude_deg = 16.5", "latitude_deg = 95.0\nlongitude_deg = 16.5", "target.latitude_deg",
      "<= 90"),
-    ("longitude_deg = 16.5", "longitude_deg = 16.5\nheight_m = 0.0", "target.height_m", "unknown field"),
+    ("longitude_deg = 16.5", "longitude_deg = 16.5\nheight_m = 0.0", "target.height_m", "unknown key"),
     ("mach = 2.0", "mach = 2.0\nspeed_mps = 450.0", "end.speed_mps", "not both"),
     ("mach = 2.0", "speed_mps = -4.0", "end.speed_mps", "must be > 0"),
 ]

@@ -214,3 +214,55 @@ def test_the_router_drops_a_viewer_put_even_when_the_viewer_knows_the_plant_subs
         assert _drain(sub) == []
     finally:
         transport.close(sub, pub, sim, viz, rtr)
+
+
+def _tokens_seen(session, prefix: str, own_key: str) -> set[str]:
+    """Token keys under ``prefix`` that ``session`` is told of (declared and live), up to and
+    including ``own_key`` (declared last by the forger: anything the router let through
+    came before it), and what a liveliness query then answers."""
+    patterns = (f"{prefix}/alive/*", f"{prefix}/alive/*/ready")     # what the policy lets a role ask
+    subs = [session.liveliness().declare_subscriber(k, zenoh.handlers.FifoChannel(64), history=True)
+            for k in patterns]
+    seen: set[str] = set()
+    try:
+        deadline = time.monotonic() + 10
+        while own_key not in seen:
+            assert time.monotonic() < deadline, f"{own_key} never seen; seen {seen}"
+            got = [s for s in (sub.try_recv() for sub in subs) if s is not None]
+            if not got:
+                time.sleep(0.01)
+            seen.update(str(s.key_expr) for s in got if s.kind == zenoh.SampleKind.PUT)
+    finally:
+        for sub in subs:
+            sub.undeclare()
+    for k in patterns:
+        for r in session.liveliness().get(k, timeout=5.0):
+            if r.ok is not None:
+                seen.add(str(r.ok.key_expr))
+    return seen
+
+
+@pytest.mark.parametrize("forger,own,forged", [
+    ("viz", "bridge", ("fsw", "sim", "fsw/ready")),
+    ("sim", "sim", ("fsw", "fsw/ready", "bridge")),
+    ("fsw", "fsw", ("sim", "bridge")),
+])
+def test_each_certificate_declares_only_its_own_liveliness_tokens(router, forger, own, forged):
+    """A plant that starts its clock on a forged ``alive/fsw/ready``, or an FSW that flies for
+    a forged plant, would be misled by any certificate: the router lets each role declare
+    only its own presence, and still tells every role of every genuine token."""
+    endpoint, d, _ = router
+    prefix = f"ellipsled/presence-{forger}"
+    watcher_role = "fsw" if forger != "fsw" else "sim"
+    bad = zenoh.open(client_config(forger, endpoint, d))
+    watcher = zenoh.open(client_config(watcher_role, endpoint, d))
+    tokens = []
+    try:
+        for role in forged:
+            tokens.append(bad.liveliness().declare_token(f"{prefix}/alive/{role}"))
+        own_key = f"{prefix}/alive/{own}"
+        tokens.append(bad.liveliness().declare_token(own_key))
+        seen = _tokens_seen(watcher, prefix, own_key)
+        assert seen == {own_key}, f"forged presence got through: {seen - {own_key}}"
+    finally:
+        transport.close(*tokens, bad, watcher)

@@ -22,6 +22,9 @@ AERO_KEYS = ("C_lbeta", "C_malpha", "C_nbeta")
 BROKEN_FDIR_DELAY_S = -1.0   # outside fdir.delay_s's bounds: the FSW refuses it, run() raises
 
 
+# a campaign of a million runs already takes weeks on a cluster; every run id is held in memory
+MAX_RUNS = 1_000_000
+
 @dataclass(frozen=True)
 class Dispersions:
     """Uniform ranges (lo, hi); counts are inclusive integer ranges."""
@@ -149,7 +152,7 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
         name=c.str("name"), description=c.str("description", default=""), file=str(path),
         scenario=c.str("scenario"),
         max_duration_s=c.num("max_duration_s", default=None, lo=0, lo_open=True),
-        runs=c.num("runs", lo=1, integer=True),
+        runs=c.num("runs", lo=1, hi=MAX_RUNS, integer=True),
         master_seed=c.num("master_seed", lo=0, hi=2**63 - 1, integer=True),
         dispersions=disp, success=crit, break_runs=tuple(sorted(set(br))),
     )

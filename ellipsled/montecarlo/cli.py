@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import NamedTuple
 
 from common.model import Scenario
-from ellipsled.argtypes import nonneg_int, positive_float, positive_int
+from ellipsled import argtypes
+from ellipsled.argtypes import nonneg_int
+
+from .campaign import MAX_RUNS
 
 
 def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
@@ -17,7 +21,7 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("montecarlo", help="dispersed Monte Carlo campaign on Dask (local or a cluster)",
                               description=main.__doc__)
     p.add_argument("campaign", help="campaign name (data/campaigns) or .toml path")
-    p.add_argument("--runs", type=positive_int, default=None, help="number of runs (default: the campaign's)")
+    p.add_argument("--runs", type=argtypes.int_range(1, MAX_RUNS), default=None, help="number of runs (default: the campaign's)")
     p.add_argument("--out", required=True, help="campaign folder: results.parquet, summary.md, plots; "
                                                 "an existing one is resumed (with --pin: the scenario folder)")
     p.add_argument("--pin", type=nonneg_int, nargs="+", default=None, metavar="ID",
@@ -30,11 +34,12 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
     tls.add_argument("--tls-ca-file", default=None, metavar="PEM", help="CA certificate(s)")
     tls.add_argument("--tls-cert", default=None, metavar="PEM", help="this client's certificate")
     tls.add_argument("--tls-key", default=None, metavar="PEM", help="this client's private key")
-    p.add_argument("--workers", type=positive_int, default=None,
+    # (a few per core at most: each is a process with its own compiled kernels and run history)
+    p.add_argument("--workers", type=argtypes.int_range(1, 4 * (os.cpu_count() or 1)), default=None,
                    help="worker processes of the embedded cluster (default: one per core)")
-    p.add_argument("--duration", type=positive_float, default=None, help="stop every run after S s of flight")
-    p.add_argument("--seed", type=nonneg_int, default=None, help="master seed (default: the campaign's)")
-    p.add_argument("--flush-s", type=positive_float, default=5.0, help="write finished rows at least this often")
+    p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop every run after S s of flight")
+    p.add_argument("--seed", type=argtypes.seed, default=None, help="master seed (default: the campaign's)")
+    p.add_argument("--flush-s", type=argtypes.timeout_s, default=5.0, help="write finished rows at least this often")
     p.add_argument("--dashboard", action="store_true", help="embedded cluster: Dask dashboard on 127.0.0.1")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=main)

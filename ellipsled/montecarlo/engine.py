@@ -35,6 +35,7 @@ import pyarrow as pa
 
 from common.config import resolve
 from common.model import INERTIA_KEYS, Scenario, load_scenario
+from ellipsled.history import budget_refusal
 
 from .campaign import (AERO_KEYS, Campaign, Criteria, apply_dispersion, campaign_base, dispersion_columns, draw_run,
                        load_campaign)
@@ -338,6 +339,10 @@ def run_campaign(campaign: Campaign | str | Path, out: str | Path, *, runs: int 
     out.mkdir(parents=True, exist_ok=True)
     with _exclusive(out):
         base = prepare_out(out, camp, master_seed, duration_s)
+        # each run preallocates its history: refused here, not once per run in the workers
+        why = budget_refusal(base.max_duration_s if duration_s is None else duration_s, base.dt_control_s)
+        if why is not None:
+            raise ValueError(why)
         store = ResultStore(out / RESULTS_DIR, RECORD_SCHEMA)
         done = set(store.run_ids())
         todo = [i for i in range(runs) if i not in done]

@@ -20,6 +20,8 @@ import os
 import sys
 from pathlib import Path
 
+from ellipsled import argtypes
+
 # Role -> certificate common name; the names the router's policy refers to. ``dask``:
 # the Monte Carlo cluster's scheduler, workers and client (Dask's TLS is mutual too; each
 # end is a server and a client).
@@ -161,7 +163,7 @@ def add_pki_parser(sub) -> None:
     q.add_argument("--router-host", action="append", default=None, metavar="NAME_OR_ADDRESS",
                    help="a name or address clients use to reach the router (repeatable; default "
                         + ", ".join(DEFAULT_ROUTER_HOSTS) + ")")
-    q.add_argument("--days", type=int, default=DEFAULT_DAYS, help="validity of every certificate")
+    q.add_argument("--days", type=argtypes.int_range(1, 36500), default=DEFAULT_DAYS, help="validity of every certificate")
 
     def run(a):
         try:

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 from common.config import DATA_DIR
+from ellipsled import argtypes
 
 DEFAULT_CONFIG = DATA_DIR / "zenoh" / "router.json5"
 
@@ -50,7 +51,7 @@ def add_router_parser(sub) -> None:
     p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
                    help="listen here instead of the file's endpoints, e.g. tls/10.0.0.1:7447 (repeatable)")
     p.add_argument("--rt", action="store_true", help="every thread SCHED_FIFO --rt-priority, memory locked")
-    p.add_argument("--rt-priority", type=int, default=82,
+    p.add_argument("--rt-priority", type=argtypes.rt_priority, default=82,
                    help="SCHED_FIFO priority with --rt (the SIL nodes: loop 80, their I/O threads 81)")
     p.set_defaults(func=main)
 

@@ -7,7 +7,7 @@ import signal
 import sys
 import time
 
-from ellipsled.argtypes import positive_float
+from ellipsled import argtypes
 from interfaces import transport
 from interfaces.keys import DEFAULT_PREFIX, keys
 
@@ -15,9 +15,9 @@ from interfaces.keys import DEFAULT_PREFIX, keys
 
 def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", nargs="?", default="nominal", help="scenario name (data/scenarios) or .toml path")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=argtypes.seed, default=None)
     p.add_argument("--ft-off", action="store_true", help="fault tolerance off")
-    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop after S seconds of simulated time")
     from ellipsled.runlib import add_variant_arguments
     add_variant_arguments(p)
     mode = p.add_mutually_exclusive_group()
@@ -39,9 +39,9 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--prefix", default=DEFAULT_PREFIX, help="key-expression prefix of this run/vehicle")
     p.add_argument("--out", default=None, help="folder for this process's records")
     p.add_argument("--rt", action="store_true", help="real-time hygiene: SCHED_FIFO, affinity, mlockall")
-    p.add_argument("--rt-priority", type=int, default=80,
+    p.add_argument("--rt-priority", type=argtypes.rt_priority, default=80,
                    help="SCHED_FIFO priority of the main loop; Zenoh's I/O threads run one above it")
-    p.add_argument("--cpu", type=int, default=None, help="pin to this CPU")
+    p.add_argument("--cpu", type=argtypes.int_range(0, (os.cpu_count() or 1) - 1), default=None, help="pin to this CPU")
 
 
 class Stop:

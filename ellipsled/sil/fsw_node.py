@@ -22,6 +22,7 @@ from common import rt
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.events import EventLog, Severity  # noqa: E402
+from ellipsled import argtypes  # noqa: E402
 from ellipsled.history import History, guidance_fields, record_fsw  # noqa: E402
 from ellipsled.runlib import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock  # noqa: E402
@@ -40,17 +41,20 @@ ROLE = "fsw"
 
 def add_arguments(p) -> None:
     add_common_arguments(p)
-    p.add_argument("--rt-offset-us", type=float, default=-100.0,
+    p.add_argument("--rt-offset-us", type=argtypes.offset_us, default=-100.0,
                    help="real time: release this long after the plant publishes a step (negative: "
                         "before; the input task then waits for the frame, whose arrival, handled by "
                         "Zenoh's threads one priority up, cannot delay the release)")
-    p.add_argument("--frame-wait-us", type=float, default=3000.0,
+    p.add_argument("--frame-wait-us", type=argtypes.wait_us, default=3000.0,
                    help="real time: at a release, wait this long at most for the frame due")
     p.add_argument("--gcs", default=DEFAULT_GCS, help="ground station address (MAVLink)")
     p.add_argument("--mavlink-bind", default=DEFAULT_VEHICLE, help="the vehicle's MAVLink address")
     p.add_argument("--signing-key", default=None,
                    help="MAVLink signing key file (or $ELLIPSLED_SIGNING_KEY_FILE); no key = no ground link")
-    p.add_argument("--wait-peers", type=float, default=30.0)
+    p.add_argument("--wait-peers", type=argtypes.timeout_s, default=30.0)
+    p.add_argument("--plant-gone-s", type=argtypes.timeout_s, default=15.0,
+                   help="leave when the plant's liveliness has been gone this long (a restarted plant "
+                        "that is back sooner is flown on) [s]")
 
 
 class FswNode:
@@ -76,6 +80,7 @@ class FswNode:
         self.sub_fault_log = transport.subscriber(self.session, self.K.fault_log) if self.fsw.fdir.oracle else None
         self.dec_fault_log = Codec.for_schema("FAULT_APPLIED", on_reject=self._rejected)
         self.token = transport.declare_alive(self.session, self.K, ROLE)
+        self.plant_presence = transport.Presence(self.session, self.K.alive_sim)
         self.ready = None       # real time: a second token once warmed up (the plant starts on it)
         # a restarted plant takes over the sensor key after 1 s of silence, not before
         self.dec_sensors = Codec.for_schema("SENSORS", guard=SequenceGuard(takeover_after_s=1.0),
@@ -156,9 +161,25 @@ class FswNode:
                 self._rejected("fault_log", str(e))
 
     def _fetch_frame(self) -> int | None:
-        """The step of the newest sensor frame that decoded, or None."""
-        s, _ = transport.latest(self.sub_sensors)
-        return int(self.frame["k"]) if s is not None and self._accept(s) else None
+        """The step of the newest sensor frame that decodes, or None: the samples waiting are
+        judged newest first, so garbage published after a genuine frame cannot hide it."""
+        for s in reversed(transport.drain(self.sub_sensors)):
+            if self._accept(s):
+                return int(self.frame["k"])
+        return None
+
+    def _running(self) -> bool:
+        """Neither stopped (signal) nor left alone: a plant whose liveliness has been gone for
+        --plant-gone-s is not coming back, and an FSW without one must not linger holding its
+        ground link."""
+        if self.stop:
+            return False
+        gone_s = self.plant_presence.gone_for_s()
+        if gone_s < self.args.plant_gone_s:
+            return True
+        say(ROLE, f"the plant has been gone for {gone_s:.1f} s: leaving")
+        self.stop.requested = True
+        return False
 
     def _pause(self) -> None:
         if not self.spin:           # with --rt, Zenoh's threads preempt this spin (one priority up)
@@ -265,7 +286,7 @@ class FswNode:
 
     def run_lockstep(self) -> None:
         warm = False
-        while not self.stop:
+        while self._running():
             s = transport.recv(self.sub_sensors, 0.1)
             source = self.source_id
             if s is None or not self._accept(s):
@@ -290,7 +311,7 @@ class FswNode:
 
     def _next_good_frame(self) -> int | None:
         """Wait (interruptibly) for the next frame that decodes; its step, or None on stop."""
-        while not self.stop:
+        while self._running():
             s = transport.recv(self.sub_sensors, 0.1)
             if s is not None and self._accept(s):
                 return int(self.frame["k"])
@@ -334,7 +355,7 @@ class FswNode:
         self.next_k = lock + 1
         self.lock_source = self.source_id
         self.n_frames = 0                               # frame ages from here on
-        while not self.stop:
+        while self._running():
             if self.sub_fault_log is not None:
                 self._take_fault_log()
             self.topo.tick()
@@ -386,8 +407,8 @@ class FswNode:
         if self.link is not None:
             self.link.flush_events()
             self.link.close()
-        transport.close(self.ready, self.token, self.sub_sensors, self.pub_jets, self.pub_state, self.pub_events,
-                        self.pub_faults, self.sub_fault_log, self.session)
+        transport.close(self.ready, self.token, self.plant_presence, self.sub_sensors, self.pub_jets, self.pub_state,
+                        self.pub_events, self.pub_faults, self.sub_fault_log, self.session)
 
 
 def main(args) -> int:

@@ -26,9 +26,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from ellipsled.argtypes import positive_float
+from ellipsled import argtypes
 from ellipsled.history import History, merge
-from ellipsled.procs import stop_process
+from ellipsled.procs import die_with_parent, stop_process
 from ellipsled.runlib import (EXIT_NOT_COMPLETED, add_variant_arguments, exit_code, fault_free_reference,
                               format_summary, judge, prepare_args, variant_argv)
 from ellipsled.terminal import ProgressFile, RunProgress, files_written
@@ -51,12 +51,12 @@ def add_arguments(p) -> None:
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
                       help="the plant on its own clock at --speed, the FSW on absolute deadlines")
     p.set_defaults(mode="lockstep")
-    p.add_argument("--duration", type=positive_float, default=None, help="stop after S seconds of simulated time")
+    p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop after S seconds of simulated time")
     add_variant_arguments(p)
     p.add_argument("--out", default="runs/sil", help="output folder")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=argtypes.seed, default=None)
     p.add_argument("--ft-off", action="store_true")
-    p.add_argument("--speed", type=float, default=1.0, help="real time: simulated seconds per wall second")
+    p.add_argument("--speed", type=argtypes.speed, default=1.0, help="real time: simulated seconds per wall second")
     p.add_argument("--rerun", default="auto",
                    help="viewer | web | file | none | auto (viewer with a display, else file); '+' joins")
     p.add_argument("--console", action="store_true", help="open the ground console beside the SIL")
@@ -73,8 +73,8 @@ def add_arguments(p) -> None:
     p.add_argument("--rt", action=argparse.BooleanOptionalAction, default=None,
                    help="real-time hygiene, SCHED_FIFO/affinity/mlockall for sim (CPU 0) and fsw (CPU 1) "
                         "when permitted (default: on with --realtime, off in lockstep)")
-    p.add_argument("--fsw-timeout", type=float, default=10.0)
-    p.add_argument("--rt-offset-us", type=float, default=None,
+    p.add_argument("--fsw-timeout", type=argtypes.timeout_s, default=10.0)
+    p.add_argument("--rt-offset-us", type=argtypes.offset_us, default=None,
                    help="real time: the FSW releases this long after the plant publishes a step "
                         "(default: ellipsled fsw's)")
     p.add_argument("--no-plots", action="store_true")
@@ -145,7 +145,9 @@ class Launcher:
         path = self.out / f"{role}.log"
         log = open(path, "w")
         self.logs.append(log)
-        self.children[role] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        # a launcher killed outright takes its children with it (the kernel signals them)
+        self.children[role] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                               preexec_fn=die_with_parent())
         if self.relay is not None:
             self.relay.follow(path)
 
@@ -173,6 +175,7 @@ class Launcher:
 
     def _run(self) -> int:
         a = self.args
+        scn = prepare_args(a)           # a scenario the nodes would refuse is refused before they start
         self.rt = a.rt if a.rt is not None else a.mode == "realtime"
         # peers route nothing for each other (no router, no gossip): every viewer connects to
         # both data sources, the plant and the FSW, each listening on its own loopback port
@@ -187,7 +190,6 @@ class Launcher:
         key = self._key_file()
         if not a.console:               # the console owns the terminal otherwise
             self.relay = LogRelay(self.say_child)
-            scn = prepare_args(a)
             self.progress = RunProgress(f"{scn.name} {a.mode}", scn.max_duration_s)
         fd, self.progress_path = tempfile.mkstemp(prefix="ellipsled-progress-")
         os.close(fd)

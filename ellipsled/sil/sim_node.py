@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from common.rt import sleep_until_ns
+from ellipsled import argtypes
 from ellipsled.history import History, record_truth
 from ellipsled.runlib import end_reason_of, prepare_args
 from ellipsled.terminal import ProgressFile
@@ -32,18 +33,33 @@ ROLE = "sim"
 
 def add_arguments(p) -> None:
     add_common_arguments(p)
-    p.add_argument("--speed", type=float, default=1.0, help="real time: simulated seconds per wall second")
-    p.add_argument("--fsw-timeout", type=float, default=10.0,
+    p.add_argument("--speed", type=argtypes.speed, default=1.0, help="real time: simulated seconds per wall second")
+    p.add_argument("--fsw-timeout", type=argtypes.timeout_s, default=10.0,
                    help="lockstep: end the run when the FSW has not answered for this long [s]")
-    p.add_argument("--wait-peers", type=float, default=30.0, help="how long to wait for the FSW at start [s]")
-    p.add_argument("--resend-s", type=float, default=0.5,
+    p.add_argument("--wait-peers", type=argtypes.timeout_s, default=30.0, help="how long to wait for the FSW at start [s]")
+    p.add_argument("--resend-s", type=argtypes.timeout_s, default=0.5,
                    help="lockstep: publish the sensor frame again after this long without its answer (the "
                         "frame or the answer was lost, e.g. while a router restarts) [s]")
     p.add_argument("--wait-bridge", action="store_true", help="also wait for the Rerun bridge before step 0")
-    p.add_argument("--miss-periods", type=int, default=3,
+    p.add_argument("--miss-periods", type=argtypes.int_range(1, 1000), default=3,
                    help="real time: hold jets off after this many periods without a fresh command")
     p.add_argument("--progress-file", default=None, metavar="PATH",
                    help="keep the simulated time reached in this file (ellipsled run's progress bar)")
+
+
+def command_refusal(rec, k: int) -> str | None:
+    """Why the plant at step ``k`` refuses a decoded jet command it cannot have been sent: an
+    answer to a step it has not published yet (one far ahead would make every genuine answer
+    look stale), a negative step, or a valve state other than 0 (closed) or 1 (open). None
+    when the command may fly."""
+    kc = int(rec["k"])
+    if kc > k:
+        return "future_step"
+    if kc < 0:
+        return "negative_step"
+    if int(rec["u"].max()) > 1:
+        return "u_range"
+    return None
 
 
 class SimNode:
@@ -99,6 +115,14 @@ class SimNode:
         self.rejects[reason] = self.rejects.get(reason, 0) + 1
         if self.rejects[reason] in (1, 10, 100, 1000):
             say(ROLE, f"rejected payload ({reason}): {detail} [{self.rejects[reason]} so far]")
+
+    def _refused(self, rec, k: int) -> bool:
+        """A decoded jet command the plant at step k refuses (``command_refusal``): counted
+        in ``rejects`` with the decoder's refusals, never flown."""
+        why = command_refusal(rec, k)
+        if why is not None:
+            self._rejected(why, f"JETS k={int(rec['k'])} u max {int(rec['u'].max())} at plant step {k}")
+        return why is not None
 
     # ------------------------------------------------------------------ faults
     def apply_faults(self) -> None:
@@ -188,7 +212,7 @@ class SimNode:
                     return False
                 continue
             rec = self.dec_jets.decode(s.payload.to_bytes())
-            if rec is None:
+            if rec is None or self._refused(rec, k):
                 continue
             kc = int(rec["k"])
             if kc == k:
@@ -233,7 +257,7 @@ class SimNode:
                 if s is None:
                     break
                 rec = self.dec_jets.decode(s.payload.to_bytes())
-                if rec is None:
+                if rec is None or self._refused(rec, k):
                     continue
                 kc = int(rec["k"])
                 if kc < last_cmd_k:

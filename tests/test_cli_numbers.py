@@ -1,0 +1,104 @@
+"""Every number on an `ellipsled` command line is checked by the parser against its range: a
+value outside it is a usage error naming the option (exit status 2), before any process,
+session, allocation or flight starts. Runs whose preallocated history would not fit the
+memory budget are refused with the budget named."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from common.config import ConfigError
+from ellipsled import cli, runlib
+
+BAD = [
+    (["batch", "nominal", "--out", "/nonexistent", "--seed", "-1"], "--seed"),
+    (["batch", "nominal", "--out", "/nonexistent", "--duration", "1e300"], "--duration"),
+    (["batch", "nominal", "--out", "/nonexistent", "--duration", "1e6"], "--duration"),
+    (["batch", "--from-campaign", "/nonexistent", "--run", "-3", "--out", "/nonexistent"], "--run"),
+    (["plant", "nominal", "--seed", "-2"], "--seed"),
+    (["report", "--out", "/nonexistent", "--seed", "-1"], "--seed"),
+    (["montecarlo", "default", "--out", "/nonexistent", "--runs", "1000000000"], "--runs"),
+    (["montecarlo", "default", "--out", "/nonexistent", "--workers", "10000"], "--workers"),
+    (["montecarlo", "default", "--out", "/nonexistent", "--seed", "-1"], "--seed"),
+    (["montecarlo", "default", "--out", "/nonexistent", "--flush-s", "nan"], "--flush-s"),
+    *[(["run", "--realtime", "--speed", v], "--speed") for v in ("0", "nan", "-1", "1e-9", "inf")],
+    *[(["run", "--fsw-timeout", v], "--fsw-timeout") for v in ("nan", "-1", "0")],
+    (["run", "--rt-offset-us", "nan"], "--rt-offset-us"),
+    (["run", "--seed", "-1"], "--seed"),
+    (["sim", "--speed", "0"], "--speed"),
+    (["sim", "--fsw-timeout", "nan"], "--fsw-timeout"),
+    (["sim", "--wait-peers", "-1"], "--wait-peers"),
+    (["sim", "--resend-s", "nan"], "--resend-s"),
+    (["sim", "--miss-periods", "0"], "--miss-periods"),
+    (["sim", "--rt-priority", "100"], "--rt-priority"),
+    (["sim", "--cpu", "-1"], "--cpu"),
+    (["sim", "--cpu", "100000"], "--cpu"),
+    (["fsw", "--rt-offset-us", "nan"], "--rt-offset-us"),
+    (["fsw", "--frame-wait-us", "-5"], "--frame-wait-us"),
+    (["fsw", "--wait-peers", "inf"], "--wait-peers"),
+    (["router", "--rt-priority", "0"], "--rt-priority"),
+    (["pki", "init", "/nonexistent", "--days", "0"], "--days"),
+]
+
+
+@pytest.mark.parametrize("argv,option", BAD, ids=lambda x: " ".join(x) if isinstance(x, list) else x)
+def test_a_number_outside_its_range_is_a_usage_error_naming_the_option(argv, option, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.build_parser(argv).parse_args(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}" in err and "must be" in err, err
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--realtime", "--speed", "1", "--fsw-timeout", "10", "--rt-offset-us", "-100", "--seed", "0"],
+    ["batch", "nominal", "--out", "x", "--seed", "123456789", "--duration", "700"],
+    ["montecarlo", "default", "--out", "x", "--runs", "1000", "--workers", "1"],
+    ["fsw", "--rt-offset-us", "250", "--frame-wait-us", "3000"],
+])
+def test_values_within_range_pass(argv):
+    cli.build_parser(argv).parse_args(argv)
+
+
+def test_a_huge_duration_ends_with_a_usage_error_not_a_traceback(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "batch", "nominal", "--out", str(tmp_path),
+                        "--duration", "1e300"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr and "argument --duration" in r.stderr
+
+
+def test_a_run_whose_history_exceeds_the_memory_budget_is_refused_naming_the_budget():
+    from ellipsled.history import HISTORY_BUDGET_BYTES, budget_refusal, row_bytes, rows_for
+    dt = 0.02
+    longest_rows = HISTORY_BUDGET_BYTES // row_bytes()
+    too_long = (longest_rows + 10) * dt
+    with pytest.raises(ConfigError) as e:
+        runlib.prepare("nominal", duration_s=too_long)
+    msg = str(e.value)
+    assert "--duration" in msg and "memory budget" in msg and "GiB" in msg, msg
+    assert budget_refusal((longest_rows - 10) * dt, dt) is None
+    # a scenario's own max_duration_s is held to the same budget
+    scn = runlib.prepare("nominal")
+    assert rows_for(scn.max_duration_s, scn.dt_control_s) * row_bytes() <= HISTORY_BUDGET_BYTES
+
+
+def test_a_campaign_whose_runs_exceed_the_memory_budget_is_refused_before_any_run(tmp_path, monkeypatch):
+    import ellipsled.history as history
+    from ellipsled.montecarlo.engine import run_campaign
+    monkeypatch.setattr(history, "HISTORY_BUDGET_BYTES", 1_000_000, raising=False)   # ~1,100 rows: 22 s
+    with pytest.raises(ValueError, match="memory budget"):
+        run_campaign("default", tmp_path / "mc", runs=1, duration_s=60.0, workers=1, progress=False)
+    assert not list((tmp_path / "mc").rglob("*.parquet"))          # nothing flown
+
+
+def test_a_campaign_file_asking_for_more_runs_than_the_bound_is_refused(tmp_path):
+    from common.config import DATA_DIR
+    from ellipsled.montecarlo.campaign import MAX_RUNS, load_campaign
+    src = (DATA_DIR / "campaigns" / "default.toml").read_text()
+    import re
+    path = tmp_path / "big.toml"
+    path.write_text(re.sub(r"(?m)^runs = \d+", f"runs = {MAX_RUNS * 1000}", src, count=1))
+    with pytest.raises(ConfigError, match=r"campaign\.runs: must be <= "):
+        load_campaign(path)

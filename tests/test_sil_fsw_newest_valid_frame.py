@@ -1,0 +1,61 @@
+"""The real-time FSW flies the newest sensor frame that decodes: garbage, a forged frame of a
+second publisher or a truncated one arriving after a genuine frame is refused (counted by
+the decoder) and the genuine frame is taken, not lost. Scripted samples, no transport."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from ellipsled.sil.fsw_node import FswNode
+from interfaces import records
+from interfaces.codec import Codec, SequenceGuard
+
+
+class Sub:
+    """A polled subscriber holding scripted payloads."""
+
+    def __init__(self, payloads):
+        self.q = [SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda b=b: b)) for b in payloads]
+
+    def try_recv(self):
+        return self.q.pop(0) if self.q else None
+
+
+def _frame(enc: Codec, k: int, seq: int) -> bytes:
+    rec = records.new(records.SENSORS)
+    rec["k"] = k
+    return enc.encode(rec, seq, 1_000 + seq)
+
+
+def _node(payloads):
+    dec = Codec.for_schema("SENSORS", guard=SequenceGuard(takeover_after_s=1.0))
+    frame = records.new(records.SENSORS)
+    node = SimpleNamespace(sub_sensors=Sub(payloads), frame=frame, dec=dec)
+    node._accept = lambda s: dec.decode(s.payload.to_bytes(), out=frame) is not None
+    return node
+
+
+def test_garbage_after_a_genuine_frame_does_not_hide_it():
+    plant, forger = Codec.for_schema("SENSORS"), Codec.for_schema("SENSORS")   # (one publisher id a process)
+    genuine = [_frame(plant, k, k) for k in range(3)]
+    node = _node([genuine[0]])
+    assert FswNode._fetch_frame(node) == 0                 # the plant owns the key
+    node.sub_sensors = Sub([genuine[1], b"\x00" * 37, genuine[2][:-5], _frame(forger, 99, 0), b"garbage"])
+    assert FswNode._fetch_frame(node) == 1
+    assert int(node.frame["k"]) == 1
+    r = node.dec.rejects
+    assert r["size"] == 3 and sum(r.values()) == 4, r           # each refusal counted (the forgery too)
+
+
+def test_the_newest_genuine_frame_is_taken_and_nothing_is_left_queued():
+    plant = Codec.for_schema("SENSORS")
+    node = _node([_frame(plant, k, k) for k in range(4)] + [b"junk"])
+    assert FswNode._fetch_frame(node) == 3
+    assert node.sub_sensors.try_recv() is None
+    assert FswNode._fetch_frame(node) is None          # nothing new: no frame
+
+
+def test_only_garbage_gives_no_frame_and_keeps_the_last_one():
+    node = _node([b"junk", b"\xff" * 400])
+    node.frame["k"] = 7
+    assert FswNode._fetch_frame(node) is None
+    assert int(node.frame["k"]) == 7 and sum(node.dec.rejects.values()) == 2

@@ -6,7 +6,9 @@ connect, answered by the link without touching the flight software's state:
   link ticks);
 - one-shot requests: MAV_CMD_REQUEST_MESSAGE for every message the vehicle produces,
   MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, MAV_CMD_REQUEST_PROTOCOL_VERSION;
-- identity: AUTOPILOT_VERSION (capability bits only for what the link does), PROTOCOL_VERSION;
+- identity: AUTOPILOT_VERSION (capability bits only for what the link does, the version,
+  vendor and product ids), PROTOCOL_VERSION;
+- the modes by name: AVAILABLE_MODES (MAV_CMD_REQUEST_MESSAGE param2: 0 all, else the index);
 - the mission list of a vehicle without missions: MISSION_COUNT 0.
 
 Each command is judged here and answered as (MAV_RESULT, reason, replies, broadcast); the
@@ -22,8 +24,13 @@ from pathlib import Path
 from interfaces.mavlink import dialect as mav
 from interfaces.vocabulary import CommandResult
 
+from . import telemetry as tm
 from .metadata import firmware_version
 
+# AUTOPILOT_VERSION.vendor_id / product_id: the project's own (MAVLink keeps no registry of
+# them; they are not USB ids): "EL" and 1, the flight software of this vehicle.
+VENDOR_ID = 0x454C
+PRODUCT_ID = 0x0001
 MAVLINK_VERSION = 200                    # MAVLink 2 only: the intake refuses MAVLink 1 frames
 MSG_ID_MAX = 0xFFFFFF                    # message ids are 24 bits
 
@@ -79,9 +86,11 @@ class LinkServices:
         self.link = link
         self.default_rates = dict(link.rates_hz)
         self.stream_of_id = {getattr(mav, "MAVLINK_MSG_ID_" + name): name for name in link.rates_hz}
-        # one-shot messages that are not streams: id -> () -> list of messages
-        self.oneshot = {mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: lambda: [self.autopilot_version()],
-                        mav.MAVLINK_MSG_ID_PROTOCOL_VERSION: lambda: [self.protocol_version()]}
+        # one-shot messages that are not streams: id -> (params) -> messages (empty: none yet),
+        # or a reason to deny the request
+        self.oneshot = {mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: lambda p: [self.autopilot_version()],
+                        mav.MAVLINK_MSG_ID_PROTOCOL_VERSION: lambda p: [self.protocol_version()],
+                        mav.MAVLINK_MSG_ID_AVAILABLE_MODES: self._available_modes}
         self.oneshot.update(extra or {})
         self._version = flight_sw_version()
         self._custom = list(source_digest())
@@ -90,7 +99,14 @@ class LinkServices:
     def autopilot_version(self):
         z8 = [0] * 8
         return mav.MAVLink_autopilot_version_message(CAPABILITIES, self._version, 0, 0, 0, self._custom, z8, z8,
-                                                     0, 0, 0, [0] * 18)
+                                                     VENDOR_ID, PRODUCT_ID, 0, [0] * 18)
+
+    @staticmethod
+    def _available_modes(p) -> list | str:
+        n = len(tm.available_modes())
+        if not _int_in(p[1], 0, n):
+            return f"REQUEST MODES {p[1]:g} DENIED (0 ALL, 1..{n})"
+        return tm.available_modes(int(p[1]))
 
     @staticmethod
     def protocol_version():
@@ -168,7 +184,12 @@ class LinkServices:
             return CommandResult.DENIED, f"REQUEST TARGET {p[6]:g} DENIED (0, 1, 2)", [], False
         broadcast = int(p[6]) == TARGET_BROADCAST
         if mid in self.oneshot:
-            return CommandResult.ACCEPTED, "", self.oneshot[mid](), broadcast
+            msgs = self.oneshot[mid](p)
+            if isinstance(msgs, str):
+                return CommandResult.DENIED, msgs, [], False
+            if not msgs:
+                return CommandResult.TEMPORARILY_REJECTED, f"REQUEST MSG {mid} REJECTED: NO DATA YET", [], False
+            return CommandResult.ACCEPTED, "", msgs, broadcast
         name = self.stream_of_id.get(mid)
         if name is None:
             return CommandResult.DENIED, f"REQUEST MSG {mid} DENIED: NOT PRODUCED", [], False

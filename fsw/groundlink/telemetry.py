@@ -185,6 +185,65 @@ def position(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool]) -> I
         yield mav.MAVLink_altitude_message(int(max(0.0, fsw.t_s) * 1e6), h, h, h, h, -1001.0, -1.0)
 
 
+def planet_fixed(fsw, x_N: np.ndarray) -> np.ndarray:
+    """x_N in the planet-fixed frame P (N and P coincide at t = 0; P turns at the planet's rate
+    about N3, so longitude = atan2(y_P, x_P), as ``lat_lon``)."""
+    th = fsw.scenario.planet.omega_radps * fsw.t_s
+    c, s = math.cos(th), math.sin(th)
+    return np.array([c * x_N[0] + s * x_N[1], -s * x_N[0] + c * x_N[1], x_N[2]])
+
+
+def local_origin(fsw) -> tuple[np.ndarray, np.ndarray]:
+    """(r0_P [m], C_L0P): the origin of LOCAL_POSITION_NED, the point of the FSW's sphere
+    below the navigation position now, in P, and the north-east-down axes there (rows, in P).
+    The link takes it once, at the first navigation fix."""
+    r_P = planet_fixed(fsw, fsw.nav.state.r_N)
+    r0_P = r_P * (fsw.scenario.planet.radius_m / float(np.linalg.norm(r_P)))
+    return r0_P, local_ned_dcm(r0_P)
+
+
+def local_position_ned(fsw, ms: int, origin: tuple[np.ndarray, np.ndarray]):
+    """LOCAL_POSITION_NED in the planet-fixed north-east-down frame of ``origin``
+    (``local_origin``): position of the vehicle relative to it, and the planet-relative
+    velocity (its time derivative) in the same axes, as floats (no saturation). The origin's
+    axes turn away from the vehicle's local NED by the angle flown around the planet."""
+    r0_P, C_L0P = origin
+    nav = fsw.nav.state
+    x = C_L0P @ (planet_fixed(fsw, nav.r_N) - r0_P)
+    v = C_L0P @ planet_fixed(fsw, nav.vrel_N)
+    return mav.MAVLink_local_position_ned_message(ms, float(x[0]), float(x[1]), float(x[2]),
+                                                  float(v[0]), float(v[1]), float(v[2]))
+
+
+def gps_global_origin(fsw, origin: tuple[np.ndarray, np.ndarray]):
+    """GPS_GLOBAL_ORIGIN: where ``origin`` is (latitude, longitude, altitude 0 on the sphere)."""
+    r0_P = origin[0]
+    lat = math.asin(max(-1.0, min(1.0, float(r0_P[2]) / float(np.linalg.norm(r0_P)))))
+    lon = math.atan2(float(r0_P[1]), float(r0_P[0]))
+    return mav.MAVLink_gps_global_origin_message(int(round(math.degrees(lat) * 1e7)),
+                                                 int(round(math.degrees(lon) * 1e7)), 0,
+                                                 int(max(0.0, fsw.t_s) * 1e6))
+
+
+# ---------------------------------------------------------------- modes (standard modes protocol)
+def current_mode(fsw):
+    """CURRENT_MODE: the FSW's Mode as custom_mode; no MAVLink standard mode fits an entry
+    vehicle's modes (NON_STANDARD); the intended mode is the one flown (no mode is refused
+    silently: a refused mode command is answered DENIED)."""
+    m = int(fsw.modes.mode)
+    return mav.MAVLink_current_mode_message(mav.MAV_STANDARD_MODE_NON_STANDARD, m, m)
+
+
+def available_modes(index: int = 0) -> list:
+    """AVAILABLE_MODES: every Mode (``index`` 0) or the one of index 1..n, by name. Not
+    selectable by a stock ground station: modes are set with ELLIPSLED_CMD_SET_MODE (signed)."""
+    modes = list(Mode)
+    pick = modes if index == 0 else modes[index - 1:index]
+    return [mav.MAVLink_available_modes_message(len(modes), modes.index(m) + 1, mav.MAV_STANDARD_MODE_NON_STANDARD,
+                                                int(m), mav.MAV_MODE_PROPERTY_NOT_USER_SELECTABLE,
+                                                m.name.encode("ascii"), 0) for m in pick]
+
+
 # ---------------------------------------------------------------- guidance
 _RULES = {"corridor": mav.ELLIPSLED_REVERSAL_RULE_CORRIDOR, "final": mav.ELLIPSLED_REVERSAL_RULE_FINAL}
 

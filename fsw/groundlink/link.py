@@ -54,6 +54,7 @@ from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, S
 from . import metadata, policy
 from . import telemetry as tm
 from .commands import CommandTranslator, InjectFn, ParamProtocol
+from . import ftp
 from .ftp import FtpServer
 from .services import COMMANDS as LINK_COMMANDS
 from .services import LinkServices
@@ -425,6 +426,8 @@ class GroundLink:
 
     @staticmethod
     def _for_me(msg) -> bool:
+        if msg.get_msgId() in _UNTARGETED:
+            return True
         return msg.target_system in (0, SYSTEM_ID) and msg.target_component in (0, COMPONENT_ID)
 
     def _take_read(self, addr) -> bool:
@@ -515,8 +518,14 @@ class GroundLink:
         if self._ftp_budget <= 0:
             self.stats["ftp_deferred"] += 1
             return
-        budget = self._ftp_budget if signed else 1 + self._take_reads(addr, min(self._ftp_budget, self._reply_budget) - 1)
+        budget = self._ftp_budget
+        if not signed:                      # a burst's replies beyond the first, from the read budget
+            payload = bytes(msg.payload)
+            want = self.ftp.burst_packets if len(payload) > 3 and payload[3] == ftp.BURST else 1
+            budget = 1 + self._take_reads(addr, min(want, self._ftp_budget, self._reply_budget) - 1)
         replies = self.ftp.handle(msg.payload, budget, client=addr)
+        if not signed and len(replies) < budget:     # what a short burst did not use goes back
+            self._read_budget[addr][0] += budget - max(1, len(replies))
         self._ftp_budget -= len(replies)
         for payload in replies:
             reply = mav.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(),
@@ -627,7 +636,8 @@ class GroundLink:
             yield tm.heartbeat(fsw)
         elif name == "SYS_STATUS":
             yield tm.sys_status(fsw, self._loop_timing, self.rejections, self.stats["kernel_drops"],
-                                self.stats["refused_early"])
+                                self.stats["refused_early"], self.link.counts[Reject.UNSIGNED],
+                                self.stats["reads_limited"])
         elif name == "SYSTEM_TIME":
             yield tm.system_time(fsw, self.wall_clock())
         elif name == "ACTUATOR_OUTPUT_STATUS":

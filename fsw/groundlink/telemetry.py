@@ -53,10 +53,13 @@ def heartbeat(fsw):
                                          int(fsw.modes.mode), system_status(fsw), 3)
 
 
-def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int, dropped: int = 0, refused_early: int = 0):
+def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int, dropped: int = 0, refused_early: int = 0,
+               unsigned_writes: int = 0, reads_limited: int = 0):
     """SYS_STATUS; the link's counters in the standard error fields (a stock ground station
     shows them): errors_comm every rejection, errors_count1 datagrams dropped on the full
-    receive queue, errors_count2 datagrams refused before verification (each saturating)."""
+    receive queue, errors_count2 datagrams refused before verification, errors_count3
+    unsigned frames refused for their class (state-changing), errors_count4 read-only
+    requests and answers over their sender's budget (each saturating)."""
     S = mav
     present = (S.MAV_SYS_STATUS_SENSOR_3D_GYRO | S.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                | S.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION | S.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
@@ -72,7 +75,7 @@ def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int, dropped: int
         load = int(round(min(1000.0, max(0.0, rg[3] * 1e-6 / fsw.dt_s * 1000.0))))
     return mav.MAVLink_sys_status_message(present, enabled, health, load, 0xFFFF, -1, -1, 0,
                                           min(rejections, 0xFFFF), min(dropped, 0xFFFF), min(refused_early, 0xFFFF),
-                                          0, 0)
+                                          min(unsigned_writes, 0xFFFF), min(reads_limited, 0xFFFF))
 
 
 def nav_valid(fsw) -> bool:

@@ -105,9 +105,9 @@ def test_policy_table_reads_are_reads_and_everything_that_changes_state_is_signe
               mav.ELLIPSLED_CMD_FDIR_CLEAR, mav.ELLIPSLED_CMD_FDIR_SET_DELAY, mav.ELLIPSLED_CMD_FAULT_TOLERANCE,
               mav.MAV_CMD_DO_SET_MODE, 12345):
         assert policy.access(cmd(c)) == policy.WRITE, c
-    for op in (ftp.LIST, ftp.OPEN_RO, ftp.READ, ftp.BURST, ftp.CRC32, ftp.TERMINATE):
-        assert policy.access(ftp_op(op)) == policy.READ, op
-    for op in (ftp.RESET, *ftp.WRITE_OPS, 200):
+    for op in (ftp.LIST, ftp.OPEN_RO, ftp.READ, ftp.BURST, ftp.CRC32, ftp.TERMINATE, 16, 200):
+        assert policy.access(ftp_op(op)) == policy.READ, op      # 16, 200: unknown, answered NAK
+    for op in (ftp.RESET, *ftp.WRITE_OPS):
         assert policy.access(ftp_op(op)) == policy.WRITE, op
     assert policy.access(mav.MAVLink_param_set_message(1, 1, b"C_D_MAX", 2.0, 9)) == policy.WRITE
     assert not policy.may_be_unsigned(mav.MAVLINK_MSG_ID_PARAM_SET)

@@ -11,22 +11,27 @@ signature work; the receive buffer sized to one tick's budget, the kernel droppi
 excess), answers what arrived, then sends the telemetry that is due; it never blocks and
 never raises on anything from the network. What the link refused and dropped is in
 ``stats``, in SYS_STATUS (errors_comm: rejections; errors_count1: datagrams dropped on the
-full queue; errors_count2: datagrams refused before verification), per sender in
-``refused_by_sender``, and, while a flood lasts, in one throttled WARNING event per kind
-(EventLog rate limit; what it held is told once its interval is over).
+full queue; errors_count2: datagrams refused before verification; errors_count3: unsigned
+state-changing frames refused; errors_count4: reads over budget), per sender in
+``refused_by_sender``, and in the one throttled refusal event below.
 
 Who the link listens to:
 - the vehicle's own system id is refused from the link (a frame the vehicle signed and
   someone sent back verifies: same key, fresh timestamp);
+- what may come unsigned is decided by one table, policy.py (signing policy by message
+  class): read-only requests (identity, a telemetry message, modes, metadata over FTP's
+  read-only opcodes, parameter reads, the mission list, PING, TIMESYNC) are answered to the
+  requester only and within the tick's reply budget; an unsigned sender gets at most
+  ``READ_RATE_HZ`` requests and answer frames a second (after a burst of ``READ_BURST``: a
+  parameter list or an FTP burst goes out at that pace), so no unsigned request is an
+  amplifier; state-changing frames are acted on only signed (unsigned: refused, counted,
+  a command answered DENIED);
 - a telemetry peer (an address that gets the telemetry besides ``gcs``) is made only by a
-  signed *command-class* frame (COMMAND_LONG, COMMAND_INT, PARAM_SET, FTP: what must be
-  signed) addressed to this vehicle; a signed heartbeat or read makes none;
-- read-only requests (PARAM_REQUEST_READ/LIST, MISSION_REQUEST_LIST), which may come
-  unsigned, are answered to the requester only and within the tick's reply budget; an
-  unsigned sender gets at most ``READ_RATE_HZ`` requests and answer frames a second
-  (after a burst of ``READ_BURST``: a parameter list goes out at that pace), so no
-  unsigned request is an amplifier; an unknown id read unsigned is counted, not told one
-  event per request.
+  signed *command-class* frame (COMMAND_LONG, COMMAND_INT, PARAM_SET, FTP) from a ground
+  system addressed to this vehicle; a signed heartbeat or read makes none;
+- every refusal (the intake's, an unsigned state-changing frame, a read over budget, an
+  unknown parameter id read unsigned) is counted and told in one event code,
+  ``REFUSAL_EVENT``: at once, then at most once per ``REFUSAL_EVENT_INTERVAL_S`` (a summary).
 
 Downlink per tick, beyond the telemetry streams: at most ``max_tx_per_tick`` frames of
 events and answers to requests; answers (parameter lists included) take at most

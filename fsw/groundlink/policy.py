@@ -7,8 +7,8 @@ WRITE  changes the vehicle's state (or another client's): accepted signed only; 
        is refused, counted and told in the link's one throttled refusal event.
 
 A message's class is its entry in MESSAGES; for the messages that carry a command or an FTP
-opcode it is the command's (COMMANDS) or the opcode's (FTP_OPCODES) entry, WRITE for any
-command or opcode not listed. The intake lets through unsigned only the message ids that
+opcode it is the command's (COMMANDS: WRITE for any command not listed) or the opcode's
+(FTP_OPCODES: READ for any opcode not listed, which the server refuses). The intake lets through unsigned only the message ids that
 can be READ (``may_be_unsigned``); the link judges the rest by ``access`` after decoding.
 """
 from __future__ import annotations
@@ -43,10 +43,11 @@ COMMANDS: dict[int, str] = {
     mav.MAV_CMD_GET_MESSAGE_INTERVAL: READ,
 }
 
-# Read-only MAVLink FTP opcodes (a client's own session: ftp.FtpServer keeps sessions per
-# client); ResetSessions (everyone's sessions) and every write opcode are WRITE.
-FTP_OPCODES: dict[int, str] = {op: READ for op in (ftp.NONE, ftp.TERMINATE, ftp.LIST, ftp.OPEN_RO, ftp.READ,
-                                                   ftp.CRC32, ftp.BURST)}
+# MAVLink FTP opcodes that change something: ResetSessions (everyone's sessions) and every
+# write opcode. Every other opcode is READ: the read-only ones (a client's own session:
+# ftp.FtpServer keeps sessions per client) and those the server does not know, which it
+# answers NAK UnknownCommand (a client falls back on it, e.g. from ListDirectoryWithTime).
+FTP_OPCODES: dict[int, str] = {op: WRITE for op in (ftp.RESET, *ftp.WRITE_OPS)}
 
 
 def may_be_unsigned(msgid: int) -> bool:
@@ -61,7 +62,7 @@ def access(msg) -> str:
         return COMMANDS.get(msg.command, WRITE)
     if cls == BY_OPCODE:
         payload = bytes(msg.payload)
-        return FTP_OPCODES.get(payload[3], WRITE) if len(payload) > 3 else WRITE
+        return FTP_OPCODES.get(payload[3], READ) if len(payload) > 3 else WRITE
     return cls
 
 

@@ -37,12 +37,13 @@ MSG_ID_MAX = 0xFFFFFF                    # message ids are 24 bits
 # What the link implements, and nothing else (MAV_PROTOCOL_CAPABILITY). PARAM_FLOAT and
 # PARAM_ENCODE_C_CAST: every parameter is MAV_PARAM_TYPE_REAL32 and its value is sent as
 # that float (integers cast); COMMAND_INT: handled as COMMAND_LONG is; FTP: the read-only
-# subset that serves the component metadata (ftp.py). No MISSION_*: the
-# vehicle flies no missions (it answers a list request with 0 items). MAVLink signing has
+# subset that serves the component metadata (ftp.py); MISSION_INT: the mission protocol's
+# list, in its MISSION_ITEM_INT form, of zero items (the vehicle flies no missions; a ground
+# station refuses to download from a vehicle without it). MAVLink signing has
 # no capability bit; the link requires it for commands and writes.
 CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
                 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mav.MAV_PROTOCOL_CAPABILITY_FTP)
+                | mav.MAV_PROTOCOL_CAPABILITY_FTP | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT)
 
 COMMANDS = frozenset({mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTERVAL,
                       mav.MAV_CMD_GET_MESSAGE_INTERVAL, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
@@ -180,6 +181,9 @@ class LinkServices:
         mid = self._msg_id(p[0], "REQUEST")
         if isinstance(mid, str):
             return CommandResult.DENIED, mid, [], False
+        if math.isnan(p[6]) or math.isnan(p[1]):       # a param left unused (NaN, as MAVSDK sends it): 0
+            p = list(p)
+            p[1], p[6] = (0.0 if math.isnan(x) else x for x in (p[1], p[6]))
         if not _int_in(p[6], 0, 2):
             return CommandResult.DENIED, f"REQUEST TARGET {p[6]:g} DENIED (0, 1, 2)", [], False
         broadcast = int(p[6]) == TARGET_BROADCAST

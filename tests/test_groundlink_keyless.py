@@ -234,7 +234,8 @@ def test_local_position_ned_carries_entry_speed_in_a_documented_planet_fixed_fra
     # the first fix is the origin: its GPS_GLOBAL_ORIGIN is the navigation's position then
     # (the rig has flown 3 cycles since: within 0.01 deg)
     lat0, lon0 = rig.gl.stream_messages("GLOBAL_POSITION_INT")[0].lat, rig.gl.stream_messages("GLOBAL_POSITION_INT")[0].lon
-    station.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+    nan = float("nan")                                   # unused params, as MAVSDK sends them
+    station.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, nan, nan, nan, nan, nan, nan)
     assert station.wait(lambda: station.of("GPS_GLOBAL_ORIGIN"))
     origin = station.of("GPS_GLOBAL_ORIGIN")[0]
     assert abs(origin.latitude - lat0) <= 1e5 and abs(origin.longitude - lon0) <= 1e5 and origin.altitude == 0

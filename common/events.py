@@ -29,7 +29,8 @@ class EventLog:
     ``min_interval_s`` are suppressed and counted (``suppressed``); the next one that
     passes says how many were suppressed, and ``release_held`` tells a code's suppressed
     events once its interval is over even if no other comes (one summary, not one event
-    per occurrence).
+    per occurrence). A code may have its own interval (``emit(..., min_interval_s=...)``:
+    e.g. the ground link's refusals, told once and then summarised once a minute).
     """
 
     def __init__(self, capacity: int = 1024, min_interval_s: float = 1.0, history_capacity: int = 4096):
@@ -37,6 +38,7 @@ class EventLog:
         self.min_interval_s = min_interval_s
         self._queue: deque[Event] = deque()
         self._last: dict[str, float] = {}
+        self._interval: dict[str, float] = {}  # code -> its own min_interval_s
         self._held: dict[str, list] = {}      # code -> [count, severity, source, text of the last held]
         self._ring: deque[Event] = deque(maxlen=int(history_capacity))
         self.total = 0                        # events delivered so far (the next one's sequence number)
@@ -65,10 +67,12 @@ class EventLog:
         return first, [ring[i] for i in range(len(ring) - n, len(ring))]
 
     def emit(self, t_s: float, severity: Severity, source: str, code: str, text: str,
-             rate_limited: bool = False) -> bool:
+             rate_limited: bool = False, min_interval_s: float | None = None) -> bool:
         if rate_limited:
+            if min_interval_s is not None:
+                self._interval[code] = float(min_interval_s)
             last = self._last.get(code)
-            if last is not None and t_s - last < self.min_interval_s:
+            if last is not None and t_s - last < self._interval.get(code, self.min_interval_s):
                 held = self._held.get(code)
                 if held is None:
                     self._held[code] = [1, severity, source, text]
@@ -88,7 +92,8 @@ class EventLog:
         one event: the last suppressed one, saying how many others were held. Returns how
         many were delivered."""
         n = 0
-        for code in [c for c, h in self._held.items() if t_s - self._last.get(c, t_s) >= self.min_interval_s]:
+        for code in [c for c in self._held
+                     if t_s - self._last.get(c, t_s) >= self._interval.get(c, self.min_interval_s)]:
             count, severity, source, text = self._held.pop(code)
             self._deliver(Event(t_s, Severity(severity), source, code,
                                 f"{text} (+{count - 1} suppressed)" if count > 1 else text))

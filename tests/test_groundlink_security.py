@@ -42,7 +42,7 @@ def settle(rig, s: float = 0.1) -> None:
 
 
 def link_events(rig):
-    return [e for e in rig.fsw.events.history if e.source == "link" and e.code == "link_reject"]
+    return [e for e in rig.fsw.events.history if e.source == "link" and e.code == "link_refused"]
 
 
 def resign_crc(frame: bytearray, msgid: int) -> None:
@@ -58,7 +58,8 @@ def test_unsigned_command_rejected_counted_and_reported(rig):
     unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
     send_raw(rig, ARM_OFF.pack(unsigned))
     settle(rig)
-    assert rig.fsw.driver.armed and not rig.gcs.state.acks
+    assert rig.fsw.driver.armed                       # no effect; answered DENIED, so the client stops retrying
+    assert [a.result for a in rig.gcs.state.acks] == [mav.MAV_RESULT_DENIED]
     assert rig.gl.link.counts[Reject.UNSIGNED] == 1 and rig.gl.rejections == 1
     ev = link_events(rig)
     assert len(ev) == 1 and ev[0].severity == mav.MAV_SEVERITY_WARNING
@@ -115,21 +116,23 @@ def test_forged_future_timestamp_does_not_lock_out_the_genuine_ground(rig):
 
 
 def test_rejection_events_are_rate_limited_but_every_rejection_is_counted(rig):
+    rig.gl.refusal_event_interval_s = 1.0            # (default 60 s: test_groundlink_keyless.py)
     unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
     for _ in range(30):
         send_raw(rig, ARM_OFF.pack(unsigned))
     settle(rig, 0.2)
     assert rig.gl.rejections == 30
-    assert len(link_events(rig)) == 1                 # one per second of FSW time
+    assert len(link_events(rig)) == 1                 # one per interval of FSW time
     rig.fly(60)                                       # 1.2 s of FSW time
     send_raw(rig, ARM_OFF.pack(unsigned))
     settle(rig)
+    rig.fly(60)                                       # what the limit still holds is told
     ev = link_events(rig)
-    # the 31 rejections are all accounted for in the 2 events: a tick's alike refusals are
-    # reported once ("30x"), the rate limiter holds the rest ("+N suppressed")
+    # the 31 rejections are all accounted for in 3 events: the first, the held ones once the
+    # interval is over ("+N suppressed"), the last
     told = sum(int((re.search(r"rejected (\d+)x", e.text) or [0, 1])[1])
                + sum(int(n) for n in re.findall(r"\(\+(\d+) suppressed\)", e.text)) for e in ev)
-    assert len(ev) == 2 and told == 31, [e.text for e in ev]
+    assert len(ev) == 3 and told == 31, [e.text for e in ev]
     rig.gcs.state.latest.pop("SYS_STATUS", None)
     rig.clock.t += 1.0
     assert rig.exchange(lambda: "SYS_STATUS" in rig.gcs.state.latest)
@@ -286,10 +289,10 @@ def test_unknown_id_reads_are_counted_per_sender_and_told_in_one_throttled_event
         assert len(link_ev) <= 2, [e.text for e in link_ev]          # one per kind, not one per request
         assert rig.gl.refused_by_sender[evil.getsockname()] == n
         assert rig.gl.stats["reads_unknown"] + rig.gl.stats["reads_limited"] == n
-        rig.fly(60)                                                 # 1.2 s: the held ones are told
-        told = [e.text for e in rig.fsw.events.history if e.code == "param_unknown_read"]
+        rig.fly(3100)                                               # 62 s: the held ones are told
+        told = [e.text for e in rig.fsw.events.history if e.code == "link_refused"]
         total = sum(1 + sum(int(k) for k in re.findall(r"\(\+(\d+) suppressed\)", t)) for t in told)
-        assert len(told) == 2 and total == rig.gl.stats["reads_unknown"], told
+        assert len(told) == 2 and total == n, told
     finally:
         evil.close()
 

@@ -46,10 +46,13 @@ def test_autopilot_version_claims_only_what_the_link_does(quiet):
     assert arrived(quiet, "AUTOPILOT_VERSION")
     caps = quiet.gcs.state.latest["AUTOPILOT_VERSION"].capabilities
     P = mav
+    # MISSION_INT: the (empty) mission list in its MISSION_ITEM_INT form; without it MAVSDK
+    # refuses to download a mission (INT_MESSAGES_NOT_SUPPORTED)
     for bit in (P.MAV_PROTOCOL_CAPABILITY_MAVLINK2, P.MAV_PROTOCOL_CAPABILITY_COMMAND_INT,
-                P.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT, P.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST):
+                P.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT, P.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
+                P.MAV_PROTOCOL_CAPABILITY_MISSION_INT):
         assert caps & bit, bit
-    for bit in (P.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT, P.MAV_PROTOCOL_CAPABILITY_MISSION_INT,
+    for bit in (P.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT,
                 P.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE, P.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET,
                 P.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED, P.MAV_PROTOCOL_CAPABILITY_TERRAIN,
                 P.MAV_PROTOCOL_CAPABILITY_FLIGHT_TERMINATION, P.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE,
@@ -140,7 +143,7 @@ def test_set_message_interval_changes_the_rate_counted_at_the_ground(rig):
     (REQ, (9999,), "NOT PRODUCED"),
     (REQ, (float("inf"),), "MSG ID inf"),
     (REQ, (30, 0, 0, 0, 0, 0, 3), "TARGET 3"),
-    (REQ, (30, 0, 0, 0, 0, 0, float("nan")), "TARGET nan"),
+    (REQ, (30, 0, 0, 0, 0, 0, float("inf")), "TARGET inf"),     # NaN: a param left unused, 0
     (GET_IV, (1e9,), "MSG ID"),
     (mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, (2,), "CAPABILITIES 2"),
     (mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, (float("nan"),), "CAPABILITIES nan"),

@@ -103,9 +103,10 @@ def test_a_stock_ground_station_sees_position_identity_rates_and_parameter_metad
         assert _command(conn, A.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 1) == A.MAV_RESULT_ACCEPTED
         av = _recv(conn, "AUTOPILOT_VERSION", 3)
         assert av is not None
-        want = A.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | A.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | A.MAV_PROTOCOL_CAPABILITY_FTP
+        want = (A.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | A.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | A.MAV_PROTOCOL_CAPABILITY_FTP
+                | A.MAV_PROTOCOL_CAPABILITY_MISSION_INT)             # the empty mission list, in its INT form
         assert av.capabilities & want == want
-        assert not av.capabilities & (A.MAV_PROTOCOL_CAPABILITY_MISSION_INT | A.MAV_PROTOCOL_CAPABILITY_TERRAIN)
+        assert not av.capabilities & (A.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | A.MAV_PROTOCOL_CAPABILITY_TERRAIN)
         assert _command(conn, A.MAV_CMD_REQUEST_MESSAGE, MSG_PROTOCOL_VERSION) == A.MAV_RESULT_ACCEPTED
         pv = _unknown_payload(conn, MSG_PROTOCOL_VERSION, 3)
         assert pv is not None and struct.unpack_from("<HHH", pv) == (200, 200, 200)

@@ -6,6 +6,12 @@ BurstReadFile, CalcFileCRC32. Every write operation is refused (NAK FileProtecte
 other opcode NAK UnknownCommand. A request that is malformed (a bad session, a size over
 the payload, an offset past the end) gets a NAK, never an exception.
 
+Sessions belong to the client that opened them (``handle(..., client=...)``: the link passes
+the sender's address): another client's read or terminate of it is NAK InvalidSession, so
+a client without the signing key can read (policy.py) without disturbing anyone's session.
+When all ``max_sessions`` are open, an open is NAK NoSessionsAvailable (a keyed ground
+station's ResetSessions, signed only, closes them all).
+
 Bounds: at most ``max_sessions`` open files; a burst is at most ``burst_packets`` replies
 (the last carries burst_complete and the client asks for the next burst), and the link
 caps the FTP replies of one tick.
@@ -13,6 +19,7 @@ caps the FTP replies of one tick.
 from __future__ import annotations
 
 import struct
+from collections import OrderedDict
 
 from .metadata import crc32
 
@@ -35,7 +42,7 @@ def _norm(path: str) -> str:
 
 
 class FtpServer:
-    def __init__(self, files: dict[str, bytes], *, max_sessions: int = 2, burst_packets: int = 16):
+    def __init__(self, files: dict[str, bytes], *, max_sessions: int = 4, burst_packets: int = 16):
         self.files = {_norm(p): bytes(b) for p, b in files.items()}
         self.dirs: dict[str, list[str]] = {}
         for p in self.files:                      # each directory's entries, in name order
@@ -50,7 +57,7 @@ class FtpServer:
             lst.sort()
         self.max_sessions = int(max_sessions)
         self.burst_packets = int(burst_packets)
-        self.sessions: dict[int, str] = {}       # session id -> path
+        self.sessions: OrderedDict[int, tuple[str, object]] = OrderedDict()  # id -> (path, client)
         self.stats = {"requests": 0, "naks": 0, "bytes_read": 0}
 
     # ------------------------------------------------------------------ replies
@@ -63,9 +70,17 @@ class FtpServer:
         return self._reply(seq, session, NAK, req_opcode, offset, bytes([error]))
 
     # ------------------------------------------------------------------ requests
-    def handle(self, payload, max_replies: int | None = None) -> list[bytes]:
-        """Reply payloads (each PAYLOAD_LEN bytes) to one request payload; a burst is cut
-        to ``max_replies`` (its last reply then says burst complete)."""
+    def _session(self, session: int, client) -> str | None:
+        """The path of ``client``'s open ``session`` (marked recently used), or None."""
+        held = self.sessions.get(session)
+        if held is None or held[1] != client:
+            return None
+        self.sessions.move_to_end(session)
+        return held[0]
+
+    def handle(self, payload, max_replies: int | None = None, client=None) -> list[bytes]:
+        """Reply payloads (each PAYLOAD_LEN bytes) to one request payload of ``client``; a
+        burst is cut to ``max_replies`` (its last reply then says burst complete)."""
         self.stats["requests"] += 1
         raw = bytes(payload)
         if len(raw) < HEADER.size:
@@ -80,20 +95,21 @@ class FtpServer:
             self.sessions.clear()
             return [self._reply(seq, session, ACK, op, 0)]
         if op == TERMINATE:
-            if self.sessions.pop(session, None) is None:
+            if self._session(session, client) is None:
                 return [self._nak(seq, session, op, offset, INVALID_SESSION)]
+            del self.sessions[session]
             return [self._reply(seq, session, ACK, op, 0)]
         if op == LIST:
             return [self._list(seq, session, offset, data)]
         if op == OPEN_RO:
-            return [self._open(seq, session, data)]
+            return [self._open(seq, session, data, client)]
         if op == CRC32:
             content = self.files.get(_norm(data.decode("utf-8", "replace")))
             if content is None:
                 return [self._nak(seq, session, op, 0, FILE_NOT_FOUND)]
             return [self._reply(seq, session, ACK, op, 0, struct.pack("<I", crc32(content)))]
         if op in (READ, BURST):
-            return self._read(seq, session, op, offset, size, max_replies)
+            return self._read(seq, session, op, offset, size, max_replies, client)
         if op in WRITE_OPS:
             return [self._nak(seq, session, op, offset, FILE_PROTECTED)]
         return [self._nak(seq, session, op, offset, UNKNOWN_COMMAND)]
@@ -116,18 +132,18 @@ class FtpServer:
             out += b
         return self._reply(seq, session, ACK, LIST, offset, bytes(out))
 
-    def _open(self, seq, session, data) -> bytes:
+    def _open(self, seq, session, data, client) -> bytes:
         path = _norm(data.decode("utf-8", "replace"))
         if path not in self.files:
             return self._nak(seq, session, OPEN_RO, 0, FILE_NOT_FOUND)
         free = [s for s in range(self.max_sessions) if s not in self.sessions]
         if not free:
             return self._nak(seq, session, OPEN_RO, 0, NO_SESSIONS)
-        self.sessions[free[0]] = path
+        self.sessions[free[0]] = (path, client)
         return self._reply(seq, free[0], ACK, OPEN_RO, 0, struct.pack("<I", len(self.files[path])))
 
-    def _read(self, seq, session, op, offset, size, max_replies=None) -> list[bytes]:
-        path = self.sessions.get(session)
+    def _read(self, seq, session, op, offset, size, max_replies=None, client=None) -> list[bytes]:
+        path = self._session(session, client)
         if path is None:
             return [self._nak(seq, session, op, offset, INVALID_SESSION)]
         content = self.files[path]

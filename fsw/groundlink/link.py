@@ -11,22 +11,27 @@ signature work; the receive buffer sized to one tick's budget, the kernel droppi
 excess), answers what arrived, then sends the telemetry that is due; it never blocks and
 never raises on anything from the network. What the link refused and dropped is in
 ``stats``, in SYS_STATUS (errors_comm: rejections; errors_count1: datagrams dropped on the
-full queue; errors_count2: datagrams refused before verification), per sender in
-``refused_by_sender``, and, while a flood lasts, in one throttled WARNING event per kind
-(EventLog rate limit; what it held is told once its interval is over).
+full queue; errors_count2: datagrams refused before verification; errors_count3: unsigned
+state-changing frames refused; errors_count4: reads over budget), per sender in
+``refused_by_sender``, and in the one throttled refusal event below.
 
 Who the link listens to:
 - the vehicle's own system id is refused from the link (a frame the vehicle signed and
   someone sent back verifies: same key, fresh timestamp);
+- what may come unsigned is decided by one table, policy.py (signing policy by message
+  class): read-only requests (identity, a telemetry message, modes, metadata over FTP's
+  read-only opcodes, parameter reads, the mission list, PING, TIMESYNC) are answered to the
+  requester only and within the tick's reply budget; an unsigned sender gets at most
+  ``READ_RATE_HZ`` requests and answer frames a second (after a burst of ``READ_BURST``: a
+  parameter list or an FTP burst goes out at that pace), so no unsigned request is an
+  amplifier; state-changing frames are acted on only signed (unsigned: refused, counted,
+  a command answered DENIED);
 - a telemetry peer (an address that gets the telemetry besides ``gcs``) is made only by a
-  signed *command-class* frame (COMMAND_LONG, COMMAND_INT, PARAM_SET, FTP: what must be
-  signed) addressed to this vehicle; a signed heartbeat or read makes none;
-- read-only requests (PARAM_REQUEST_READ/LIST, MISSION_REQUEST_LIST), which may come
-  unsigned, are answered to the requester only and within the tick's reply budget; an
-  unsigned sender gets at most ``READ_RATE_HZ`` requests and answer frames a second
-  (after a burst of ``READ_BURST``: a parameter list goes out at that pace), so no
-  unsigned request is an amplifier; an unknown id read unsigned is counted, not told one
-  event per request.
+  signed *command-class* frame (COMMAND_LONG, COMMAND_INT, PARAM_SET, FTP) from a ground
+  system addressed to this vehicle; a signed heartbeat or read makes none;
+- every refusal (the intake's, an unsigned state-changing frame, a read over budget, an
+  unknown parameter id read unsigned) is counted and told in one event code,
+  ``REFUSAL_EVENT``: at once, then at most once per ``REFUSAL_EVENT_INTERVAL_S`` (a summary).
 
 Downlink per tick, beyond the telemetry streams: at most ``max_tx_per_tick`` frames of
 events and answers to requests; answers (parameter lists included) take at most
@@ -48,12 +53,13 @@ from collections.abc import Callable, Mapping
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
-from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey, stream_state_path
+from interfaces.mavlink.signing import Reject, Rejection, SignedLink, SigningKey, stream_state_path
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, Severity, parse_udp
 
-from . import metadata
+from . import metadata, policy
 from . import telemetry as tm
 from .commands import CommandTranslator, InjectFn, ParamProtocol
+from . import ftp
 from .ftp import FtpServer
 from .services import COMMANDS as LINK_COMMANDS
 from .services import LinkServices
@@ -83,26 +89,29 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "VFR_HUD": 5.0,
     "ALTITUDE": 1.0,
     "SYSTEM_TIME": 1.0,
+    "LOCAL_POSITION_NED": 5.0,
+    "CURRENT_MODE": 0.5,                     # and at each mode change
 }
 ATTITUDE_GROUP = ("ATTITUDE", "ATTITUDE_QUATERNION", "ATTITUDE_TARGET", "NAMED_VALUE_FLOAT", "ELLIPSLED_ENTRY_STATE")
 POSITION_GROUP = ("GLOBAL_POSITION_INT", "VFR_HUD", "ALTITUDE")
 # streams of one message type each, built one by one (the groups share their geometry)
 SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STATUS", "ELLIPSLED_JET_STATUS",
-                  "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS")
+                  "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS",
+                  "LOCAL_POSITION_NED", "CURRENT_MODE")
 MAX_RATE_HZ = 100.0
 DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
 
-# What a ground station may send unsigned: its presence and the parameter and mission-list
-# reads (they change nothing, so a stock ground station without the key can list them).
-ALLOW_UNSIGNED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
-                            mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ, mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST})
-# What the link acts on besides HEARTBEAT (messages with a target system and component).
-_ADDRESSED = frozenset({mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMMAND_INT,
-                        mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST, mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
-                        mav.MAVLINK_MSG_ID_PARAM_SET, mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST,
-                        mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL})
-# Frames that must be signed, and only they make a telemetry peer (see the module docstring).
-COMMAND_CLASS = _ADDRESSED - ALLOW_UNSIGNED
+# What a ground station may send unsigned, and what must be signed: the one table is
+# policy.py (read-only messages, commands and FTP opcodes; everything else signed only).
+ALLOW_UNSIGNED = policy.UNSIGNED_MSGIDS
+# What the link acts on besides HEARTBEAT (messages with a target system and component, and
+# TIMESYNC, which has none in pymavlink 2.4.50's common.xml).
+_ADDRESSED = frozenset(policy.MESSAGES) - {mav.MAVLINK_MSG_ID_HEARTBEAT}
+_UNTARGETED = frozenset({mav.MAVLINK_MSG_ID_TIMESYNC})
+# Frames that must be signed in some form, and only they (signed) make a telemetry peer.
+COMMAND_CLASS = policy.COMMAND_CLASS
+REFUSAL_EVENT = "link_refused"   # the one event code of every refusal on the link ...
+REFUSAL_EVENT_INTERVAL_S = 60.0  # ... told at once, then at most once in this interval (a summary)
 FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends (~1.5 ms of packing)
 EVENT_SHARE = 16                 # frames a tick no answer to a request can take from the events
 READ_RATE_HZ = 10.0              # read-only requests and answer frames per second and unsigned sender ...
@@ -135,7 +144,7 @@ class GroundLink:
                  clock: Callable[[], float] = time.monotonic, wall_clock: Callable[[], float] = time.time,
                  max_rx_per_tick: int = 256,
                  rx_budget_us: float = 2000.0, max_tx_per_tick: int = 64, peer_timeout_s: float = 10.0, max_peers: int = 4,
-                 stream_state: str | None = "beside-key"):
+                 stream_state: str | None = "beside-key", refusal_event_interval_s: float = REFUSAL_EVENT_INTERVAL_S):
         if not isinstance(key, SigningKey):
             raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
         if not int(max_tx_per_tick) > EVENT_SHARE:
@@ -146,6 +155,7 @@ class GroundLink:
         self.max_rx_per_tick = int(max_rx_per_tick)
         self.max_tx_per_tick = int(max_tx_per_tick)
         self.peer_timeout_s = float(peer_timeout_s)
+        self.refusal_event_interval_s = float(refusal_event_interval_s)
         self.max_peers = int(max_peers)
         self.rates_hz = self._check_rates(rates)
         # no stream can go out more often than the link ticks (RG2): the fastest rate a
@@ -181,7 +191,10 @@ class GroundLink:
         self.files = metadata.build(fsw.registry, fsw.scenario.vehicle.name)
         self.ftp = FtpServer(self.files)
         self._ftp_budget = FTP_REPLIES_PER_TICK
-        self.services = LinkServices(self, {mav.MAVLINK_MSG_ID_COMPONENT_METADATA: lambda: [self.component_metadata()]})
+        self._origin = None                            # LOCAL_POSITION_NED's, at the first navigation fix
+        self._mode_sent = None                         # the Mode CURRENT_MODE last told
+        self.services = LinkServices(self, {mav.MAVLINK_MSG_ID_COMPONENT_METADATA: lambda p: [self.component_metadata()],
+                                            mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self._origin_message})
         self._event_index = 0                          # the start-up events go out too
         self._pack_only = False                        # warm_up packs without sending
         self._loop_timing: dict[int, tuple] = {}
@@ -193,7 +206,7 @@ class GroundLink:
                       "tx_bytes": 0, "tx_errors": 0, "refused_early": 0, "kernel_drops": 0,
                       "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0, "ftp_deferred": 0,
                       "reads_limited": 0, "reads_unknown": 0, "peers_added": 0, "refused_senders": 0,
-                      "commands_accepted": 0, "params_set": 0}
+                      "commands_accepted": 0, "params_set": 0, "unsigned_writes": 0, "unsigned_reads": 0}
         self.tick_ns_max = 0
         self.send_ns_peak = 0
 
@@ -278,7 +291,8 @@ class GroundLink:
         FlightSoftware that has flown a cycle — and send nothing: the first encode of each
         message type costs milliseconds, which would otherwise land in the first real-time
         cycles. Schedules, counters and the link's sequence numbers are left as they were."""
-        saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq)
+        saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq, self._origin,
+                 self._mode_sent)
         self.fsw = spare_fsw
         self._pack_only = True
         try:
@@ -288,12 +302,13 @@ class GroundLink:
             for msg in (mav.MAVLink_command_ack_message(0, 0, 0, 0, 0, 0), self.services.autopilot_version(),
                         self.services.protocol_version(), mav.MAVLink_message_interval_message(0, 0),
                         self.component_metadata(), mav.MAVLink_file_transfer_protocol_message(0, 0, 0, [0] * 251),
+                        *tm.available_modes(), mav.MAVLink_ping_message(0, 0, 0, 0), mav.MAVLink_timesync_message(0, 0),
                         mav.MAVLink_mission_count_message(0, 0, 0, 0)):
                 self._send(msg)
         except Exception:                       # a warm-up failure must not stop the FSW
             log.exception("ground link warm-up failed")
         finally:
-            self.fsw, self._next_due, self._event_index, self.link.signer.seq = saved
+            self.fsw, self._next_due, self._event_index, self.link.signer.seq, self._origin, self._mode_sent = saved
             self._pack_only = False
 
     def poll(self, budget_ns: int | None = None) -> int:
@@ -332,12 +347,19 @@ class GroundLink:
 
     # -------------------------------------------------------------- receive side
     def _on_reject(self, rej: Rejection) -> None:
-        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", "link_reject", rej.text(),
-                             rate_limited=True)
+        self._tell_refusal(rej.text())
+
+    def _tell_refusal(self, text: str) -> None:
+        """The link's one refusal event: the first told at once, the others held and told
+        as one summary (the last one's text, + how many) once REFUSAL_EVENT_INTERVAL_S is over."""
+        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", REFUSAL_EVENT, text[:tm.STATUSTEXT_LEN],
+                             rate_limited=True, min_interval_s=self.refusal_event_interval_s)
 
     def handle(self, msg, addr: tuple[str, int]) -> None:
-        """Act on one verified, decoded message that arrived from ``addr``: commands and
-        parameter writes only when signed and addressed to this vehicle."""
+        """Act on one verified, decoded message that arrived from ``addr``, by its class
+        (policy.py): READ answered to the requester (unsigned: within its read budget),
+        WRITE only when signed; only a signed frame of a command-class message from a ground
+        system makes ``addr`` a telemetry peer."""
         signed = bool(msg.get_signed())
         mid = msg.get_msgId()
         if mid == mav.MAVLINK_MSG_ID_HEARTBEAT:
@@ -348,19 +370,29 @@ class GroundLink:
             return
         if signed and mid in COMMAND_CLASS and msg.get_srcSystem() != SYSTEM_ID:
             self._add_peer(addr)
-        elif not signed and not self._may_read(addr):
-            return
-        if mid == mav.MAVLINK_MSG_ID_COMMAND_LONG and signed:
-            self._command(msg, addr, [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
-                                      msg.param7])
-        elif mid == mav.MAVLINK_MSG_ID_COMMAND_INT and signed:
-            # no command of this vehicle takes a position: x, y are passed on as numbers
-            self._command(msg, addr, [msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y),
-                                      msg.z])
+        elif not signed:
+            if policy.access(msg) != policy.READ:
+                self._refuse_unsigned(msg, addr)
+                return
+            if not self._may_read(addr):
+                return
+            self.stats["unsigned_reads"] += 1
+        if mid in (mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMMAND_INT):
+            # no command of this vehicle takes a position: COMMAND_INT's x, y are passed on as numbers
+            p5, p6 = (msg.param5, msg.param6) if mid == mav.MAVLINK_MSG_ID_COMMAND_LONG else (float(msg.x), float(msg.y))
+            self._command(msg, addr, [msg.param1, msg.param2, msg.param3, msg.param4, p5, p6,
+                                      msg.param7 if mid == mav.MAVLINK_MSG_ID_COMMAND_LONG else msg.z], signed)
         elif mid == mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST:
             self._reply(self.services.mission_count(msg), addr)
-        elif mid == mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL and signed:
-            self._ftp(msg, addr)
+        elif mid == mav.MAVLINK_MSG_ID_PING:
+            if msg.target_system == 0 and msg.target_component == 0:       # a request, not an answer
+                self._reply(mav.MAVLink_ping_message(msg.time_usec, msg.seq, msg.get_srcSystem(),
+                                                     msg.get_srcComponent()), addr)
+        elif mid == mav.MAVLINK_MSG_ID_TIMESYNC:
+            if msg.tc1 == 0:                                                # a request, not an answer
+                self._reply(mav.MAVLink_timesync_message(time.monotonic_ns(), msg.ts1), addr)
+        elif mid == mav.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL:
+            self._ftp(msg, addr, signed)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
             self._queue_param_list(addr, signed)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ:
@@ -369,11 +401,10 @@ class GroundLink:
                 self._reply(self.params_in.value_msg(name), addr)
             elif signed:
                 self._refuse("param_unknown", why)
-            else:                                # counted, told in one throttled event
+            else:                                # counted, told in the one throttled event
                 self.stats["reads_unknown"] += 1
                 self.intake.count_sender(addr)
-                self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", "param_unknown_read",
-                                     why[:tm.STATUSTEXT_LEN], rate_limited=True)
+                self._tell_refusal(why)
         elif mid == mav.MAVLINK_MSG_ID_PARAM_SET and signed:
             name, why = self.params_in.set(msg)
             if why:
@@ -383,8 +414,25 @@ class GroundLink:
             if name is not None:
                 self._send(self.params_in.value_msg(name), extra=addr)     # new value, or unchanged
 
+    def _refuse_unsigned(self, msg, addr) -> None:
+        """An unsigned frame of the WRITE class: refused with no effect, counted (as the
+        intake counts the unsigned frames it refuses: Reject.UNSIGNED, per sender) and told
+        in the one throttled event; a command is answered DENIED, within the sender's read
+        budget, so its client stops retrying."""
+        self.stats["unsigned_writes"] += 1
+        mid = msg.get_msgId()
+        cmd = getattr(msg, "command", None)
+        self.intake.count_sender(addr)
+        self.link.verifier.reject(Rejection(Reject.UNSIGNED, msg.get_srcSystem(), msg.get_srcComponent(), mid,
+                                            detail="" if cmd is None else f"command {cmd}"))
+        if cmd is not None and self._take_read(addr):
+            self._reply(mav.MAVLink_command_ack_message(cmd, CommandResult.DENIED, 0, 0, msg.get_srcSystem(),
+                                                        msg.get_srcComponent()), addr)
+
     @staticmethod
     def _for_me(msg) -> bool:
+        if msg.get_msgId() in _UNTARGETED:
+            return True
         return msg.target_system in (0, SYSTEM_ID) and msg.target_component in (0, COMPONENT_ID)
 
     def _take_read(self, addr) -> bool:
@@ -412,8 +460,7 @@ class GroundLink:
             return True
         self.stats["reads_limited"] += 1
         self.intake.count_sender(addr)
-        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", "reads_limited",
-                             f"link reads limited: {addr[0]}:{addr[1]}"[:tm.STATUSTEXT_LEN], rate_limited=True)
+        self._tell_refusal(f"link reads limited: {addr[0]}:{addr[1]}")
         return False
 
     def _reply(self, msg, addr) -> None:
@@ -462,17 +509,36 @@ class GroundLink:
     def _refuse(self, code: str, text: str) -> None:
         self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", code, text[:tm.STATUSTEXT_LEN])
 
-    def _ftp(self, msg, addr) -> None:
+    def _take_reads(self, addr, n: int) -> int:
+        """Up to ``n`` units of ``addr``'s read budget: how many it had."""
+        got = 0
+        while got < n and self._take_read(addr):
+            got += 1
+        return got
+
+    def _ftp(self, msg, addr, signed: bool = True) -> None:
         """One MAVLink FTP request; what this tick can no longer send is dropped unanswered
-        (the client retries)."""
+        (the client retries). Unsigned, a burst is also cut to the sender's read budget
+        (its request took one unit: the first reply)."""
         if self._ftp_budget <= 0:
             self.stats["ftp_deferred"] += 1
             return
-        replies = self.ftp.handle(msg.payload, self._ftp_budget)
+        budget = self._ftp_budget
+        if not signed:                      # a burst's replies beyond the first, from the read budget
+            payload = bytes(msg.payload)
+            want = self.ftp.burst_packets if len(payload) > 3 and payload[3] == ftp.BURST else 1
+            budget = 1 + self._take_reads(addr, min(want, self._ftp_budget, self._reply_budget) - 1)
+        replies = self.ftp.handle(msg.payload, budget, client=addr)
+        if not signed and len(replies) < budget:     # what a short burst did not use goes back
+            self._read_budget[addr][0] += budget - max(1, len(replies))
         self._ftp_budget -= len(replies)
         for payload in replies:
-            self._send(mav.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(),
-                                                                  list(payload)), only=addr)
+            reply = mav.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(),
+                                                               list(payload))
+            if signed:
+                self._send(reply, only=addr)
+            else:
+                self._reply(reply, addr)
 
     def component_metadata(self):
         """COMPONENT_METADATA: where the general metadata file is, and its CRC."""
@@ -481,19 +547,28 @@ class GroundLink:
                                                       metadata.crc32(general),
                                                       metadata.mftp_uri(metadata.GENERAL_PATH).encode("ascii"))
 
-    def _command(self, msg, addr, p: list[float]) -> None:
+    def _command(self, msg, addr, p: list[float], signed: bool = True) -> None:
+        """A command: its COMMAND_ACK, then what was asked for, to the requester (a signed
+        request for a broadcast answer excepted). Unsigned (a READ command): from the reply
+        budget, each frame after the ACK and the first answer taking a unit of the
+        requester's read budget."""
         replies, broadcast = [], False
         if msg.command in LINK_COMMANDS:
             result, why, replies, broadcast = self.services.execute(msg.command, p)
         else:
             result, why = self.commands_in.execute(msg.command, p)
-        if result != CommandResult.ACCEPTED and why:
+        if result != CommandResult.ACCEPTED and why and signed:
             self._refuse("cmd_refused", why)
         self.commands[result] = self.commands.get(result, 0) + 1
-        if result == CommandResult.ACCEPTED:
+        if result == CommandResult.ACCEPTED and signed:
             self.stats["commands_accepted"] += 1
         ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent())
+        if not signed:
+            replies = replies[:1 + self._take_reads(addr, len(replies) - 1)] if len(replies) > 1 else replies
+            for m in [ack, *replies]:
+                self._reply(m, addr)
+            return
         # to the requester only: another ground station waiting on the same command id
         # must not take this answer for its own; what was asked for follows the ACK
         self._send(ack, only=addr)
@@ -566,7 +641,8 @@ class GroundLink:
             yield tm.heartbeat(fsw)
         elif name == "SYS_STATUS":
             yield tm.sys_status(fsw, self._loop_timing, self.rejections, self.stats["kernel_drops"],
-                                self.stats["refused_early"])
+                                self.stats["refused_early"], self.link.counts[Reject.UNSIGNED],
+                                self.stats["reads_limited"])
         elif name == "SYSTEM_TIME":
             yield tm.system_time(fsw, self.wall_clock())
         elif name == "ACTUATOR_OUTPUT_STATUS":
@@ -579,6 +655,24 @@ class GroundLink:
             yield from tm.loop_timing(ms, self._loop_timing)
         elif name == "ELLIPSLED_GUIDANCE_STATUS":
             yield tm.guidance_status(fsw, ms)
+        elif name == "LOCAL_POSITION_NED":
+            origin = self._local_origin()
+            if origin is not None:
+                yield tm.local_position_ned(fsw, ms, origin)
+        elif name == "CURRENT_MODE":
+            self._mode_sent = fsw.modes.mode
+            yield tm.current_mode(fsw)
+
+    def _local_origin(self):
+        """LOCAL_POSITION_NED's origin (telemetry.local_origin), taken at the first navigation
+        fix; None before it."""
+        if self._origin is None and tm.nav_valid(self.fsw):
+            self._origin = tm.local_origin(self.fsw)
+        return self._origin
+
+    def _origin_message(self, p) -> list:
+        origin = self._local_origin()
+        return [] if origin is None else [tm.gps_global_origin(self.fsw, origin)]
 
     def send_due(self, sensors=None) -> None:
         """Send every telemetry stream that is due, queued parameters and new events."""
@@ -587,6 +681,8 @@ class GroundLink:
         self._sensors = sensors
         self._ftp_budget = FTP_REPLIES_PER_TICK
         ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
+        if fsw.modes.mode != self._mode_sent and self.rates_hz["CURRENT_MODE"] > 0.0:
+            self.schedule_now("CURRENT_MODE")                 # a mode change is told at once
         for name in SINGLE_STREAMS:
             if self._due(name, now):
                 for msg in self._single(name, ms):

@@ -6,7 +6,9 @@ connect, answered by the link without touching the flight software's state:
   link ticks);
 - one-shot requests: MAV_CMD_REQUEST_MESSAGE for every message the vehicle produces,
   MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, MAV_CMD_REQUEST_PROTOCOL_VERSION;
-- identity: AUTOPILOT_VERSION (capability bits only for what the link does), PROTOCOL_VERSION;
+- identity: AUTOPILOT_VERSION (capability bits only for what the link does, the version,
+  vendor and product ids), PROTOCOL_VERSION;
+- the modes by name: AVAILABLE_MODES (MAV_CMD_REQUEST_MESSAGE param2: 0 all, else the index);
 - the mission list of a vehicle without missions: MISSION_COUNT 0.
 
 Each command is judged here and answered as (MAV_RESULT, reason, replies, broadcast); the
@@ -22,20 +24,26 @@ from pathlib import Path
 from interfaces.mavlink import dialect as mav
 from interfaces.vocabulary import CommandResult
 
+from . import telemetry as tm
 from .metadata import firmware_version
 
+# AUTOPILOT_VERSION.vendor_id / product_id: the project's own (MAVLink keeps no registry of
+# them; they are not USB ids): "EL" and 1, the flight software of this vehicle.
+VENDOR_ID = 0x454C
+PRODUCT_ID = 0x0001
 MAVLINK_VERSION = 200                    # MAVLink 2 only: the intake refuses MAVLink 1 frames
 MSG_ID_MAX = 0xFFFFFF                    # message ids are 24 bits
 
 # What the link implements, and nothing else (MAV_PROTOCOL_CAPABILITY). PARAM_FLOAT and
 # PARAM_ENCODE_C_CAST: every parameter is MAV_PARAM_TYPE_REAL32 and its value is sent as
 # that float (integers cast); COMMAND_INT: handled as COMMAND_LONG is; FTP: the read-only
-# subset that serves the component metadata (ftp.py). No MISSION_*: the
-# vehicle flies no missions (it answers a list request with 0 items). MAVLink signing has
+# subset that serves the component metadata (ftp.py); MISSION_INT: the mission protocol's
+# list, in its MISSION_ITEM_INT form, of zero items (the vehicle flies no missions; a ground
+# station refuses to download from a vehicle without it). MAVLink signing has
 # no capability bit; the link requires it for commands and writes.
 CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
                 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mav.MAV_PROTOCOL_CAPABILITY_FTP)
+                | mav.MAV_PROTOCOL_CAPABILITY_FTP | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT)
 
 COMMANDS = frozenset({mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTERVAL,
                       mav.MAV_CMD_GET_MESSAGE_INTERVAL, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
@@ -79,9 +87,11 @@ class LinkServices:
         self.link = link
         self.default_rates = dict(link.rates_hz)
         self.stream_of_id = {getattr(mav, "MAVLINK_MSG_ID_" + name): name for name in link.rates_hz}
-        # one-shot messages that are not streams: id -> () -> list of messages
-        self.oneshot = {mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: lambda: [self.autopilot_version()],
-                        mav.MAVLINK_MSG_ID_PROTOCOL_VERSION: lambda: [self.protocol_version()]}
+        # one-shot messages that are not streams: id -> (params) -> messages (empty: none yet),
+        # or a reason to deny the request
+        self.oneshot = {mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: lambda p: [self.autopilot_version()],
+                        mav.MAVLINK_MSG_ID_PROTOCOL_VERSION: lambda p: [self.protocol_version()],
+                        mav.MAVLINK_MSG_ID_AVAILABLE_MODES: self._available_modes}
         self.oneshot.update(extra or {})
         self._version = flight_sw_version()
         self._custom = list(source_digest())
@@ -90,7 +100,14 @@ class LinkServices:
     def autopilot_version(self):
         z8 = [0] * 8
         return mav.MAVLink_autopilot_version_message(CAPABILITIES, self._version, 0, 0, 0, self._custom, z8, z8,
-                                                     0, 0, 0, [0] * 18)
+                                                     VENDOR_ID, PRODUCT_ID, 0, [0] * 18)
+
+    @staticmethod
+    def _available_modes(p) -> list | str:
+        n = len(tm.available_modes())
+        if not _int_in(p[1], 0, n):
+            return f"REQUEST MODES {p[1]:g} DENIED (0 ALL, 1..{n})"
+        return tm.available_modes(int(p[1]))
 
     @staticmethod
     def protocol_version():
@@ -164,11 +181,19 @@ class LinkServices:
         mid = self._msg_id(p[0], "REQUEST")
         if isinstance(mid, str):
             return CommandResult.DENIED, mid, [], False
+        if math.isnan(p[6]) or math.isnan(p[1]):       # a param left unused (NaN, as MAVSDK sends it): 0
+            p = list(p)
+            p[1], p[6] = (0.0 if math.isnan(x) else x for x in (p[1], p[6]))
         if not _int_in(p[6], 0, 2):
             return CommandResult.DENIED, f"REQUEST TARGET {p[6]:g} DENIED (0, 1, 2)", [], False
         broadcast = int(p[6]) == TARGET_BROADCAST
         if mid in self.oneshot:
-            return CommandResult.ACCEPTED, "", self.oneshot[mid](), broadcast
+            msgs = self.oneshot[mid](p)
+            if isinstance(msgs, str):
+                return CommandResult.DENIED, msgs, [], False
+            if not msgs:
+                return CommandResult.TEMPORARILY_REJECTED, f"REQUEST MSG {mid} REJECTED: NO DATA YET", [], False
+            return CommandResult.ACCEPTED, "", msgs, broadcast
         name = self.stream_of_id.get(mid)
         if name is None:
             return CommandResult.DENIED, f"REQUEST MSG {mid} DENIED: NOT PRODUCED", [], False

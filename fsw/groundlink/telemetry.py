@@ -53,10 +53,13 @@ def heartbeat(fsw):
                                          int(fsw.modes.mode), system_status(fsw), 3)
 
 
-def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int, dropped: int = 0, refused_early: int = 0):
+def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int, dropped: int = 0, refused_early: int = 0,
+               unsigned_writes: int = 0, reads_limited: int = 0):
     """SYS_STATUS; the link's counters in the standard error fields (a stock ground station
     shows them): errors_comm every rejection, errors_count1 datagrams dropped on the full
-    receive queue, errors_count2 datagrams refused before verification (each saturating)."""
+    receive queue, errors_count2 datagrams refused before verification, errors_count3
+    unsigned frames refused for their class (state-changing), errors_count4 read-only
+    requests and answers over their sender's budget (each saturating)."""
     S = mav
     present = (S.MAV_SYS_STATUS_SENSOR_3D_GYRO | S.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                | S.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION | S.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
@@ -72,7 +75,7 @@ def sys_status(fsw, loop_timing: dict[int, tuple], rejections: int, dropped: int
         load = int(round(min(1000.0, max(0.0, rg[3] * 1e-6 / fsw.dt_s * 1000.0))))
     return mav.MAVLink_sys_status_message(present, enabled, health, load, 0xFFFF, -1, -1, 0,
                                           min(rejections, 0xFFFF), min(dropped, 0xFFFF), min(refused_early, 0xFFFF),
-                                          0, 0)
+                                          min(unsigned_writes, 0xFFFF), min(reads_limited, 0xFFFF))
 
 
 def nav_valid(fsw) -> bool:
@@ -183,6 +186,65 @@ def position(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool]) -> I
         # no terrain model: terrain altitude unknown (< -1000 by the message's definition),
         # no clearance measurement (negative)
         yield mav.MAVLink_altitude_message(int(max(0.0, fsw.t_s) * 1e6), h, h, h, h, -1001.0, -1.0)
+
+
+def planet_fixed(fsw, x_N: np.ndarray) -> np.ndarray:
+    """x_N in the planet-fixed frame P (N and P coincide at t = 0; P turns at the planet's rate
+    about N3, so longitude = atan2(y_P, x_P), as ``lat_lon``)."""
+    th = fsw.scenario.planet.omega_radps * fsw.t_s
+    c, s = math.cos(th), math.sin(th)
+    return np.array([c * x_N[0] + s * x_N[1], -s * x_N[0] + c * x_N[1], x_N[2]])
+
+
+def local_origin(fsw) -> tuple[np.ndarray, np.ndarray]:
+    """(r0_P [m], C_L0P): the origin of LOCAL_POSITION_NED, the point of the FSW's sphere
+    below the navigation position now, in P, and the north-east-down axes there (rows, in P).
+    The link takes it once, at the first navigation fix."""
+    r_P = planet_fixed(fsw, fsw.nav.state.r_N)
+    r0_P = r_P * (fsw.scenario.planet.radius_m / float(np.linalg.norm(r_P)))
+    return r0_P, local_ned_dcm(r0_P)
+
+
+def local_position_ned(fsw, ms: int, origin: tuple[np.ndarray, np.ndarray]):
+    """LOCAL_POSITION_NED in the planet-fixed north-east-down frame of ``origin``
+    (``local_origin``): position of the vehicle relative to it, and the planet-relative
+    velocity (its time derivative) in the same axes, as floats (no saturation). The origin's
+    axes turn away from the vehicle's local NED by the angle flown around the planet."""
+    r0_P, C_L0P = origin
+    nav = fsw.nav.state
+    x = C_L0P @ (planet_fixed(fsw, nav.r_N) - r0_P)
+    v = C_L0P @ planet_fixed(fsw, nav.vrel_N)
+    return mav.MAVLink_local_position_ned_message(ms, float(x[0]), float(x[1]), float(x[2]),
+                                                  float(v[0]), float(v[1]), float(v[2]))
+
+
+def gps_global_origin(fsw, origin: tuple[np.ndarray, np.ndarray]):
+    """GPS_GLOBAL_ORIGIN: where ``origin`` is (latitude, longitude, altitude 0 on the sphere)."""
+    r0_P = origin[0]
+    lat = math.asin(max(-1.0, min(1.0, float(r0_P[2]) / float(np.linalg.norm(r0_P)))))
+    lon = math.atan2(float(r0_P[1]), float(r0_P[0]))
+    return mav.MAVLink_gps_global_origin_message(int(round(math.degrees(lat) * 1e7)),
+                                                 int(round(math.degrees(lon) * 1e7)), 0,
+                                                 int(max(0.0, fsw.t_s) * 1e6))
+
+
+# ---------------------------------------------------------------- modes (standard modes protocol)
+def current_mode(fsw):
+    """CURRENT_MODE: the FSW's Mode as custom_mode; no MAVLink standard mode fits an entry
+    vehicle's modes (NON_STANDARD); the intended mode is the one flown (no mode is refused
+    silently: a refused mode command is answered DENIED)."""
+    m = int(fsw.modes.mode)
+    return mav.MAVLink_current_mode_message(mav.MAV_STANDARD_MODE_NON_STANDARD, m, m)
+
+
+def available_modes(index: int = 0) -> list:
+    """AVAILABLE_MODES: every Mode (``index`` 0) or the one of index 1..n, by name. Not
+    selectable by a stock ground station: modes are set with ELLIPSLED_CMD_SET_MODE (signed)."""
+    modes = list(Mode)
+    pick = modes if index == 0 else modes[index - 1:index]
+    return [mav.MAVLink_available_modes_message(len(modes), modes.index(m) + 1, mav.MAV_STANDARD_MODE_NON_STANDARD,
+                                                int(m), mav.MAV_MODE_PROPERTY_NOT_USER_SELECTABLE,
+                                                m.name.encode("ascii"), 0) for m in pick]
 
 
 # ---------------------------------------------------------------- guidance

@@ -2765,6 +2765,16 @@ enums["MAV_CMD"][44105].param[7] = """Reserved (default:0)"""
 MAV_CMD_ENUM_END = 44106
 enums["MAV_CMD"][44106] = EnumEntry("MAV_CMD_ENUM_END", """""")
 
+# MAV_MODE_PROPERTY
+enums["MAV_MODE_PROPERTY"] = Enum()
+enums["MAV_MODE_PROPERTY"].bitmask = True
+MAV_MODE_PROPERTY_ADVANCED = 1
+enums["MAV_MODE_PROPERTY"][1] = EnumEntry("MAV_MODE_PROPERTY_ADVANCED", """If set, this mode is an advanced mode.""")
+MAV_MODE_PROPERTY_NOT_USER_SELECTABLE = 2
+enums["MAV_MODE_PROPERTY"][2] = EnumEntry("MAV_MODE_PROPERTY_NOT_USER_SELECTABLE", """If set, this mode should not be added to the list of selectable modes.""")
+MAV_MODE_PROPERTY_ENUM_END = 3
+enums["MAV_MODE_PROPERTY"][3] = EnumEntry("MAV_MODE_PROPERTY_ENUM_END", """""")
+
 # HL_FAILURE_FLAG
 enums["HL_FAILURE_FLAG"] = Enum()
 enums["HL_FAILURE_FLAG"].bitmask = True
@@ -6457,6 +6467,8 @@ MAVLINK_MSG_ID_ELLIPSLED_JET_STATUS = 44001
 MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS = 44002
 MAVLINK_MSG_ID_ELLIPSLED_LOOP_TIMING = 44003
 MAVLINK_MSG_ID_ELLIPSLED_GUIDANCE_STATUS = 44004
+MAVLINK_MSG_ID_AVAILABLE_MODES = 435
+MAVLINK_MSG_ID_CURRENT_MODE = 436
 MAVLINK_MSG_ID_SYS_STATUS = 1
 MAVLINK_MSG_ID_SYSTEM_TIME = 2
 MAVLINK_MSG_ID_PING = 4
@@ -7005,6 +7017,94 @@ class MAVLink_ellipsled_guidance_status_message(MAVLink_message):
 # Define name on the class for backwards compatibility (it is now msgname).
 # Done with setattr to hide the class variable from mypy.
 setattr(MAVLink_ellipsled_guidance_status_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_available_modes_message(MAVLink_message):
+    """
+    Information about a flight mode (upstream common.xml, standard
+    modes protocol), requested with MAV_CMD_REQUEST_MESSAGE (param2: 0
+    all modes, else the mode index).
+    """
+
+    id = MAVLINK_MSG_ID_AVAILABLE_MODES
+    msgname = "AVAILABLE_MODES"
+    fieldnames = ["number_modes", "mode_index", "standard_mode", "custom_mode", "properties", "mode_name", "seq"]
+    ordered_fieldnames = ["custom_mode", "properties", "number_modes", "mode_index", "standard_mode", "mode_name", "seq"]
+    fieldtypes = ["uint8_t", "uint8_t", "uint8_t", "uint32_t", "uint32_t", "char", "uint8_t"]
+    fielddisplays_by_name: Dict[str, str] = {"properties": "bitmask"}
+    fieldenums_by_name: Dict[str, str] = {"standard_mode": "MAV_STANDARD_MODE", "properties": "MAV_MODE_PROPERTY"}
+    fieldunits_by_name: Dict[str, str] = {}
+    native_format = bytearray(b"<IIBBBcB")
+    orders = [2, 3, 4, 0, 1, 5, 6]
+    lengths = [1, 1, 1, 1, 1, 1, 1]
+    array_lengths = [0, 0, 0, 0, 0, 35, 0]
+    crc_extra = 134
+    unpacker = struct.Struct("<IIBBB35sB")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, number_modes: int, mode_index: int, standard_mode: int, custom_mode: int, properties: int, mode_name: bytes, seq: int = 0):
+        MAVLink_message.__init__(self, MAVLink_available_modes_message.id, MAVLink_available_modes_message.msgname)
+        self._fieldnames = MAVLink_available_modes_message.fieldnames
+        self._instance_field = MAVLink_available_modes_message.instance_field
+        self._instance_offset = MAVLink_available_modes_message.instance_offset
+        self.number_modes = number_modes
+        self.mode_index = mode_index
+        self.standard_mode = standard_mode
+        self.custom_mode = custom_mode
+        self.properties = properties
+        self._mode_name_raw = mode_name
+        self.mode_name = mode_name.split(b"\x00", 1)[0].decode("ascii", errors="replace")
+        self.seq = seq
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.custom_mode, self.properties, self.number_modes, self.mode_index, self.standard_mode, self._mode_name_raw, self.seq), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_available_modes_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_current_mode_message(MAVLink_message):
+    """
+    The current mode (upstream common.xml, standard modes protocol):
+    emitted on any mode change and at a low rate.
+    """
+
+    id = MAVLINK_MSG_ID_CURRENT_MODE
+    msgname = "CURRENT_MODE"
+    fieldnames = ["standard_mode", "custom_mode", "intended_custom_mode"]
+    ordered_fieldnames = ["custom_mode", "intended_custom_mode", "standard_mode"]
+    fieldtypes = ["uint8_t", "uint32_t", "uint32_t"]
+    fielddisplays_by_name: Dict[str, str] = {}
+    fieldenums_by_name: Dict[str, str] = {"standard_mode": "MAV_STANDARD_MODE"}
+    fieldunits_by_name: Dict[str, str] = {}
+    native_format = bytearray(b"<IIB")
+    orders = [2, 0, 1]
+    lengths = [1, 1, 1]
+    array_lengths = [0, 0, 0]
+    crc_extra = 193
+    unpacker = struct.Struct("<IIB")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, standard_mode: int, custom_mode: int, intended_custom_mode: int):
+        MAVLink_message.__init__(self, MAVLink_current_mode_message.id, MAVLink_current_mode_message.msgname)
+        self._fieldnames = MAVLink_current_mode_message.fieldnames
+        self._instance_field = MAVLink_current_mode_message.instance_field
+        self._instance_offset = MAVLink_current_mode_message.instance_offset
+        self.standard_mode = standard_mode
+        self.custom_mode = custom_mode
+        self.intended_custom_mode = intended_custom_mode
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.custom_mode, self.intended_custom_mode, self.standard_mode), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_current_mode_message, "name", mavlink_msg_deprecated_name_property())
 
 
 class MAVLink_sys_status_message(MAVLink_message):
@@ -17087,6 +17187,8 @@ mavlink_map: Dict[int, Type[MAVLink_message]] = {
     MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS: MAVLink_ellipsled_control_status_message,
     MAVLINK_MSG_ID_ELLIPSLED_LOOP_TIMING: MAVLink_ellipsled_loop_timing_message,
     MAVLINK_MSG_ID_ELLIPSLED_GUIDANCE_STATUS: MAVLink_ellipsled_guidance_status_message,
+    MAVLINK_MSG_ID_AVAILABLE_MODES: MAVLink_available_modes_message,
+    MAVLINK_MSG_ID_CURRENT_MODE: MAVLink_current_mode_message,
     MAVLINK_MSG_ID_SYS_STATUS: MAVLink_sys_status_message,
     MAVLINK_MSG_ID_SYSTEM_TIME: MAVLink_system_time_message,
     MAVLINK_MSG_ID_PING: MAVLink_ping_message,
@@ -17958,6 +18060,64 @@ class MAVLink(object):
 
         """
         self.send(self.ellipsled_guidance_status_encode(time_boot_ms, mode, flags, target_lat, target_lon, range_to_go, predicted_lat, predicted_lon, predicted_alt, predicted_miss, downrange_error, crossrange_error, time_to_go, bank_0, bank_cmd, bank_sign, density_scale, cycles, overruns, reversals, last_reversal_time, last_reversal_rule, authority_pos, authority_neg, bias, trim_needed), force_mavlink1=force_mavlink1)
+
+    def available_modes_encode(self, number_modes: int, mode_index: int, standard_mode: int, custom_mode: int, properties: int, mode_name: bytes, seq: int = 0) -> MAVLink_available_modes_message:
+        """
+        Information about a flight mode (upstream common.xml, standard modes
+        protocol), requested with MAV_CMD_REQUEST_MESSAGE (param2: 0
+        all modes, else the mode index).
+
+        number_modes              : The total number of available modes for the current vehicle type. (type:uint8_t)
+        mode_index                : The current mode index within number_modes, indexed from 1. (type:uint8_t)
+        standard_mode             : Standard mode. (type:uint8_t, values:MAV_STANDARD_MODE)
+        custom_mode               : A bitfield for use for autopilot-specific flags (type:uint32_t)
+        properties                : Mode properties. (type:uint32_t, values:MAV_MODE_PROPERTY)
+        mode_name                 : Name of custom mode, with null termination character. Should be omitted for standard modes. (type:char)
+        seq                       : Sequence number of the set of AVAILABLE_MODES (0: the set never changes). (type:uint8_t)
+
+        """
+        return MAVLink_available_modes_message(number_modes, mode_index, standard_mode, custom_mode, properties, mode_name, seq)
+
+    def available_modes_send(self, number_modes: int, mode_index: int, standard_mode: int, custom_mode: int, properties: int, mode_name: bytes, seq: int = 0, force_mavlink1: bool = False) -> None:
+        """
+        Information about a flight mode (upstream common.xml, standard modes
+        protocol), requested with MAV_CMD_REQUEST_MESSAGE (param2: 0
+        all modes, else the mode index).
+
+        number_modes              : The total number of available modes for the current vehicle type. (type:uint8_t)
+        mode_index                : The current mode index within number_modes, indexed from 1. (type:uint8_t)
+        standard_mode             : Standard mode. (type:uint8_t, values:MAV_STANDARD_MODE)
+        custom_mode               : A bitfield for use for autopilot-specific flags (type:uint32_t)
+        properties                : Mode properties. (type:uint32_t, values:MAV_MODE_PROPERTY)
+        mode_name                 : Name of custom mode, with null termination character. Should be omitted for standard modes. (type:char)
+        seq                       : Sequence number of the set of AVAILABLE_MODES (0: the set never changes). (type:uint8_t)
+
+        """
+        self.send(self.available_modes_encode(number_modes, mode_index, standard_mode, custom_mode, properties, mode_name, seq), force_mavlink1=force_mavlink1)
+
+    def current_mode_encode(self, standard_mode: int, custom_mode: int, intended_custom_mode: int) -> MAVLink_current_mode_message:
+        """
+        The current mode (upstream common.xml, standard modes protocol):
+        emitted on any mode change and at a low rate.
+
+        standard_mode             : Standard mode. (type:uint8_t, values:MAV_STANDARD_MODE)
+        custom_mode               : A bitfield for use for autopilot-specific flags (type:uint32_t)
+        intended_custom_mode        : The custom_mode of the mode that was last commanded by the user; 0 unknown/not supplied. (type:uint32_t)
+
+        """
+        return MAVLink_current_mode_message(standard_mode, custom_mode, intended_custom_mode)
+
+    def current_mode_send(self, standard_mode: int, custom_mode: int, intended_custom_mode: int, force_mavlink1: bool = False) -> None:
+        """
+        The current mode (upstream common.xml, standard modes protocol):
+        emitted on any mode change and at a low rate.
+
+        standard_mode             : Standard mode. (type:uint8_t, values:MAV_STANDARD_MODE)
+        custom_mode               : A bitfield for use for autopilot-specific flags (type:uint32_t)
+        intended_custom_mode        : The custom_mode of the mode that was last commanded by the user; 0 unknown/not supplied. (type:uint32_t)
+
+        """
+        self.send(self.current_mode_encode(standard_mode, custom_mode, intended_custom_mode), force_mavlink1=force_mavlink1)
 
     def sys_status_encode(self, onboard_control_sensors_present: int, onboard_control_sensors_enabled: int, onboard_control_sensors_health: int, load: int, voltage_battery: int, current_battery: int, battery_remaining: int, drop_rate_comm: int, errors_comm: int, errors_count1: int, errors_count2: int, errors_count3: int, errors_count4: int, onboard_control_sensors_present_extended: int = 0, onboard_control_sensors_enabled_extended: int = 0, onboard_control_sensors_health_extended: int = 0) -> MAVLink_sys_status_message:
         """

@@ -179,7 +179,8 @@ def test_plant_killed_fsw_holds_jets_off_and_recovers(tmp_path, procs):
     """Kill the plant mid-run: the FSW declares its sensors stale, holds the jets off and
     keeps running; a new plant process is picked up and commanded again."""
     e_fsw = transport.loopback(transport.free_port())
-    procs.start("fsw", _node("fsw", "case1", "realtime", tmp_path / "fsw", listen=[e_fsw]))
+    procs.start("fsw", _node("fsw", "case1", "realtime", tmp_path / "fsw", listen=[e_fsw],
+                                extra=["--plant-gone-s", "120"]))  # it must outlast the restart
     procs.start("sim1", _node("sim", "case1", "realtime", tmp_path / "sim1", connect=[e_fsw],
                               extra=["--duration", "60"]))
     # start-up (seconds on a loaded machine: imports, compiled kernels, warm-up), then a few

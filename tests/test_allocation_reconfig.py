@@ -3,7 +3,6 @@ time, the synchronous default (lockstep = batch), and the asynchronous mode, who
 answers never fire a jet the new health forbids, are exact over the interim model (checked
 by brute force over the previous candidates), and switch to answers equal to the
 synchronous allocator's. Timing figures are in the benchmark; bounds here are sanity only."""
-import ctypes
 import gc
 import sys
 import threading
@@ -154,16 +153,8 @@ def _worst_wait_on_the_builder(hold_s: float = 0.0) -> tuple[int, int, int]:
 
 def _measure_the_loop_beside_the_builder(hold_s: float) -> tuple[int, int, int]:
     rng = np.random.default_rng(5)
-    hold = ctypes.PyDLL(None).usleep                    # PyDLL: the call keeps the GIL
     al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
-    build = al._rebuilder._build
-
-    def build_holding_the_gil(*args):
-        if hold_s > 0.0:
-            hold(int(hold_s * 1e6))
-        return build(*args)
-
-    al._rebuilder._build = build_holding_the_gil
+    al._rebuilder._build = threadtime.holding_the_gil_first(al._rebuilder._build, hold_s)
     switch = sys.getswitchinterval()
     sys.setswitchinterval(rt.GIL_SWITCH_S)              # as the real-time FSW runs
     meter = BlockedMeter()

@@ -28,7 +28,6 @@ The rules proven here:
 """
 from __future__ import annotations
 
-import ctypes
 import math
 import sys
 import threading
@@ -52,7 +51,6 @@ from tests.threadtime import BlockedMeter, LongestCCall, gil_keeping_burn
 PERIOD_NS = 20_000_000                       # the 50 Hz control period
 GIL_HOLD_S = 1.5 * PERIOD_NS * 1e-9          # a job that keeps the GIL this long must be caught
 SANITY_S = 30.0                              # only against a hang: no outcome depends on it
-usleep = ctypes.PyDLL(None).usleep           # PyDLL: the call keeps the GIL
 
 
 def _until(cond) -> None:
@@ -125,14 +123,7 @@ def _worst_wait_on_the_lp(hold_s: float = 0.0) -> int:
 def _measure_the_loop_beside_the_lp(hold_s: float) -> int:
     fl = _Flight("nominal")
     f = fl.fsw
-    solve = f._lp_worker._solve
-
-    def solve_holding_the_gil(*args):
-        if hold_s > 0.0:
-            usleep(int(hold_s * 1e6))
-        return solve(*args)
-
-    f._lp_worker._solve = solve_holding_the_gil
+    f._lp_worker._solve = threadtime.holding_the_gil_first(f._lp_worker._solve, hold_s)
     f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
     f.health_changed()
     assert f.allocator.wait_idle(SANITY_S)               # the tables are not what is measured
@@ -327,10 +318,7 @@ def _worst_wait_on_the_guidance(hold_s: float = 0.0) -> int:
     """Real-time flight from the first guidance release until three answers are applied (each
     computed inside the measured flight). Returns the longest time one loop iteration slept
     [ns]. ``hold_s``: each correction first holds the GIL that long."""
-    def holding_the_gil(correct, *a):
-        if hold_s > 0.0:
-            usleep(int(hold_s * 1e6))
-        return correct(*a)
+    holding_the_gil = threadtime.holding_the_gil_first(lambda correct, *a: correct(*a), hold_s)
     with threadtime.as_the_realtime_loop():
         fl = _guided(holding_the_gil)
         try:

@@ -10,6 +10,7 @@ thread of its process. That is a property of the code, the same on a quiet or a 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import sys
 import threading
@@ -126,3 +127,18 @@ def gil_keeping_burn(cpu_ns: float):
         if time.thread_time_ns() - t0 >= cpu_ns:
             return lambda: pow(3, e)
         e *= 2
+
+
+_usleep_keeping_the_gil = ctypes.PyDLL(None).usleep      # PyDLL: the call keeps the GIL
+
+
+def holding_the_gil_first(job, hold_s: float):
+    """``job`` that first keeps the GIL ``hold_s`` while it sleeps (a C call that does not
+    give it up, the fault the blocked-time tests exist to catch); ``job`` itself for 0."""
+    if hold_s <= 0.0:
+        return job
+
+    def held(*args):
+        _usleep_keeping_the_gil(int(hold_s * 1e6))
+        return job(*args)
+    return held

@@ -763,7 +763,8 @@ class EntryGuidance:
         self.xr_keep_m = math.nan        # predicted deploy crossrange, sign kept [m, + left]
         self.xr_rev_m = math.nan         # ... reversed at the next cycle
         self._t_cycle = math.nan         # release time of the last cycle
-        self.cycles = 0
+        self.released = 0                # corrections handed to the worker
+        self.cycles = 0                  # ... whose answers were applied
         self.no_root = 0
         self.overruns = 0
         self.faults = 0                  # corrections that raised (command kept)
@@ -1030,6 +1031,7 @@ class EntryGuidance:
         shp = np.array([sh.phi, sh.phid, sh._sign, sh._turn, sh.rate_limit_radps, sh.accel_limit_radps2, sh.dt,
                         self.bank_cmd])
         self._job = (x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp, t_s)
+        self.released += 1
         self._go.set()
 
     def _apply(self, res: dict) -> None:
@@ -1156,7 +1158,7 @@ class EntryGuidance:
 
         def pct(a, q):
             return float(np.percentile(a, q)) if n else None
-        return {"cycles": self.cycles, "compute_p50_us": pct(us, 50), "compute_p99_us": pct(us, 99),
+        return {"released": self.released, "cycles": self.cycles, "compute_p50_us": pct(us, 50), "compute_p99_us": pct(us, 99),
                 "compute_max_us": float(us.max()) if n else None,
                 "predictions_per_cycle_mean": float(calls.mean()) if n else None,
                 "predictions_per_cycle_max": int(calls.max()) if n else None,

@@ -93,14 +93,14 @@ def test_a_row_outside_the_schema_is_refused_before_it_is_written(tmp_path):
 
 
 def test_a_folder_of_the_earlier_format_is_not_resumed(tmp_path):
-    """Its parts have per-part column types: new parts beside them would not make one table."""
+    """Its parts have another schema: new parts beside them would not make one table."""
     import json
     from ellipsled.montecarlo.engine import FORMAT, META_FILE, prepare_out
     camp = load_campaign("default")
     out = tmp_path / "mc"
     prepare_out(out, camp, 1, 10.0)
     meta = json.loads((out / META_FILE).read_text())
-    assert meta["format"] == FORMAT == 2
-    (out / META_FILE).write_text(json.dumps(dict(meta, format=1)))
-    with pytest.raises(ValueError, match="format 1.*choose another --out"):
+    assert meta["format"] == FORMAT
+    (out / META_FILE).write_text(json.dumps(dict(meta, format=FORMAT - 1)))
+    with pytest.raises(ValueError, match=f"format {FORMAT - 1}.*choose another --out"):
         prepare_out(out, camp, 1, 10.0)

@@ -44,7 +44,7 @@ from .store import ResultStore, flatten
 META_FILE = "campaign.json"
 SCENARIO_FILE = "scenario.toml"
 RESULTS_DIR = "results.parquet"
-FORMAT = 2      # 2: every part file has RECORD_SCHEMA (1: column types inferred per part)
+FORMAT = 3      # 3: + guidance.released; 2: every part file has RECORD_SCHEMA (1: types inferred per part)
 
 # summary.json figures that measure the machine, not the flight: not reproducible run to run.
 TIMING_COLUMNS = frozenset({"wall_s", "realtime_factor", "cycle_slips", "events", "allocator.p50_us",
@@ -112,7 +112,7 @@ RECORD_SCHEMA = pa.schema(
     + _cols(_F, "deploy_miss_km", "deploy_alt_km", "downrange_err_km", "crossrange_err_km", "peak_heat_rate_wcm2",
             "peak_load_g", "gamma_positive_max_alt_km", "limits.load_g", "limits.heat_rate_wcm2")
     + [("skip", _B), ("guidance_mode", _S), ("reversal_count", _I)]
-    + _cols(_I, "guidance.cycles", "guidance.predictions_per_cycle_max", "guidance.no_root", "guidance.floor_cycles",
+    + _cols(_I, "guidance.released", "guidance.cycles", "guidance.predictions_per_cycle_max", "guidance.no_root", "guidance.floor_cycles",
             "guidance.held_cycles", "guidance.overruns", "guidance.faults")
     + _cols(_F, "guidance.compute_p50_us", "guidance.compute_p99_us", "guidance.compute_max_us",
             "guidance.predictions_per_cycle_mean", "guidance.k_rho_final", "guidance.k_ld_final",

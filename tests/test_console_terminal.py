@@ -21,7 +21,7 @@ from interfaces.mavlink.signing import SigningKey
 
 from tests.ground_procs import free_udp, stop
 
-pytestmark = [pytest.mark.slow, pytest.mark.realtime,
+pytestmark = [pytest.mark.slow,         # its SIL runs --no-rt: no FIFO process, it may run beside others
               pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed (apt-get install tmux)")]
 PY = [sys.executable, "-m", "ellipsled.cli"]
 STATUSTEXT_LEN = 50

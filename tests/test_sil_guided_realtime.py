@@ -13,7 +13,7 @@ import pytest
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
-DURATION_S = 60.0      # the entry interface's cold corrector and the longest predictions
+DURATION_S = 30.0      # the entry interface's cold corrector and the longest predictions (from the interface)
 
 
 def test_guided_entry_in_real_time_answers_every_guidance_cycle_off_the_loop(tmp_path):

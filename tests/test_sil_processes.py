@@ -263,7 +263,7 @@ from interfaces import records, transport
 from interfaces.codec import Codec
 from interfaces.keys import keys
 K = keys(sys.argv[1])
-s = transport.open_session("attacker", None, sys.argv[2:])
+s = transport.open_session("attacker", [sys.argv[2]], None)     # the plant and the FSW connect to it
 pubs = {k: transport.publisher(s, k) for k in (K.sensors, K.jets, K.faults, K.truth, K.state, K.events)}
 sub = transport.subscriber(s, K.jets)
 print("ready", flush=True)
@@ -272,6 +272,8 @@ while captured is None:                        # the FSW owns the jets key first
     smp = transport.recv(sub, 0.1)
     if smp is not None:
         captured = smp.payload.to_bytes()
+while len(list(s.info.peers_zid())) < 2:       # both nodes are its peers: every put reaches both
+    time.sleep(0.01)
 print("captured", flush=True)
 rng = np.random.default_rng(7)
 intruder = Codec.for_schema("JETS")            # another publisher id on the jets key
@@ -297,10 +299,13 @@ def test_garbage_replays_and_a_second_publisher_on_every_key(tmp_path, procs):
     completes, every bad payload is rejected and counted, nothing crashes."""
     e_sim = transport.loopback(transport.free_port())
     e_fsw = transport.loopback(transport.free_port())
-    # the attacker is up (session, publishers, subscriber) before the run starts, so that
-    # it attacks the whole run: a lockstep run of 400 s takes only a few seconds here
+    e_att = transport.loopback(transport.free_port())
+    # the attacker is up (session, publishers, subscriber) before the run starts and both
+    # nodes connect to it as they open their sessions, so that it attacks the whole run
+    # however fast the run and however slow the host: a lockstep run of 400 s takes a few
+    # seconds, and an attacker that connected to them would still be waiting out its retry
     log = open(tmp_path / "attacker.log", "w")
-    attacker = subprocess.Popen([sys.executable, "-c", ATTACKER, PREFIX, e_sim, e_fsw], stdout=log,
+    attacker = subprocess.Popen([sys.executable, "-c", ATTACKER, PREFIX, e_att], stdout=log,
                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     procs.p["attacker"] = attacker
     deadline = time.monotonic() + 60.0
@@ -308,9 +313,10 @@ def test_garbage_replays_and_a_second_publisher_on_every_key(tmp_path, procs):
             and time.monotonic() < deadline:
         time.sleep(0.05)
     assert "ready" in (tmp_path / "attacker.log").read_text(), (tmp_path / "attacker.log").read_text()
-    procs.start("sim", _node("sim", "case1", "lockstep", tmp_path / "sim", listen=[e_sim],
+    procs.start("sim", _node("sim", "case1", "lockstep", tmp_path / "sim", listen=[e_sim], connect=[e_att],
                              extra=["--duration", "400"]))
-    procs.start("fsw", _node("fsw", "case1", "lockstep", tmp_path / "fsw", listen=[e_fsw], connect=[e_sim]))
+    procs.start("fsw", _node("fsw", "case1", "lockstep", tmp_path / "fsw", listen=[e_fsw],
+                             connect=[e_sim, e_att]))
     try:
         assert procs.wait("sim", 180) == 0, procs.log("sim")
     finally:

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .guidance import _S2_MAX
+from .guidance.reference import _S2_MAX
 from .health import STUCK_ON, JetHealth
 from .lp import set_colwise_matrix, solve_or_none
 

@@ -62,7 +62,6 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
     return best[0], best[1], len(pts), abs(best[1]) <= tol
 
 
-
 HOLD_MAX = 1.0 - 1e-6    # bank_profile: a bound held to the deploy, within float reach
 
 

@@ -29,37 +29,36 @@ _speed_of_sound = njit(cache=True, nogil=True)(atmosphere.speed_of_sound)
 
 # The predictor's constants: one flat vector (the compiled kernels take arrays), indexed by
 # these compile-time constants; predictor_constants fills it.
-C_MU = 0                # gravitational parameter [m^3/s^2]
-C_RE = 1                # planet radius [m]
-C_OM = 2                # planet rotation rate [rad/s]
-C_RHO_MODEL = 3         # atmosphere model: 0 exponential, 1 polynomial
-C_RHO0, C_H = 4, 5      # exponential atmosphere: density at zero altitude [kg/m^3], scale height [m]
-C_KRHO = 6              # density scale estimate K_rho [-]
-C_KLD = 7               # L/D scale estimate K_LD [-]
-C_S_M = 8               # reference area over mass [m^2/kg]
-C_CL, C_CD = 9, 10      # lift and drag coefficients at trim [-]
-C_MACH_F = 11           # deploy Mach number (0: the deploy condition is the speed C_V_F)
-C_V_F = 12              # deploy speed [m/s]
-C_H_FLOOR = 13          # altitude at or below which a prediction has hit the ground [m]
-C_H_CEIL = 14           # altitude above which a climbing prediction has skipped out [m]
-C_T_MAX = 15            # longest prediction [s]
-C_G0 = 16               # surface gravity, the unit of the load factor [m/s^2]
-C_RN = 17               # nose radius [m]
-C_SG = 18               # Sutton-Graves constant [SI]
-C_NLIM, C_QLIM = 19, 20  # path limits: load factor [g], heat rate [W/m^2] (0: off)
-C_HTAU, C_HGAIN = 21, 22  # path-limit feedback: closing time [s], gain [s/m]
-C_BLO, C_BHI = 23, 24   # the law's bank magnitude clipped to the phi_0 bounds [rad] (bank_profile)
+C_MU = 0                        # gravitational parameter [m^3/s^2]
+C_RE = 1                        # planet radius [m]
+C_OM = 2                        # planet rotation rate [rad/s]
+C_RHO_MODEL = 3                 # atmosphere model: 0 exponential, 1 polynomial
+C_RHO0, C_H = 4, 5              # exponential atmosphere: density at zero altitude [kg/m^3], scale height [m]
+C_KRHO = 6                      # density scale estimate K_rho [-]
+C_KLD = 7                       # L/D scale estimate K_LD [-]
+C_S_M = 8                       # reference area over mass [m^2/kg]
+C_CL, C_CD = 9, 10              # lift and drag coefficients at trim [-]
+C_MACH_F = 11                   # deploy Mach number (0: the deploy condition is the speed C_V_F)
+C_V_F = 12                      # deploy speed [m/s]
+C_H_FLOOR = 13                  # altitude at or below which a prediction has hit the ground [m]
+C_H_CEIL = 14                   # altitude above which a climbing prediction has skipped out [m]
+C_T_MAX = 15                    # longest prediction [s]
+C_G0, C_RN, C_SG = 16, 17, 18   # surface gravity (the load factor's unit) [m/s^2], nose radius [m],
+                                # Sutton-Graves constant [SI]
+C_NLIM, C_QLIM = 19, 20         # path limits: load factor [g], heat rate [W/m^2] (0: off)
+C_HTAU, C_HGAIN = 21, 22        # path-limit feedback: closing time [s], gain [s/m]
+C_BLO, C_BHI = 23, 24           # the law's bank magnitude clipped to the phi_0 bounds [rad] (bank_profile)
 N_C = 25
 # The predictor's outputs, indexed likewise
-O_R = 0                 # 3: final position, planet-fixed [m]
-O_T = 3                 # time of flight [s]
-O_NMAX, O_QMAX = 4, 5   # peak load factor [g], peak heat rate [W/m^2]
-O_H, O_V = 6, 7         # final altitude [m] and speed [m/s]
-O_FLAG = 8              # how it ended: REACHED, SKIPPED, GROUND or TIMEOUT
+O_R = 0                         # 3: final position, planet-fixed [m]
+O_T = 3                         # time of flight [s]
+O_NMAX, O_QMAX = 4, 5           # peak load factor [g], peak heat rate [W/m^2]
+O_H, O_V = 6, 7                 # final altitude [m] and speed [m/s]
+O_FLAG = 8                      # how it ended: REACHED, SKIPPED, GROUND or TIMEOUT
 N_O = 9
 REACHED, SKIPPED, GROUND, TIMEOUT = 0, 1, 2, 3
-T_PRED_MAX_S = 1500.0             # a prediction longer than this is a skip-out
-SUTTON_GRAVES_MARS = 1.9027e-4     # k of q = k sqrt(rho / R_n) V^3 [SI] (spec 60-guidance.md)
+T_PRED_MAX_S = 1500.0           # a prediction longer than this is a skip-out
+SUTTON_GRAVES_MARS = 1.9027e-4  # k of q = k sqrt(rho / R_n) V^3 [SI] (spec 60-guidance.md)
 
 
 @njit(cache=True, nogil=True)
@@ -289,4 +288,3 @@ def deploy_energy(scenario: Scenario, h_deploy_m: float) -> float:
     V = scenario.end_speed_mps if scenario.end_speed_mps is not None else \
         scenario.end_mach * atmosphere.speed_of_sound(h_deploy_m)
     return pl.mu_m3ps2 / (pl.radius_m + h_deploy_m) - 0.5 * V * V
-

@@ -158,7 +158,7 @@ def floor_bank(deploy, h_floor_m: float, b_hi: float, h_hi_m: float, b_min: floa
 
 
 class Correction(TypedDict):
-    """One answer of the corrector (EntryGuidance.solve): the bank profile to fly from the
+    """One answer of the corrector (Corrector.solve): the bank profile to fly from the
     state it answers, and what its prediction says of the deploy."""
     bank0_rad: float          # phi_0 commanded: the profile's bank now (the line clipped to the bounds)
     p_range_rad: float        # the range solution's parameter p (bank_profile): the next cycle's warm start

@@ -237,10 +237,9 @@ class EntryGuidance(Corrector):
         r = nav.r_N
         rn = math.sqrt(float(r @ r))
         hdot = float(nav.vrel_N @ r) / rn
-        a = nav.accel_B
-        n_g = math.sqrt(float(a @ a)) / self.constants[C_G0]
-        q = SUTTON_GRAVES_MARS * math.sqrt(max(nav.rho_kgpm3, 0.0) * self.estimator.k_rho / self.constants[C_RN]) \
-            * V ** 3
+        a, c = nav.accel_B, self.constants
+        n_g = math.sqrt(float(a @ a)) / c[C_G0]
+        q = SUTTON_GRAVES_MARS * math.sqrt(max(nav.rho_kgpm3, 0.0) * self.estimator.k_rho / c[C_RN]) * V ** 3
         # the answer's profile at today's energy (the bank its prediction flew), not its start held
         # for the cycle: the next answer, re-anchored, is then the same profile (profile_at)
         e0, b_line, b_f = self._line

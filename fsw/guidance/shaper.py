@@ -112,7 +112,7 @@ class BankShaper:
     def __init__(self, phi0_rad: float, rate_limit_radps: float, accel_limit_radps2: float, dt_s: float):
         self.rate_limit_radps = float(rate_limit_radps)
         self.accel_limit_radps2 = float(accel_limit_radps2)
-        self.dt = float(dt_s)
+        self.dt_s = float(dt_s)
         self.phi = float(phi0_rad)
         self.phid = 0.0
         self.phidd = 0.0
@@ -128,31 +128,32 @@ class BankShaper:
     def state(self, mag_rad: float) -> np.ndarray:
         """The state shaped_transition starts from (its shp), mag_rad the magnitude commanded now."""
         return np.array([self.phi, self.phid, self._sign, self._turn, self.rate_limit_radps, self.accel_limit_radps2,
-                         self.dt, mag_rad])
+                         self.dt_s, mag_rad])
 
     def turn_round(self, turn_rad: float, sign: float) -> bool:
-        """Take another way round (turn_rad, as reversal_other_way's) for the reversal to
-        ``sign`` when it is still under way (the reference not yet on that side); True if
-        taken. NaN: none."""
+        """Take another way round (turn_rad, as reversal_other_way's; NaN: none) for the
+        reversal to ``sign`` while it is under way (the reference not yet on that side);
+        True if taken."""
         if not (math.isfinite(turn_rad) and sign == self._sign and math.sin(self.phi) * self._sign < 0.0):
             return False
         self.target += turn_rad - self._turn
         self._turn = turn_rad
         return True
+
     def _step(self) -> None:
-        dt, a = self.dt, self.phidd
+        dt, a = self.dt_s, self.phidd
         self.phi += self.phid * dt + 0.5 * a * dt * dt
         self.phid += a * dt
 
     def evaluate(self, t_s: float) -> tuple[float, float, float]:
         if self._t is None:
             self._t = t_s
-        n = int(round((t_s - self._t) / self.dt))
+        n = int(round((t_s - self._t) / self.dt_s))
         for _ in range(max(0, n)):
             self._step()
-        self._t += n * self.dt if n > 0 else 0.0
+        self._t += n * self.dt_s if n > 0 else 0.0
         self.phidd = shaper_accel(self.phi, self.phid, self.target, self.rate_limit_radps,
-                                  self.accel_limit_radps2, self.dt)
+                                  self.accel_limit_radps2, self.dt_s)
         return self.phi, self.phid, self.phidd
 
     def transition_s(self, angle_rad: float) -> float:

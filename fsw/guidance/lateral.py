@@ -1,5 +1,4 @@
-"""The entry guidance's lateral channel: when to reverse the bank's sign.
-"""
+"""The entry guidance's lateral channel: when to reverse the bank's sign."""
 from __future__ import annotations
 
 import math

@@ -25,13 +25,13 @@ from .control import SamiController
 from .controllability import (Controllability, aero_moment_per_rad, controllability, velocity_dir_B,
                               schedule_accel_need_radps2)
 from .fdir import Fdir
-from .guidance import BankProfile, Guidance
+from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
 from .jetdriver import JetDriver
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation
-from .npc import PARAMS as NPC_PARAMS, EntryGuidance
+from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .params import Param, ParamRegistry
 from . import executive
 

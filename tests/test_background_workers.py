@@ -1,5 +1,5 @@
 """The FSW's background workers -- the controllability LP (fsw/flightsoftware.py ``_LpWorker``)
-and the predictor-corrector's correction (fsw/npc.py ``EntryGuidance``) -- judged by their
+and the predictor-corrector's correction (fsw/guidance/npc.py ``EntryGuidance``) -- judged by their
 logic, not by the host: each worker's job is injected (held on an Event the test controls,
 or made to keep the GIL for a known time with a C call). That no job keeps the loop from
 the GIL a control period by computing is judged in the job's own CPU time per C call
@@ -374,10 +374,10 @@ def test_a_correction_that_computes_a_control_period_in_one_c_call_is_seen():
 
 def test_the_corrections_compiled_kernels_release_the_gil():
     """The module's promise that the loop runs while the predictor computes: every compiled
-    kernel of fsw/npc.py is built nogil."""
+    kernel of the guidance's predictor and shaper (fsw/guidance/) is built nogil."""
     from numba.core.registry import CPUDispatcher
-    from fsw import npc
-    kernels = [v for v in vars(npc).values() if isinstance(v, CPUDispatcher)]
+    from fsw.guidance import predictor, shaper
+    kernels = [v for m in (predictor, shaper) for v in vars(m).values() if isinstance(v, CPUDispatcher)]
     assert len(kernels) >= 8
     assert [k.py_func.__name__ for k in kernels if not k.targetoptions.get("nogil")] == []
 

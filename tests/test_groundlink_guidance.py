@@ -68,7 +68,7 @@ def test_npc_status_carries_the_flight_softwares_own_guidance_figures(guided):
     assert m.predicted_alt == pytest.approx(e.pred_h_m, rel=1e-6)
     assert m.time_to_go == pytest.approx(e.t_go_s, rel=1e-6)
     # phi_0 flown (the corrector's own parameter goes beyond the bounds when it holds one)
-    assert m.bank_0 == pytest.approx(e.bank0_cmd, rel=1e-6) and e.bank_lo - 1e-6 <= m.bank_0 <= e.bank_hi + 1e-6
+    assert m.bank_0 == pytest.approx(e.bank0_cmd, rel=1e-6) and e.bank_min_rad - 1e-6 <= m.bank_0 <= e.bank_max_rad + 1e-6
     assert m.bank_cmd == pytest.approx(e.bank_cmd, rel=1e-6) and 0.0 < m.bank_cmd < math.pi
     assert m.bank_sign == (1 if e.lateral.sign > 0 else -1)
     assert m.density_scale == pytest.approx(e.estimator.k_rho, rel=1e-6)

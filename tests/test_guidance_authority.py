@@ -9,7 +9,7 @@ import pytest
 
 from common.model import load_scenario
 from fsw.flightsoftware import FlightSoftware
-from fsw.guidance import BankProfile, _bang_bang
+from fsw.guidance.reference import BankProfile, _bang_bang
 from fsw.health import JetHealth
 
 SC = load_scenario("case2")

@@ -23,7 +23,8 @@ from typing import Callable
 
 import numpy as np
 
-from common.events import EventLog, Severity
+from common.events import EventLog
+from interfaces.event_catalogue import EV
 from common.rt import sleep_until_ns
 from .params import Param
 
@@ -269,8 +270,7 @@ class Executive:
                     if not self.catch_task_errors:
                         raise
                     self.task_errors += 1
-                    self.events.emit(self._t_s(t_s, t_rel), Severity.ERROR, "executive", "task_error",
-                                     f"task {name}: {type(e).__name__}"[:50], rate_limited=True)
+                    self.events.emit(self._t_s(t_s, t_rel), EV.TASK_ERROR, task=name, error=type(e).__name__)
                 t_end = now_ns()
                 task_row[idx] = t_end - t
                 t = t_end
@@ -282,8 +282,7 @@ class Executive:
         self.cycles += 1
         if self.clock.missed != missed_before:
             n = self.clock.missed - missed_before
-            self.events.emit(self._t_s(t_s, t_rel), Severity.WARNING, "executive", "release_missed",
-                             f"{n} release(s) missed before tick {k}", rate_limited=True)
+            self.events.emit(self._t_s(t_s, t_rel), EV.RELEASE_MISSED, count=n, tick=k)
         if late:
             self.slips += 1
             self.last_slip_k = k
@@ -297,9 +296,8 @@ class Executive:
                     "jitter_us": (t_start - t_rel) / 1e3,
                     "tasks_us": {name: task_row[j] / 1e3 for j, name in enumerate(self._names)
                                  if task_row[j] >= 0}})
-            self.events.emit(self._t_s(t_s, t_rel), Severity.WARNING, "executive", "cycle_slip",
-                             f"slip k={k} {(t_end - t_rel) / 1e6:.1f}>{self.deadline_ns / 1e6:.0f}ms "
-                             f"{self._names[worst]} {task_row[worst] / 1e6:.1f}", rate_limited=True)
+            self.events.emit(self._t_s(t_s, t_rel), EV.CYCLE_SLIP, tick=k, took_ms=(t_end - t_rel) / 1e6,
+                             deadline_ms=self.deadline_ns / 1e6, task=self._names[worst], task_ms=task_row[worst] / 1e6)
         return not late
 
     def _t_s(self, t_s: float | None, t_rel_ns: int) -> float:

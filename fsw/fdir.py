@@ -51,13 +51,14 @@ import math
 import numpy as np
 from numba import njit
 
-from common.events import EventLog, Severity
+from common.events import EventLog
+from interfaces.event_catalogue import EV
 from interfaces.vocabulary import DEGRADED, FAILED_OFF, HEALTH_NAMES, INHIBITED, MARK_KINDS, N_JETS, NOMINAL, STUCK_ON
 
 from .health import JetHealth
 from .params import Param
 
-_TEXT = {FAILED_OFF: "FAILED OFF", STUCK_ON: "STUCK ON", DEGRADED: "DEGRADED", NOMINAL: "HEALTHY"}
+_ISOLATED = {FAILED_OFF: EV.JET_FAILED_OFF, STUCK_ON: EV.JET_STUCK_ON}     # a jet isolated: its event
 _T_EPS_S = 1e-9          # time comparison slack for "delay elapsed" (float step times)
 
 # Row indices of the per-jet counter array.
@@ -208,7 +209,7 @@ class Fdir:
         self._load_thresholds()
         self.oracle = self.p["fdir.mode"] == "oracle"
         if self.oracle:
-            events.emit(0.0, Severity.WARNING, "fdir", "fdir_oracle", "TEST MODE: FDIR ORACLE IDENTIFICATION")
+            events.emit(0.0, EV.FDIR_ORACLE)
 
         self.health_isolated = JetHealth(n_jets)
         self.health_active = JetHealth(n_jets)
@@ -276,7 +277,7 @@ class Fdir:
         """Isolation-to-reconfiguration delay for detections declared from now on."""
         v = self.set_param("fdir.delay_s", delay_s)
         if t_s is not None:
-            self.events.emit(t_s, Severity.NOTICE, "fdir", "fdir_delay", f"FDIR DELAY {v:.2f} S")
+            self.events.emit(t_s, EV.FDIR_DELAY, delay_s=v)
 
     # ------------------------------------------------------------------ jet monitor
     def update(self, t_s: float, u_cmd_prev: np.ndarray | None, chamber: np.ndarray) -> bool:
@@ -333,8 +334,7 @@ class Fdir:
     def _report_nonfinite(self, t_s: float, n_bad: int) -> None:
         self.nonfinite_count += n_bad
         first = int(np.flatnonzero(self._new_kind == -1)[0]) + 1
-        self.events.emit(t_s, Severity.WARNING, "fdir", "fdir_chamber_skip",
-                         f"FDIR SKIPS NON-FINITE CHAMBER JET {first} (x{n_bad})", rate_limited=True)
+        self.events.emit(t_s, EV.FDIR_CHAMBER_SKIP, jet=first, count=n_bad)
 
     def _declare(self, t_s: float) -> None:
         for k in np.flatnonzero(self._new_kind > 0):
@@ -348,9 +348,9 @@ class Fdir:
             self.detections.append({"jet": int(k + 1), "kind": name, "t_s": float(t_s), "eta_hat": eta,
                                     "t_apply_s": float(t_apply)})
             if kind == DEGRADED:
-                self.events.emit(t_s, Severity.WARNING, "fdir", "jet_degraded", f"JET {k + 1} DEGRADED ETA {eta:.2f}")
+                self.events.emit(t_s, EV.JET_DEGRADED, jet=k + 1, eta=eta)
             else:
-                self.events.emit(t_s, Severity.ERROR, "fdir", f"jet_{name}", f"JET {k + 1} {_TEXT[kind]}")
+                self.events.emit(t_s, _ISOLATED[kind], jet=k + 1)
 
     def _apply_due(self, t_s: float) -> bool:
         due = self._t_apply <= t_s + _T_EPS_S
@@ -361,10 +361,8 @@ class Fdir:
             st = int(self.health_isolated.state[k])
             self._app_state[k] = st
             self._app_eta[k] = self.health_isolated.eta[k]
-            self.events.emit(t_s, Severity.NOTICE, "fdir", "fdir_reconfig",
-                             f"RECONFIG JET {k + 1} {_TEXT[st]}"
-                             + (f" ETA {self.health_isolated.eta[k]:.2f}" if st == DEGRADED else "")
-                             + (" (GND OVERRIDE HOLDS)" if self._ovr_state[k] >= 0 else ""))
+            eta = {"eta": self.health_isolated.eta[k]} if st == DEGRADED else {}
+            self.events.emit(t_s, EV.FDIR_RECONFIG, jet=k + 1, health=st, override=self._ovr_state[k] >= 0, **eta)
         if due.any():
             changed = self._refresh_active()
         return changed
@@ -413,8 +411,7 @@ class Fdir:
                 raise ValueError(f"eta: must be in (0, 1) for degraded, got {eta!r}")
         self._ovr_state[jet - 1] = state
         self._ovr_eta[jet - 1] = float(eta) if state == DEGRADED else 1.0
-        text = f"GND MARK JET {jet} {_TEXT[state]}" + (f" ETA {eta:.2f}" if state == DEGRADED else "")
-        self.events.emit(t_s, Severity.NOTICE, "fdir", "fdir_override", text)
+        self.events.emit(t_s, EV.FDIR_OVERRIDE, jet=jet, health=state, **({"eta": eta} if state == DEGRADED else {}))
         self._refresh_active()
 
     def clear(self, t_s: float, jet: int) -> None:
@@ -432,8 +429,7 @@ class Fdir:
             self._ovr_state[k] = -1
             self._ovr_eta[k] = 1.0
         self._next_apply = float(np.min(self._t_apply))
-        self.events.emit(t_s, Severity.NOTICE, "fdir", "fdir_clear",
-                         "GND CLEAR ALL JETS" if jet == 0 else f"GND CLEAR JET {jet}")
+        self.events.emit(t_s, EV.FDIR_CLEAR, jets=jet)
         self._refresh_active()
 
     def set_inhibit(self, t_s: float, jet: int, on: bool) -> None:
@@ -478,8 +474,7 @@ class Fdir:
             self._res_above_s += dt_s
             if self._res_above_s >= self.p["fdir.res_persist_s"] - _T_EPS_S:
                 self.residual_alarm = True
-                self.events.emit(t_s, Severity.WARNING, "fdir", "unexplained_torque",
-                                 f"UNEXPLAINED TORQUE {norm:.0f} NM", rate_limited=True)
+                self.events.emit(t_s, EV.UNEXPLAINED_TORQUE, torque_Nm=norm)
         else:
             self._res_above_s = 0.0
             self.residual_alarm = False

@@ -15,7 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
-from common.events import EventLog, Severity
+from common.events import EventLog
+from interfaces.event_catalogue import EV
 from .params import Param
 
 
@@ -76,8 +77,7 @@ class JetDriver:
         on = bool(on)
         if on != self.armed:
             self.armed = on
-            self.events.emit(t_s, Severity.NOTICE, "driver", "jets_armed" if on else "jets_disarmed",
-                             "JETS ARMED" if on else "JETS DISARMED")
+            self.events.emit(t_s, EV.JETS_ARMED if on else EV.JETS_DISARMED)
 
     def set_param(self, name: str, value: float) -> float:
         """Owner's hook (driver.arm_on_entry)."""
@@ -100,9 +100,7 @@ class JetDriver:
         if np.all(self.inhibit[sel] == on):
             return
         self.inhibit[sel] = on
-        who = "ALL JETS" if jet == 0 else f"JET {jet}"
-        self.events.emit(t_s, Severity.NOTICE, "driver", "jet_inhibit",
-                         f"{who} INHIBITED" if on else f"{who} INHIBIT CLEARED")
+        self.events.emit(t_s, EV.JET_INHIBIT, jets=jet, inhibit=on)
 
     def command(self, u_alloc: np.ndarray, jets_enabled: bool) -> np.ndarray:
         """The command actually sent for the next period: u_alloc (> 0.5 = on; NaN = off)

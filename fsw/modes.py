@@ -22,7 +22,8 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
-from common.events import EventLog, Severity
+from common.events import EventLog
+from interfaces.event_catalogue import EV
 from interfaces.vocabulary import Mode
 
 from .params import Param
@@ -50,19 +51,17 @@ class ModeManager:
         try:
             target = Mode[mode.upper()] if isinstance(mode, str) else Mode(mode)
         except (KeyError, ValueError):
-            self.events.emit(t_s, Severity.WARNING, "modes", "mode_refused", f"MODE {mode!s:.12} UNKNOWN: REFUSED")
+            self.events.emit(t_s, EV.MODE_REFUSED, request=str(mode))
             return False
         reason = str(reason)
         if target == self.mode:
             return True
         if (self.mode, target) not in _ALLOWED:
-            self.events.emit(t_s, Severity.WARNING, "modes", "mode_refused",
-                             f"MODE {self.mode.name}->{target.name} REFUSED")
+            self.events.emit(t_s, EV.MODE_REFUSED, current=self.mode, target=target)
             return False
         self.transitions.append((t_s, self.mode, target, reason))
-        text = f"MODE {self.mode.name}->{target.name} ({reason})"
-        self.mode = target
-        self.events.emit(t_s, Severity.NOTICE, "modes", "mode_change", text[:50])
+        before, self.mode = self.mode, target
+        self.events.emit(t_s, EV.MODE_CHANGE, current=before, target=target, reason=reason)
         return True
 
     @property

@@ -29,14 +29,14 @@ from numba import njit
 
 from interfaces.records import SENSORS
 
-from common.events import EventLog, Severity
+from common.events import EventLog
+from interfaces.event_catalogue import EV, EventDef
 from .params import Param, load_params
 
 MARS_RADIUS_M = 3396.2e3   # default only; pass the planet's radius from data/planets
 
 REASONS = ("format", "nonfinite", "range", "duplicate", "out_of_order", "chamber_nonfinite", "chamber_range")
 _VEC_FIELDS = ("omega_BN_B", "sigma_BN", "r_N", "v_N", "accel_B")
-_VEC_NAMES = ("OMEGA", "SIGMA", "R", "V", "ACCEL")
 
 # The float part of a SENSORS record is one contiguous run of float64: the five 3-vectors
 # in _VEC_FIELDS order, then the chamber pressures. check() views it without copying.
@@ -153,9 +153,9 @@ class SensorMonitor:
         the last step index so its frames are not rejected as out of order."""
         self.last_k = None
 
-    def _reject(self, t_s: float, reason: str, text: str) -> bool:
+    def _reject(self, t_s: float, reason: str, event: EventDef, **args) -> bool:
         self.counts[reason] += 1
-        self.events.emit(t_s, Severity.WARNING, "monitor", f"frame_{reason}", text[:50], rate_limited=True)
+        self.events.emit(t_s, event, **args)
         self._no_fresh(t_s)
         return False
 
@@ -163,8 +163,7 @@ class SensorMonitor:
         self.missed += 1
         if not self.stale and self.missed >= self.stale_n:
             self.stale = True
-            self.events.emit(t_s, Severity.ERROR, "monitor", "sensors_stale",
-                             f"SENSORS STALE ({self.missed} PERIODS): JETS HELD OFF")
+            self.events.emit(t_s, EV.SENSORS_STALE, periods=self.missed)
 
     def tick(self, t_s: float, got_frame: bool = False) -> None:
         """End of a control period; ``got_frame`` False = no frame arrived at all."""
@@ -180,7 +179,7 @@ class SensorMonitor:
         else:
             if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != () \
                     or not frame.flags.c_contiguous or not frame.flags.writeable:
-                return self._reject(t_s, "format", "SENSOR FRAME BAD FORMAT: REJECTED")
+                return self._reject(t_s, "format", EV.FRAME_FORMAT)
             x = np.ndarray((_N_F,), dtype=np.float64, buffer=frame, offset=_F0)
             ki = np.ndarray((1,), dtype=np.int64, buffer=frame, offset=_K0)
             self._fviews = (frame, frame.dtype, x, ki)
@@ -188,15 +187,15 @@ class SensorMonitor:
         # one pass over the floats: vectors finite and credible, bad chamber entries -> NaN
         code = _frame_kernel(x, self._lims, 5, self._out) if k >= 0 else -1
         if code == -1:
-            return self._reject(t_s, "range", f"SENSOR FRAME BAD K {k}")
+            return self._reject(t_s, "range", EV.FRAME_RANGE, k=k)
         if 1 <= code <= 5:
-            return self._reject(t_s, "nonfinite", f"SENSOR FRAME NON-FINITE {_VEC_NAMES[code - 1]}")
+            return self._reject(t_s, "nonfinite", EV.FRAME_NONFINITE, vector=code - 1)
         if code > 100:
-            return self._reject(t_s, "range", f"SENSOR {_VEC_NAMES[code - 101]} OUT OF RANGE {self._out[0]:.4g}")
+            return self._reject(t_s, "range", EV.FRAME_RANGE, vector=code - 101, value=self._out[0])
         if self.last_k is not None and k <= self.last_k:
             if k == self.last_k:
-                return self._reject(t_s, "duplicate", f"SENSOR FRAME K {k} DUPLICATE")
-            return self._reject(t_s, "out_of_order", f"SENSOR FRAME K {k} OUT OF ORDER")
+                return self._reject(t_s, "duplicate", EV.FRAME_DUPLICATE, k=k)
+            return self._reject(t_s, "out_of_order", EV.FRAME_OUT_OF_ORDER, k=k)
         if self._out[1] or self._out[2]:
             self._report_chamber(t_s)
         self.last_k = k
@@ -204,7 +203,7 @@ class SensorMonitor:
         self.missed = 0
         if self.stale:
             self.stale = False
-            self.events.emit(t_s, Severity.NOTICE, "monitor", "sensors_recovered", "SENSORS RECOVERED")
+            self.events.emit(t_s, EV.SENSORS_RECOVERED)
         return True
 
     def _report_chamber(self, t_s: float) -> None:
@@ -212,8 +211,6 @@ class SensorMonitor:
         self.counts["chamber_nonfinite"] += n_nf
         self.counts["chamber_range"] += n_out
         if n_nf:
-            self.events.emit(t_s, Severity.WARNING, "monitor", "chamber_nonfinite",
-                             f"CHAMBER NON-FINITE JET {int(self._out[3]) + 1}", rate_limited=True)
+            self.events.emit(t_s, EV.CHAMBER_NONFINITE, jet=int(self._out[3]) + 1)
         if n_out:
-            self.events.emit(t_s, Severity.WARNING, "monitor", "chamber_range",
-                             f"CHAMBER OUT OF RANGE JET {int(self._out[4]) + 1}", rate_limited=True)
+            self.events.emit(t_s, EV.CHAMBER_RANGE, jet=int(self._out[4]) + 1)

@@ -126,8 +126,8 @@ class FswNode:
 
     # ------------------------------------------------------------------ inputs
     def _rejected(self, reason: str, detail: str) -> None:
-        self.events.emit(self.fsw.t_s, Severity.WARNING, "link", f"rx_{reason}",
-                         f"SENSOR PAYLOAD REJECTED: {reason}"[:50], rate_limited=True)
+        from interfaces.event_catalogue import BY_NAME     # (not at the top: see the module's imports)
+        self.events.emit(self.fsw.t_s, BY_NAME[f"rx_{reason}"])
 
     def _accept(self, sample) -> bool:
         """Decode a sensor sample into our frame copy; note a new plant (restart)."""
@@ -137,7 +137,8 @@ class FswNode:
         pid = self.dec_sensors.last_publisher_id
         if self.source_id is not None and pid != self.source_id:
             self.fsw.monitor.restart_sequence()
-            self.events.emit(self.fsw.t_s, Severity.NOTICE, "link", "new_sensor_source", "NEW SENSOR SOURCE")
+            from interfaces.event_catalogue import EV
+            self.events.emit(self.fsw.t_s, EV.NEW_SENSOR_SOURCE)
         self.source_id = pid
         self.last_frame_wall = time.monotonic()
         if self.n_frames < len(self.frame_age_ns):
@@ -253,13 +254,14 @@ class FswNode:
             say(ROLE, "no signing key (--signing-key or ELLIPSLED_SIGNING_KEY_FILE): MAVLink ground link off")
             return None
         from fsw.groundlink import GroundLink
+        from interfaces.event_catalogue import EV
         from interfaces.mavlink.signing import SigningKey
         key = SigningKey.from_file(path)
         try:
             gl = GroundLink(self.fsw, key, gcs=self.args.gcs, bind=self.args.mavlink_bind, inject=self.inject)
         except OSError as e:   # e.g. the port is taken by another run: fly on without a ground link
             say(ROLE, f"MAVLink ground link off: cannot bind {self.args.mavlink_bind}: {e}")
-            self.events.emit(0.0, Severity.ERROR, "link", "mavlink_bind", "GROUND LINK OFF: PORT IN USE")
+            self.events.emit(0.0, EV.MAVLINK_BIND)
             return None
         say(ROLE, f"MAVLink ground link on {self.args.mavlink_bind}, ground station {self.args.gcs}")
         return gl

@@ -10,10 +10,11 @@ import logging
 import math
 from collections.abc import Callable
 
+from interfaces.event_catalogue import EV
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import printable_text
 from interfaces.records import FAULT_NAMES
-from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult, Mode, Severity
+from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult, Mode
 
 log = logging.getLogger(__name__)
 
@@ -120,9 +121,8 @@ class CommandTranslator:
             return CommandResult.DENIED, f"INJECT DENIED BY PLANT: {e}"
         if ok is not True:
             return CommandResult.TEMPORARILY_REJECTED, "INJECT REJECTED: PLANT UNAVAILABLE"
-        who = "ALL JETS" if jet == 0 else f"JET {jet}"
-        self.fsw.events.emit(self.fsw.t_s, Severity.NOTICE, "link", "inject",
-                             f"GND INJECT {who} {kind.upper()}" + (f" ETA {eta:.2f}" if kind == "degraded" else ""))
+        self.fsw.events.emit(self.fsw.t_s, EV.INJECT, jets=jet, kind=int(ftype),
+                             **({"eta": eta} if kind == "degraded" else {}))
         return CommandResult.ACCEPTED, ""
 
 

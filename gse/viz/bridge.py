@@ -29,6 +29,7 @@ from gse.viz.logger import RerunLogger
 from gse.viz.sinks import open_sinks
 from interfaces import codec
 from interfaces import keys as keymod
+from interfaces.event_catalogue import EV
 from interfaces.keys import DEFAULT_PREFIX
 
 
@@ -73,8 +74,7 @@ class Bridge:
         self.received = {kind: 0 for kind in self.subs}
 
     def _on_reject(self, reason: str, detail: str) -> None:
-        self.events.emit(self._last_t, Severity.WARNING, "bridge", "bad_payload",
-                         f"{reason}: {detail}"[:50], rate_limited=True)
+        self.events.emit(self._last_t, EV.BAD_PAYLOAD, reason=reason, detail=detail)
 
     def poll(self, max_per_topic: int = 1000) -> int:
         """Decode and log what has arrived; returns the number of samples handled."""

@@ -285,7 +285,7 @@ class EV:
     LINK_FLOOD = _ev(851, "link", WARNING, "link flooded: {dropped} datagrams dropped",
                      "The kernel dropped datagrams for the vehicle's port (a flood).", 1.0, dropped=U32)
     LINK_REFUSED = _ev(852, "link", WARNING, "{detail}",
-                       "The ground link refused frames or requests (the last one, and how many were held).",
+                       "The ground link refused frames or requests (the last, + how many were held).",
                        REFUSAL_INTERVAL_S, detail=TEXT)
     PARAM_UNKNOWN = _ev(853, "link", WARNING, "{detail}", "A signed parameter request named no parameter.", detail=TEXT)
     PARAM_REFUSED = _ev(854, "link", WARNING, "{detail}", "A signed parameter set was refused (the reason).", detail=TEXT)

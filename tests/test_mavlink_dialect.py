@@ -50,9 +50,12 @@ def test_dialect_includes_common_and_nothing_else():
 # Upstream common.xml messages that pymavlink 2.4.50's common.xml lacks, defined in the
 # dialect as upstream defines them; CRC_EXTRA as published in the upstream C headers
 # (mavlink/c_library_v2 common: MAVLINK_MSG_ID_PROTOCOL_VERSION_CRC 217,
-# MAVLINK_MSG_ID_COMPONENT_METADATA_CRC 182; AVAILABLE_MODES 134 and CURRENT_MODE 193, as
+# MAVLINK_MSG_ID_COMPONENT_METADATA_CRC 182, MAVLINK_MSG_ID_EVENT_CRC 160,
+# MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE_CRC 106, MAVLINK_MSG_ID_REQUEST_EVENT_CRC 33,
+# MAVLINK_MSG_ID_RESPONSE_EVENT_ERROR_CRC 77; AVAILABLE_MODES 134 and CURRENT_MODE 193, as
 # pymavlink 2.4.50's own development dialect has them).
-UPSTREAM_COMMON = {300: ("PROTOCOL_VERSION", 217), 397: ("COMPONENT_METADATA", 182),
+UPSTREAM_COMMON = {300: ("PROTOCOL_VERSION", 217), 397: ("COMPONENT_METADATA", 182), 410: ("EVENT", 160),
+                   411: ("CURRENT_EVENT_SEQUENCE", 106), 412: ("REQUEST_EVENT", 33), 413: ("RESPONSE_EVENT_ERROR", 77),
                    435: ("AVAILABLE_MODES", 134), 436: ("CURRENT_MODE", 193)}
 
 

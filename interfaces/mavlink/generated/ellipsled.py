@@ -2775,6 +2775,40 @@ enums["MAV_MODE_PROPERTY"][2] = EnumEntry("MAV_MODE_PROPERTY_NOT_USER_SELECTABLE
 MAV_MODE_PROPERTY_ENUM_END = 3
 enums["MAV_MODE_PROPERTY"][3] = EnumEntry("MAV_MODE_PROPERTY_ENUM_END", """""")
 
+# COMP_METADATA_TYPE
+enums["COMP_METADATA_TYPE"] = Enum()
+enums["COMP_METADATA_TYPE"].bitmask = False
+COMP_METADATA_TYPE_GENERAL = 0
+enums["COMP_METADATA_TYPE"][0] = EnumEntry("COMP_METADATA_TYPE_GENERAL", """General information about the component, and the other metadata files it has.""")
+COMP_METADATA_TYPE_PARAMETER = 1
+enums["COMP_METADATA_TYPE"][1] = EnumEntry("COMP_METADATA_TYPE_PARAMETER", """Parameter meta data.""")
+COMP_METADATA_TYPE_COMMANDS = 2
+enums["COMP_METADATA_TYPE"][2] = EnumEntry("COMP_METADATA_TYPE_COMMANDS", """Meta data that specifies which commands and command parameters the vehicle supports. (WIP)""")
+COMP_METADATA_TYPE_PERIPHERALS = 3
+enums["COMP_METADATA_TYPE"][3] = EnumEntry("COMP_METADATA_TYPE_PERIPHERALS", """Meta data that specifies external non-MAVLink peripherals.""")
+COMP_METADATA_TYPE_EVENTS = 4
+enums["COMP_METADATA_TYPE"][4] = EnumEntry("COMP_METADATA_TYPE_EVENTS", """Meta data for the events interface.""")
+COMP_METADATA_TYPE_ACTUATORS = 5
+enums["COMP_METADATA_TYPE"][5] = EnumEntry("COMP_METADATA_TYPE_ACTUATORS", """Meta data for actuator configuration (motors, servos and vehicle geometry) and testing.""")
+COMP_METADATA_TYPE_ENUM_END = 6
+enums["COMP_METADATA_TYPE"][6] = EnumEntry("COMP_METADATA_TYPE_ENUM_END", """""")
+
+# MAV_EVENT_ERROR_REASON
+enums["MAV_EVENT_ERROR_REASON"] = Enum()
+enums["MAV_EVENT_ERROR_REASON"].bitmask = False
+MAV_EVENT_ERROR_REASON_UNAVAILABLE = 0
+enums["MAV_EVENT_ERROR_REASON"][0] = EnumEntry("MAV_EVENT_ERROR_REASON_UNAVAILABLE", """The requested event is not available (anymore).""")
+MAV_EVENT_ERROR_REASON_ENUM_END = 1
+enums["MAV_EVENT_ERROR_REASON"][1] = EnumEntry("MAV_EVENT_ERROR_REASON_ENUM_END", """""")
+
+# MAV_EVENT_CURRENT_SEQUENCE_FLAGS
+enums["MAV_EVENT_CURRENT_SEQUENCE_FLAGS"] = Enum()
+enums["MAV_EVENT_CURRENT_SEQUENCE_FLAGS"].bitmask = True
+MAV_EVENT_CURRENT_SEQUENCE_FLAGS_RESET = 1
+enums["MAV_EVENT_CURRENT_SEQUENCE_FLAGS"][1] = EnumEntry("MAV_EVENT_CURRENT_SEQUENCE_FLAGS_RESET", """A sequence reset has happened (e.g. vehicle reboot).""")
+MAV_EVENT_CURRENT_SEQUENCE_FLAGS_ENUM_END = 2
+enums["MAV_EVENT_CURRENT_SEQUENCE_FLAGS"][2] = EnumEntry("MAV_EVENT_CURRENT_SEQUENCE_FLAGS_ENUM_END", """""")
+
 # HL_FAILURE_FLAG
 enums["HL_FAILURE_FLAG"] = Enum()
 enums["HL_FAILURE_FLAG"].bitmask = True
@@ -6462,6 +6496,10 @@ MAVLINK_MSG_ID_BAD_DATA = -1
 MAVLINK_MSG_ID_UNKNOWN = -2
 MAVLINK_MSG_ID_PROTOCOL_VERSION = 300
 MAVLINK_MSG_ID_COMPONENT_METADATA = 397
+MAVLINK_MSG_ID_EVENT = 410
+MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE = 411
+MAVLINK_MSG_ID_REQUEST_EVENT = 412
+MAVLINK_MSG_ID_RESPONSE_EVENT_ERROR = 413
 MAVLINK_MSG_ID_ELLIPSLED_ENTRY_STATE = 44000
 MAVLINK_MSG_ID_ELLIPSLED_JET_STATUS = 44001
 MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS = 44002
@@ -6766,6 +6804,183 @@ class MAVLink_component_metadata_message(MAVLink_message):
 # Define name on the class for backwards compatibility (it is now msgname).
 # Done with setattr to hide the class variable from mypy.
 setattr(MAVLink_component_metadata_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_event_message(MAVLink_message):
+    """
+    Event message (upstream common.xml, events protocol). Each new
+    event from a component gets a new sequence number; the same
+    message may be sent again when requested (REQUEST_EVENT). Events
+    are broadcast (destination_component, not target_component:
+    receivers track the sequence).
+    """
+
+    id = MAVLINK_MSG_ID_EVENT
+    msgname = "EVENT"
+    fieldnames = ["destination_component", "destination_system", "id", "event_time_boot_ms", "sequence", "log_levels", "arguments"]
+    ordered_fieldnames = ["id", "event_time_boot_ms", "sequence", "destination_component", "destination_system", "log_levels", "arguments"]
+    fieldtypes = ["uint8_t", "uint8_t", "uint32_t", "uint32_t", "uint16_t", "uint8_t", "uint8_t"]
+    fielddisplays_by_name: Dict[str, str] = {}
+    fieldenums_by_name: Dict[str, str] = {}
+    fieldunits_by_name: Dict[str, str] = {"event_time_boot_ms": "ms"}
+    native_format = bytearray(b"<IIHBBBB")
+    orders = [3, 4, 0, 1, 2, 5, 6]
+    lengths = [1, 1, 1, 1, 1, 1, 40]
+    array_lengths = [0, 0, 0, 0, 0, 0, 40]
+    crc_extra = 160
+    unpacker = struct.Struct("<IIHBBB40B")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, destination_component: int, destination_system: int, id: int, event_time_boot_ms: int, sequence: int, log_levels: int, arguments: Sequence[int]):
+        MAVLink_message.__init__(self, MAVLink_event_message.id, MAVLink_event_message.msgname)
+        self._fieldnames = MAVLink_event_message.fieldnames
+        self._instance_field = MAVLink_event_message.instance_field
+        self._instance_offset = MAVLink_event_message.instance_offset
+        self.destination_component = destination_component
+        self.destination_system = destination_system
+        self.id = id
+        self.event_time_boot_ms = event_time_boot_ms
+        self.sequence = sequence
+        self.log_levels = log_levels
+        self.arguments = arguments
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.id, self.event_time_boot_ms, self.sequence, self.destination_component, self.destination_system, self.log_levels, self.arguments[0], self.arguments[1], self.arguments[2], self.arguments[3], self.arguments[4], self.arguments[5], self.arguments[6], self.arguments[7], self.arguments[8], self.arguments[9], self.arguments[10], self.arguments[11], self.arguments[12], self.arguments[13], self.arguments[14], self.arguments[15], self.arguments[16], self.arguments[17], self.arguments[18], self.arguments[19], self.arguments[20], self.arguments[21], self.arguments[22], self.arguments[23], self.arguments[24], self.arguments[25], self.arguments[26], self.arguments[27], self.arguments[28], self.arguments[29], self.arguments[30], self.arguments[31], self.arguments[32], self.arguments[33], self.arguments[34], self.arguments[35], self.arguments[36], self.arguments[37], self.arguments[38], self.arguments[39]), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_event_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_current_event_sequence_message(MAVLink_message):
+    """
+    Regular broadcast of the latest event sequence number of a
+    component (upstream common.xml): a receiver detects the events it
+    missed.
+    """
+
+    id = MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE
+    msgname = "CURRENT_EVENT_SEQUENCE"
+    fieldnames = ["sequence", "flags"]
+    ordered_fieldnames = ["sequence", "flags"]
+    fieldtypes = ["uint16_t", "uint8_t"]
+    fielddisplays_by_name: Dict[str, str] = {"flags": "bitmask"}
+    fieldenums_by_name: Dict[str, str] = {"flags": "MAV_EVENT_CURRENT_SEQUENCE_FLAGS"}
+    fieldunits_by_name: Dict[str, str] = {}
+    native_format = bytearray(b"<HB")
+    orders = [0, 1]
+    lengths = [1, 1]
+    array_lengths = [0, 0]
+    crc_extra = 106
+    unpacker = struct.Struct("<HB")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, sequence: int, flags: int):
+        MAVLink_message.__init__(self, MAVLink_current_event_sequence_message.id, MAVLink_current_event_sequence_message.msgname)
+        self._fieldnames = MAVLink_current_event_sequence_message.fieldnames
+        self._instance_field = MAVLink_current_event_sequence_message.instance_field
+        self._instance_offset = MAVLink_current_event_sequence_message.instance_offset
+        self.sequence = sequence
+        self.flags = flags
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.sequence, self.flags), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_current_event_sequence_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_request_event_message(MAVLink_message):
+    """
+    Request one or more events to be (re-)sent (upstream common.xml).
+    If first_sequence==last_sequence, only a single event is
+    requested. Note that first_sequence can be larger than
+    last_sequence (because the sequence number can wrap). Each
+    sequence will trigger an EVENT or EVENT_ERROR response.
+    """
+
+    id = MAVLINK_MSG_ID_REQUEST_EVENT
+    msgname = "REQUEST_EVENT"
+    fieldnames = ["target_system", "target_component", "first_sequence", "last_sequence"]
+    ordered_fieldnames = ["first_sequence", "last_sequence", "target_system", "target_component"]
+    fieldtypes = ["uint8_t", "uint8_t", "uint16_t", "uint16_t"]
+    fielddisplays_by_name: Dict[str, str] = {}
+    fieldenums_by_name: Dict[str, str] = {}
+    fieldunits_by_name: Dict[str, str] = {}
+    native_format = bytearray(b"<HHBB")
+    orders = [2, 3, 0, 1]
+    lengths = [1, 1, 1, 1]
+    array_lengths = [0, 0, 0, 0]
+    crc_extra = 33
+    unpacker = struct.Struct("<HHBB")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, target_system: int, target_component: int, first_sequence: int, last_sequence: int):
+        MAVLink_message.__init__(self, MAVLink_request_event_message.id, MAVLink_request_event_message.msgname)
+        self._fieldnames = MAVLink_request_event_message.fieldnames
+        self._instance_field = MAVLink_request_event_message.instance_field
+        self._instance_offset = MAVLink_request_event_message.instance_offset
+        self.target_system = target_system
+        self.target_component = target_component
+        self.first_sequence = first_sequence
+        self.last_sequence = last_sequence
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.first_sequence, self.last_sequence, self.target_system, self.target_component), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_request_event_message, "name", mavlink_msg_deprecated_name_property())
+
+
+class MAVLink_response_event_error_message(MAVLink_message):
+    """
+    Response to a REQUEST_EVENT in case of an error (e.g. the event is
+    not available anymore) (upstream common.xml).
+    """
+
+    id = MAVLINK_MSG_ID_RESPONSE_EVENT_ERROR
+    msgname = "RESPONSE_EVENT_ERROR"
+    fieldnames = ["target_system", "target_component", "sequence", "sequence_oldest_available", "reason"]
+    ordered_fieldnames = ["sequence", "sequence_oldest_available", "target_system", "target_component", "reason"]
+    fieldtypes = ["uint8_t", "uint8_t", "uint16_t", "uint16_t", "uint8_t"]
+    fielddisplays_by_name: Dict[str, str] = {}
+    fieldenums_by_name: Dict[str, str] = {"reason": "MAV_EVENT_ERROR_REASON"}
+    fieldunits_by_name: Dict[str, str] = {}
+    native_format = bytearray(b"<HHBBB")
+    orders = [2, 3, 0, 1, 4]
+    lengths = [1, 1, 1, 1, 1]
+    array_lengths = [0, 0, 0, 0, 0]
+    crc_extra = 77
+    unpacker = struct.Struct("<HHBBB")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, target_system: int, target_component: int, sequence: int, sequence_oldest_available: int, reason: int):
+        MAVLink_message.__init__(self, MAVLink_response_event_error_message.id, MAVLink_response_event_error_message.msgname)
+        self._fieldnames = MAVLink_response_event_error_message.fieldnames
+        self._instance_field = MAVLink_response_event_error_message.instance_field
+        self._instance_offset = MAVLink_response_event_error_message.instance_offset
+        self.target_system = target_system
+        self.target_component = target_component
+        self.sequence = sequence
+        self.sequence_oldest_available = sequence_oldest_available
+        self.reason = reason
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.sequence, self.sequence_oldest_available, self.target_system, self.target_component, self.reason), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_response_event_error_message, "name", mavlink_msg_deprecated_name_property())
 
 
 class MAVLink_ellipsled_entry_state_message(MAVLink_message):
@@ -17182,6 +17397,10 @@ setattr(MAVLink_heartbeat_message, "name", mavlink_msg_deprecated_name_property(
 mavlink_map: Dict[int, Type[MAVLink_message]] = {
     MAVLINK_MSG_ID_PROTOCOL_VERSION: MAVLink_protocol_version_message,
     MAVLINK_MSG_ID_COMPONENT_METADATA: MAVLink_component_metadata_message,
+    MAVLINK_MSG_ID_EVENT: MAVLink_event_message,
+    MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE: MAVLink_current_event_sequence_message,
+    MAVLINK_MSG_ID_REQUEST_EVENT: MAVLink_request_event_message,
+    MAVLINK_MSG_ID_RESPONSE_EVENT_ERROR: MAVLink_response_event_error_message,
     MAVLINK_MSG_ID_ELLIPSLED_ENTRY_STATE: MAVLink_ellipsled_entry_state_message,
     MAVLINK_MSG_ID_ELLIPSLED_JET_STATUS: MAVLink_ellipsled_jet_status_message,
     MAVLINK_MSG_ID_ELLIPSLED_CONTROL_STATUS: MAVLink_ellipsled_control_status_message,
@@ -17850,6 +18069,128 @@ class MAVLink(object):
 
         """
         self.send(self.component_metadata_encode(time_boot_ms, file_crc, uri), force_mavlink1=force_mavlink1)
+
+    def event_encode(self, destination_component: int, destination_system: int, id: int, event_time_boot_ms: int, sequence: int, log_levels: int, arguments: Sequence[int]) -> MAVLink_event_message:
+        """
+        Event message (upstream common.xml, events protocol). Each new event
+        from a component gets a new sequence number; the same message
+        may be sent again when requested (REQUEST_EVENT). Events are
+        broadcast (destination_component, not target_component:
+        receivers track the sequence).
+
+        destination_component        : Component ID (type:uint8_t)
+        destination_system        : System ID (type:uint8_t)
+        id                        : Event ID (as defined in the component metadata) (type:uint32_t)
+        event_time_boot_ms        : Timestamp (time since system boot when the event happened). [ms] (type:uint32_t)
+        sequence                  : Sequence number. (type:uint16_t)
+        log_levels                : Log levels: 4 bits MSB: internal (for logging purposes), 4 bits LSB: external. Levels: Emergency = 0, Alert = 1, Critical = 2, Error = 3, Warning = 4, Notice = 5, Info = 6, Debug = 7, Protocol = 8, Disabled = 9 (type:uint8_t)
+        arguments                 : Arguments (depend on event ID). (type:uint8_t)
+
+        """
+        return MAVLink_event_message(destination_component, destination_system, id, event_time_boot_ms, sequence, log_levels, arguments)
+
+    def event_send(self, destination_component: int, destination_system: int, id: int, event_time_boot_ms: int, sequence: int, log_levels: int, arguments: Sequence[int], force_mavlink1: bool = False) -> None:
+        """
+        Event message (upstream common.xml, events protocol). Each new event
+        from a component gets a new sequence number; the same message
+        may be sent again when requested (REQUEST_EVENT). Events are
+        broadcast (destination_component, not target_component:
+        receivers track the sequence).
+
+        destination_component        : Component ID (type:uint8_t)
+        destination_system        : System ID (type:uint8_t)
+        id                        : Event ID (as defined in the component metadata) (type:uint32_t)
+        event_time_boot_ms        : Timestamp (time since system boot when the event happened). [ms] (type:uint32_t)
+        sequence                  : Sequence number. (type:uint16_t)
+        log_levels                : Log levels: 4 bits MSB: internal (for logging purposes), 4 bits LSB: external. Levels: Emergency = 0, Alert = 1, Critical = 2, Error = 3, Warning = 4, Notice = 5, Info = 6, Debug = 7, Protocol = 8, Disabled = 9 (type:uint8_t)
+        arguments                 : Arguments (depend on event ID). (type:uint8_t)
+
+        """
+        self.send(self.event_encode(destination_component, destination_system, id, event_time_boot_ms, sequence, log_levels, arguments), force_mavlink1=force_mavlink1)
+
+    def current_event_sequence_encode(self, sequence: int, flags: int) -> MAVLink_current_event_sequence_message:
+        """
+        Regular broadcast of the latest event sequence number of a component
+        (upstream common.xml): a receiver detects the events it
+        missed.
+
+        sequence                  : Sequence number. (type:uint16_t)
+        flags                     : Flag bitset. (type:uint8_t, values:MAV_EVENT_CURRENT_SEQUENCE_FLAGS)
+
+        """
+        return MAVLink_current_event_sequence_message(sequence, flags)
+
+    def current_event_sequence_send(self, sequence: int, flags: int, force_mavlink1: bool = False) -> None:
+        """
+        Regular broadcast of the latest event sequence number of a component
+        (upstream common.xml): a receiver detects the events it
+        missed.
+
+        sequence                  : Sequence number. (type:uint16_t)
+        flags                     : Flag bitset. (type:uint8_t, values:MAV_EVENT_CURRENT_SEQUENCE_FLAGS)
+
+        """
+        self.send(self.current_event_sequence_encode(sequence, flags), force_mavlink1=force_mavlink1)
+
+    def request_event_encode(self, target_system: int, target_component: int, first_sequence: int, last_sequence: int) -> MAVLink_request_event_message:
+        """
+        Request one or more events to be (re-)sent (upstream common.xml). If
+        first_sequence==last_sequence, only a single event is
+        requested. Note that first_sequence can be larger than
+        last_sequence (because the sequence number can wrap). Each
+        sequence will trigger an EVENT or EVENT_ERROR response.
+
+        target_system             : System ID (type:uint8_t)
+        target_component          : Component ID (type:uint8_t)
+        first_sequence            : First sequence number of the requested event. (type:uint16_t)
+        last_sequence             : Last sequence number of the requested event. (type:uint16_t)
+
+        """
+        return MAVLink_request_event_message(target_system, target_component, first_sequence, last_sequence)
+
+    def request_event_send(self, target_system: int, target_component: int, first_sequence: int, last_sequence: int, force_mavlink1: bool = False) -> None:
+        """
+        Request one or more events to be (re-)sent (upstream common.xml). If
+        first_sequence==last_sequence, only a single event is
+        requested. Note that first_sequence can be larger than
+        last_sequence (because the sequence number can wrap). Each
+        sequence will trigger an EVENT or EVENT_ERROR response.
+
+        target_system             : System ID (type:uint8_t)
+        target_component          : Component ID (type:uint8_t)
+        first_sequence            : First sequence number of the requested event. (type:uint16_t)
+        last_sequence             : Last sequence number of the requested event. (type:uint16_t)
+
+        """
+        self.send(self.request_event_encode(target_system, target_component, first_sequence, last_sequence), force_mavlink1=force_mavlink1)
+
+    def response_event_error_encode(self, target_system: int, target_component: int, sequence: int, sequence_oldest_available: int, reason: int) -> MAVLink_response_event_error_message:
+        """
+        Response to a REQUEST_EVENT in case of an error (e.g. the event is not
+        available anymore) (upstream common.xml).
+
+        target_system             : System ID (type:uint8_t)
+        target_component          : Component ID (type:uint8_t)
+        sequence                  : Sequence number. (type:uint16_t)
+        sequence_oldest_available        : Oldest Sequence number that is still available after the sequence set in REQUEST_EVENT. (type:uint16_t)
+        reason                    : Error reason. (type:uint8_t, values:MAV_EVENT_ERROR_REASON)
+
+        """
+        return MAVLink_response_event_error_message(target_system, target_component, sequence, sequence_oldest_available, reason)
+
+    def response_event_error_send(self, target_system: int, target_component: int, sequence: int, sequence_oldest_available: int, reason: int, force_mavlink1: bool = False) -> None:
+        """
+        Response to a REQUEST_EVENT in case of an error (e.g. the event is not
+        available anymore) (upstream common.xml).
+
+        target_system             : System ID (type:uint8_t)
+        target_component          : Component ID (type:uint8_t)
+        sequence                  : Sequence number. (type:uint16_t)
+        sequence_oldest_available        : Oldest Sequence number that is still available after the sequence set in REQUEST_EVENT. (type:uint16_t)
+        reason                    : Error reason. (type:uint8_t, values:MAV_EVENT_ERROR_REASON)
+
+        """
+        self.send(self.response_event_error_encode(target_system, target_component, sequence, sequence_oldest_available, reason), force_mavlink1=force_mavlink1)
 
     def ellipsled_entry_state_encode(self, time_boot_ms: int, altitude: float, speed: float, flight_path_angle: float, heading: float, latitude: float, longitude: float, mach: float, qbar: float, alpha: float, beta: float, bank: float, bank_ref: float) -> MAVLink_ellipsled_entry_state_message:
         """

@@ -86,8 +86,9 @@ def events_metadata() -> dict:
 
 
 def metadata_bytes() -> bytes:
-    """The events metadata file as served (stable bytes: its CRC goes in the general metadata)."""
-    return json.dumps(events_metadata(), indent=1, sort_keys=True, ensure_ascii=False).encode("utf-8")
+    """The events metadata file as served: compact (a keyless station reads it at the link's
+    read pace), stable bytes (its CRC goes in the general metadata)."""
+    return json.dumps(events_metadata(), separators=(",", ":"), sort_keys=True, ensure_ascii=False).encode("utf-8")
 
 
 def _cell(s: str) -> str:

@@ -49,9 +49,10 @@ def test_metadata_files_say_what_the_registry_declares(rig):
     general = json.loads(files[metadata.GENERAL_PATH])
     params = json.loads(files[metadata.PARAMETER_PATH])
     assert set(general) <= GENERAL_KEYS and general["version"] >= 1
-    (mt,) = general["metadataTypes"]
-    assert set(mt) <= TYPE_KEYS and mt["type"] == 1 and mt["uri"] == "mftp://" + metadata.PARAMETER_PATH
-    assert mt["fileCrc"] == zlib.crc32(files[metadata.PARAMETER_PATH])
+    types = {mt["type"]: mt for mt in general["metadataTypes"]}
+    assert set(types) == {mav.COMP_METADATA_TYPE_PARAMETER, mav.COMP_METADATA_TYPE_EVENTS}
+    for mt, path in ((types[1], metadata.PARAMETER_PATH), (types[4], metadata.EVENTS_PATH)):
+        assert set(mt) <= TYPE_KEYS and mt["uri"] == "mftp://" + path and mt["fileCrc"] == zlib.crc32(files[path])
     assert params["version"] >= 3
     rows = {r["param_id"]: r for r in rig.fsw.registry.describe() if r["ground_settable"]}
     got = {p["name"]: p for p in params["parameters"]}
@@ -179,9 +180,9 @@ def test_a_stock_pymavlink_client_downloads_the_metadata_over_signed_ftp(tmp_pat
         client = mavftp.MAVFTP(conn, target_system=1, target_component=1)
         assert client.cmd_list(["metadata"]).error_code == mavftp.FtpError.Success
         names = {e.name for e in client.list_result}
-        assert {"general.json", "parameters.json"} <= names
+        assert {"general.json", "parameters.json", "events.json"} <= names
         got = {}
-        for path in (metadata.GENERAL_PATH, metadata.PARAMETER_PATH):
+        for path in (metadata.GENERAL_PATH, metadata.PARAMETER_PATH, metadata.EVENTS_PATH):
             def keep(fh, path=path):
                 got[path] = fh.read()
             client.cmd_get([path], callback=keep)

@@ -27,6 +27,7 @@ from tests.ground_procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 MSG_PROTOCOL_VERSION, MSG_COMPONENT_METADATA = 300, 397
+COMP_METADATA_TYPE_PARAMETER = 1          # upstream common.xml (not in the stock client's dialect)
 
 
 def _recv(conn, types, timeout_s: float, cond=lambda m: True):
@@ -158,7 +159,7 @@ def test_a_stock_ground_station_sees_position_identity_rates_and_parameter_metad
         general_bytes = download(uri[len("mftp://"):])
         assert zlib.crc32(general_bytes) == file_crc
         general = json.loads(general_bytes)
-        (ptype,) = general["metadataTypes"]
+        ptype = next(t for t in general["metadataTypes"] if t["type"] == COMP_METADATA_TYPE_PARAMETER)
         param_bytes = download(ptype["uri"][len("mftp://"):])
         assert zlib.crc32(param_bytes) == ptype["fileCrc"]
         meta = {p["name"]: p for p in json.loads(param_bytes)["parameters"]}

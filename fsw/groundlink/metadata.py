@@ -1,8 +1,9 @@
 """Component metadata a ground station can show (MAVLink component metadata protocol):
-the general metadata file and the parameter metadata file, built once at start from the
+the general metadata file, the parameter metadata file, built once at start from the
 parameter registry's own declarations (``ParamRegistry.describe()``, the source of
-`ellipsled params --json` and of the README table), served read-only over MAVLink FTP
-(ftp.py) and announced by COMPONENT_METADATA.
+`ellipsled params --json` and of the README table), and the events metadata file, the
+event catalogue's (interfaces/event_metadata.py: what the EVENT messages mean), served
+read-only over MAVLink FTP (ftp.py) and announced by COMPONENT_METADATA.
 
 Only ground-settable parameters are listed: they are the ones a ground station sees over
 the parameter protocol, by their MAVLink ids. Every value goes on the wire as REAL32, so
@@ -14,10 +15,13 @@ import json
 import zlib
 from importlib import metadata
 
+from interfaces import event_metadata
+from interfaces.mavlink import dialect as mav
+
 METADATA_DIR = "metadata"
 GENERAL_PATH = f"{METADATA_DIR}/general.json"
 PARAMETER_PATH = f"{METADATA_DIR}/parameters.json"
-COMP_METADATA_TYPE_PARAMETER = 1       # COMP_METADATA_TYPE (upstream common.xml; not in pymavlink 2.4.50)
+EVENTS_PATH = f"{METADATA_DIR}/events.json"
 PARAMETER_FORMAT_VERSION = 3           # parameter.schema.json: version >= 3
 GENERAL_FORMAT_VERSION = 1
 
@@ -68,11 +72,14 @@ def firmware_version() -> str:
 
 
 def build(registry, model_name: str) -> dict[str, bytes]:
-    """{path: file content}: the parameter metadata, then the general metadata naming it
-    (with its CRC, so a ground station can cache it)."""
+    """{path: file content}: the parameter and events metadata, then the general metadata
+    naming them (with their CRCs, so a ground station can cache them)."""
     params = _dump({"version": PARAMETER_FORMAT_VERSION, "parameters": parameter_entries(registry)})
+    events = event_metadata.metadata_bytes()
     general = _dump({"version": GENERAL_FORMAT_VERSION, "vendorName": "ellipsled", "modelName": model_name,
                      "firmwareVersion": firmware_version(),
-                     "metadataTypes": [{"type": COMP_METADATA_TYPE_PARAMETER, "uri": mftp_uri(PARAMETER_PATH),
-                                        "fileCrc": crc32(params)}]})
-    return {GENERAL_PATH: general, PARAMETER_PATH: params}
+                     "metadataTypes": [{"type": mav.COMP_METADATA_TYPE_PARAMETER, "uri": mftp_uri(PARAMETER_PATH),
+                                        "fileCrc": crc32(params)},
+                                       {"type": mav.COMP_METADATA_TYPE_EVENTS, "uri": mftp_uri(EVENTS_PATH),
+                                        "fileCrc": crc32(events)}]})
+    return {GENERAL_PATH: general, PARAMETER_PATH: params, EVENTS_PATH: events}

@@ -6,8 +6,11 @@ commands, parameters, security) is documented in interfaces/mavlink/README.md.
 - ``telemetry.py``: each telemetry message built from the FlightSoftware's state.
 - ``commands.py``: translation of COMMAND_LONG to the FlightSoftware command API and of
   the parameter protocol to its parameter registry.
+- ``events.py``: the MAVLink events interface (EVENT, CURRENT_EVENT_SEQUENCE, REQUEST_EVENT);
+  its ``GroundLink`` is link.GroundLink with that interface, the one this package exports.
 """
-from .link import DEFAULT_BIND, DEFAULT_GCS, DEFAULT_RATES_HZ, GroundLink
+from .events import GroundLink
+from .link import DEFAULT_BIND, DEFAULT_GCS, DEFAULT_RATES_HZ
 from .telemetry import euler321
 
 __all__ = ["GroundLink", "DEFAULT_RATES_HZ", "DEFAULT_GCS", "DEFAULT_BIND", "euler321"]

@@ -28,6 +28,7 @@ MESSAGES: dict[int, str] = {
     mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ: READ,
     mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: READ,
     mav.MAVLINK_MSG_ID_MISSION_ACK: READ,                # a client closing its mission download
+    mav.MAVLINK_MSG_ID_REQUEST_EVENT: READ,              # events sent again (events.py), to the requester
     mav.MAVLINK_MSG_ID_PARAM_SET: WRITE,
     mav.MAVLINK_MSG_ID_COMMAND_LONG: BY_COMMAND,
     mav.MAVLINK_MSG_ID_COMMAND_INT: BY_COMMAND,
@@ -41,6 +42,7 @@ COMMANDS: dict[int, str] = {
     mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: READ,
     mav.MAV_CMD_REQUEST_PROTOCOL_VERSION: READ,
     mav.MAV_CMD_GET_MESSAGE_INTERVAL: READ,
+    mav.MAV_CMD_RUN_PREARM_CHECKS: READ,                 # a report asked for (MAVSDK's events plugin): UNSUPPORTED
 }
 
 # MAVLink FTP opcodes that change something: ResetSessions (everyone's sessions) and every

@@ -388,15 +388,15 @@ def _field_pattern(t: ArgType) -> str:
 
 
 def _form_pattern(e: EventDef, f: Form) -> re.Pattern | None:
-    """A regular expression matching what ``f`` renders, or None when its text is all
-    TEXT arguments (it could be anything)."""
+    """A regular expression matching what ``f`` renders, or None when its text is free text
+    but for punctuation (it could be anything)."""
     parts, literal = [], ""
     for lit, fname, _, _ in string.Formatter().parse(f.message):
         parts.append(re.escape(lit))
         literal += lit
         if fname is not None:
             parts.append(_field_pattern(e.args[fname]))
-    if not literal.strip():
+    if not re.search(r"[A-Za-z0-9]", literal):
         return None
     return re.compile("".join(parts) + _SUPPRESSED + r"\Z", re.DOTALL)
 
@@ -404,9 +404,11 @@ def _form_pattern(e: EventDef, f: Form) -> re.Pattern | None:
 # more literal text first: the most specific form wins
 _PATTERNS = sorted(((p, e, len(re.sub(r"\{[^}]*\}", "", f.message))) for e in CATALOGUE for f in e.forms
                     for p in [_form_pattern(e, f)] if p is not None), key=lambda x: -x[2])
-# a text cut at STATUSTEXT_LEN: known by the literal start of a message (a distinctive one)
+# a text cut at STATUSTEXT_LEN: known by the literal start of a message that can be that long
 _HEADS = sorted(((f.message.split("{", 1)[0], e) for e in CATALOGUE for f in e.forms
-                 if len(f.message.split("{", 1)[0]) >= 8), key=lambda x: -len(x[0]))
+                 if f.message.split("{", 1)[0]
+                 and len(e.render({n: sample_value(e.args[n]) for n, _ in f.fields})[1]) >= STATUSTEXT_LEN),
+                key=lambda x: -len(x[0]))
 
 
 def identify(text: str) -> EventDef | None:
@@ -416,6 +418,10 @@ def identify(text: str) -> EventDef | None:
         if p.match(text):
             return e
     if len(text) >= STATUSTEXT_LEN:
+        whole = re.sub(r" \(\+\d*(?: [a-z]*\)?)?\Z", "", text)      # the cut was in a summary's count
+        for p, e, _ in _PATTERNS:
+            if whole != text and p.match(whole):
+                return e
         for head, e in _HEADS:
             if text.startswith(head):
                 return e

@@ -98,8 +98,9 @@ def test_policy_table_reads_are_reads_and_everything_that_changes_state_is_signe
     cmd = lambda c: mav.MAVLink_command_long_message(1, 1, c, 0, 0, 0, 0, 0, 0, 0, 0)      # noqa: E731
     ftp_op = lambda op: mav.MAVLink_file_transfer_protocol_message(0, 1, 1, [0, 0, 0, op] + [0] * 247)  # noqa: E731
     for c in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
-              mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, mav.MAV_CMD_GET_MESSAGE_INTERVAL):
+              mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, mav.MAV_CMD_GET_MESSAGE_INTERVAL, mav.MAV_CMD_RUN_PREARM_CHECKS):
         assert policy.access(cmd(c)) == policy.READ, c
+    assert policy.access(mav.MAVLink_request_event_message(1, 1, 0, 0)) == policy.READ
     for c in (mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAV_CMD_INJECT_FAILURE, mav.ELLIPSLED_CMD_SET_MODE,
               mav.ELLIPSLED_CMD_ARM_JETS, mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.ELLIPSLED_CMD_FDIR_MARK_JET,
               mav.ELLIPSLED_CMD_FDIR_CLEAR, mav.ELLIPSLED_CMD_FDIR_SET_DELAY, mav.ELLIPSLED_CMD_FAULT_TOLERANCE,

@@ -17,6 +17,12 @@ the command line is not focused (Escape leaves it, ":" enters it):
 Commands go out without blocking the UI; their ACK (or TIMEOUT after the retries)
 appears in the acknowledgements panel.
 
+The events panel shows each STATUSTEXT with its severity and its source, read back to its
+entry of the event catalogue (interfaces/event_catalogue.py). ``events WORD...`` on the
+command line filters it, with the catalogue's words: a severity ("events warning": that and
+worse), sources ("events fdir driver") and event names ("events jet_failed_off"), any
+unambiguous prefix; ``events all`` shows everything again, ``events`` says what is shown.
+
 The same screens watch without commanding: over a client without the key (``--view-only``:
 telemetry shown unverified, nothing sent) or over a recorded .tlog (``--replay``,
 gse/replay.py); the top line says which, and a command is answered "not sent".
@@ -34,6 +40,7 @@ from textual.containers import Horizontal, Vertical
 from textual.css.query import NoMatches
 from textual.widgets import Footer, Input, RichLog, Static
 
+from interfaces.event_catalogue import BY_NAME, SOURCES, identify
 from interfaces.mavlink import dialect as mav
 from interfaces.vocabulary import N_JETS, JetState, Mode, Severity
 
@@ -61,6 +68,49 @@ def _mode_name(code: int) -> str:
 
 def _severity_name(code: int) -> str:
     return Severity(code).name if code in Severity._value2member_map_ else str(code)
+
+
+class EventFilter:
+    """Which events the panel shows: at least ``severity`` (None: any), and, when sources or
+    names are chosen, only the events of those (an event the catalogue does not know then
+    not at all). Words: the catalogue's severities, sources and event names."""
+
+    WORDS = {**{s.name.lower(): ("severity", s) for s in Severity}, **{s: ("source", s) for s in SOURCES},
+             **{n: ("name", n) for n in BY_NAME}}
+
+    def __init__(self, severity: Severity | None = None, sources=(), names=()):
+        self.severity, self.sources, self.names = severity, frozenset(sources), frozenset(names)
+
+    @classmethod
+    def parse(cls, words: list[str]) -> "EventFilter":
+        """The filter ``words`` say ("all" or none: everything); ValueError names a bad word."""
+        severity, sources, names = None, set(), set()
+        for w in (w.lower() for w in words):
+            if w == "all":
+                continue
+            hits = [w] if w in cls.WORDS else [k for k in cls.WORDS if k.startswith(w)]
+            if len(hits) != 1:
+                raise ValueError(f"events: {w!r} is {'ambiguous' if hits else 'not a severity, source or event'}"
+                                 + (f" ({', '.join(sorted(hits)[:6])})" if hits else ""))
+            kind, value = cls.WORDS[hits[0]]
+            if kind == "severity":
+                severity = value
+            else:
+                (sources if kind == "source" else names).add(value)
+        return cls(severity, sources, names)
+
+    def shows(self, severity: int, text: str) -> bool:
+        if self.severity is not None and severity > self.severity:
+            return False
+        if not (self.sources or self.names):
+            return True
+        e = identify(text)
+        return e is not None and (e.source in self.sources or e.name in self.names)
+
+    def __str__(self) -> str:
+        parts = ([f"{self.severity.name.lower()}+"] if self.severity is not None else []) \
+            + sorted(self.sources) + sorted(self.names)
+        return ", ".join(parts) or "all"
 
 
 def _deg(x) -> str:
@@ -118,6 +168,7 @@ class GroundConsole(App):
         self.ack_lines: list[str] = []      # what the acknowledgements panel shows (newest last)
         self.ft_on = True
         self._events_shown = 0
+        self.event_filter = EventFilter()
         self._last_hb = 0.0
         replay = getattr(client, "path", None)
         self.watch_only = (f"replay of {replay.name}" if replay is not None
@@ -167,14 +218,32 @@ class GroundConsole(App):
             else:
                 still.append((label, pc))
         self.inflight = still
-        log = self.query_one("#events", RichLog)
         evs = list(c.state.events)
         new = c.state.events_total - self._events_shown
-        for e in evs[max(0, len(evs) - new):]:
-            log.write(Text(f"{time.strftime('%H:%M:%S', time.localtime(e.t_unix_s))} "
-                           f"{_severity_name(e.severity):<9} {e.text}",
-                           style=SEVERITY_STYLE.get(e.severity, "")))
+        self._write_events(evs[max(0, len(evs) - new):])
         self._events_shown = c.state.events_total
+
+    def _write_events(self, evs) -> None:
+        log = self.query_one("#events", RichLog)
+        for e in evs:
+            if self.event_filter.shows(e.severity, e.text):
+                entry = identify(e.text)
+                log.write(Text(f"{time.strftime('%H:%M:%S', time.localtime(e.t_unix_s))} "
+                               f"{_severity_name(e.severity):<9} {entry.source if entry else '-':<9} {e.text}",
+                               style=SEVERITY_STYLE.get(e.severity, "")))
+
+    def set_event_filter(self, words: list[str]) -> None:
+        """``events WORD...``: filter the events panel (and show it again from what is kept)."""
+        if words:
+            try:
+                self.event_filter = EventFilter.parse(words)
+            except ValueError as e:
+                self._ack_line(f"! {e}")
+                return
+            self.query_one("#events", RichLog).clear()
+            self._write_events(list(self.client.state.events))
+        self.query_one("#events", RichLog).border_title = f"events ({self.event_filter})"
+        self._ack_line(f"events shown: {self.event_filter}")
 
     def _ack_line(self, line: str) -> None:
         self.ack_lines.append(line)
@@ -183,6 +252,10 @@ class GroundConsole(App):
     # ---------------------------------------------------------------- commands
     def submit(self, text: str) -> None:
         """Run one command line (also what pressing Enter in the command line does)."""
+        words = text.lstrip(":").split()
+        if words[:1] == ["events"]:
+            self.set_event_filter(words[1:])
+            return
         try:
             req = parse_line(text.lstrip(":"))
         except ValueError as e:

@@ -117,3 +117,38 @@ def test_console_shows_guidance_and_position_as_the_vehicle_reports_them(tmp_pat
             assert f"reversals {len(e.lateral.reversals)}" in " ".join(guidance.split())
     finally:
         r.close()
+
+
+def test_the_events_panel_filters_by_the_catalogues_severities_sources_and_names(rig):
+    from interfaces.event_catalogue import EV
+
+    async def scenario():
+        app = GroundConsole(rig.gcs, timeout_s=0.5, retries=2, poll_s=0.1, refresh_s=0.3)
+        async with app.run_test(size=(140, 45)) as pilot:
+            log = rig.fsw.events
+            log.emit(rig.fsw.t_s, EV.JET_FAILED_OFF, jet=3)             # fdir, ERROR
+            log.emit(rig.fsw.t_s, EV.FDIR_DELAY, delay_s=2.0)           # fdir, NOTICE
+            log.emit(rig.fsw.t_s, EV.JETS_DISARMED)                     # driver, NOTICE
+            for _ in range(4):
+                rig.fly(5)
+                await pilot.pause(0.11)
+
+            def shown():
+                return [" ".join(seg.text for seg in line).strip() for line in app.query_one("#events").lines]
+            assert any("fdir" in s and "JET 3 FAILED OFF" in s for s in shown())
+            app.submit("events fdir")
+            await pilot.pause(0.05)
+            assert [s.split(None, 3)[-1] for s in shown()] == ["JET 3 FAILED OFF", "FDIR DELAY 2.00 S"]
+            app.submit("events err driver")                              # ERROR and worse, of the driver
+            await pilot.pause(0.05)
+            assert shown() == []
+            app.submit("events jets_dis")
+            await pilot.pause(0.05)
+            assert [s.split(None, 3)[-1] for s in shown()] == ["JETS DISARMED"]
+            app.submit("events jet")                                     # ambiguous: explained, filter kept
+            assert app.ack_lines[-1].startswith("! events: 'jet' is ambiguous")
+            app.submit("events all")
+            await pilot.pause(0.05)
+            assert len(shown()) == len(rig.gcs.state.events) and app.ack_lines[-1] == "events shown: all"
+
+    asyncio.run(scenario())

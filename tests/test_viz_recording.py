@@ -15,6 +15,8 @@ from rerun.chunk import RrdReader
 from common.model import load_planet
 from ellipsled.history import History
 from common.events import Event, Severity
+from interfaces.event_catalogue import EV
+from interfaces.event_metadata import markdown
 from gse.viz import RerunLogger, open_sinks, record_history
 from gse.viz.blueprint import VIEW_NAMES
 from gse.viz.logger import SCALAR_CHANNELS, TRUTH
@@ -205,6 +207,12 @@ def test_jets_health_mode_and_events(recorded):
     _, _, level = _column(ents["/events"], "TextLog:level")
     assert list(steps) == [50, 125] and "jet_failed_off" in text[0][0]
     assert level == [["WARN"], ["CRITICAL"]]
+    # the events table: each event's catalogue fields (a code the catalogue does not know: id 0)
+    table = [[_column(ents["/events"], c)[2][i][0] for c in ("event_id", "event_name", "source", "severity")]
+             for i in range(2)]
+    assert table == [[EV.JET_FAILED_OFF.id, "jet_failed_off", "fdir", "WARNING"], [0, "safe", "modes", "CRITICAL"]]
+    (doc,) = [d for d in ents["/event_catalogue"] if "TextDocument:text" in d]
+    assert doc["TextDocument:text"] == [[markdown()]]               # the catalogue, as docs/events.md has it
 
 
 class _CountingRec:

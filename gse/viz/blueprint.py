@@ -13,7 +13,7 @@ VIEW_NAMES = (
     "Torque x", "Torque y", "Torque z", "Jets firing", "Jet health", "Jet health now",
     "Jets on", "Adaptive parameters", "Altitude", "Speed", "Flight-path angle", "Mach",
     "Dynamic pressure", "Deceleration", "Trajectory", "Attitude", "Loop timing", "Slips",
-    "Mode", "Ground track", "Predicted miss", "Events",
+    "Mode", "Ground track", "Predicted miss", "Events", "Event table", "Event catalogue",
 )
 
 
@@ -70,7 +70,11 @@ def default_blueprint() -> rrb.Blueprint:
         _ts("Predicted miss", "/guidance/predicted_miss_km"),
         column_shares=[3, 2], name="Map",
     )
-    tabs = rrb.Tabs(attitude, torque, jets, adapt, entry, views3d, ground, timing)
+    # the events logger.py writes: a table of them (their catalogue fields) and the catalogue
+    events = rrb.Horizontal(rrb.DataframeView(name="Event table", origin="/events"),
+                            rrb.TextDocumentView(name="Event catalogue", origin="/event_catalogue"),
+                            column_shares=[3, 2], name="Events")
+    tabs = rrb.Tabs(attitude, torque, jets, adapt, entry, views3d, ground, timing, events)
     return rrb.Blueprint(
         rrb.Vertical(tabs, rrb.TextLogView(name="Events", origin="/events"), row_shares=[4, 1]),
         rrb.TimePanel(state="expanded"),

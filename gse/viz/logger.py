@@ -32,6 +32,8 @@ import rerun as rr
 from common.config import load_toml, resolve
 from common.model import load_planet, load_vehicle
 from common.mrp import sigma_to_quat
+from interfaces.event_catalogue import BY_NAME
+from interfaces.event_metadata import markdown as event_catalogue_markdown
 from interfaces.records import GUID_PREDICTION, GUID_TARGET
 from interfaces.vocabulary import HEALTH_NAMES, N_JETS, Mode, Severity
 
@@ -56,6 +58,11 @@ MAP_EVERY = 10             # ground-track points: every 10th control step (5 Hz 
 TEXTLOG_LEVEL = {Severity.EMERGENCY: "CRITICAL", Severity.ALERT: "CRITICAL", Severity.CRITICAL: "CRITICAL",
                  Severity.ERROR: "ERROR", Severity.WARNING: "WARN", Severity.NOTICE: "INFO",
                  Severity.INFO: "INFO", Severity.DEBUG: "DEBUG"}
+
+# The events table (entity "events", beside the TextLog): one row per event, the columns its
+# catalogue entry's fields (interfaces/event_catalogue.py; 0 / "" for a code it does not know).
+# The catalogue itself is the markdown document "event_catalogue" (the table of docs/events.md).
+EVENT_COLUMNS = ("event_id", "event_name", "source", "severity")
 
 JET_NAMES = [f"J{j + 1}" for j in range(N_JETS)]
 LANE_HIGH = 0.8     # jets/lanes: lane j+1 reads j+1 when off, j+1+LANE_HIGH when firing
@@ -181,7 +188,7 @@ class RerunLogger:
         self.vis_scale = float(vis_scale)
         self.radius_m = float(radius_m) if radius_m is not None else load_planet("mars").radius_m
         self._buf = {src: _Buffer(f, flush_rows) for src, f in SOURCE_FIELDS.items()}
-        self._events: list[tuple[int, float, str, str]] = []
+        self._events: list[tuple] = []           # (k, t_s, text, level, *EVENT_COLUMNS)
         self._last_flush = clock()
         self._last_health: np.ndarray | None = None
         self._last_mode: float | None = None
@@ -256,10 +263,13 @@ class RerunLogger:
             if not math.isfinite(t_s):
                 raise ValueError("non-finite event time")
             try:
-                level = TEXTLOG_LEVEL[Severity(int(event.severity))]
+                severity = Severity(int(event.severity))
             except ValueError:
-                level = "INFO"
+                severity = Severity.INFO
+            level = TEXTLOG_LEVEL[severity]
             text = f"[{event.source}] {event.code}: {event.text}"
+            entry = BY_NAME.get(event.code)
+            row = (entry.id if entry else 0, event.code, str(event.source), severity.name)
         except Exception:
             self.stats["bad_values"] += 1
             return
@@ -267,7 +277,7 @@ class RerunLogger:
             k = self._last_k
             if self._dt_est:
                 k = max(0, self._last_k + int(round((t_s - self._last_t) / self._dt_est)))
-        self._events.append((int(k), t_s, text, level))
+        self._events.append((int(k), t_s, text, level, *row))
         self.stats["events"] += 1
         if len(self._events) >= self.flush_rows:
             self._flush_events()
@@ -365,6 +375,8 @@ class RerunLogger:
                                             colors=[(255, 80, 80), (80, 255, 80), (80, 80, 255)],
                                             labels=["N1", "N2", "N3"]), static=True)
         self._log("map", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)     # x east (lon), y north (lat)
+        self._log("event_catalogue", rr.TextDocument(event_catalogue_markdown(), media_type=rr.MediaType.MARKDOWN),
+                  static=True)
 
     def _flush_source(self, source: str) -> None:
         b = self._buf[source]
@@ -529,8 +541,10 @@ class RerunLogger:
         ev, self._events = self._events, []
         k = np.array([e[0] for e in ev], dtype=np.int64)
         t = np.array([e[1] for e in ev])
+        table = {name: [e[4 + i] for e in ev] for i, name in enumerate(EVENT_COLUMNS)}
         self._send("events", _time_columns(k, t),
-                   rr.TextLog.columns(text=[e[2] for e in ev], level=[e[3] for e in ev]))
+                   [*rr.TextLog.columns(text=[e[2] for e in ev], level=[e[3] for e in ev]),
+                    *rr.AnyValues.columns(**table)])
 
 
 def _great_circle_m(lat1: float, lon1: float, lat2: float, lon2: float, radius_m: float) -> float:

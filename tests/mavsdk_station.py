@@ -44,6 +44,7 @@ def main() -> int:
 
     from mavsdk import ComponentType, Configuration, Mavsdk
     from mavsdk.plugins.component_metadata import ComponentMetadata, MetadataType
+    from mavsdk.plugins.events import Events
     from mavsdk.plugins.failure import Failure, FailureType, FailureUnit
     from mavsdk.plugins.ftp import Ftp
     from mavsdk.plugins.info import Info
@@ -69,9 +70,18 @@ def main() -> int:
             return 0
         info, tel, param = Info(system), Telemetry(system), Param(system)
 
-        # telemetry first, so the samples cover the whole contact
-        samples, modes, current = [], {}, []
+        # telemetry and events first, so they cover the whole contact (the events plugin
+        # reads the vehicle's events metadata through component metadata by itself)
+        samples, modes, current, events = [], {}, [], []
         lock = threading.Lock()
+
+        def on_event(ev, _):
+            with lock:
+                events.append({"t": time.time(), "compid": ev.compid, "namespace": ev.event_namespace,
+                               "name": ev.event_name, "message": ev.message, "description": ev.description,
+                               "log_level": ev.log_level.name})
+        events_plugin = Events(system)
+        events_plugin.subscribe_events(on_event)
 
         def on_pv(pv, _):
             with lock:
@@ -136,8 +146,11 @@ def main() -> int:
         end = time.monotonic() + a.watch_s           # keep watching, as a ground station does
         while time.monotonic() < end:
             time.sleep(0.5)
+        step("events_metadata", lambda: json.loads(
+            _until(lambda: ComponentMetadata(system).get_metadata(1, MetadataType.EVENTS), 30.0).json_metadata))
         with lock:
             res["velocity_samples"] = list(samples)
+            res["events"] = list(events)
     except Exception:
         res["crash"] = traceback.format_exc()
     finally:

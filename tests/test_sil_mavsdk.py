@@ -1,12 +1,14 @@
 """MAVSDK, a stock ground station that cannot sign (no key API), against a real-time SIL on
-loopback: it identifies the vehicle, watches it, reads its parameters, metadata and mission,
-and cannot change it. The MAVSDK side runs in its own process (tests/mavsdk_station.py),
-stopped by its pid; the SIL is ``ellipsled run --realtime`` with a ground link on free ports.
+loopback: it identifies the vehicle, watches it and its events, reads its parameters,
+metadata and mission, and cannot change it. The MAVSDK side runs in its own process
+(tests/mavsdk_station.py), stopped by its pid; the SIL is ``ellipsled run --realtime`` with
+a ground link on free ports.
 
 Checked against the run itself: the velocity MAVSDK showed against the plant's truth
 history (within 1 %), the parameters against the FSW process's own report, the refused
-parameter set and injection against the FSW's parameters and the plant's faults, and the
-vehicle's event log for refusal noise.
+parameter set and injection against the FSW's parameters and the plant's faults, the
+vehicle's event log for refusal noise, and the events MAVSDK's events plugin showed against
+that log and the event catalogue.
 """
 from __future__ import annotations
 
@@ -25,6 +27,8 @@ from fsw.flightsoftware import declarations
 from fsw.groundlink.link import REFUSAL_EVENT
 from fsw.groundlink.services import PRODUCT_ID, VENDOR_ID
 from fsw.params import ParamRegistry
+from interfaces import event_metadata
+from interfaces.event_catalogue import CATALOGUE, COMPONENT_ID, NAMESPACE
 from interfaces.vocabulary import Mode
 from tests.ground_procs import start_ground_sil, stop
 
@@ -125,7 +129,7 @@ def test_mavsdk_reads_parameters_metadata_and_the_mission(contact):
     assert set(shown) == set(ids.values())
     for name, pid in ids.items():
         assert shown[pid] == pytest.approx(report[name], rel=1e-6), pid        # sent as float32
-    assert res["ftp_list"]["ok"] == ["general.json", "parameters.json"], res["ftp_list"]
+    assert res["ftp_list"]["ok"] == ["events.json", "general.json", "parameters.json"], res["ftp_list"]
     meta = res["metadata"]["ok"]
     assert {p["name"] for p in meta["parameters"]} == set(ids.values()), res["metadata"]
     assert res["mission"] == {"ok": 0}
@@ -151,7 +155,22 @@ def test_the_vehicles_event_log_is_free_of_refusal_noise(contact):
     assert len(link) <= 2, link
 
 
-@pytest.mark.skip(reason="the MAVLink events interface (EVENT, events metadata) waits for the event catalogue "
-                         "of the architecture issue; the vehicle's events reach MAVSDK as STATUSTEXT only")
-def test_mavsdk_receives_events_with_their_severity():
-    pass
+def test_mavsdk_receives_events_with_their_severity(contact):
+    """MAVSDK's events plugin read the events metadata the vehicle serves (the catalogue's,
+    over FTP) and shows the EVENTs of the contact — at least the refusal of its own unsigned
+    writes — by name, with the severity of the vehicle's own event log and the message the
+    catalogue gives."""
+    res, out = contact
+    assert res["events_metadata"].get("ok") == event_metadata.events_metadata(), res["events_metadata"]
+    forms = {event_metadata.form_name(e, f): (e, f) for e in CATALOGUE for f in e.forms}
+    told = {(e["code"], e["severity"]) for e in json.loads((out / "fsw.json").read_text())["event_log"]}
+    got = res["events"]
+    assert got, res
+    for ev in got:
+        entry, form = forms[ev["name"]]
+        assert (ev["namespace"], ev["compid"]) == (NAMESPACE, COMPONENT_ID)
+        assert (entry.name, ev["log_level"]) in told, (ev, sorted(told))
+        assert ev["message"] and ev["description"].startswith(entry.doc)
+        if not entry.wire_args(form):                 # no values: the message is the metadata's own
+            assert ev["message"] == event_metadata.ground_message(entry, form)
+    assert any(ev["name"] == REFUSAL_EVENT and ev["log_level"] == "WARNING" for ev in got), got

@@ -128,16 +128,21 @@ def main() -> int:
             _until(tel.get_gps_global_origin, 10.0)))
         step("mission", lambda: len(MissionRaw(system).download_mission()))
 
-        def ftp_list():
-            return sorted(e.name for e in Ftp(system).list_directory("metadata").entries)
-        step("ftp_list", ftp_list)
-
         def component_metadata():
             cm = ComponentMetadata(system)
             cm.request_autopilot_component()
             md = _until(lambda: cm.get_metadata(1, MetadataType.PARAMETER), 60.0)
             return json.loads(md.json_metadata)
         step("metadata", component_metadata)
+        # the events metadata (the events plugin asked for it) before the station's own FTP
+        # use: MAVSDK's FTP client is one queue, and a listing between two metadata downloads
+        # was seen to leave the second one waiting for good
+        step("events_metadata", lambda: json.loads(
+            _until(lambda: ComponentMetadata(system).get_metadata(1, MetadataType.EVENTS), 60.0).json_metadata))
+
+        def ftp_list():
+            return sorted(e.name for e in Ftp(system).list_directory("metadata").entries)
+        step("ftp_list", ftp_list)
 
         # what only a keyed station may do: both must be refused
         step("param_set", lambda: str(param.set_param_float(a.set_param, 900000.0)))
@@ -146,8 +151,6 @@ def main() -> int:
         end = time.monotonic() + a.watch_s           # keep watching, as a ground station does
         while time.monotonic() < end:
             time.sleep(0.5)
-        step("events_metadata", lambda: json.loads(
-            _until(lambda: ComponentMetadata(system).get_metadata(1, MetadataType.EVENTS), 30.0).json_metadata))
         with lock:
             res["velocity_samples"] = list(samples)
             res["events"] = list(events)

@@ -36,7 +36,7 @@ bench: $(STAMP)
 # then MkDocs with --strict (a broken link or a page missing from the nav fails) into site/.
 docs: $(STAMP)
 	$(BIN)/python -m ellipsled.docsgen
-	$(BIN)/mkdocs build --strict --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 # Refresh the full lock from the direct dependencies (requirements-nodeps.in: without theirs).
 lock:

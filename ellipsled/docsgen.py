@@ -178,7 +178,7 @@ def records_page() -> str:
            "|---|---|---|---|---|---|"]
     schemas = sorted(codec.REGISTRY.values(), key=lambda s: s.schema_id)
     for s in schemas:
-        out.append(f"| `{s.key_suffix}` | [{s.name}](#{s.name.lower().replace('_', '-')}) | {s.schema_id} | "
+        out.append(f"| `{s.key_suffix}` | [{s.name}](#{s.name.lower()}) | {s.schema_id} | "
                    f"{s.version} | {s.dtype.itemsize} | `{codec.layout_id(s.dtype):#010x}` |")
     k = keys.keys(keys.DEFAULT_PREFIX)
     for fld in dataclasses.fields(k):
@@ -305,13 +305,14 @@ def generate() -> dict[str, str]:
 
 
 def write(out_dir: Path) -> list[Path]:
+    """Write the pages under ``out_dir``; returns those whose text changed."""
     written = []
     for page, text in generate().items():
         path = Path(out_dir) / page
         path.parent.mkdir(parents=True, exist_ok=True)
         if not path.exists() or path.read_text() != text:
             path.write_text(text)
-        written.append(path)
+            written.append(path)
     return written
 
 
@@ -332,8 +333,11 @@ def main(argv: list[str] | None = None) -> int:
         for page in bad:
             print(f"{a.out / page}: out of date (run: python -m ellipsled.docsgen)", file=sys.stderr)
         return 1 if bad else 0
-    for path in write(a.out):
+    changed = write(a.out)
+    for path in changed:
         print(f"wrote {path}")
+    if not changed:
+        print(f"{', '.join(PAGES)}: up to date")
     return 0
 
 

@@ -112,16 +112,17 @@ def test_a_reversal_decision_reaches_the_ground_with_its_time_and_rule(guided):
 def test_non_finite_values_never_go_out(guided):
     rig = guided
     e, fsw = rig.fsw.entry, rig.fsw
-    saved = (e.pred_h_m, e.bank_cmd, fsw.controllability)
+    auth = fsw.authority
+    saved = (e.pred_h_m, e.bank_cmd, auth.controllability)
     try:
         e.pred_h_m = math.nan
         e.bank_cmd = math.inf
-        if fsw.controllability is not None:
-            fsw.controllability = dataclasses.replace(fsw.controllability, authority_neg_radps2=math.nan,
-                                                      trim_needed_deg=math.inf)
+        if auth.controllability is not None:
+            auth.controllability = dataclasses.replace(auth.controllability, authority_neg_radps2=math.nan,
+                                                       trim_needed_deg=math.inf)
         m = fresh(rig, fsw.t_s)
     finally:
-        e.pred_h_m, e.bank_cmd, fsw.controllability = saved
+        e.pred_h_m, e.bank_cmd, auth.controllability = saved
     assert all(math.isfinite(getattr(m, f)) for f in FLOATS)
     assert not m.flags & (F.ELLIPSLED_GUIDANCE_FLAGS_PREDICTION | F.ELLIPSLED_GUIDANCE_FLAGS_LP
                           | F.ELLIPSLED_GUIDANCE_FLAGS_TRIM)

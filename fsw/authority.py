@@ -28,7 +28,7 @@ from .params import Param
 
 if TYPE_CHECKING:
     from .control import SamiController
-    from .guidance import Guidance
+    from .guidance.reference import Guidance
     from .navigation import Navigation
 
 

@@ -2,7 +2,7 @@
 
 The flight software's long computations (the allocator's table builds, the controllability
 LP, the guidance correction) take longer than a control period. Each is one
-``BackgroundJob``, the only place in fsw/ that starts a thread. The loop hands it requests
+``BackgroundJob``, the flight software's one way to start a thread. The loop hands it requests
 (``submit``) and collects answers (``take``); the function never sees a thread, a clock or
 the loop.
 
@@ -66,12 +66,12 @@ class BackgroundJob:
 
     ``fn`` is public: tests replace it to inject delays or faults. ``name`` names the
     thread. With ``events``, lateness, skipped requests and faults are reported under
-    ``source`` with codes ``<word>_overrun`` and ``<word>_fault`` (``word`` defaults to
-    ``name``); without, they are only counted."""
+    ``source`` with codes ``<event_name>_overrun`` and ``<event_name>_fault`` (``event_name``
+    defaults to ``name``); without, they are only counted."""
 
     def __init__(self, fn: Callable, name: str, *, mode: str = REALTIME, keep: str = LATEST,
                  skip_while_busy: bool = False, events: EventLog | None = None, source: str = "",
-                 word: str = "") -> None:
+                 event_name: str = "") -> None:
         if mode not in (IN_PLACE, AWAITED, REALTIME) or keep not in (LATEST, EVERY):
             raise ValueError(f"{name}: mode {mode!r}, keep {keep!r}")
         self.fn = fn
@@ -79,7 +79,7 @@ class BackgroundJob:
         self.mode = mode
         self.keep = keep
         self.skip_while_busy = skip_while_busy
-        self.events, self.source, self.word = events, source or name, word or name
+        self.events, self.source, self.event_name = events, source or name, event_name or name
         self.released = 0                 # requests accepted
         self.skipped = 0                  # requests refused while busy (skip_while_busy)
         self.late = 0                     # answers not there at their due step
@@ -122,7 +122,7 @@ class BackgroundJob:
                 self.released += 1
                 self._cv.notify()
         if refused:
-            self._report(t_s, "_overrun", f"{self.word.upper()} CYCLE SKIPPED: PREVIOUS STILL RUNNING")
+            self._report(t_s, "_overrun", f"{self.event_name.upper()} CYCLE SKIPPED: PREVIOUS STILL RUNNING")
             return False
         self._deadline = due_t is not None
         self.due_t = -math.inf if due_t is None else due_t
@@ -162,11 +162,11 @@ class BackgroundJob:
             if self._deadline and not self.overdue:
                 self.overdue = True
                 self.late += 1
-                self._report(t_s, "_overrun", f"{self.word.upper()} CYCLE OVERRUN: COMMAND KEPT")
+                self._report(t_s, "_overrun", f"{self.event_name.upper()} CYCLE OVERRUN: COMMAND KEPT")
             return None
         self.due_t, self.overdue = math.inf, False
         if ans.error is not None:
-            self._report(ans.t_s, "_fault", f"{self.word.upper()} FAULT: {type(ans.error).__name__}: {ans.error}"[:50])
+            self._report(ans.t_s, "_fault", f"{self.event_name.upper()} FAULT: {type(ans.error).__name__}: {ans.error}"[:50])
             return None
         return ans
 
@@ -294,4 +294,4 @@ class BackgroundJob:
 
     def _report(self, t_s: float, suffix: str, text: str) -> None:
         if self.events is not None:
-            self.events.emit(t_s, Severity.WARNING, self.source, self.word + suffix, text, rate_limited=True)
+            self.events.emit(t_s, Severity.WARNING, self.source, self.event_name + suffix, text, rate_limited=True)

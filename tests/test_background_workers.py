@@ -403,7 +403,7 @@ def test_awaited_the_answer_is_not_handed_over_before_its_due_step_and_waited_fo
 def test_in_real_time_an_answer_missing_at_its_due_step_is_one_overrun_and_taken_when_it_arrives():
     jobs = _TaggedJobs()
     events = EventLog()
-    w = _runner(jobs, events=events, source="guidance", word="guidance")
+    w = _runner(jobs, events=events, source="guidance", event_name="guidance")
     try:
         w.submit("held", tag=-1.0, t_s=1.0, due_t=1.5)
         assert w.take(1.48) is None and w.late == 0
@@ -424,7 +424,7 @@ def test_in_real_time_an_answer_missing_at_its_due_step_is_one_overrun_and_taken
 def test_a_request_while_busy_is_refused_and_counted_when_the_job_keeps_its_cadence():
     jobs = _TaggedJobs()
     events = EventLog()
-    w = _runner(jobs, skip_while_busy=True, events=events, source="guidance", word="guidance")
+    w = _runner(jobs, skip_while_busy=True, events=events, source="guidance", event_name="guidance")
     try:
         assert w.submit("held", t_s=1.0, due_t=1.5)
         jobs.started("held")
@@ -447,7 +447,7 @@ def test_a_job_that_raises_is_a_counted_fault_and_an_event_and_the_runner_serves
             raise ValueError("no answer")
         return x
     events = EventLog()
-    w = _runner(job, mode=mode, events=events, source="guidance", word="controllability")
+    w = _runner(job, mode=mode, events=events, source="guidance", event_name="controllability")
     try:
         w.submit("bad", t_s=4.0)
         assert w.wait_idle(SANITY_S) and w.faults == 1

@@ -20,9 +20,8 @@ The rules proven here:
   warm-up discards its answer; close ends the thread;
 - the loop never waits on a worker: it keeps cycling while a job is held, no C call of a
   job computes for a control period, and the predictor's kernels are built nogil;
-- LP: the newest request wins: an answer to a request overtaken by a newer one (still
-  solving, or solved and not yet taken) is never applied; an answer is applied by the first
-  control cycle after it is ready;
+- LP (real time): the FSW flies on while it solves, and its answer is applied by the first
+  control cycle after it is ready (batch and lockstep: solved in place, on no thread);
 - guidance (real time): the answer is applied at its due step (release + apply_delay_s),
   never earlier; not there when due is one overrun (event; the previous answer's profile
   stays); a cycle released while it still computes is skipped (an overrun, its event
@@ -31,8 +30,7 @@ The rules proven here:
   release time, and its predicted time to deploy is aged from that release, not from the
   cycle it missed;
 - guidance (batch and lockstep): the loop waits for the answer at its due step, so a run
-  is the same bit for bit however slow the correction is. The LP has no worker there: it is
-  solved in place (``realtime`` False).
+  is the same bit for bit however slow the correction is.
 """
 from __future__ import annotations
 

@@ -278,198 +278,173 @@ def test_batch_and_lockstep_solve_the_lp_in_place_without_a_thread():
 
 
 # ---------------------------------------------------------------- the runner
-def _runner(jobs, mode=REALTIME, **kw) -> BackgroundJob:
-    return BackgroundJob(jobs, "test-job", mode=mode, **kw)
+@pytest.fixture
+def jobs():
+    """Tagged jobs (``_TaggedJobs``); every one still held is let go at the end."""
+    tagged = _TaggedJobs()
+    yield tagged
+    tagged.release_all()
 
 
-def test_a_request_overtaken_while_computing_is_dropped_and_the_newest_answered():
-    jobs = _TaggedJobs()
-    w = _runner(jobs)
-    try:
-        w.submit("held-old", tag=1.0)
-        jobs.started("held-old")
-        w.submit("held-new", tag=2.0)                    # a newer request while the old one computes
-        jobs.go("held-old")
-        jobs.started("held-new")                         # the old one has finished: its answer ...
-        assert not w.ready                               # ... was dropped
-        jobs.go("held-new")
-        _until(lambda: w.ready)
-        ans = w.take()
-        assert (ans.tag, ans.value) == (2.0, "held-new")
-        assert jobs.calls == ["held-old", "held-new"] and not w.busy and not w.ready
-    finally:
-        jobs.release_all()
+@pytest.fixture
+def runner(jobs):
+    """``runner(fn=jobs, mode=REALTIME, **kw)``: a BackgroundJob named "test-job", closed at the end."""
+    made = []
+
+    def make(fn=jobs, mode=REALTIME, **kw) -> BackgroundJob:
+        made.append(BackgroundJob(fn, "test-job", mode=mode, **kw))
+        return made[-1]
+    yield make
+    jobs.release_all()
+    for w in made:
         w.close()
 
 
-def test_an_answer_not_yet_taken_is_dropped_by_a_newer_request():
-    jobs = _TaggedJobs()
-    w = _runner(jobs)
-    try:
-        w.submit("old", tag=1.0)
-        _until(lambda: w.ready)                          # answered, not yet taken ...
-        w.submit("held-new", tag=2.0)                    # ... when a newer request comes
-        assert not w.ready                               # the old answer is not there to take
-        jobs.go("held-new")
-        _until(lambda: w.ready)
-        assert w.take().tag == 2.0
-    finally:
-        jobs.release_all()
-        w.close()
+def test_a_request_overtaken_while_computing_is_dropped_and_the_newest_answered(jobs, runner):
+    w = runner()
+    w.submit("held-old", tag=1.0)
+    jobs.started("held-old")
+    w.submit("held-new", tag=2.0)                        # a newer request while the old one computes
+    jobs.go("held-old")
+    jobs.started("held-new")                             # the old one has finished: its answer ...
+    assert not w.ready                                   # ... was dropped
+    jobs.go("held-new")
+    _until(lambda: w.ready)
+    ans = w.take()
+    assert (ans.tag, ans.value) == (2.0, "held-new")
+    assert jobs.calls == ["held-old", "held-new"] and not w.busy and not w.ready
 
 
-def test_a_request_not_yet_started_is_replaced_by_a_newer_one():
-    jobs = _TaggedJobs()
-    w = _runner(jobs)
-    try:
-        w.submit("held-first")
-        jobs.started("held-first")
-        w.submit("second")                               # waits behind the first ...
-        w.submit("third")                                # ... and is replaced
-        jobs.go("held-first")
-        _until(lambda: w.ready)
-        assert w.take().value == "third" and jobs.calls == ["held-first", "third"]
-        assert w.released == 3
-    finally:
-        jobs.release_all()
-        w.close()
+def test_an_answer_not_yet_taken_is_dropped_by_a_newer_request(jobs, runner):
+    w = runner()
+    w.submit("old", tag=1.0)
+    _until(lambda: w.ready)                              # answered, not yet taken ...
+    w.submit("held-new", tag=2.0)                        # ... when a newer request comes
+    assert not w.ready                                   # the old answer is not there to take
+    jobs.go("held-new")
+    _until(lambda: w.ready)
+    assert w.take().tag == 2.0
 
 
-def test_every_answer_is_kept_by_its_tag_and_requests_go_before_the_backlog():
-    jobs = _TaggedJobs()
-    w = _runner(jobs, keep=EVERY)
-    try:
-        w.queue([("b1", ("held-b1",)), ("b2", ("b2",))])
-        jobs.started("held-b1")
-        w.submit("r", tag="r")                           # served before the rest of the backlog
-        jobs.go("held-b1")
-        assert w.wait_idle(SANITY_S)
-        assert jobs.calls == ["held-b1", "r", "b2"]
-        assert w.pop("r").value == "r" and w.pop("r") is None
-        assert [(a.tag, a.value) for a in w.pop_all()] == [("b1", "held-b1"), ("b2", "b2")]
-    finally:
-        jobs.release_all()
-        w.close()
+def test_a_request_not_yet_started_is_replaced_by_a_newer_one(jobs, runner):
+    w = runner()
+    w.submit("held-first")
+    jobs.started("held-first")
+    w.submit("second")                                   # waits behind the first ...
+    w.submit("third")                                    # ... and is replaced
+    jobs.go("held-first")
+    _until(lambda: w.ready)
+    assert w.take().value == "third" and jobs.calls == ["held-first", "third"]
+    assert w.released == 3
 
 
-def test_cancel_drops_the_waiting_request_and_the_backlog():
-    jobs = _TaggedJobs()
-    w = _runner(jobs, keep=EVERY)
-    try:
-        w.queue([("b1", ("held-b1",)), ("b2", ("b2",))])
-        jobs.started("held-b1")
-        w.submit("r", tag="r")
-        w.cancel()
-        jobs.go("held-b1")                               # the running one finishes and is kept
-        assert w.wait_idle(SANITY_S)
-        assert jobs.calls == ["held-b1"] and [a.tag for a in w.pop_all()] == ["b1"]
-    finally:
-        jobs.release_all()
-        w.close()
+def _a_request_behind_a_held_backlog(jobs, runner) -> BackgroundJob:
+    """A runner keeping every answer: computing held-b1 of its backlog (b1, b2), with r submitted."""
+    w = runner(keep=EVERY)
+    w.queue([("b1", ("held-b1",)), ("b2", ("b2",))])
+    jobs.started("held-b1")
+    w.submit("r", tag="r")
+    return w
 
 
-def test_in_place_the_answer_is_there_when_submit_returns_and_no_thread_runs():
+def test_every_answer_is_kept_by_its_tag_and_requests_go_before_the_backlog(jobs, runner):
+    w = _a_request_behind_a_held_backlog(jobs, runner)
+    jobs.go("held-b1")                                   # then r, before the rest of the backlog
+    assert w.wait_idle(SANITY_S)
+    assert jobs.calls == ["held-b1", "r", "b2"]
+    assert w.pop("r").value == "r" and w.pop("r") is None
+    assert [(a.tag, a.value) for a in w.pop_all()] == [("b1", "held-b1"), ("b2", "b2")]
+
+
+def test_cancel_drops_the_waiting_request_and_the_backlog(jobs, runner):
+    w = _a_request_behind_a_held_backlog(jobs, runner)
+    w.cancel()
+    jobs.go("held-b1")                                   # the running one finishes and is kept
+    assert w.wait_idle(SANITY_S)
+    assert jobs.calls == ["held-b1"] and [a.tag for a in w.pop_all()] == ["b1"]
+
+
+def test_in_place_the_answer_is_there_when_submit_returns_and_no_thread_runs(runner):
     callers = []
 
     def job(x):
         callers.append(threading.current_thread())
         return 2 * x
-    w = _runner(job, mode=IN_PLACE)
+    w = runner(job, mode=IN_PLACE)
     w.submit(21, tag="t", t_s=3.0)
     assert not w.alive and callers == [threading.current_thread()]
     ans = w.take(3.0)
     assert (ans.value, ans.tag, ans.t_s) == (42, "t", 3.0) and w.take(3.0) is None
     assert w.warm(1) and callers == [threading.current_thread()]     # nothing to warm in place
-    w.close()
 
 
-def test_awaited_the_answer_is_not_handed_over_before_its_due_step_and_waited_for_at_it():
-    jobs = _TaggedJobs()
-    w = _runner(jobs, mode=AWAITED)
-    try:
-        w.submit("held", tag=1, t_s=0.0, due_t=0.5)
-        jobs.started("held")
-        assert w.take(0.48) is None                      # not due: returns at once, not late
-        threading.Timer(0.05, jobs.go, ("held",)).start()
-        ans = w.take(0.5)                                # due: waits for it
-        assert ans.value == "held" and w.late == 0 and w.due_t == math.inf
-    finally:
-        jobs.release_all()
-        w.close()
+def test_awaited_the_answer_is_not_handed_over_before_its_due_step_and_waited_for_at_it(jobs, runner):
+    w = runner(mode=AWAITED)
+    w.submit("held", tag=1, t_s=0.0, due_t=0.5)
+    jobs.started("held")
+    assert w.take(0.48) is None                          # not due: returns at once, not late
+    threading.Timer(0.05, jobs.go, ("held",)).start()
+    ans = w.take(0.5)                                    # due: waits for it
+    assert ans.value == "held" and w.late == 0 and w.due_t == math.inf
 
 
-def test_in_real_time_an_answer_missing_at_its_due_step_is_one_overrun_and_taken_when_it_arrives():
-    jobs = _TaggedJobs()
+def test_in_real_time_an_answer_missing_at_its_due_step_is_one_overrun_and_taken_when_it_arrives(jobs, runner):
     events = EventLog()
-    w = _runner(jobs, events=events, source="guidance", event_name="guidance")
-    try:
-        w.submit("held", tag=-1.0, t_s=1.0, due_t=1.5)
-        assert w.take(1.48) is None and w.late == 0
-        assert w.take(1.5) is None and w.late == 1 and w.overdue
-        assert w.take(1.52) is None and w.late == 1       # counted once
-        [ev] = [e for e in events.history if e.code == "guidance_overrun"]
-        assert (ev.t_s, ev.text, ev.source) == (1.5, "GUIDANCE CYCLE OVERRUN: COMMAND KEPT", "guidance")
-        jobs.go("held")
-        _until(lambda: w.ready)
-        ans = w.take(1.54)                               # the first take after it arrived
-        assert (ans.value, ans.tag, ans.t_s) == ("held", -1.0, 1.0)
-        assert not w.overdue and w.due_t == math.inf and w.late == 1
-    finally:
-        jobs.release_all()
-        w.close()
+    w = runner(events=events, source="guidance", event_name="guidance")
+    w.submit("held", tag=-1.0, t_s=1.0, due_t=1.5)
+    assert w.take(1.48) is None and w.late == 0
+    assert w.take(1.5) is None and w.late == 1 and w.overdue
+    assert w.take(1.52) is None and w.late == 1           # counted once
+    [ev] = [e for e in events.history if e.code == "guidance_overrun"]
+    assert (ev.t_s, ev.text, ev.source) == (1.5, "GUIDANCE CYCLE OVERRUN: COMMAND KEPT", "guidance")
+    jobs.go("held")
+    _until(lambda: w.ready)
+    ans = w.take(1.54)                                   # the first take after it arrived
+    assert (ans.value, ans.tag, ans.t_s) == ("held", -1.0, 1.0)
+    assert not w.overdue and w.due_t == math.inf and w.late == 1
 
 
-def test_a_request_while_busy_is_refused_and_counted_when_the_job_keeps_its_cadence():
-    jobs = _TaggedJobs()
+def test_a_request_while_busy_is_refused_and_counted_when_the_job_keeps_its_cadence(jobs, runner):
     events = EventLog()
-    w = _runner(jobs, skip_while_busy=True, events=events, source="guidance", event_name="guidance")
-    try:
-        assert w.submit("held", t_s=1.0, due_t=1.5)
-        jobs.started("held")
-        assert not w.submit("next", t_s=2.0, due_t=2.5)
-        assert (w.released, w.skipped, w.due_t) == (1, 1, 1.5)
-        [ev] = [e for e in events.history if e.code == "guidance_overrun"]
-        assert (ev.t_s, ev.text) == (2.0, "GUIDANCE CYCLE SKIPPED: PREVIOUS STILL RUNNING")
-        jobs.go("held")
-        _until(lambda: w.ready)
-        assert w.take(2.0).value == "held" and jobs.calls == ["held"]
-    finally:
-        jobs.release_all()
-        w.close()
+    w = runner(skip_while_busy=True, events=events, source="guidance", event_name="guidance")
+    assert w.submit("held", t_s=1.0, due_t=1.5)
+    jobs.started("held")
+    assert not w.submit("next", t_s=2.0, due_t=2.5)
+    assert (w.released, w.skipped, w.due_t) == (1, 1, 1.5)
+    [ev] = [e for e in events.history if e.code == "guidance_overrun"]
+    assert (ev.t_s, ev.text) == (2.0, "GUIDANCE CYCLE SKIPPED: PREVIOUS STILL RUNNING")
+    jobs.go("held")
+    _until(lambda: w.ready)
+    assert w.take(2.0).value == "held" and jobs.calls == ["held"]
 
 
 @pytest.mark.parametrize("mode", [IN_PLACE, REALTIME])
-def test_a_job_that_raises_is_a_counted_fault_and_an_event_and_the_runner_serves_on(mode):
+def test_a_job_that_raises_is_a_counted_fault_and_an_event_and_the_runner_serves_on(runner, mode):
     def job(x):
         if x == "bad":
             raise ValueError("no answer")
         return x
     events = EventLog()
-    w = _runner(job, mode=mode, events=events, source="guidance", event_name="controllability")
-    try:
-        w.submit("bad", t_s=4.0)
-        assert w.wait_idle(SANITY_S) and w.faults == 1
-        assert w.take(5.0) is None                       # reported, not handed over
-        [ev] = [e for e in events.history if e.code == "controllability_fault"]
-        assert (ev.t_s, ev.text) == (4.0, "CONTROLLABILITY FAULT: ValueError: no answer")
-        w.submit("good", t_s=6.0)
-        assert w.wait_idle(SANITY_S) and w.take(6.0).value == "good" and w.faults == 1
-    finally:
-        w.close()
+    w = runner(job, mode=mode, events=events, source="guidance", event_name="controllability")
+    w.submit("bad", t_s=4.0)
+    assert w.wait_idle(SANITY_S) and w.faults == 1
+    assert w.take(5.0) is None                           # reported, not handed over
+    [ev] = [e for e in events.history if e.code == "controllability_fault"]
+    assert (ev.t_s, ev.text) == (4.0, "CONTROLLABILITY FAULT: ValueError: no answer")
+    w.submit("good", t_s=6.0)
+    assert w.wait_idle(SANITY_S) and w.take(6.0).value == "good" and w.faults == 1
 
 
-def test_warm_up_runs_the_job_on_its_own_thread_and_discards_the_answer():
+def test_warm_up_runs_the_job_on_its_own_thread_and_discards_the_answer(runner):
     threads = []
 
     def job(x):
         threads.append(threading.current_thread().name)
         return x
-    w = _runner(job)
-    try:
-        assert w.warm("x", timeout_s=SANITY_S)
-        assert threads == ["test-job"] and not w.ready and w.take() is None and w.released == 0
-    finally:
-        w.close()
+    w = runner(job)
+    assert w.warm("x", timeout_s=SANITY_S)
+    assert threads == ["test-job"] and not w.ready and w.take() is None and w.released == 0
+    w.close()
     assert not w.alive
 
 

@@ -39,6 +39,7 @@ class GroundCommands:
     t_s: float
 
     def health_changed(self) -> None:
+        """FlightSoftware's: the allocator and the authority supervisor take the new health."""
         raise NotImplementedError
 
     def cmd_mode(self, mode) -> Reply:

@@ -453,8 +453,8 @@ def _guided(job=None) -> _Flight:
     """Guided flight; ``job(correct, *args)`` replaces the correction when given."""
     fl = _Flight("guided-nominal")
     if job is not None:
-        correct = fl.fsw.entry._correct
-        fl.fsw.entry._correct = lambda *a: job(correct, *a)
+        correct = fl.fsw.entry.job.fn
+        fl.fsw.entry.job.fn = lambda *a: job(correct, *a)
     return fl
 
 
@@ -494,7 +494,7 @@ def _longest_c_call_of_the_guidance(burn=None) -> LongestCCall:
         return correct(*a)
     fl = _guided(job)
     eg = fl.fsw.entry
-    eg._correct = meter.wrap(eg._correct)
+    eg.job.fn = meter.wrap(eg.job.fn)
     try:
         t_end = time.monotonic() + SANITY_S
         while eg.cycles < 3:
@@ -531,9 +531,9 @@ def test_a_guidance_answer_is_applied_at_its_due_step_not_before():
     eg = fl.fsw.entry
     try:
         fl.step()                                        # t = 0: the first cycle is released
-        t_rel, due = eg._t_cycle, eg._due_t
+        t_rel, due = eg._t_cycle, eg.job.due_t
         assert due == pytest.approx(t_rel + eg.apply_delay_s)
-        assert eg._done.wait(SANITY_S)                   # the answer is there long before it is due
+        assert eg.job.wait_idle(SANITY_S)                   # the answer is there long before it is due
         while fl.t_next < due:
             fl.step()
             assert eg.cycles == 0
@@ -570,10 +570,10 @@ def test_a_guidance_answer_late_for_its_due_step_is_an_overrun_and_the_previous_
     overruns = lambda: [e for e in fl.fsw.events.history if e.code == "guidance_overrun"]  # noqa: E731
     try:
         fl.step()                                        # t = 0: the first release
-        assert eg._done.wait(SANITY_S)                   # its answer in before it is due
+        assert eg.job.wait_idle(SANITY_S)                   # its answer in before it is due
         _fly_through(fl, 1.0)                            # applied at 0.5; the second released at 1.0
         assert eg.cycles == 1 and eg.overruns == 0
-        t_rel, due = eg._t_cycle, eg._due_t
+        t_rel, due = eg._t_cycle, eg.job.due_t
         assert t_rel == pytest.approx(1.0)
         kept = (eg.bank0_cmd, eg._line)
         _fly_through(fl, due)                            # the due step, no answer
@@ -583,10 +583,10 @@ def test_a_guidance_answer_late_for_its_due_step_is_an_overrun_and_the_previous_
         _fly_through(fl, t_rel + 1.0)                    # the next release, still computing
         # counted; its event ("SKIPPED") throttled with the overrun's (one code, 1 s apart)
         assert eg.overruns == 2 and len(overruns()) == 1 and fl.fsw.events._held["guidance_overrun"][0] == 1
-        assert eg._job[-1] == t_rel and len(n_jobs) <= 2  # no new job released
+        assert eg.job.released == 2 and len(n_jobs) <= 2  # no new job released
         assert eg.cycles == 1 and (eg.bank0_cmd, eg._line) == kept
         go.set()
-        assert eg._done.wait(SANITY_S)
+        assert eg.job.wait_idle(SANITY_S)
         assert eg.cycles == 1                            # arrived; only a control cycle applies it
         fl.step()
         assert eg.cycles == 2 and eg.t_hist[1] == t_rel  # stamped with its release, not now
@@ -619,10 +619,10 @@ def _correction_held_to_its_due_step(f: FlightSoftware) -> None:
     is due at: as late as an answer can come."""
     eg = f.entry
     due = threading.Event()
-    steer, correct = eg.steer, eg._correct
+    steer, correct = eg.steer, eg.job.fn
 
     def steer_noting_the_due_step(nav):
-        if nav.t_s >= eg._due_t:
+        if nav.t_s >= eg.job.due_t:
             due.set()
         steer(nav)
 
@@ -630,7 +630,7 @@ def _correction_held_to_its_due_step(f: FlightSoftware) -> None:
         assert due.wait(SANITY_S)
         due.clear()
         return correct(*a)
-    eg.steer, eg._correct = steer_noting_the_due_step, held
+    eg.steer, eg.job.fn = steer_noting_the_due_step, held
 
 
 def test_batch_is_the_same_bit_for_bit_when_every_answer_comes_only_at_its_due_step(monkeypatch):

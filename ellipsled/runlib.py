@@ -205,7 +205,7 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
 def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> float | None:
     """max |bank - the scenario's own smoothed schedule| after the fault [deg]: the bank error
     against the reference before any re-plan (the FSW's re-planned reference may lag it)."""
-    from fsw.guidance import BankProfile
+    from fsw.guidance.reference import BankProfile
     t = h["t_s"]
     t_f = min((tf for tf, _, _ in faults_applied), default=2.5)
     m = t >= t_f

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .guidance import _S2_MAX
+from .guidance.reference import _S2_MAX
 from .health import STUCK_ON, JetHealth
 from .lp import set_colwise_matrix, solve_or_none
 
@@ -81,7 +81,7 @@ def schedule_accel_need_radps2(schedule, t_from_s: float) -> float:
     """The bank acceleration [rad/s^2] a minimum-jerk reference needs to fly every step of the
     schedule ((t_s, bank_rad) pairs) not yet finished at ``t_from_s`` before the next step is due
     (the last step: within the interval before it): max_k (10/sqrt 3) |dphi_k| / gap_k^2
-    (guidance.BankProfile's transition). 0 when no step remains. A perfect controller needs no
+    (guidance.reference.BankProfile's transition). 0 when no step remains. A perfect controller needs no
     more than this; the guidance keeps a margin on top (flightsoftware.FlightSoftware)."""
     t = [float(x[0]) for x in schedule]
     phi = [float(x[1]) for x in schedule]

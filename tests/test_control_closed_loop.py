@@ -9,7 +9,7 @@ import pytest
 from common import frames, mrp
 from common.model import inertia_matrix, inertia_vector, load_vehicle
 from fsw.control import SamiController
-from fsw.guidance import BankProfile, Guidance
+from fsw.guidance.reference import BankProfile, Guidance
 from fsw.navigation import NavState
 from fsw.params import load_params
 

@@ -68,7 +68,7 @@ def test_npc_status_carries_the_flight_softwares_own_guidance_figures(guided):
     assert m.predicted_alt == pytest.approx(e.pred_h_m, rel=1e-6)
     assert m.time_to_go == pytest.approx(e.t_go_s, rel=1e-6)
     # phi_0 flown (the corrector's own parameter goes beyond the bounds when it holds one)
-    assert m.bank_0 == pytest.approx(e.bank0_cmd, rel=1e-6) and e.bank_lo - 1e-6 <= m.bank_0 <= e.bank_hi + 1e-6
+    assert m.bank_0 == pytest.approx(e.bank0_cmd, rel=1e-6) and e.bank_min_rad - 1e-6 <= m.bank_0 <= e.bank_max_rad + 1e-6
     assert m.bank_cmd == pytest.approx(e.bank_cmd, rel=1e-6) and 0.0 < m.bank_cmd < math.pi
     assert m.bank_sign == (1 if e.lateral.sign > 0 else -1)
     assert m.density_scale == pytest.approx(e.estimator.k_rho, rel=1e-6)
@@ -112,16 +112,17 @@ def test_a_reversal_decision_reaches_the_ground_with_its_time_and_rule(guided):
 def test_non_finite_values_never_go_out(guided):
     rig = guided
     e, fsw = rig.fsw.entry, rig.fsw
-    saved = (e.pred_h_m, e.bank_cmd, fsw.controllability)
+    auth = fsw.authority
+    saved = (e.pred_h_m, e.bank_cmd, auth.controllability)
     try:
         e.pred_h_m = math.nan
         e.bank_cmd = math.inf
-        if fsw.controllability is not None:
-            fsw.controllability = dataclasses.replace(fsw.controllability, authority_neg_radps2=math.nan,
-                                                      trim_needed_deg=math.inf)
+        if auth.controllability is not None:
+            auth.controllability = dataclasses.replace(auth.controllability, authority_neg_radps2=math.nan,
+                                                       trim_needed_deg=math.inf)
         m = fresh(rig, fsw.t_s)
     finally:
-        e.pred_h_m, e.bank_cmd, fsw.controllability = saved
+        e.pred_h_m, e.bank_cmd, auth.controllability = saved
     assert all(math.isfinite(getattr(m, f)) for f in FLOATS)
     assert not m.flags & (F.ELLIPSLED_GUIDANCE_FLAGS_PREDICTION | F.ELLIPSLED_GUIDANCE_FLAGS_LP
                           | F.ELLIPSLED_GUIDANCE_FLAGS_TRIM)

@@ -162,9 +162,9 @@ def test_npc_bounds_must_stay_ordered_and_a_set_applies_at_the_next_guidance_cyc
         v = _set_and_wait(r, "N_BANK_MIN_DEG", 90.0)                     # would empty [min, max)
         assert v == f32(10.0) and r.fsw.params["npc.bank_min_deg"] == 10.0
         assert any(t.startswith("N_BANK_MIN_DEG REFUSED: needs bank_min < bank_max") for t in r.texts())
-        assert e.bank_hi == pytest.approx(math.radians(165.0))         # not before the next cycle
+        assert e.bank_max_rad == pytest.approx(math.radians(165.0))         # not before the next cycle
         r.fly(50)                                                     # the guidance cycle at 1 s
-        assert e.bank_hi == pytest.approx(math.radians(90.0)) and e.params["npc.bank_max_deg"] == 90.0
+        assert e.bank_max_rad == pytest.approx(math.radians(90.0)) and e.params["npc.bank_max_deg"] == 90.0
         assert "GUIDANCE NPC.BANK_MAX_DEG 90" in r.texts()
     finally:
         r.close()

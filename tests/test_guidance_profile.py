@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from common.model import load_scenario
-from fsw.guidance import BankProfile
+from fsw.guidance.reference import BankProfile
 
 D = math.radians
 

@@ -8,7 +8,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from common import frames, mrp
-from fsw.guidance import BankProfile, Guidance
+from fsw.guidance.reference import BankProfile, Guidance
 from fsw.navigation import NavState
 
 MU = 4.2828e13

@@ -1,4 +1,4 @@
-"""Predictor-corrector entry guidance (fsw/npc.py, spec 60-guidance.md), each piece
+"""Predictor-corrector entry guidance (fsw/guidance/, spec 60-guidance.md), each piece
 against independent truth: the plant's own trajectory, a known root, a scripted heading
 history, a known density scale."""
 from __future__ import annotations
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from common.model import load_scenario
-from fsw import npc
+from common.events import EventLog
+from fsw.guidance import corrector, estimator, geometry, lateral, npc, predictor, shaper
 from fsw.navigation import Navigation
 from fsw.params import load_params
 from sim.openloop import OMEGA_N_RADPS, ZETA, ideal_torque
@@ -29,7 +30,7 @@ def fly_plant(scn, bank_of_energy, every=None):
     I = plant.inertia_truth_kgm2
     kp, kd = OMEGA_N_RADPS ** 2, 2 * ZETA * OMEGA_N_RADPS
     u, tau, C = np.zeros(18, np.uint8), np.zeros(3), np.zeros((3, 3))
-    x0 = npc.planet_fixed(plant.x[:3], plant.x[3:6], 0.0, pl.omega_radps)
+    x0 = geometry.planet_fixed(plant.x[:3], plant.x[3:6], 0.0, pl.omega_radps)
     e0 = pl.mu_m3ps2 / np.linalg.norm(x0[:3]) - 0.5 * float(x0[3:] @ x0[3:])
     frames = []
     while True:
@@ -51,48 +52,48 @@ def test_predictor_matches_the_plant_flown_open_loop_with_the_same_bank_history(
     differs: the plant flies 6-DOF with alpha and beta excursions and lift slope, the
     predictor at trim."""
     b0, bf = math.radians(130.0), math.radians(PARAMS["npc.bank_final_deg"])
-    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
-    xs = npc.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    xs = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
     e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(xs[:3]) - 0.5 * float(xs[3:] @ xs[3:])
     x0, _, tr, reason, _ = fly_plant(SCN, lambda e: b0 + (bf - b0) * min(1.0, max(0.0, (e - e0) / (ef - e0))))
     assert reason == "mach"
-    c = npc.predictor_constants(SCN, PARAMS)
-    c[npc.C_KRHO] = SCN.truth.density_scale
-    c[npc.C_NLIM] = c[npc.C_QLIM] = 0.0          # the plant flies the law without the path-limit feedback
-    out = np.zeros(npc.N_O)
-    npc.predict(x0, c, b0, bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
-    assert out[npc.O_FLAG] == npc.REACHED
+    c = predictor.predictor_constants(SCN, PARAMS)
+    c[predictor.C_KRHO] = SCN.truth.density_scale
+    c[predictor.C_NLIM] = c[predictor.C_QLIM] = 0.0          # the plant flies the law without the path-limit feedback
+    out = np.zeros(predictor.N_O)
+    predictor.predict(x0, c, b0, bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
+    assert out[predictor.O_FLAG] == predictor.REACHED
     R = SCN.planet.radius_m
-    plant_end = npc.unit_from_latlon(tr["lat_rad"], tr["lon_rad"])
-    flown = npc.central_angle(x0[:3], plant_end) * R
-    miss = npc.central_angle(out[:3], plant_end) * R
+    plant_end = geometry.unit_from_latlon(tr["lat_rad"], tr["lon_rad"])
+    flown = geometry.central_angle(x0[:3], plant_end) * R
+    miss = geometry.central_angle(out[:3], plant_end) * R
     assert flown > 500e3
     assert miss < 0.01 * flown, (miss, flown)
-    assert out[npc.O_T] == pytest.approx(tr["t_s"], rel=0.02)
-    assert out[npc.O_H] == pytest.approx(tr["h_m"], abs=1500.0)
+    assert out[predictor.O_T] == pytest.approx(tr["t_s"], rel=0.02)
+    assert out[predictor.O_H] == pytest.approx(tr["h_m"], abs=1500.0)
     # and a bank 10 deg off moves the prediction by much more than that error (the test can fail)
-    npc.predict(x0, c, b0 - math.radians(10.0), bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
-    assert npc.central_angle(out[:3], plant_end) * R > 3 * miss
+    predictor.predict(x0, c, b0 - math.radians(10.0), bf, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
+    assert geometry.central_angle(out[:3], plant_end) * R > 3 * miss
 
 
 def test_root_finder_recovers_a_known_bank():
     """Fly the predictor at phi_0* = 120 deg, put the target where it ends, start the
     corrector at 70 deg (a skip-out there: the corrector must walk out of it): it must find
     phi_0* again."""
-    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
-    eg = npc.EntryGuidance(SCN, dict(PARAMS, **{"npc.max_iter": 20}), npc.EventLog(), 0.02)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    eg = npc.EntryGuidance(SCN, dict(PARAMS, **{"npc.max_iter": 20}), EventLog(), 0.02)
     try:
-        x = npc.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
-        out = np.zeros(npc.N_O)
+        x = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+        out = np.zeros(predictor.N_O)
         b_star = math.radians(120.0)
         e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
-        npc.predict(x, eg.c, b_star, eg.bank_f, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
+        predictor.predict(x, eg.constants, b_star, eg.bank_final_rad, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
         r = out[:3] / np.linalg.norm(out[:3])
         eg.target_u = r
         eg.bank0 = math.radians(70.0)
         res = eg.solve(x, 1.0, 1.0, 1.0)
-        assert res["ok"] and res["calls"] <= 21
-        assert math.degrees(res["bank0"]) == pytest.approx(120.0, abs=0.2)
+        assert res["ok"] and res["predictions"] <= 21
+        assert math.degrees(res["bank0_rad"]) == pytest.approx(120.0, abs=0.2)
         assert abs(res["miss_m"]) <= PARAMS["npc.tol_m"]
     finally:
         eg.close()
@@ -110,19 +111,19 @@ def test_secant_on_a_known_function_and_the_no_root_case():
     def z(x):
         n_calls.append(x)
         return math.atan(3.0 * (root - x)) * 1e4 + (root - x) ** 3 * 1e3   # monotonic, decreasing
-    x, zx, n, ok = npc.solve_bank(z, 0.1, 2.8, 2.0, tol=1e-3, max_iter=20)
+    x, zx, n, ok = corrector.solve_bank(z, 0.1, 2.8, 2.0, tol=1e-3, max_iter=20)
     assert ok and x == pytest.approx(root, abs=1e-6) and n == len(n_calls) <= 12
     # no root inside: the bound nearest the root, flagged
-    x, zx, n, ok = npc.solve_bank(z, 1.0, 2.8, 2.0, tol=1e-3, max_iter=20)
+    x, zx, n, ok = corrector.solve_bank(z, 1.0, 2.8, 2.0, tol=1e-3, max_iter=20)
     assert not ok and x == 1.0
-    x, zx, n, ok = npc.solve_bank(lambda v: -z(v), 0.1, 0.5, 0.3, tol=1e-3, max_iter=20)
+    x, zx, n, ok = corrector.solve_bank(lambda v: -z(v), 0.1, 0.5, 0.3, tol=1e-3, max_iter=20)
     assert not ok and x == 0.5
 
 
 def test_reversal_logic_on_a_scripted_heading_history():
     p = dict(PARAMS, **{"npc.dpsi_hi_deg": 8.0, "npc.dpsi_lo_deg": 2.0, "npc.rev_gap_s": 20.0,
                         "npc.v_norev_mps": 800.0})
-    lat = npc.LateralLogic(p, v_hi_mps=7000.0, v_lo_mps=500.0, sign0=1.0)
+    lat = lateral.LateralLogic(p, v_hi_mps=7000.0, v_lo_mps=500.0, sign0=1.0)
     assert math.degrees(lat.corridor(7000.0)) == pytest.approx(8.0)
     assert math.degrees(lat.corridor(3750.0)) == pytest.approx(5.0)
     assert math.degrees(lat.corridor(100.0)) == pytest.approx(2.0)
@@ -150,7 +151,7 @@ def test_density_estimator_recovers_a_known_density_scale():
                         max_duration_s=120.0)
         _, _, _, _, frames = fly_plant(scn, lambda e: math.radians(120.0), every=1)
         nav = Navigation(scn.planet, scn.vehicle)
-        est = npc.DensityEstimator(PARAMS, scn.vehicle.S_ref_m2, scn.vehicle.mass_kg, scn.vehicle.aero.C_L,
+        est = estimator.DensityEstimator(PARAMS, scn.vehicle.S_ref_m2, scn.vehicle.mass_kg, scn.vehicle.aero.C_L,
                                    scn.vehicle.aero.C_D)
         for t, f, _ in frames:
             n = nav.update(t, f["sigma_BN"], f["omega_BN_B"], f["r_N"], f["v_N"], f["accel_B"])
@@ -162,7 +163,7 @@ def test_density_estimator_recovers_a_known_density_scale():
 
 def test_shaper_respects_the_limits_and_reverses_the_shorter_way():
     dt, w, a = 0.02, math.radians(8.0), math.radians(1.0)
-    sh = npc.BankShaper(math.radians(60.0), w, a, dt)
+    sh = shaper.BankShaper(math.radians(60.0), w, a, dt)
     sh.command(math.radians(-60.0))          # 120 deg through 0 (lift up), not 240 through 180
     phis, rates, accs = [], [], []
     for k in range(3000):
@@ -170,7 +171,7 @@ def test_shaper_respects_the_limits_and_reverses_the_shorter_way():
         phis.append(p), rates.append(pd), accs.append(pdd)
     assert max(abs(r) for r in rates) <= w + 1e-9 and max(abs(x) for x in accs) <= a + 1e-9
     assert math.degrees(phis[-1]) == pytest.approx(-60.0, abs=0.05) and min(phis) > math.radians(-60.5)
-    sh2 = npc.BankShaper(math.radians(120.0), w, a, dt)
+    sh2 = shaper.BankShaper(math.radians(120.0), w, a, dt)
     sh2.command(math.radians(-120.0))        # above 90 deg the shorter way is through 180 (lift down)
     for k in range(3000):
         p, _, _ = sh2.evaluate(k * dt)
@@ -251,10 +252,10 @@ def test_corridor_reverses_on_a_constructed_heading_error_and_not_towards_the_ta
     for lat_t, want_rev in ((0.5, True), (-0.5, False)):
         lat2, lon2 = math.radians(lat_t), math.radians(5.0)
         bearing = math.atan2(math.sin(lon2) * math.cos(lat2), math.sin(lat2))     # from (0, 0)
-        dpsi, _ = npc.heading_error(x, npc.unit_from_latlon(lat2, lon2))
+        dpsi, _ = geometry.heading_error(x, geometry.unit_from_latlon(lat2, lon2))
         assert math.degrees(dpsi) == pytest.approx(90.0 - math.degrees(bearing), abs=1e-6)
         assert abs(math.degrees(dpsi)) > 5.0
-        lat = npc.LateralLogic(p, v_hi_mps=7000.0, v_lo_mps=500.0, sign0=1.0)
+        lat = lateral.LateralLogic(p, v_hi_mps=7000.0, v_lo_mps=500.0, sign0=1.0)
         assert lat.update(100.0, 3000.0, dpsi) is want_rev
         assert lat.sign == (-1.0 if want_rev else 1.0)
         assert lat.rules == (["corridor"] if want_rev else [])
@@ -266,23 +267,23 @@ def test_final_reversal_fires_when_a_reversal_nulls_the_predicted_deploy_crossra
     'keep right to the end' and 'reverse at tau' (the crossrange function against that
     target), the logic must reverse at tau = 100 s +- 1 s, by the final rule, never by the
     corridor (a heading error inside it)."""
-    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
-    x = npc.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
     e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
-    c = npc.predictor_constants(SCN, PARAMS)
+    c = predictor.predictor_constants(SCN, PARAMS)
     b0, bf, dt, R = math.radians(120.0), math.radians(PARAMS["npc.bank_final_deg"]), PARAMS["npc.dt_pred_s"], \
         SCN.planet.radius_m
-    out = np.zeros(npc.N_O)
-    npc.predict(x, c, b0, bf, e0, ef, -1.0, dt, out, 100.0)       # right (+) before 100 s, left after
-    assert out[npc.O_FLAG] == npc.REACHED
+    out = np.zeros(predictor.N_O)
+    predictor.predict(x, c, b0, bf, e0, ef, -1.0, dt, out, 100.0)       # right (+) before 100 s, left after
+    assert out[predictor.O_FLAG] == predictor.REACHED
     target = out[:3] / np.linalg.norm(out[:3])
-    npc.predict(x, c, b0, bf, e0, ef, 1.0, dt, out, 0.0)
-    keep = npc.crossrange(x[:3], target, out[:3], R)
-    lat = npc.LateralLogic(dict(PARAMS, **{"npc.v_norev_mps": 0.0}), 7300.0, 450.0, sign0=1.0)
+    predictor.predict(x, c, b0, bf, e0, ef, 1.0, dt, out, 0.0)
+    keep = geometry.crossrange(x[:3], target, out[:3], R)
+    lat = lateral.LateralLogic(dict(PARAMS, **{"npc.v_norev_mps": 0.0}), 7300.0, 450.0, sign0=1.0)
     fired = None
     for tau in range(0, 200):
-        npc.predict(x, c, b0, bf, e0, ef, -1.0, dt, out, float(tau))
-        rev = npc.crossrange(x[:3], target, out[:3], R)
+        predictor.predict(x, c, b0, bf, e0, ef, -1.0, dt, out, float(tau))
+        rev = geometry.crossrange(x[:3], target, out[:3], R)
         if lat.update(float(tau), 5000.0, 0.0, keep, rev):
             fired = tau
             break
@@ -292,7 +293,7 @@ def test_final_reversal_fires_when_a_reversal_nulls_the_predicted_deploy_crossra
     # after the final reversal the corridor is off; the prediction alone may reverse again
     assert not lat.update(300.0, 5000.0, math.radians(30.0))
     # and none when the reversal would not end before the deploy
-    lat2 = npc.LateralLogic(dict(PARAMS, **{"npc.v_norev_mps": 0.0}), 7300.0, 450.0, sign0=1.0)
+    lat2 = lateral.LateralLogic(dict(PARAMS, **{"npc.v_norev_mps": 0.0}), 7300.0, 450.0, sign0=1.0)
     assert not lat2.update(100.0, 5000.0, 0.0, keep, -1.0, t_go_s=20.0, t_rev_s=15.0)
     assert lat2.update(100.0, 5000.0, 0.0, keep, -1.0, t_go_s=40.0, t_rev_s=15.0)
 
@@ -319,12 +320,12 @@ def test_shaped_transition_reverses_the_shorter_way_in_the_rest_to_rest_time():
     trapezoidal rate profile within the limits (closed form, BankShaper.transition_s), and
     with a switch at 5 s it holds 136 deg until then; below 90 deg it goes through 0."""
     dtc, w, a, ts = 0.02, math.radians(8.0), math.radians(0.5), 0.5
-    sh = npc.BankShaper(0.0, w, a, dtc)
-    tab = np.zeros(npc.N_TRANSITION)
+    sh = shaper.BankShaper(0.0, w, a, dtc)
+    tab = np.zeros(shaper.N_TRANSITION)
     for phi0, t_switch in ((136.0, 0.0), (136.0, 5.0), (-40.0, 0.0)):
         b = math.radians(phi0)
         shp = np.array([b, 0.0, math.copysign(1.0, b), 0.0, w, a, dtc, abs(b)])
-        n = npc.shaped_transition(shp, b, t_switch, -b, ts, tab)
+        n = shaper.shaped_transition(shp, b, t_switch, -b, ts, tab)
         path = np.degrees(tab[:n])
         swing = 2.0 * min(abs(b), math.pi - abs(b))
         assert (n - 1) * ts == pytest.approx(t_switch + sh.transition_s(swing), abs=1.5), phi0   # + the settling tail
@@ -337,7 +338,7 @@ def test_shaped_transition_reverses_the_shorter_way_in_the_rest_to_rest_time():
         assert np.all(np.abs(np.diff(path)) <= math.degrees(w) * ts + 1e-6)        # the rate limit
     # settled on the command already: nothing to model
     shp = np.array([math.radians(70.0), 0.0, 1.0, 0.0, w, a, dtc, math.radians(70.0)])
-    assert npc.shaped_transition(shp, math.radians(70.0), 0.0, math.radians(70.0), ts, tab) == 1
+    assert shaper.shaped_transition(shp, math.radians(70.0), 0.0, math.radians(70.0), ts, tab) == 1
 
 
 def test_predicting_through_the_shaper_once_settled_is_the_law_and_a_slow_reversal_through_lift_down_costs_range():
@@ -347,22 +348,22 @@ def test_predicting_through_the_shaper_once_settled_is_the_law_and_a_slow_revers
     limit, as the controllability LP gives a degraded vehicle), the longer the lift points
     down and the shorter the predicted range; with a fast shaper it approaches the instant
     reversal of predict."""
-    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
-    x = npc.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
     e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
-    c = npc.predictor_constants(SCN, PARAMS)
+    c = predictor.predictor_constants(SCN, PARAMS)
     b0, bf, dt = math.radians(120.0), math.radians(PARAMS["npc.bank_final_deg"]), PARAMS["npc.dt_pred_s"]
-    ref, out = np.zeros(npc.N_O), np.zeros(npc.N_O)
-    npc.predict(x, c, b0, bf, e0, ef, 1.0, dt, ref, 0.0)
-    npc.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, np.array([b0, 0.0, 1.0, 0.0, 0.1, 0.01, 0.02, b0]), 0.0)
+    ref, out = np.zeros(predictor.N_O), np.zeros(predictor.N_O)
+    predictor.predict(x, c, b0, bf, e0, ef, 1.0, dt, ref, 0.0)
+    predictor.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, np.array([b0, 0.0, 1.0, 0.0, 0.1, 0.01, 0.02, b0]), 0.0)
     assert np.array_equal(out, ref)
 
     def range_km(accel_dps2):
         shp = np.array([-b0, 0.0, -1.0, 0.0, math.radians(8.0), math.radians(accel_dps2), 0.02, b0])
-        npc.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, shp, 0.0)
-        assert out[npc.O_FLAG] == npc.REACHED
-        return npc.central_angle(x[:3], out[:3]) * SCN.planet.radius_m / 1e3
-    r_inst = npc.central_angle(x[:3], ref[:3]) * SCN.planet.radius_m / 1e3
+        predictor.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, shp, 0.0)
+        assert out[predictor.O_FLAG] == predictor.REACHED
+        return geometry.central_angle(x[:3], out[:3]) * SCN.planet.radius_m / 1e3
+    r_inst = geometry.central_angle(x[:3], ref[:3]) * SCN.planet.radius_m / 1e3
     r_slow, r_mid, r_fast = range_km(0.25), range_km(1.0), range_km(100.0)
     assert r_slow < r_mid < r_fast
     assert r_fast == pytest.approx(r_inst, abs=0.02 * r_inst)
@@ -377,23 +378,23 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
     depends on phi_0 and not monotonically: there the floor is a best effort.)"""
     _, _, _, _, frames = fly_plant(SCN.with_(max_duration_s=95.0), lambda e: math.radians(90.0), every=200)
     t, f, _ = [fr for fr in frames if fr[0] >= 90.0][0]
-    x = npc.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
-    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = geometry.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
     e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
-    out = np.zeros(npc.N_O)
+    out = np.zeros(predictor.N_O)
     base = dict(PARAMS, **{"npc.max_iter": 20, "npc.floor_miss_max_m": 1e7})     # unbounded here
-    eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": 0.0}), npc.EventLog(), 0.02)
+    eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": 0.0}), EventLog(), 0.02)
     try:
-        npc.predict(x, eg.c, math.radians(110.0), eg.bank_f, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
+        predictor.predict(x, eg.constants, math.radians(110.0), eg.bank_final_rad, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
         target = out[:3] / np.linalg.norm(out[:3])
         eg.target_u = target
         eg.bank0 = math.radians(100.0)
         free = eg.solve(x, 1.0, 1.0, 1.0)
     finally:
         eg.close()
-    assert free["ok"] and not free["floor"] and math.degrees(free["bank0"]) == pytest.approx(110.0, abs=0.5)
-    for floor_m, binds in ((free["h_f"] + 500.0, True), (free["h_f"] - 2000.0, False)):
-        eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": floor_m}), npc.EventLog(), 0.02)
+    assert free["ok"] and not free["floor"] and math.degrees(free["bank0_rad"]) == pytest.approx(110.0, abs=0.5)
+    for floor_m, binds in ((free["h_final_m"] + 500.0, True), (free["h_final_m"] - 2000.0, False)):
+        eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": floor_m}), EventLog(), 0.02)
         try:
             eg.target_u = target
             eg.bank0 = math.radians(100.0)
@@ -402,25 +403,25 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
             eg.close()
         assert res["floor"] is binds
         if binds:
-            assert res["h_f"] >= floor_m - PARAMS["npc.tol_m"]
-            assert res["bank0"] < free["bank0"] and res["miss_m"] > 10e3         # long
-            assert res["b_range"] == pytest.approx(free["bank0"], abs=1e-6)     # next cycle's warm start
+            assert res["h_final_m"] >= floor_m - PARAMS["npc.tol_m"]
+            assert res["bank0_rad"] < free["bank0_rad"] and res["miss_m"] > 10e3         # long
+            assert res["p_range_rad"] == pytest.approx(free["bank0_rad"], abs=1e-6)     # next cycle's warm start
             res_binds = res
         else:
-            assert res["bank0"] == free["bank0"] and res["h_f"] == free["h_f"]
+            assert res["bank0_rad"] == free["bank0_rad"] and res["h_final_m"] == free["h_final_m"]
     # a trade bounded to half that miss: the floor gives up less (below the floor, within the bound)
     traded = res_binds["miss_m"]
-    p = dict(base, **{"npc.h_floor_m": free["h_f"] + 500.0, "npc.floor_miss_max_m": 0.5 * traded})
-    eg = npc.EntryGuidance(SCN, p, npc.EventLog(), 0.02)
+    p = dict(base, **{"npc.h_floor_m": free["h_final_m"] + 500.0, "npc.floor_miss_max_m": 0.5 * traded})
+    eg = npc.EntryGuidance(SCN, p, EventLog(), 0.02)
     try:
         eg.target_u = target
         eg.bank0 = math.radians(100.0)
         res = eg.solve(x, 1.0, 1.0, 1.0)
     finally:
         eg.close()
-    assert res["h_f"] < free["h_f"] + 500.0 - PARAMS["npc.tol_m"]
-    assert free["bank0"] >= res["bank0"] > res_binds["bank0"] and abs(res["miss_m"]) <= 0.5 * traded
-    assert res["floor"] == (res["bank0"] < free["bank0"])      # a trade is flagged; none is the range solution
+    assert res["h_final_m"] < free["h_final_m"] + 500.0 - PARAMS["npc.tol_m"]
+    assert free["bank0_rad"] >= res["bank0_rad"] > res_binds["bank0_rad"] and abs(res["miss_m"]) <= 0.5 * traded
+    assert res["floor"] == (res["bank0_rad"] < free["bank0_rad"])      # a trade is flagged; none is the range solution
 
 
 def test_deploy_altitude_floor_without_a_higher_deploy_keeps_the_range_solution():
@@ -431,13 +432,13 @@ def test_deploy_altitude_floor_without_a_higher_deploy_keeps_the_range_solution(
     floor's line from the bound (a different flight: 61-104 km long in a dispersed run)."""
     _, _, _, _, frames = fly_plant(SCN.with_(max_duration_s=95.0), lambda e: math.radians(90.0), every=200)
     t, f, _ = [fr for fr in frames if fr[0] >= 90.0][0]
-    x = npc.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
-    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = geometry.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
     e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
     base = dict(PARAMS, **{"npc.max_iter": 20, "npc.bank_max_deg": 120.0, "npc.floor_miss_max_m": 2000.0})
-    out = np.zeros(npc.N_O)
+    out = np.zeros(predictor.N_O)
     hi = math.radians(120.0)
-    npc.predict(x, npc.predictor_constants(SCN, base), hi, hi, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
+    predictor.predict(x, predictor.predictor_constants(SCN, base), hi, hi, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
     r_end = out[:3] / np.linalg.norm(out[:3])
     axis = np.cross(x[:3], r_end)
     axis /= np.linalg.norm(axis)
@@ -445,19 +446,19 @@ def test_deploy_altitude_floor_without_a_higher_deploy_keeps_the_range_solution(
     target = r_end * math.cos(ang) + np.cross(axis, r_end) * math.sin(ang)
     res = {}
     for name, h_floor in (("free", 0.0), ("floor", None)):
-        eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": 0.0}), npc.EventLog(), 0.02)
+        eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": 0.0}), EventLog(), 0.02)
         try:
             eg.target_u = target
             eg.bank0 = math.radians(100.0)
             if h_floor is None:
-                eg.params["npc.h_floor_m"] = res["free"]["h_f"] + 500.0
+                eg.params["npc.h_floor_m"] = res["free"]["h_final_m"] + 500.0
             res[name] = eg.solve(x, 1.0, 1.0, 1.0)
         finally:
             eg.close()
     free, fl = res["free"], res["floor"]
     assert not free["ok"] and free["held"] and free["miss_m"] > 5e3       # beyond the bound, long
     assert not fl["floor"] and fl["held"]
-    for k in ("bank0", "b_line", "bank_f", "miss_m", "h_f"):
+    for k in ("bank0_rad", "bank_line_rad", "bank_final_rad", "miss_m", "h_final_m"):
         assert fl[k] == free[k], k
 
 
@@ -466,7 +467,7 @@ def test_final_reversal_at_the_cycle_nearest_the_crossing():
     at the cycle on the nearer side, before the crossing when waiting would overshoot more."""
     p = dict(PARAMS, **{"npc.v_norev_mps": 0.0})
     for before, after, want in ((-0.3e3, 0.9e3, 10), (-0.9e3, 0.3e3, 11)):
-        lat = npc.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+        lat = lateral.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
         xr = {9: before - 1.2e3, 10: before, 11: after}
         fired = [t for t in range(9, 12) if lat.update(float(t), 5000.0, 0.0, 20e3, xr[t])]
         assert fired == [want] and lat.rules == ["final"]
@@ -488,12 +489,12 @@ def test_corrector_family_holds_a_bound_and_the_next_cycle_finds_the_same_profil
     bank rises with p at every energy (more lift down); profile_at re-anchors a profile at a
     later energy into the parameter whose profile is the remainder of the same one."""
     lo, hi, f = math.radians(10.0), math.radians(165.0), math.radians(60.0)
-    p_lo, p_hi = npc.profile_span(lo, hi, f)
+    p_lo, p_hi = corrector.profile_span(lo, hi, f)
     assert (p_lo, p_hi) == pytest.approx((lo - (f - lo), hi + (hi - f)))
     fracs = np.linspace(0.0, 0.99, 34)       # (a bound held "to the end" leaves it in the last 1e-6)
 
     def flown(p, fr):
-        b0, bf = npc.bank_profile(p, lo, hi, f)
+        b0, bf = corrector.bank_profile(p, lo, hi, f)
         return min(hi, max(lo, b0 + (bf - b0) * fr))
     ps = np.linspace(p_lo + 1e-3, p_hi - 1e-3, 301)
     for p in ps:
@@ -506,7 +507,7 @@ def test_corrector_family_holds_a_bound_and_the_next_cycle_finds_the_same_profil
     assert [flown(p_hi, fr) for fr in fracs] == pytest.approx([hi] * len(fracs))   # held to the end
     for p in (math.radians(40.0), math.radians(120.0), p_hi - math.radians(30.0), p_lo + math.radians(20.0)):
         for a in (0.1, 0.4, 0.8):
-            q = npc.profile_at(p, lo, hi, f, a)
+            q = corrector.profile_at(p, lo, hi, f, a)
             for g in np.linspace(0.0, 1.0, 11):
                 assert flown(q, g) == pytest.approx(_held_profile(p, lo, hi, f, a + g * (1.0 - a)), abs=1e-9)
 
@@ -517,27 +518,27 @@ def test_corrector_answers_a_target_only_a_held_bound_reaches():
     flies ~400 km long, so the plain family has no root; the answer holds the bound to
     (nearly) the end and its prediction lands on the target (the deploy-altitude floor off:
     this dive deploys at 1.5 km)."""
-    ef = npc.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
-    x = npc.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
     e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
     p = dict(PARAMS, **{"npc.max_iter": 20, "npc.bank_max_deg": 110.0, "npc.h_floor_m": 0.0})
-    eg = npc.EntryGuidance(SCN, p, npc.EventLog(), 0.02)
+    eg = npc.EntryGuidance(SCN, p, EventLog(), 0.02)
     try:
-        hi, dt = eg.bank_hi, PARAMS["npc.dt_pred_s"]
-        out = np.zeros(npc.N_O)
-        npc.predict(x, eg.c, hi, hi, e0, ef, 1.0, dt, out, 0.0)
-        assert out[npc.O_FLAG] == npc.REACHED
+        hi, dt = eg.bank_max_rad, PARAMS["npc.dt_pred_s"]
+        out = np.zeros(predictor.N_O)
+        predictor.predict(x, eg.constants, hi, hi, e0, ef, 1.0, dt, out, 0.0)
+        assert out[predictor.O_FLAG] == predictor.REACHED
         eg.target_u = out[:3] / np.linalg.norm(out[:3])
-        s_togo = npc.central_angle(x[:3], eg.target_u) * eg.R
-        npc.predict(x, eg.c, hi, eg.bank_f, e0, ef, 1.0, dt, out, 0.0)
-        assert npc.central_angle(x[:3], out[:3]) * eg.R - s_togo > 200e3     # the plain family's best: long
+        s_togo = geometry.central_angle(x[:3], eg.target_u) * eg.radius_m
+        predictor.predict(x, eg.constants, hi, eg.bank_final_rad, e0, ef, 1.0, dt, out, 0.0)
+        assert geometry.central_angle(x[:3], out[:3]) * eg.radius_m - s_togo > 200e3     # the plain family's best: long
         eg.bank0 = math.radians(120.0)
         res = eg.solve(x, 1.0, 1.0, 1.0)
     finally:
         eg.close()
     assert res["ok"] and res["held"] and abs(res["miss_m"]) <= PARAMS["npc.tol_m"]
-    assert res["bank0"] == pytest.approx(hi)
-    assert res["b_range"] > eg.p_hi - math.radians(10.0)                 # held for most of the energy to go
+    assert res["bank0_rad"] == pytest.approx(hi)
+    assert res["p_range_rad"] > eg.p_max_rad - math.radians(10.0)                 # held for most of the energy to go
 
 
 def test_guided_nominal_flies_what_it_predicted_after_the_final_reversal():
@@ -555,8 +556,8 @@ def test_guided_nominal_flies_what_it_predicted_after_the_final_reversal():
     sel = (t >= t_rev + 1.0) & (t <= t_freeze)
     assert sel.sum() > 30 * 50
     R = SCN.planet.radius_m
-    end = npc.unit_from_latlon(float(h["lat_rad"][-1]), float(h["lon_rad"][-1]))
-    d = [npc.central_angle(npc.unit_from_latlon(a, b), end) * R
+    end = geometry.unit_from_latlon(float(h["lat_rad"][-1]), float(h["lon_rad"][-1]))
+    d = [geometry.central_angle(geometry.unit_from_latlon(a, b), end) * R
          for a, b in zip(np.asarray(h["pred_lat_rad"])[sel][::50], np.asarray(h["pred_lon_rad"])[sel][::50])]
     assert max(d) < 150.0, max(d)
     assert s["deploy_miss_km"] <= 1.0
@@ -575,24 +576,24 @@ def test_a_reversal_turns_round_only_when_the_other_way_is_the_shorter():
     def shp(phi, phid, mag, turn, sign=1.0):
         return np.array([d(phi), d(phid), sign, turn, rate, a, 0.02, d(mag)])
     s0 = shp(-92.0, -2.0, 10.0, -2.0 * math.pi)           # on its way to -350 deg
-    alt = npc.reversal_other_way(s0, 1.0)
+    alt = shaper.reversal_other_way(s0, 1.0)
     assert alt is not None and alt[3] == pytest.approx(0.0, abs=1e-12) and alt[2] == 1.0
     assert np.array_equal(np.delete(alt, 3), np.delete(s0, 3))
-    assert npc.reversal_other_way(shp(-92.0, -2.0, 92.0, -2.0 * math.pi), 1.0) is None    # 176 < 184 deg
-    assert npc.reversal_other_way(shp(20.0, 2.0, 10.0, 0.0), 1.0) is None                   # on the + side
+    assert shaper.reversal_other_way(shp(-92.0, -2.0, 92.0, -2.0 * math.pi), 1.0) is None    # 176 < 184 deg
+    assert shaper.reversal_other_way(shp(20.0, 2.0, 10.0, 0.0), 1.0) is None                   # on the + side
     # moving at 8 deg/s towards -180: 64 deg of braking. From -92: 102 + 64 < 258; from -150:
     # 160 + 64 > 200
-    assert npc.reversal_other_way(shp(-92.0, -8.0, 10.0, -2.0 * math.pi), 1.0) is not None
-    assert npc.reversal_other_way(shp(-150.0, -8.0, 10.0, -2.0 * math.pi), 1.0) is None
+    assert shaper.reversal_other_way(shp(-92.0, -8.0, 10.0, -2.0 * math.pi), 1.0) is not None
+    assert shaper.reversal_other_way(shp(-150.0, -8.0, 10.0, -2.0 * math.pi), 1.0) is None
     # a reversal begun at +70 deg through 0 deg, then 165 deg commanded: -165 deg is 235 deg on,
     # +195 deg is 125 deg back (plus 4 deg of braking): it may turn round through 180 deg
-    back = npc.reversal_other_way(shp(70.0, -2.0, 165.0, 0.0, -1.0), -1.0)
+    back = shaper.reversal_other_way(shp(70.0, -2.0, 165.0, 0.0, -1.0), -1.0)
     assert back is not None and back[3] == pytest.approx(2.0 * math.pi, abs=1e-12)
-    tab = np.empty(npc.N_TRANSITION)
-    n = npc.shaped_transition(alt, d(10.0), 0.0, d(10.0), 0.5, tab)
+    tab = np.empty(shaper.N_TRANSITION)
+    n = shaper.shaped_transition(alt, d(10.0), 0.0, d(10.0), 0.5, tab)
     path = np.degrees(tab[:n])
     assert path.min() >= -92.0 - 2.0 ** 2 / 2.0 - 1e-6               # brakes within v^2/2a
     assert path[-1] == pytest.approx(10.0, abs=0.1) and path.max() < 10.5           # back through 0 deg
     assert np.all(np.diff(path[np.argmin(path):np.argmax(path) + 1]) >= 0.0)
-    n0 = npc.shaped_transition(s0, d(10.0), 0.0, d(10.0), 0.5, tab)
+    n0 = shaper.shaped_transition(s0, d(10.0), 0.0, d(10.0), 0.5, tab)
     assert np.degrees(tab[n0 - 1]) == pytest.approx(-350.0, abs=0.1)   # the way it began

@@ -319,7 +319,7 @@ def reverses(speed: str, dpsi_deg: float, *, t_go_s: float = math.inf, t_rev_s: 
     def obs(fl: Flight) -> bool:
         fl.fly(60)
         lat = fl.fsw.entry.lateral
-        V, t = (lat.v_hi if speed == "hi" else lat.v_lo), fl.fsw.t_s
+        V, t = (lat.v_hi_mps if speed == "hi" else lat.v_lo_mps), fl.fsw.t_s
         if second_after_s is not None:
             assert lat.update(t, V, math.radians(30.0) * lat.sign)
             t += second_after_s
@@ -412,7 +412,7 @@ CASES = [
     # reaches phi_f earlier (more lift): more bank early
     Case("npc.bank_final_deg", 150.0, npc_after(lambda e, a: e.bank0_cmd), "<", at=10, scenario=GUIDED),
     Case("npc.bank_max_deg", 90.0, npc_after(lambda e, a: e.bank0_cmd), "<", at=10, scenario=GUIDED),
-    # (bank_min: the range solution below it, the answer holds the bound: fsw/npc.py bank_profile)
+    # (bank_min: the range solution below it, the answer holds the bound: fsw/guidance/corrector.py bank_profile)
     Case("npc.bank_min_deg", 90.0, npc_after(lambda e, a: e.bank0_cmd == math.radians(90.0)), "==", (True, False),
          at=10, scenario=GUIDED, setup=ground(("param", "npc.bank_final_deg", 150.0))),
     Case("npc.h_deploy_m", 30000.0, npc_after(lambda e, a: e.bank0_cmd), ">", at=10, scenario=GUIDED),

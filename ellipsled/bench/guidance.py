@@ -23,7 +23,8 @@ from common.model import load_scenario
 from ellipsled.batch import run as batch_run
 from common.events import EventLog
 from fsw.executive import own_slips
-from fsw.npc import PARAMS, EntryGuidance, planet_fixed
+from fsw.guidance.geometry import planet_fixed
+from fsw.guidance.npc import PARAMS, EntryGuidance
 from fsw.params import load_params
 from sim.dynamics import initial_translation
 
@@ -45,7 +46,7 @@ def run(quick: bool) -> dict:
             t0 = time.perf_counter_ns()
             r = eg.solve(x, 1.0, 1.0, 1.0)
             us.append((time.perf_counter_ns() - t0) / 1e3)
-            calls.append(r["calls"])
+            calls.append(r["predictions"])
     finally:
         eg.close()
     res = {"figure": "one guidance cycle (prediction + correction)",

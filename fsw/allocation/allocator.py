@@ -533,10 +533,8 @@ class Allocator:
         """Move finished background builds of this parameter generation into the stores."""
         if self._rebuilder is None:
             return
-        done = self._rebuilder.done
-        for key in list(done):
-            t = done.pop(key, None)
-            if t is None or isinstance(t, Exception) or key[0] != self._gen:
+        for key, t in self._rebuilder.finished():
+            if isinstance(t, Exception) or key[0] != self._gen:
                 continue
             if key in self._prebuild_keys:
                 self._prebuilt[key] = t
@@ -607,7 +605,7 @@ class Allocator:
         self._rebuilder.submit(job)
 
     def _try_switch(self) -> bool:
-        t = self._rebuilder.done.pop(self._target_key, None) if self._rebuilder is not None else None
+        t = self._rebuilder.take(self._target_key) if self._rebuilder is not None else None
         if t is None:
             return False
         if isinstance(t, Exception):       # never expected; build it here rather than lose it

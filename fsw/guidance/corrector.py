@@ -1,0 +1,348 @@
+"""The entry guidance's corrector (spec 60-guidance.md): from a planet-fixed state, the bank
+profile whose predicted deploy reaches the target.
+
+- ``bank_profile``: the one-parameter family it searches (the line in energy from phi_0 to
+  phi_f, a phi_0 bound held beyond it), with ``profile_span`` and ``profile_at``;
+- ``solve_bank``: the root-finder, a safeguarded secant on the range miss z(phi_0);
+- ``floor_bank``: the deploy-altitude floor's search, which trades range for altitude;
+- ``Corrector``: one correction (``solve``), its answer a ``Correction``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import NotRequired, TypedDict
+
+import numpy as np
+
+from common.model import Scenario
+from .geometry import central_angle, crossrange, unit_from_latlon
+from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_T, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict,
+                        predict_shaped, predictor_constants)
+from .shaper import reversal_other_way
+
+
+def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int,
+               dx0: float = math.radians(5.0)) -> tuple[float, float, int, bool]:
+    """Root of a monotonic scalar function z on [x_lo, x_hi]: secant steps warm-started at
+    x0; once two points of opposite sign are known, an iterate outside them is replaced by
+    their midpoint (so it cannot diverge). Returns (x, z(x), evaluations, converged
+    |z| <= tol). Without a root in the bounds the secant runs into a bound and stops
+    there: the answer is then the point of smallest |z| seen (converged False)."""
+    pts: list[tuple[float, float]] = []
+
+    def ev(x: float) -> float:
+        zx = float(z(x))
+        pts.append((x, zx))
+        return zx
+
+    x1 = min(max(x0, x_lo), x_hi)
+    if abs(ev(x1)) <= tol:
+        return x1, pts[0][1], 1, True
+    ev(x1 + dx0 if x1 + dx0 <= x_hi else x1 - dx0)
+    while len(pts) < max_iter:
+        best = min(pts, key=lambda p: abs(p[1]))
+        if abs(best[1]) <= tol:
+            break
+        (xa, za), (xb, zb) = pts[-2], pts[-1]
+        xn = xb - zb * (xb - xa) / (zb - za) if zb != za else xb + dx0
+        neg = [p[0] for p in pts if p[1] < 0.0]
+        pos = [p[0] for p in pts if p[1] > 0.0]
+        if neg and pos:
+            a, b = min(((u, v) for u in neg for v in pos), key=lambda uv: abs(uv[0] - uv[1]))
+            a, b = min(a, b), max(a, b)
+            if not a < xn < b:
+                xn = 0.5 * (a + b)
+        else:
+            xn = min(max(xn, x_lo), x_hi)
+            if any(abs(xn - p[0]) < 1e-12 for p in pts):
+                break              # pushed against a bound already tried: no root inside
+        ev(xn)
+    best = min(pts, key=lambda p: abs(p[1]))
+    return best[0], best[1], len(pts), abs(best[1]) <= tol
+
+
+HOLD_MAX = 1.0 - 1e-6    # bank_profile: a bound held to the deploy, within float reach
+
+
+def bank_profile(p: float, lo: float, hi: float, f: float) -> tuple[float, float]:
+    """The corrector's one-parameter family: (phi_0, phi_f) of the line in energy from the
+    bank now to phi_f at the deploy energy, which the predictor clips to the phi_0 bounds
+    [lo, hi]. Inside them phi_0 = p and phi_f = f. Beyond a bound (p up to profile_span's)
+    the family goes on with the bound held for the fraction k = (p - hi) / (hi - f) of the
+    energy to go (resp. (lo - p) / (f - lo)) and the line to f after it: phi_0 is then the
+    line's start above hi (below lo) that reaches the bound at k; k = 1 holds it to the end.
+
+    Why a held bound and not phi_0 pinned at it: the bank commanded is the profile's now,
+    and the next cycle re-anchors the profile at its own energy. A profile "from hi now to f
+    at the deploy" pinned at hi is re-anchored at hi every cycle and flown at hi to the end,
+    while every prediction had the bank leave it: what was predicted is not what is flown.
+    A held bound is a profile the next cycle finds again (the same line, clipped), so the
+    predictions are the flight. Continuous at the bounds and monotonic in range as p is.
+    All angles [rad]."""
+    if p > hi and hi > f:
+        k = min((p - hi) / (hi - f), HOLD_MAX)
+        return (hi - f * k) / (1.0 - k), f
+    if p < lo and f > lo:
+        k = min((lo - p) / (f - lo), HOLD_MAX)
+        return (lo - f * k) / (1.0 - k), f
+    return p, f
+
+
+def profile_span(lo: float, hi: float, f: float) -> tuple[float, float]:
+    """The range of bank_profile's parameter: down to lo held to the end, up to hi held."""
+    return lo - max(0.0, f - lo), hi + max(0.0, hi - f)
+
+
+def profile_at(p: float, lo: float, hi: float, f: float, frac: float) -> float:
+    """bank_profile(p)'s parameter re-anchored at the fraction frac of its energy span: the
+    same profile from there on, as the next cycle's family writes it (its warm start: an
+    answer still within tolerance is then the profile already flown, not a new one)."""
+    b0, bf = bank_profile(p, lo, hi, f)
+    b = b0 + (bf - b0) * min(1.0, max(0.0, frac))
+    if b > hi and hi > f:
+        return hi + (b - hi) / (b - bf) * (hi - f)
+    if b < lo and f > lo:
+        return lo - (lo - b) / (bf - b) * (f - lo)
+    return b
+
+
+FLOOR_STEP_RAD = math.radians(10.0)   # floor_bank's march down from the range solution
+FLOOR_RES_RAD = math.radians(0.5)     # ... and its bisection's resolution
+
+
+def floor_bank(deploy, h_floor_m: float, b_hi: float, h_hi_m: float, b_min: float, tol_m: float,
+               max_iter: int, miss_max_m: float) -> tuple[float, int]:
+    """(phi_0 [rad], predictions): the largest phi_0 below b_hi (whose prediction deploys at
+    h_hi_m, below h_floor_m) whose predicted deploy altitude reaches h_floor_m, down to b_min.
+    deploy(phi_0) flies the floor mode's profile (phi_0 held to the end when below phi_f) and
+    returns (predicted deploy altitude [m], range miss [m]), the miss None when the
+    prediction skips out or times out. The deploy altitude is not monotonic in phi_0 (a
+    steeper dive also slows the vehicle higher up), so no secant: steps of FLOOR_STEP_RAD down
+    to the first phi_0 that reaches the floor, then bisection between it and the last that
+    did not (the crossing nearest the range solution, least range given up). A phi_0 that
+    skips out or whose predicted miss exceeds miss_max_m is refused, and so is everything
+    below it (more lift up flies further); without a crossing above the refused, the phi_0 of
+    the highest deploy seen, and NaN when no phi_0 tried deploys higher than h_hi_m (then the
+    range solution stays: the floor's profile from b_hi is another flight, not a trade; for
+    a range solution that holds a phi_0 bound, the floor's line from that bound flies far
+    long). The miss bound keeps the trade from running away: flown long, the next range
+    solution needs more lift down, which deploys lower still."""
+    b_bad, b_ok, b_lim, n = b_hi, math.nan, math.nan, 0
+    best_b, best_h = b_hi, h_hi_m
+    while n < max_iter:
+        if not math.isnan(b_ok):
+            b = 0.5 * (b_ok + b_bad)
+        elif not math.isnan(b_lim):
+            b = 0.5 * (b_lim + b_bad)
+        else:
+            b = max(b_min, b_bad - FLOOR_STEP_RAD)
+        h, miss = deploy(b)
+        n += 1
+        if miss is None or abs(miss) > miss_max_m:
+            b_lim = b
+        elif h >= h_floor_m:
+            b_ok = b
+            if h - h_floor_m <= tol_m:
+                break
+        else:
+            b_bad = b
+            if h > best_h:
+                best_b, best_h = b, h
+        if not math.isnan(b_ok):
+            if b_bad - b_ok < FLOOR_RES_RAD:
+                break
+        elif (not math.isnan(b_lim) and b_bad - b_lim < FLOOR_RES_RAD) or b <= b_min:
+            break
+    return (b_ok if not math.isnan(b_ok) else best_b if best_h > h_hi_m else math.nan), n
+
+
+class Correction(TypedDict):
+    """One answer of the corrector (Corrector.solve): the bank profile to fly from the
+    state it answers, and what its prediction says of the deploy."""
+    bank0_rad: float          # phi_0 commanded: the profile's bank now (the line clipped to the bounds)
+    p_range_rad: float        # the range solution's parameter p (bank_profile): the next cycle's warm start
+    e0_jpkg: float            # energy mu/r - V^2/2 of the state answered: where the profile starts
+    bank_line_rad: float      # the profile flown: phi_0 of its line ...
+    bank_final_rad: float     # ... and its phi_f (the line clipped to the phi_0 bounds, as predicted)
+    floor: bool               # the deploy-altitude floor traded range for altitude
+    held: bool                # the range solution holds a phi_0 bound (and no floor trade)
+    miss_m: float             # predicted range miss (NaN: the floor's profile does not reach the deploy)
+    predictions: int          # predictor runs it took
+    turn_rad: float           # the way round for the reversal under way, added to the command (NaN: kept)
+    ok: bool                  # a range solution within tolerance, or a floor trade
+    range_to_go_m: float      # great-circle range from the state answered to the target
+    lat_rad: float            # predicted deploy point, planet-fixed
+    lon_rad: float
+    h_final_m: float          # predicted deploy altitude
+    t_go_s: float             # predicted time to deploy, from the state answered
+    xr_keep_m: float          # predicted deploy crossrange (+ left), sign kept (NaN: not predicted) ...
+    xr_rev_m: float           # ... and reversed t_flip from now
+    compute_ns: int           # the correction's wall time
+    t_s: NotRequired[float]   # release time of the cycle it answers (added by the worker)
+    sign: NotRequired[float]  # bank sign it was solved for (added by the worker)
+
+
+class Corrector:
+    """One correction from a planet-fixed state (``solve``): phi_0 of the family
+    ``bank_profile`` by ``solve_bank`` on the predicted range miss, warm-started at the last
+    answer's profile; a reversal under way turned round when the other way misses by less;
+    the deploy-altitude floor's trade; and the deploy crossranges for the lateral logic.
+    ``params``: its own copy of the npc.* values, ``take_params`` applies new ones."""
+
+    def __init__(self, scenario: Scenario, params: dict):
+        if scenario.target_lat_rad is None:
+            raise ValueError(f"{scenario.file}: target: guidance mode \"npc\" needs a [target]")
+        self.scenario, self.params = scenario, dict(params)
+        pl = scenario.planet
+        self.constants = predictor_constants(scenario, params)     # the predictor's (indices C_*)
+        self.mu_m3ps2, self.radius_m, self.omega_radps = pl.mu_m3ps2, pl.radius_m, pl.omega_radps
+        self.scale_height_m = pl.scale_height_m
+        self.e_deploy_jpkg = deploy_energy(scenario, params["npc.h_deploy_m"])
+        self.bank_final_rad = math.radians(params["npc.bank_final_deg"])
+        self.bank_min_rad = math.radians(params["npc.bank_min_deg"])
+        self.bank_max_rad = math.radians(params["npc.bank_max_deg"])
+        self.p_min_rad, self.p_max_rad = profile_span(self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
+        self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
+        self.bank0 = abs(scenario.bank_schedule[0][1])   # the range solution's parameter p [rad]
+                                         # (bank_profile: phi_0 within the bounds): the next warm start
+        self._p_e0_jpkg = math.nan       # energy at which bank0's profile starts
+        self._shp = None                 # the reference shaper's state the predictions start from
+        self._out = np.zeros(N_O)
+
+    def take_params(self, names: set[str]) -> None:
+        """Apply self.params (``names``: the ones just set) where the construction put them."""
+        p, scn = self.params, self.scenario
+        self.bank_final_rad = math.radians(p["npc.bank_final_deg"])
+        self.bank_min_rad, self.bank_max_rad = math.radians(p["npc.bank_min_deg"]), math.radians(p["npc.bank_max_deg"])
+        self.p_min_rad, self.p_max_rad = profile_span(self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
+        self.bank0 = min(self.p_max_rad, max(self.p_min_rad, self.bank0))      # the warm start within them
+        if "npc.h_deploy_m" in names:
+            self.e_deploy_jpkg = deploy_energy(scn, p["npc.h_deploy_m"])
+        c = predictor_constants(scn, p)                 # path limits and their feedback
+        c[C_KRHO], c[C_KLD] = self.constants[C_KRHO], self.constants[C_KLD]
+        self.constants[:] = c
+
+    def _z(self, x, e0, s_togo, sign, t_switch=0.0):
+        """The corrector's miss function z(p) [m]: predicted range past the target."""
+        out = self._out
+
+        def z(p):
+            b0, bf = bank_profile(p, self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
+            self._predict(x, b0, bf, e0, sign, out, t_switch)
+            if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
+                # out of the atmosphere: far long. Its range so far says little, so the miss
+                # is made 1000 km plus a slope towards more bank: the corrector then walks
+                # out of the skip region instead of stalling on a flat function
+                return 1e6 + (self.p_max_rad - p) * 1e6
+            return central_angle(x[:3], out[:3]) * self.radius_m - s_togo
+        return z
+
+    def _predict(self, x, b0, bf, e0, sign, out, t_switch=0.0):
+        """The corrector's prediction: from the reference shaper's state when one is given
+        (the transition in progress flown within the attitude chain's limits; a reversal to
+        ``sign`` commanded at t_switch > 0), else the law from the start."""
+        if self._shp is None:
+            predict(x, self.constants, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"], out, 0.0)
+        else:
+            predict_shaped(x, self.constants, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"],
+                           out, self._shp, float(t_switch))
+
+    def _floor_bank(self, x, e0, s_togo, sign, h_floor, b_hi, h_hi):
+        """floor_bank over the floor mode's profile (phi_0 held to the end when below phi_f)."""
+        out = self._out
+
+        def deploy(b):
+            self._predict(x, b, min(self.bank_final_rad, b), e0, sign, out)
+            if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
+                return out[O_H], None
+            return out[O_H], central_angle(x[:3], out[:3]) * self.radius_m - s_togo
+        return floor_bank(deploy, h_floor, b_hi, h_hi, self.bank_min_rad, self.params["npc.tol_m"],
+                          int(self.params["npc.max_iter"]), self.params["npc.floor_miss_max_m"])
+
+    def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
+              shp: np.ndarray | None = None) -> Correction:
+        """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
+        t_flip given, one more prediction: the same phi_0 with a reversal taking effect
+        t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
+        sign kept and reversed). shp: the reference shaper's state at x (shaped_transition),
+        None: the bank follows the law at once."""
+        t0 = time.perf_counter_ns()
+        self._shp = shp
+        c = self.constants
+        c[C_KRHO], c[C_KLD] = k_rho, k_ld
+        r = math.sqrt(float(x[:3] @ x[:3]))
+        e0 = self.mu_m3ps2 / r - 0.5 * float(x[3:] @ x[3:])
+        s_togo = central_angle(x[:3], self.target_u) * self.radius_m
+        dt = self.params["npc.dt_pred_s"]
+        lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.bank_final_rad
+        p_warm = self.bank0
+        if math.isfinite(self._p_e0_jpkg) and self.e_deploy_jpkg != self._p_e0_jpkg:
+            p_warm = profile_at(p_warm, lo, hi, f, (e0 - self._p_e0_jpkg) / (self.e_deploy_jpkg - self._p_e0_jpkg))
+        tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
+        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.p_min_rad, self.p_max_rad, p_warm, tol, n_max)
+        turn = math.nan
+        alt = None
+        if shp is not None and not abs(zb) <= self.params["npc.floor_miss_max_m"]:
+            alt = reversal_other_way(shp, sign)
+        if alt is not None:
+            # a reversal in progress whose way round costs more range than the guidance
+            # trades anywhere (npc.floor_miss_max_m): the other way (the reference braked and
+            # turned back, as the shaper would fly it) if that one's answer misses by less.
+            # Not for less: the lateral decision timed the reversal for the way it began, and
+            # turning round delays it, which costs crossrange
+            self._shp = alt
+            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign), self.p_min_rad, self.p_max_rad, p_warm,
+                                         tol, n_max)
+            n += na
+            if abs(za) < abs(zb) - tol:
+                p, zb, ok, turn = pa, za, oka, float(alt[3])
+            else:
+                self._shp = shp
+        b_range = p
+        b0, bf = bank_profile(p, lo, hi, f)
+        held = not lo <= p <= hi
+        # the prediction of the answer (the root-finder's last call may have been another)
+        self._predict(x, b0, bf, e0, sign, self._out)
+        floor = False
+        h_floor = self.params["npc.h_floor_m"]
+        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H] < h_floor and p > lo:
+            # the range solution deploys too low: trade range for altitude (more lift up, so
+            # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
+            # fixed phi_f would otherwise take the lift-up away just where it counts), and
+            # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
+            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, hi), self._out[O_H])
+            n += nh
+            if math.isnan(b_fl):        # no trade deploys higher: the range solution's prediction again
+                self._predict(x, b0, bf, e0, sign, self._out)
+            else:
+                floor = True
+                b0, bf = b_fl, min(f, b_fl)
+                self._predict(x, b0, bf, e0, sign, self._out)
+                zb = (central_angle(x[:3], self._out[:3]) * self.radius_m - s_togo if self._out[O_FLAG] == REACHED
+                      else math.nan)
+                ok = False
+        rf = self._out[:3].copy()
+        # phi_0 commanded: the profile's bank now (the line clipped to the bounds, as predicted)
+        res = Correction(bank0_rad=min(hi, max(lo, b0)), p_range_rad=b_range, e0_jpkg=e0, bank_line_rad=b0,
+                         bank_final_rad=bf, floor=floor, held=held and not floor, miss_m=zb, predictions=n + 1,
+                         turn_rad=turn, ok=ok or floor, range_to_go_m=s_togo,
+                         lat_rad=math.asin(rf[2] / math.sqrt(float(rf @ rf))), lon_rad=math.atan2(rf[1], rf[0]),
+                         h_final_m=float(self._out[O_H]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,
+                         xr_rev_m=math.nan, compute_ns=0)
+        if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
+            # the lateral decision's pair, "keep" and "reverse at t_flip", both flown with the
+            # bank switching at once (the reversal at its shaped transition's mid-point) and
+            # this phi_0: a pair flown through the shaper, the reversed one re-solved, would
+            # decide the final reversal at the first reversal, where the load limit's lift-up
+            # sends the swing through lift up, and fly far long
+            predict(x, c, b0, bf, e0, self.e_deploy_jpkg, sign, dt, self._out, 0.0)
+            res["predictions"] += 1
+            if self._out[O_FLAG] == REACHED:
+                res["xr_keep_m"] = crossrange(x[:3], self.target_u, self._out[:3], self.radius_m)
+                predict(x, c, b0, bf, e0, self.e_deploy_jpkg, -sign, dt, self._out, t_flip)
+                res["predictions"] += 1
+                if self._out[O_FLAG] == REACHED:
+                    res["xr_rev_m"] = crossrange(x[:3], self.target_u, self._out[:3], self.radius_m)
+        res["compute_ns"] = time.perf_counter_ns() - t0
+        return res

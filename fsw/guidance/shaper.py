@@ -1,0 +1,175 @@
+"""The bank shaper: the commanded bank turned into the reference phi_r, phidot_r, phiddot_r
+within the rate and acceleration limits the attitude chain is given (``BankShaper``), and
+the same law compiled for the predictor (``shaped_transition``), so that the corrector
+predicts a reversal as the vehicle will fly it.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def shaper_accel(phi, phid, target, rate_limit, accel_limit, dt):
+    """The reference's acceleration towards target: bang-bang at the acceleration limit to
+    the desired rate min(rate limit, sqrt(2 a |e|) (braking), |e|/dt), by sign of the error.
+    One law for the BankShaper and the predictor."""
+    e = target - phi
+    v_des = math.copysign(min(rate_limit, math.sqrt(2.0 * accel_limit * abs(e)), abs(e) / dt), e)
+    return max(-accel_limit, min(accel_limit, (v_des - phid) / dt))
+
+
+@njit(cache=True, nogil=True)
+def shaper_branch(phi, sign_now, turn, bank_signed):
+    """(sign, turn) of the reference's target bank_signed + turn (turn a multiple of 2 pi): a
+    new reversal goes the shorter way from phi; once the reference is on the commanded
+    side, magnitude changes take the nearest way (they never cross 0 or 180 deg)."""
+    s = 1.0 if bank_signed >= 0 else -1.0
+    if s != sign_now or math.sin(phi) * s > 0.0:
+        return s, 2.0 * math.pi * round((phi - bank_signed) / (2.0 * math.pi))
+    return sign_now, turn
+
+
+# a shaped transition longer than this is not modelled past it (the law takes over)
+N_TRANSITION = 256
+
+
+@njit(cache=True, nogil=True)
+def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
+    """The reference's bank [rad, signed, on the shaper's branch] every t_sample [s] from now
+    while the BankShaper moves from its state towards bank_a and, from t_switch on, towards
+    bank_b (a reversal commanded then): the same branch rule and acceleration law, stepped
+    at the control period. shp: [phi, phidot, sign, turn, rate limit, acceleration limit,
+    control period, the magnitude commanded now]. The branch (which way round) is the one
+    the shaper takes for the command now, fixed for the prediction: in flight the new
+    answer arrives after the reversal has set off, and a branch that followed the
+    corrector's trial bank would flip near a 180 deg swing and make the miss function jump.
+    Returns the number of samples written to tab; the last is the first at which the
+    reference has settled on bank_b (<= 1 when it already has)."""
+    phi, phid, s_now, turn = shp[0], shp[1], shp[2], shp[3]
+    rate, accel, dtc, mag_now = shp[4], shp[5], shp[6], shp[7]
+    s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_a))
+    target = bank_a + turn
+    switched = t_switch <= 0.0
+    if switched:
+        s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+        target = bank_b + turn
+    per = max(1, int(round(t_sample / dtc)))
+    n = 0
+    k = 0
+    while n < tab.shape[0]:
+        if not switched and k * dtc >= t_switch - 1e-9:
+            switched = True
+            s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+            target = bank_b + turn
+        if k % per == 0:
+            tab[n] = phi
+            n += 1
+            if switched and abs(target - phi) < 1e-3 and abs(phid) < 1e-3:
+                break
+        a = shaper_accel(phi, phid, target, rate, accel, dtc)
+        phi += phid * dtc + 0.5 * a * dtc * dtc
+        phid += a * dtc
+        k += 1
+    return n
+
+
+def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
+    """The shaper's state (shaped_transition's shp) with a reversal to ``sign`` going the
+    other way round, or None: when no reversal is under way (the reference already on the
+    side of ``sign``: magnitude changes take the nearest way), or when the other way is not
+    the shorter one from the reference's state (braking included). The way a reversal
+    goes is chosen for the magnitude commanded when it starts; the corrector's next answer
+    can make the other way the shorter (a reversal begun at 92 deg through 180 deg, then a
+    10 deg command: 258 deg on through lift down, ~100 deg back through lift up). The way
+    round is the turn (a multiple of 2 pi) added to the command; the shaper keeps a given
+    turn until the reference has crossed to the commanded side."""
+    phi, phid, accel, mag = float(shp[0]), float(shp[1]), float(shp[5]), float(shp[7])
+    if math.sin(phi) * sign >= 0.0 or accel <= 0.0:
+        return None
+    s, turn = shaper_branch(phi, float(shp[2]), float(shp[3]), math.copysign(mag, sign))
+    target = math.copysign(mag, sign) + turn
+    other = target - math.copysign(2.0 * math.pi, target - phi)
+    # moving towards the present target, the other way first brakes: v^2/2a out and back
+    brake = phid * phid / accel if phid * (target - phi) > 0.0 else 0.0
+    if abs(other - phi) + brake >= abs(target - phi):
+        return None
+    alt = shp.copy()
+    alt[2], alt[3] = s, other - math.copysign(mag, sign)
+    return alt
+
+
+class BankShaper:
+    """The commanded bank turned into a reference phi_r, phidot_r, phiddot_r that respects
+    the rate and acceleration limits: a second-order tracker (bang-bang towards the
+    target, braking on sqrt(2 a |e|)), stepped once per control period. A reversal (sign
+    change) goes the shorter way round (through lift up below 90 deg, lift down above);
+    magnitude changes keep the branch. Same interface as reference.BankProfile for the
+    attitude chain: evaluate(t) and replan(t, rate, accel)."""
+
+    def __init__(self, phi0_rad: float, rate_limit_radps: float, accel_limit_radps2: float, dt_s: float):
+        self.rate_limit_radps = float(rate_limit_radps)
+        self.accel_limit_radps2 = float(accel_limit_radps2)
+        self.dt_s = float(dt_s)
+        self.phi = float(phi0_rad)
+        self.phid = 0.0
+        self.phidd = 0.0
+        self.target = self.phi
+        self._sign = 1.0 if phi0_rad >= 0 else -1.0
+        self._turn = 0.0            # target = command + turn (a multiple of 2 pi)
+        self._t = None
+
+    def command(self, bank_signed_rad: float) -> None:
+        self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
+        self.target = bank_signed_rad + self._turn
+
+    def state(self, mag_rad: float) -> np.ndarray:
+        """The state shaped_transition starts from (its shp), mag_rad the magnitude commanded now."""
+        return np.array([self.phi, self.phid, self._sign, self._turn, self.rate_limit_radps, self.accel_limit_radps2,
+                         self.dt_s, mag_rad])
+
+    def turn_round(self, turn_rad: float, sign: float) -> bool:
+        """Take another way round (turn_rad, as reversal_other_way's; NaN: none) for the
+        reversal to ``sign`` while it is under way (the reference not yet on that side);
+        True if taken."""
+        if not (math.isfinite(turn_rad) and sign == self._sign and math.sin(self.phi) * self._sign < 0.0):
+            return False
+        self.target += turn_rad - self._turn
+        self._turn = turn_rad
+        return True
+
+    def _step(self) -> None:
+        dt, a = self.dt_s, self.phidd
+        self.phi += self.phid * dt + 0.5 * a * dt * dt
+        self.phid += a * dt
+
+    def evaluate(self, t_s: float) -> tuple[float, float, float]:
+        if self._t is None:
+            self._t = t_s
+        n = int(round((t_s - self._t) / self.dt_s))
+        for _ in range(max(0, n)):
+            self._step()
+        self._t += n * self.dt_s if n > 0 else 0.0
+        self.phidd = shaper_accel(self.phi, self.phid, self.target, self.rate_limit_radps,
+                                  self.accel_limit_radps2, self.dt_s)
+        return self.phi, self.phid, self.phidd
+
+    def transition_s(self, angle_rad: float) -> float:
+        """Time [s] of a rest-to-rest turn through angle_rad within the rate and acceleration
+        limits (trapezoidal rate, triangular when the rate limit is not reached)."""
+        w, a, d = self.rate_limit_radps, self.accel_limit_radps2, abs(angle_rad)
+        if w <= 0.0 or a <= 0.0:
+            return math.inf
+        return d / w + w / a if d >= w * w / a else 2.0 * math.sqrt(d / a)
+
+    def reversal_s(self, mag_rad: float) -> float:
+        """Time [s] of a reversal at bank magnitude mag_rad (the shorter way: through 0 below
+        90 deg, through 180 above)."""
+        return self.transition_s(2.0 * min(abs(mag_rad), math.pi - abs(mag_rad)))
+
+    def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float) -> bool:
+        changed = (rate_limit_radps, accel_limit_radps2) != (self.rate_limit_radps, self.accel_limit_radps2)
+        self.rate_limit_radps, self.accel_limit_radps2 = float(rate_limit_radps), float(accel_limit_radps2)
+        return changed

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from .model import N_AXES
-from .tables import BLOCK
+from .build import BLOCK
 
 STATUS_OK, STATUS_DEGRADED, STATUS_REJECTED = 0, 1, 2
 ZERO3 = np.zeros(N_AXES)

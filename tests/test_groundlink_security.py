@@ -18,7 +18,9 @@ import time
 import pytest
 
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Reject, Signer, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.sign import Signer
+from interfaces.mavlink.signing.verify import Reject
 
 from tests.test_groundlink_commands import Rig
 

@@ -53,7 +53,9 @@ from collections.abc import Callable, Mapping
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
-from interfaces.mavlink.signing import Reject, Rejection, SignedLink, SigningKey, stream_state_path
+from interfaces.mavlink.signing.keys import SigningKey, stream_state_path
+from interfaces.mavlink.signing.link import SignedLink
+from interfaces.mavlink.signing.verify import Reject, Rejection
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, Severity, parse_udp
 
 from . import metadata, policy

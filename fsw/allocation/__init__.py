@@ -1,4 +1,4 @@
-"""Fault-tolerant discrete control allocation (spec 20-fsw.md; paper section 3).
+"""Fault-tolerant discrete control allocation (paper section 3).
 
 model      the problem: health -> effective model, tolerances, problem checks
 tables     candidate tables of a health configuration: the types, work buffers, build_tables

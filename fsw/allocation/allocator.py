@@ -17,7 +17,7 @@ Method (exact by construction, see tests/test_allocation_*.py):
   branch and bound on the objective itself: a node's bound is the weighted distance from
   the demand to its bounding box clipped to the box, plus its smallest penalty; nearer
   child first; a node is pruned once its bound exceeds the best objective + the tie
-  tolerance, so every tie is visited and the spec tie-break is applied to them. With no
+  tolerance, so every tie is visited and the tie-break (model.py) is applied to them. With no
   candidate in the box, the same search without the box (degraded). The tree does not
   depend on the demand's octant (one tree, not 8 sorted tables), and the interim model of
   an asynchronous reconfiguration (forbidden jets, shifted bias) is the same search.
@@ -42,7 +42,7 @@ from fsw.params import Param
 
 from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, spill_of, validate_problem
 from .rebuild import Rebuilder
-from .tables import BLOCK, Tables, Workspace, build_tables
+from .tables import Tables, Workspace, build_tables
 from .query import (STATUS_DEGRADED, STATUS_REJECTED, TREE_STACK, ZERO3, solve_kernel, solve_scan_kernel,
                     solve_tree_kernel)
 
@@ -81,7 +81,7 @@ class Allocator:
       stuck) is kept off, and the stuck-on bias is the new one (``solve_scan_kernel``
       when it differs; the spill box's tree search takes both). The interim answer never fires a jet the new health forbids, its
       tau_B and objective are those of the new model for the returned u, and it is the
-      exact optimum (spec tie-break, sign box, degraded answer) over the previous
+      exact optimum (tie-break of model.py, sign box, degraded answer) over the previous
       configuration's candidates that avoid the changed jets. It is NOT necessarily the
       optimum of the new model: combinations that need a changed jet, or a twin of a changed
       jet (the previous tables keep one representative pattern per torque), are missing, and

@@ -158,10 +158,10 @@ def solve_tree_kernel(tau_d, w, spill, nlo, nhi, nminpen, nstart, nend, n_intern
                        cand_pen, cand_pat, ties, tie_obj, forbid, delta, tol_box, tol_tie, tie_rel,
                        tol_pen, stack_k, stack_lb, u_out, tau_out, obj_out):
     """One allocation in the spill box over the candidates with no bit of ``forbid`` whose
-    torque is cand_tau + delta (module docstring, spill box): depth-first branch and bound
+    torque is cand_tau + delta (allocator.py docstring, spill box): depth-first branch and bound
     over the candidates' tree, nearer child first, a node pruned when its bound exceeds the best
     objective found + the tie tolerance; every candidate within that tolerance is kept
-    (ties, tie_obj: work buffers of n rows) for the spec tie-break. With no candidate in the
+    (ties, tie_obj: work buffers of n rows) for the tie-break (model.py). With no candidate in the
     box, the same search without it (degraded). Same outputs as solve_kernel; stack_k,
     stack_lb: work buffers of >= 2 x tree depth + 2 entries. No allocation."""
     d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]

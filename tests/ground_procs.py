@@ -9,7 +9,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from interfaces.mavlink.signing import SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
 
 from ellipsled.procs import stop_process
 

@@ -223,8 +223,8 @@ def test_the_table_builders_compiled_kernels_release_the_gil():
     """What lets the loop solve while tables are built: every compiled kernel of the table
     builder is built nogil."""
     from numba.core.registry import CPUDispatcher
-    from fsw.allocation import tables
-    kernels = [v for v in vars(tables).values() if isinstance(v, CPUDispatcher)]
+    from fsw.allocation import build
+    kernels = [v for v in vars(build).values() if isinstance(v, CPUDispatcher)]
     assert len(kernels) >= 8
     assert [k.py_func.__name__ for k in kernels if not k.targetoptions.get("nogil")] == []
 

@@ -17,7 +17,7 @@ import pytest
 
 from ellipsled.history import History
 from gse.replay import TlogReplay
-from interfaces.mavlink.signing import SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
 
 from tests.ground_procs import free_udp, stop
 

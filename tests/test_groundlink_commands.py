@@ -23,7 +23,7 @@ from fsw.modes import Mode
 from gse.client import GroundClient
 from gse.commands import make_request
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
 from sim.plant import Plant
 
 ACCEPTED, DENIED, UNSUPPORTED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED, mav.MAV_RESULT_UNSUPPORTED

@@ -22,7 +22,7 @@ from fsw.groundlink import ftp, metadata, policy
 from fsw.groundlink.services import PRODUCT_ID, VENDOR_ID, flight_sw_version
 from fsw.groundlink.link import REFUSAL_EVENT
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Reject
+from interfaces.mavlink.signing.verify import Reject
 from interfaces.vocabulary import Mode
 
 from tests.test_groundlink_commands import Rig

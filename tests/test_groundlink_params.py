@@ -16,7 +16,7 @@ import pytest
 from fsw.flightsoftware import all_params, declarations
 from fsw.params import ParamRegistry, param_id, param_ids
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Reject
+from interfaces.mavlink.signing.verify import Reject
 
 from tests.test_groundlink_commands import Rig
 

@@ -10,7 +10,8 @@ import time
 
 from gse.client import GroundClient
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Signer, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.sign import Signer
 
 VEHICLE_A, VEHICLE_B = ("127.0.0.1", 14555), ("127.0.0.1", 40000)
 

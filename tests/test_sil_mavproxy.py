@@ -30,7 +30,7 @@ import pytest
 from ellipsled.history import History
 from fsw.flightsoftware import declarations
 from fsw.params import ParamRegistry
-from interfaces.mavlink.signing import SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
 from tests.ground_procs import start_ground_sil, stop
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is not installed (requirements.lock pins it, "

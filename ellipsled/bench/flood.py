@@ -38,7 +38,8 @@ from pymavlink.dialects.v10 import common as v10
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import parse_header
-from interfaces.mavlink.signing import Signer, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.sign import Signer
 
 from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
@@ -222,7 +223,7 @@ def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
     (every datagram split, CRC-checked and verified, up to 64 a tick). Same run, same
     datagrams."""
     from interfaces.mavlink.intake import DatagramIntake
-    from interfaces.mavlink.signing import SignedLink
+    from interfaces.mavlink.signing.link import SignedLink
     ticks = 100 if quick else 400
     per_tick = int(rate / RG2_HZ)
     key = SigningKey.generate()

@@ -253,7 +253,7 @@ class FswNode:
             say(ROLE, "no signing key (--signing-key or ELLIPSLED_SIGNING_KEY_FILE): MAVLink ground link off")
             return None
         from fsw.groundlink import GroundLink
-        from interfaces.mavlink.signing import SigningKey
+        from interfaces.mavlink.signing.keys import SigningKey
         key = SigningKey.from_file(path)
         try:
             gl = GroundLink(self.fsw, key, gcs=self.args.gcs, bind=self.args.mavlink_bind, inject=self.inject)

@@ -127,7 +127,7 @@ class Launcher:
             return self.args.signing_key
         if os.environ.get("ELLIPSLED_SIGNING_KEY_FILE"):
             return os.environ["ELLIPSLED_SIGNING_KEY_FILE"]
-        from interfaces.mavlink.signing import SigningKey
+        from interfaces.mavlink.signing.keys import SigningKey
         self.tmpdir = tempfile.mkdtemp(prefix="ellipsled-key-")
         path = os.path.join(self.tmpdir, "signing.key")
         SigningKey.generate().write_file(path)

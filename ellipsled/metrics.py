@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .history import History
+from .sil.history import History
 
 SETTLE_BAND_DEG = 1.0     # |e_phi| below this counts as settled
 SETTLE_HOLD_S = 2.0       # ... and must stay below it this long

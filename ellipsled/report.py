@@ -20,6 +20,8 @@ import numpy as np
 
 from . import batch, plots, reference, runlib
 from .metrics import FINE_BAND_DEG, THETA_NAMES, TRANSIENT_S
+from .sil.history import History
+from .sil.variant import prepare
 
 CASES = ["nominal", "case1", "case1-ft-off", "case2", "case3", "case4"]
 FAULT_CASES = ["case1", "case2", "case3", "case4"]
@@ -66,7 +68,6 @@ class Runs:
 
     def load(self) -> None:
         """The runs a previous ``fly`` wrote under out/runs (re-writing the report without flying)."""
-        from .history import History
         self.commit = (self.out / "runs" / "commit.txt").read_text().strip()
         for setup in SETUPS:
             for mode in MODES:
@@ -82,7 +83,7 @@ class Runs:
                               identification=mode, initial_error=init_err, reference_cache=self.cache)
         fsw.close()
         if case == "nominal":        # its own twin: store it for the faulted cases that share it
-            scn = runlib.prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err)
+            scn = prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err)
             reference.store_twin(scn, s["seed"], h, self.cache)
         key = (case, setup, mode)
         self.s[key] = s
@@ -385,7 +386,7 @@ def notes(R: Runs, trans: dict, reshape_deg: float) -> list[str]:
 # ----------------------------------------------------------------------------- report
 def write_report(out: Path, R: Runs) -> Path:
     trans = translational(R)
-    figs = plots.paper_figures(R.h, out, trans, runlib.prepare("nominal").planet.radius_m)
+    figs = plots.paper_figures(R.h, out, trans, prepare("nominal").planet.radius_m)
     commit = R.commit
     rows = claims(R, trans)
     c2 = R.h[("case2", "paper", "oracle")]

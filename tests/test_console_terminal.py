@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from ellipsled.history import History
+from ellipsled.sil.history import History
 from gse.replay import TlogReplay
 from interfaces.mavlink.signing.keys import SigningKey
 

@@ -185,10 +185,10 @@ def test_deploy_errors_split_a_known_geometry():
 
 
 def test_the_fsw_state_record_carries_the_same_guidance_figures_through_the_codec(guided):
-    """What the live bridge draws the map from (FSW_STATE v2, ellipsled.history.guidance_fields)
+    """What the live bridge draws the map from (FSW_STATE v2, ellipsled.sil.history.guidance_fields)
     survives the codec (which refuses non-finite numbers) and equals the corrector's values;
     a non-finite predicted point goes out as 0 with its flag clear, never refused."""
-    from ellipsled.history import guidance_fields
+    from ellipsled.sil.history import guidance_fields
     from interfaces import codec, records
     e, fsw = guided.fsw.entry, guided.fsw
     c = codec.Codec.for_schema("FSW_STATE")

@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 
 from ellipsled import batch
-from ellipsled.history import History, merge
 from ellipsled.net import pki
+from ellipsled.node_reports import read_fsw, read_sim
+from ellipsled.sil.history import History, merge
 from interfaces.keys import keys
 
 from . import netns
@@ -247,8 +248,7 @@ def test_realtime_through_the_router_answers_the_plant(net):
         _stop_all(net, "fsw-rt")
     finally:
         _stop_all(net, "router-rt")
-    fsw = json.loads((out / "fsw.json").read_text())
-    sim = json.loads((out / "sim.json").read_text())
+    fsw, sim = read_fsw(out), read_sim(out)
     print(f"through the router: latency p50 {sim['latency_p50_us']:.0f} us p99 {sim['latency_p99_us']:.0f} us, "
           f"jitter p99 {fsw['jitter_p99_us']:.0f} us, slips {fsw['cycle_slips']}, samples {sim['latency_samples']}, "
           f"plant counts {sim['counts']}, rejects {sim['rejects']}")

@@ -14,7 +14,8 @@ import urllib.request
 
 import pytest
 
-from ellipsled.terminal import ProgressFile, RunProgress, files_written
+from ellipsled.sil.progress import ProgressFile
+from ellipsled.terminal import RunProgress, files_written
 
 from tests.ground_procs import free_udp
 

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from pymavlink import mavftp, mavutil
 
-from ellipsled.history import History
+from ellipsled.sil.history import History
 from tests.ground_procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]

@@ -27,7 +27,7 @@ import time
 import numpy as np
 import pytest
 
-from ellipsled.history import History
+from ellipsled.sil.history import History
 from fsw.flightsoftware import declarations
 from fsw.params import ParamRegistry
 from interfaces.mavlink.signing.keys import SigningKey

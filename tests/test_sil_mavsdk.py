@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from common.model import load_scenario
-from ellipsled.history import History
+from ellipsled.sil.history import History
 from fsw.flightsoftware import declarations
 from fsw.groundlink.link import REFUSAL_EVENT
 from fsw.groundlink.services import PRODUCT_ID, VENDOR_ID

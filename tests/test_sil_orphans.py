@@ -15,7 +15,7 @@ import time
 import pytest
 
 from ellipsled.procs import stop_process
-from ellipsled.terminal import ProgressFile
+from ellipsled.sil.progress import ProgressFile
 from interfaces import transport
 from tests.ground_procs import start_ground_sil
 

@@ -13,7 +13,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from common.model import load_planet
-from ellipsled.history import History
+from ellipsled.sil.history import History
 from common.events import Event, Severity
 from gse.viz import RerunLogger, open_sinks, record_history
 from gse.viz.blueprint import VIEW_NAMES

@@ -36,6 +36,7 @@ from collections import deque
 
 from pymavlink.dialects.v10 import common as v10
 
+from ellipsled.node_reports import read_fsw
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import parse_header
 from interfaces.mavlink.signing.keys import SigningKey
@@ -397,7 +398,7 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
                     run.kill()
                     run.wait(10)
                 watch.stop()
-        fsw = json.loads((Path(d) / "fsw.json").read_text())
+        fsw = read_fsw(d)
     ex, gl = fsw["executive"], fsw["tasks_us"].get("groundlink", {})
     link = fsw.get("ground_link") or {}
     n_fdir, lat = watch.event_latencies(fsw.get("event_log", []))

@@ -18,6 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from ellipsled.node_reports import read_fsw
+
 from .jitter import jitter_verdict
 from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
@@ -56,7 +58,7 @@ def sil_run(mode: str, scenario: str, duration_s: float | None, timeout_s: float
         out = Path(d)
         summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").is_file() else None
         sil = json.loads((out / "sil.json").read_text()) if (out / "sil.json").is_file() else None
-        fsw = json.loads((out / "fsw.json").read_text()) if (out / "fsw.json").is_file() else None
+        fsw = read_fsw(out) if (out / "fsw.json").is_file() else None
         if sil is None and summary is None:
             raise RuntimeError(f"`{' '.join(cmd[2:])}` exit {r.returncode}, no summary.json/sil.json: "
                                f"{(r.stderr or r.stdout).strip()[-300:]}")

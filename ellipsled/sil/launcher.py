@@ -26,21 +26,23 @@ import tempfile
 import time
 from pathlib import Path
 
-from ellipsled import argtypes
-from ellipsled.history import History, merge
+from ellipsled.node_reports import read_fsw, read_sim
 from ellipsled.procs import die_with_parent, stop_process
-from ellipsled.runlib import (EXIT_NOT_COMPLETED, add_variant_arguments, exit_code, fault_free_reference,
-                              format_summary, judge, prepare_args, variant_argv)
-from ellipsled.terminal import ProgressFile, RunProgress, files_written
+from ellipsled.reference import fault_free_reference
+from ellipsled.runlib import EXIT_NOT_COMPLETED, exit_code, format_summary, judge
+from ellipsled.terminal import RunProgress, files_written
 from interfaces import transport
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE
 
+from . import argtypes
 from .common import DEFAULT_PREFIX, say
+from .history import History, merge
+from .progress import ProgressFile
+from .variant import add_variant_arguments, prepare_args, variant_argv
 
 ROLE = "run"
 STOP_TIMEOUT_S = 5.0
 ROLES = ("viz", "fsw", "sim")
-
 
 
 def add_arguments(p) -> None:
@@ -260,8 +262,8 @@ class Launcher:
     def summarize(self, rc_sim) -> int:
         a = self.args
         try:
-            sim_info = json.loads((self.out / "sim.json").read_text())
-            fsw_info = json.loads((self.out / "fsw.json").read_text())
+            sim_info = read_sim(self.out)
+            fsw_info = read_fsw(self.out)
             h = merge(History.load(self.out / "sim_history.npz"), History.load(self.out / "fsw_history.npz"))
         except (OSError, ValueError, KeyError) as e:
             self.say(f"no complete records to summarize ({e}); see the logs")

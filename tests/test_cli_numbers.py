@@ -5,13 +5,14 @@ memory budget are refused with the budget named."""
 from __future__ import annotations
 
 import subprocess
-import sys
 
 import pytest
 
 from common.config import ConfigError
 from ellipsled import cli
 from ellipsled.sil.variant import prepare
+
+from tests.procs import PY
 
 BAD = [
     (["batch", "nominal", "--out", "/nonexistent", "--seed", "-1"], "--seed"),
@@ -64,8 +65,8 @@ def test_values_within_range_pass(argv):
 
 
 def test_a_huge_duration_ends_with_a_usage_error_not_a_traceback(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "batch", "nominal", "--out", str(tmp_path),
-                        "--duration", "1e300"], capture_output=True, text=True, timeout=120)
+    r = subprocess.run(PY + ["batch", "nominal", "--out", str(tmp_path), "--duration", "1e300"],
+                       capture_output=True, text=True, timeout=120)
     assert r.returncode == 2, r.stderr
     assert "Traceback" not in r.stderr and "argument --duration" in r.stderr
 

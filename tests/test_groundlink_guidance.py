@@ -18,7 +18,7 @@ import pytest
 from fsw.groundlink import telemetry as tm
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import ACCEPTED, Rig
+from tests.rig import ACCEPTED, Rig
 
 MSG = "ELLIPSLED_GUIDANCE_STATUS"
 F = mav

@@ -25,15 +25,13 @@ from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing.verify import Reject
 from interfaces.vocabulary import Mode
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import flown
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(3)
-    yield r
-    r.close()
+    with flown(tmp_path, 3) as r:
+        yield r
 
 
 class Keyless:

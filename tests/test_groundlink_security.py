@@ -22,17 +22,15 @@ from interfaces.mavlink.signing.keys import SigningKey
 from interfaces.mavlink.signing.sign import Signer
 from interfaces.mavlink.signing.verify import Reject
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Rig, flown
 
 ARM_OFF = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0)
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(3)
-    yield r
-    r.close()
+    with flown(tmp_path, 3) as r:
+        yield r
 
 
 def send_raw(rig, data: bytes) -> None:

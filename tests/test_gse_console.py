@@ -12,15 +12,13 @@ import pytest
 from gse.console import GroundConsole
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Rig, flown
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(30)
-    yield r
-    r.close()
+    with flown(tmp_path, 30) as r:
+        yield r
 
 
 def test_console_shows_state_and_injects_with_ack(rig):

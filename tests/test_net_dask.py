@@ -14,12 +14,12 @@ import pytest
 
 from ellipsled.net import pki
 
-from . import netns
+from tests import netns
+from tests.procs import PY
 
 pytestmark = pytest.mark.slow
 
 BIN = Path(sys.executable).parent
-PY = [sys.executable, "-m", "ellipsled.cli"]
 START_S = 180                 # process start-up on a loaded 2-core machine
 
 

@@ -24,12 +24,12 @@ from ellipsled.node_reports import read_fsw, read_sim
 from ellipsled.sil.history import History, merge
 from interfaces.keys import keys
 
-from . import netns
+from tests import netns
+from tests.procs import PY
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 ZCONF = Path(__file__).resolve().parent.parent / "data" / "zenoh"
-PY = [sys.executable, "-m", "ellipsled.cli"]
 PORT = 7447
 HOSTS = ["router", "plant", "fsw", "viewer"]
 START_S = 180      # a process's start-up on a loaded 2-core machine (imports, numba caches)

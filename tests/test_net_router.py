@@ -7,7 +7,6 @@ import json
 import os
 import stat
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -19,10 +18,11 @@ from ellipsled.procs import stop_process
 from interfaces import transport
 from interfaces.keys import keys
 
+from tests.procs import PY
+
 pytestmark = pytest.mark.slow
 
 ZCONF = Path(__file__).resolve().parent.parent / "data" / "zenoh"
-PY = [sys.executable, "-m", "ellipsled.cli"]
 K = keys("ellipsled/acltest")
 
 

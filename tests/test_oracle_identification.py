@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -19,7 +18,8 @@ from fsw.flightsoftware import all_params
 from fsw.health import DEGRADED, FAILED_OFF
 from fsw.params import load_params
 
-PY = [sys.executable, "-m", "ellipsled.cli"]
+from tests.procs import PY
+
 
 
 def _fault(name: str):

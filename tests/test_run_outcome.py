@@ -18,6 +18,8 @@ from ellipsled import cli
 from ellipsled.procs import stop_process
 from ellipsled.runlib import COMPLETED_END_REASONS, exit_code
 
+from tests.procs import PY
+
 pytestmark = pytest.mark.timeout(300)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,8 +42,8 @@ def sil(tmp_path_factory):
     d = tmp_path_factory.mktemp("sil")
     env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
     with open(d / "stdout", "w") as so, open(d / "stderr", "w") as se:
-        p = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", "run", "case1", "--duration", DURATION,
-                              "--rerun", "file", "--no-plots", "--out", str(d / "out")],
+        p = subprocess.Popen(PY + ["run", "case1", "--duration", DURATION, "--rerun", "file", "--no-plots",
+                                   "--out", str(d / "out")],
                              cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=so, stderr=se)
         try:
             p.wait(SIL_TIMEOUT_S)

@@ -7,7 +7,6 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 import urllib.request
@@ -17,10 +16,9 @@ import pytest
 from ellipsled.sil.progress import ProgressFile
 from ellipsled.terminal import RunProgress, files_written
 
-from tests.ground_procs import free_udp
+from tests.procs import PY, free_udp
 
 pytestmark = pytest.mark.slow
-PY = [sys.executable, "-m", "ellipsled.cli"]
 URL = re.compile(r"https?://127\.0\.0\.1:\d+/\S*")
 
 

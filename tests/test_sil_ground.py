@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import subprocess
-import sys
 import time
 
 import pytest
@@ -15,10 +14,9 @@ from gse.client import GroundClient
 from gse.console import GroundConsole
 from gse.tlog import read_records
 
-from tests.ground_procs import start_ground_sil, stop
+from tests.procs import PY, start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
-PY = [sys.executable, "-m", "ellipsled.cli"]
 
 
 

@@ -23,7 +23,7 @@ import pytest
 from pymavlink import mavftp, mavutil
 
 from ellipsled.sil.history import History
-from tests.ground_procs import start_ground_sil, stop
+from tests.procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 MSG_PROTOCOL_VERSION, MSG_COMPONENT_METADATA = 300, 397

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import time
 
 import numpy as np
@@ -19,11 +18,12 @@ from interfaces import records, transport
 from interfaces.codec import Codec
 from interfaces.keys import keys
 
+from tests.procs import PY
+
 pytestmark = pytest.mark.slow
 
 PREFIX = "ellipsled/malformed"
 K = keys(PREFIX)
-PY = [sys.executable, "-m", "ellipsled.cli"]
 START_S = 120.0         # a plant's start-up on a loaded machine (imports, compiled kernels)
 
 

@@ -31,7 +31,7 @@ from ellipsled.sil.history import History
 from fsw.flightsoftware import declarations
 from fsw.params import ParamRegistry
 from interfaces.mavlink.signing.keys import SigningKey
-from tests.ground_procs import start_ground_sil, stop
+from tests.procs import start_ground_sil, stop
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is not installed (requirements.lock pins it, "
                                        "installed with --no-deps)")

@@ -26,7 +26,7 @@ from fsw.groundlink.link import REFUSAL_EVENT
 from fsw.groundlink.services import PRODUCT_ID, VENDOR_ID
 from fsw.params import ParamRegistry
 from interfaces.vocabulary import Mode
-from tests.ground_procs import start_ground_sil, stop
+from tests.procs import start_ground_sil, stop
 
 pytest.importorskip("mavsdk", reason="MAVSDK is not installed (requirements.lock pins it)")
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]

@@ -9,7 +9,6 @@ import re
 import signal
 import socket
 import subprocess
-import sys
 import time
 
 import pytest
@@ -17,11 +16,10 @@ import pytest
 from ellipsled.procs import stop_process
 from ellipsled.sil.progress import ProgressFile
 from interfaces import transport
-from tests.ground_procs import start_ground_sil
+from tests.procs import PY, start_ground_sil
 
 pytestmark = pytest.mark.slow
 
-PY = [sys.executable, "-m", "ellipsled.cli"]
 PREFIX = "ellipsled/orphans"
 START_S = 120.0         # start-up on a loaded machine (imports, compiled kernels, warm-up)
 

@@ -17,10 +17,11 @@ import pytest
 from ellipsled import batch
 from interfaces import transport
 
+from tests.procs import PY
+
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 PREFIX = "ellipsled/test"
-PY = [sys.executable, "-m", "ellipsled.cli"]
 
 
 class Procs:

@@ -16,7 +16,7 @@ import pytest
 from ellipsled.sil.progress import ProgressFile
 from ellipsled.terminal import RunProgress, files_written
 
-from tests.procs import PY, free_udp
+from tests.procs import PY, Tmux, free_udp
 
 pytestmark = pytest.mark.slow
 URL = re.compile(r"https?://127\.0\.0\.1:\d+/\S*")
@@ -123,7 +123,6 @@ def test_files_written_lists_what_exists_and_how_to_open_the_recording(tmp_path)
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed (apt-get install tmux)")
 def test_batch_shows_a_progress_bar_in_a_real_terminal(tmp_path):
     """A batch run inside tmux (a real pseudo-terminal): the bar shows simulated time and speed."""
-    from tests.test_console_terminal import Tmux
     out = tmp_path / "b"
     term = Tmux("ellipsled-bar", PY + ["batch", "nominal", "--no-plots", "--out", str(out)], size=(150, 30))
     try:

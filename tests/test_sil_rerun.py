@@ -9,9 +9,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from tests.test_viz_recording import RERUN, _column, _read
-
 from tests.procs import PY
+from tests.rrd import RERUN, column, read_recording
 
 pytestmark = pytest.mark.slow
 
@@ -25,20 +24,20 @@ def test_sil_recording_matches_the_run(tmp_path):
     rrd = out / "run.rrd"
     v = subprocess.run([RERUN, "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=60)
     assert v.returncode == 0, v.stdout + v.stderr
-    ents, reader = _read(rrd)
+    ents, reader = read_recording(rrd)
     assert len(reader.blueprints()) == 1
     for e in ("/bank/actual_deg", "/bank/reference_deg", "/bank/error_deg", "/adapt/theta_hat",
               "/world/vehicle", "/jets/lanes", "/events", "/timing/compute_us"):
         assert e in ents, e
     h = np.load(out / "history.npz")
     n = len(h["k"])
-    steps, _, bank = _column(ents["/bank/actual_deg"], "Scalars:scalars")
+    steps, _, bank = column(ents["/bank/actual_deg"], "Scalars:scalars")
     assert list(steps) == list(range(n))                 # every step of the run, none lost
     np.testing.assert_allclose([b[0] for b in bank], np.degrees(h["bank_rad"]), rtol=0, atol=1e-9)
-    steps, _, ref = _column(ents["/bank/reference_deg"], "Scalars:scalars")
+    steps, _, ref = column(ents["/bank/reference_deg"], "Scalars:scalars")
     np.testing.assert_allclose([x[0] for x in ref], np.degrees(h["bank_ref_rad"][steps]), rtol=0, atol=1e-9)
     # the FDIR events reached the recording as text-log entries
-    _, _, texts = _column(ents["/events"], "TextLog:text")
+    _, _, texts = column(ents["/events"], "TextLog:text")
     assert any("JET 17 FAILED OFF" in str(t) for t in texts), texts[:10]
 
 
@@ -53,17 +52,17 @@ def test_sil_guided_map_shows_each_guidance_answer_once_with_the_fsws_predicted_
                              "--rerun", "file", "--no-plots"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
-    ents, _ = _read(out / "run.rrd")
+    ents, _ = read_recording(out / "run.rrd")
     h = np.load(out / "history.npz")
     has = (h["guid_flags"] & GUID_PREDICTION) != 0
     cyc = np.where(has, h["guid_cycles"], -1)
     first = np.nonzero(has & (np.diff(np.concatenate(([-1], cyc))) != 0))[0]      # rows of a new answer
     assert len(first) >= 5                                                       # ~1 Hz over 6 s
-    steps, _, pts = _column(ents["/map/predicted"], "Points3D:positions")
+    steps, _, pts = column(ents["/map/predicted"], "Points3D:positions")
     assert list(steps) == [int(k) for k in h["k"][first]]
     np.testing.assert_allclose([p[0][0] for p in pts], np.degrees(h["pred_lon_rad"][first]), rtol=1e-6)
     np.testing.assert_allclose([p[0][1] for p in pts], np.degrees(h["pred_lat_rad"][first]), rtol=1e-6)
-    _, _, tgt = _column(ents["/map/target"], "Points3D:positions")
+    _, _, tgt = column(ents["/map/target"], "Points3D:positions")
     assert len(tgt) == 1 and tgt[0][0][0] == pytest.approx(math.degrees(float(h["target_lon_rad"][0])))
-    steps, _, _ = _column(ents["/map/track"], "LineStrips3D:strips")
+    steps, _, _ = column(ents["/map/track"], "LineStrips3D:strips")
     assert list(steps) == [int(k) for k in h["k"] if k % 10 == 0]

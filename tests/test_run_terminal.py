@@ -13,6 +13,7 @@ import urllib.request
 
 import pytest
 
+from ellipsled.procs import stop_process
 from ellipsled.sil.progress import ProgressFile
 from ellipsled.terminal import RunProgress, files_written
 
@@ -78,9 +79,7 @@ def test_run_with_the_web_viewer_prints_a_url_that_answers_and_names_its_files(t
         run.send_signal(signal.SIGINT)                    # the user stops the run
         run.wait(60)
     finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait(10)
+        stop_process(run, 10.0)
     text = lines.text()
     assert "━" not in text, "no progress bar when the output is not a terminal"
     assert f"files in {out}" in text and "run.rrd" in text and "viz.log" in text, text

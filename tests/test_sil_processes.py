@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from ellipsled import batch
+from ellipsled.procs import stop_process
 from interfaces import transport
 
 from tests.procs import PY
@@ -41,15 +42,12 @@ class Procs:
         return (self.tmp / f"{name}.log").read_text()
 
     def stop(self, name: str, sig=signal.SIGTERM, timeout: float = 10.0) -> int:
-        p = self.p[name]
-        if p.poll() is None:
-            p.send_signal(sig)
-        try:
-            return p.wait(timeout)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait(5)
+        """``sig``, then SIGKILL after ``timeout``; a process that had to be killed fails the test."""
+        p, killed = self.p[name], []
+        rc = stop_process(p, timeout, sig=sig, on_kill=lambda: killed.append(True))
+        if killed:
             raise AssertionError(f"{name} (pid {p.pid}) did not stop within {timeout} s")
+        return rc
 
     def wait(self, name: str, timeout: float) -> int:
         try:

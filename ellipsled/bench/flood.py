@@ -37,6 +37,7 @@ from collections import deque
 from pymavlink.dialects.v10 import common as v10
 
 from ellipsled.node_reports import read_fsw
+from ellipsled.procs import stop_process
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import parse_header
 from interfaces.mavlink.signing.keys import SigningKey
@@ -394,9 +395,7 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
                     sent = send(("127.0.0.1", vehicle), rate, flood_s, flood=fl)
                 run.wait(timeout_s)
             finally:
-                if run.poll() is None:
-                    run.kill()
-                    run.wait(10)
+                stop_process(run, 10.0)
                 watch.stop()
         fsw = read_fsw(d)
     ex, gl = fsw["executive"], fsw["tasks_us"].get("groundlink", {})

@@ -124,12 +124,41 @@ def circles(g: dict[str, set[str]]) -> list[list[str]]:
     return [_circle_through(g, comp[0], set(comp)) for comp in _components(g)]
 
 
-def reachable(g: dict[str, set[str]], start: str) -> set[str]:
-    """Every module ``start`` imports, directly or through others (``start`` included)."""
+def _packages_of(name: str, g: dict[str, set[str]]) -> list[str]:
+    """The packages of ours that hold module ``name`` (importing it runs their __init__)."""
+    parts = name.split(".")
+    return [p for p in (".".join(parts[:i]) for i in range(1, len(parts))) if p in g]
+
+
+def _edges(g: dict[str, set[str]], v: str, with_packages: bool) -> list[str]:
+    return sorted(g.get(v, set()) | (set(_packages_of(v, g)) if with_packages else set()))
+
+
+def reachable(g: dict[str, set[str]], start: str, with_packages: bool = False) -> set[str]:
+    """Every module ``start`` imports, directly or through others (``start`` included);
+    ``with_packages``: with the packages that hold each (and what they import)."""
     seen, todo = {start}, [start]
     while todo:
-        for w in g.get(todo.pop(), ()):
+        for w in _edges(g, todo.pop(), with_packages):
             if w not in seen:
                 seen.add(w)
                 todo.append(w)
     return seen
+
+
+def import_path(g: dict[str, set[str]], start: str, goal: str) -> list[str]:
+    """A shortest chain of imports [start, ..., goal] (through the packages that hold modules too)."""
+    came = {start: None}
+    queue = deque([start])
+    while queue:
+        v = queue.popleft()
+        if v == goal:
+            path = [v]
+            while came[path[-1]] is not None:
+                path.append(came[path[-1]])
+            return path[::-1]
+        for w in _edges(g, v, True):
+            if w not in came:
+                came[w] = v
+                queue.append(w)
+    raise ValueError(f"{start} does not reach {goal}")

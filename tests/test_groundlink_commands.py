@@ -14,6 +14,7 @@ from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
 from fsw.modes import Mode
 from gse.commands import make_request
 from interfaces.mavlink import dialect as mav
+from interfaces.vocabulary import FAULT_HEALTH
 
 from tests.rig import ACCEPTED, DENIED, UNSUPPORTED, Rig, rig  # noqa: F401  (the shared fixture)
 
@@ -30,7 +31,7 @@ def test_valid_injection_is_forwarded_to_the_plant_and_accepted(rig, words, expe
     assert rig.command(*words) == ACCEPTED
     jet, kind, eta = rig.injected[-1]
     assert (jet, kind) == expect[:2] and math.isclose(eta, expect[2], rel_tol=1e-6)
-    state = {"off": FAILED_OFF, "stuck": STUCK_ON, "degraded": DEGRADED, "clear": NOMINAL}[kind]
+    state = FAULT_HEALTH[kind]
     assert (rig.plant.fault_state == state).any() or (jet == 0 and (rig.plant.fault_state == NOMINAL).all())
     if jet:
         assert rig.plant.fault_state[jet - 1] == state

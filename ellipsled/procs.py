@@ -1,5 +1,5 @@
-"""Child processes we start: they die with us, and we stop them by their own pid, politely
-first, with bounded waits."""
+"""Child processes we start: the ``ellipsled`` command on this interpreter, children that die
+with us, and stopping them by their own pid, politely first, with bounded waits."""
 from __future__ import annotations
 
 import ctypes
@@ -10,6 +10,7 @@ import sys
 from typing import Callable
 
 PR_SET_PDEATHSIG = 1        # linux/prctl.h
+ELLIPSLED = [sys.executable, "-m", "ellipsled.cli"]     # the ``ellipsled`` command, on this interpreter
 
 
 def die_with_parent(sig: int = signal.SIGTERM) -> Callable[[], None] | None:

@@ -1,4 +1,4 @@
-"""The processes tests start: the ``ellipsled`` command (``PY``), free loopback UDP ports,
+"""The processes tests start: the ``ellipsled`` command (``ELLIPSLED``), free loopback UDP ports,
 a real-time SIL started with a fresh signing key and its ground link on loopback, a
 command in a real terminal (tmux), and stopping a process by its pid with a timeout
 (ellipsled/procs.py)."""
@@ -8,16 +8,13 @@ import os
 import shlex
 import socket
 import subprocess
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from interfaces.mavlink.signing.keys import SigningKey
 
-from ellipsled.procs import stop_process
-
-PY = [sys.executable, "-m", "ellipsled.cli"]          # the ``ellipsled`` command of this interpreter
+from ellipsled.procs import ELLIPSLED, stop_process
 
 
 def free_udp() -> int:
@@ -61,9 +58,9 @@ def start_ground_sil(tmp_path: Path, scenario: str = "nominal", duration_s: floa
     out, log_path = tmp_path / "run", tmp_path / "run.log"
     with open(log_path, "w") as log:            # the child keeps its own descriptor
         run = subprocess.Popen(
-            PY + ["run", scenario, "--realtime", "--rt" if rt else "--no-rt", "--duration", f"{duration_s:g}",
-                  "--out", str(out), "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
-                  "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
+            ELLIPSLED + ["run", scenario, "--realtime", "--rt" if rt else "--no-rt", "--duration", f"{duration_s:g}",
+                         "--out", str(out), "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
+                         "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
             stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     return GroundSil(run, key, key_file, vehicle, gcs, out, log_path)
 

@@ -10,9 +10,9 @@ import pytest
 
 from common.config import ConfigError
 from ellipsled import cli
+from ellipsled.procs import ELLIPSLED
 from ellipsled.sil.variant import prepare
 
-from tests.procs import PY
 
 BAD = [
     (["batch", "nominal", "--out", "/nonexistent", "--seed", "-1"], "--seed"),
@@ -65,7 +65,7 @@ def test_values_within_range_pass(argv):
 
 
 def test_a_huge_duration_ends_with_a_usage_error_not_a_traceback(tmp_path):
-    r = subprocess.run(PY + ["batch", "nominal", "--out", str(tmp_path), "--duration", "1e300"],
+    r = subprocess.run(ELLIPSLED + ["batch", "nominal", "--out", str(tmp_path), "--duration", "1e300"],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2, r.stderr
     assert "Traceback" not in r.stderr and "argument --duration" in r.stderr

@@ -9,8 +9,8 @@ import pytest
 
 from common.config import DATA_DIR, ConfigError
 from common.model import load_scenario, load_vehicle
+from ellipsled.procs import ELLIPSLED
 
-from tests.procs import PY
 
 CASE4 = DATA_DIR / "scenarios" / "case4.toml"
 
@@ -58,7 +58,8 @@ def test_the_parameter_registry_refuses_an_override_nobody_declares():
 
 def test_batch_refuses_the_misspelt_override_with_exit_status_2(tmp_path):
     path = _copy(tmp_path, CASE4, "delay_s = 1.5", "dealy_s = 1.5")
-    r = subprocess.run(PY + ["batch", str(path), "--out", str(tmp_path / "out"), "--duration", "0.1", "--no-plots"],
+    r = subprocess.run(ELLIPSLED + ["batch", str(path), "--out", str(tmp_path / "out"), "--duration", "0.1",
+                                    "--no-plots"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 2, r.stdout + r.stderr
     assert f"{path}: fsw.fdir.dealy_s: unknown key (did you mean delay_s?)" in r.stderr

@@ -11,10 +11,11 @@ import time
 import numpy as np
 import pytest
 
+from ellipsled.procs import ELLIPSLED
 from ellipsled.sil.history import History
 from gse.replay import TlogReplay
 
-from tests.procs import PY, Tmux, start_ground_sil, stop
+from tests.procs import Tmux, start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow,         # its SIL runs --no-rt: no FIFO process, it may run beside others
               pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed (apt-get install tmux)")]
@@ -26,9 +27,9 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
     run, out = sil.run, sil.out
     tlog = out / "console.tlog"
     out.mkdir(parents=True, exist_ok=True)      # the console may open its .tlog before the run makes the folder
-    console = Tmux("ellipsled-console", PY + ["gse", "console", "--signing-key", str(sil.key_file),
-                                              "--gcs-port", str(sil.gcs), "--vehicle", f"udp:127.0.0.1:{sil.vehicle}",
-                                              "--tlog", str(tlog)])
+    console = Tmux("ellipsled-console", ELLIPSLED + ["gse", "console", "--signing-key", str(sil.key_file),
+                                                     "--gcs-port", str(sil.gcs), "--tlog", str(tlog),
+                                                     "--vehicle", f"udp:127.0.0.1:{sil.vehicle}"])
     replay = None
     try:
         console.wait_for(lambda s: "ENTRY" in s and "ARMED" in s, 120, "the vehicle on the console")
@@ -70,7 +71,7 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         assert math.degrees(abs(math.remainder(at_end.bank - float(h["bank_rad"][i]), 2 * math.pi))) < 0.5
 
         # the same replay on the console's screens, in the terminal
-        replay = Tmux("ellipsled-replay", PY + ["gse", "console", "--replay", str(tlog), "--speed", "20"])
+        replay = Tmux("ellipsled-replay", ELLIPSLED + ["gse", "console", "--replay", str(tlog), "--speed", "20"])
         screen = replay.wait_for(lambda s: "(END)" in s, 60, "the replay to end")
         assert "REPLAY OF CONSOLE.TLOG" in screen
         assert f"{math.degrees(final.bank):8.2f}°" in screen, screen

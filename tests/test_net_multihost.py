@@ -21,11 +21,12 @@ import pytest
 from ellipsled import batch
 from ellipsled.net import pki
 from ellipsled.node_reports import read_fsw, read_sim
+from ellipsled.procs import ELLIPSLED
 from ellipsled.sil.history import History, merge
 from interfaces.keys import keys
 
 from tests import netns
-from tests.procs import PY
+
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
@@ -56,20 +57,20 @@ def net(tmp_path_factory):
 def start_router(n: netns.Network, name: str = "router", rt: bool = False) -> None:
     # --rt: on this 2-core machine the router shares the cores with the nodes' spinning
     # real-time loops (on its own machine it would not need it)
-    n.start(name, "router", PY + ["router", "--config", str(ZCONF / "router.json5"), "--listen", n.router_ep]
+    n.start(name, "router", ELLIPSLED + ["router", "--config", str(ZCONF / "router.json5"), "--listen", n.router_ep]
             + (["--rt"] if rt else []), cwd=n.work)
     n.wait_log(name, "listening on", 60)
 
 
 def node(n: netns.Network, role: str, mode: str, out: Path, prefix: str, extra=()) -> list[str]:
     """`ellipsled sim|fsw ... --zenoh-config data/zenoh/<role>.json5 --connect tls/ROUTER:7447`."""
-    return PY + [role, "case1", f"--{mode}", "--prefix", prefix, "--out", str(out),
-                 "--zenoh-config", str(ZCONF / f"{role}.json5"), "--connect", n.router_ep, *extra]
+    return ELLIPSLED + [role, "case1", f"--{mode}", "--prefix", prefix, "--out", str(out),
+                        "--zenoh-config", str(ZCONF / f"{role}.json5"), "--connect", n.router_ep, *extra]
 
 
 def viewer(n: netns.Network, out: Path, prefix: str) -> list[str]:
-    return PY + ["viz", "--prefix", prefix, "--rerun", "file", "--out", str(out), "--name", "run",
-                 "--zenoh-config", str(ZCONF / "viz.json5"), "--connect", n.router_ep]
+    return ELLIPSLED + ["viz", "--prefix", prefix, "--rerun", "file", "--out", str(out), "--name", "run",
+                        "--zenoh-config", str(ZCONF / "viz.json5"), "--connect", n.router_ep]
 
 
 def _stop_all(n: netns.Network, *names: str) -> None:

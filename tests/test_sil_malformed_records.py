@@ -13,12 +13,11 @@ import time
 import numpy as np
 import pytest
 
-from ellipsled.procs import stop_process
+from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces import records, transport
 from interfaces.codec import Codec
 from interfaces.keys import keys
 
-from tests.procs import PY
 
 pytestmark = pytest.mark.slow
 
@@ -65,9 +64,9 @@ class FakeFsw:
 def _plant(tmp_path, endpoint: str, mode: str, duration_s: float) -> subprocess.Popen:
     log = open(tmp_path / "sim.log", "w")
     try:
-        return subprocess.Popen(PY + ["sim", "nominal", f"--{mode}", "--prefix", PREFIX, "--listen", endpoint,
-                                      "--out", str(tmp_path), "--duration", str(duration_s),
-                                      "--wait-peers", str(START_S), "--fsw-timeout", "60"],
+        return subprocess.Popen(ELLIPSLED + ["sim", "nominal", f"--{mode}", "--prefix", PREFIX, "--listen", endpoint,
+                                             "--out", str(tmp_path), "--duration", str(duration_s),
+                                             "--wait-peers", str(START_S), "--fsw-timeout", "60"],
                                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     finally:
         log.close()

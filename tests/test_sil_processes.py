@@ -15,10 +15,9 @@ import numpy as np
 import pytest
 
 from ellipsled import batch
-from ellipsled.procs import stop_process
+from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces import transport
 
-from tests.procs import PY
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
@@ -34,7 +33,7 @@ class Procs:
 
     def start(self, name: str, argv: list[str]) -> subprocess.Popen:
         log = open(self.tmp / f"{name}.log", "w")
-        p = subprocess.Popen(PY + argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        p = subprocess.Popen(ELLIPSLED + argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         self.p[name] = p
         return p
 
@@ -88,8 +87,8 @@ def test_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
     """`ellipsled run --lockstep` (sim and fsw processes over Zenoh) flies exactly the
     batch run: every history array and every summary figure equal, faults at 2.5 s."""
     out = tmp_path / "sil"
-    r = subprocess.run(PY + ["run", "case1", "--lockstep", "--duration", "30", "--out", str(out),
-                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(ELLIPSLED + ["run", "case1", "--lockstep", "--duration", "30", "--out", str(out),
+                                    "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     s_sil = _json(out / "summary.json")
     s_bat, h_bat, _ = batch.run("case1", duration_s=30)
@@ -114,8 +113,8 @@ def test_guided_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
     """Guidance mode npc computes on a worker thread; its answer is applied at a fixed step
     after the release, so the multi-process lockstep run still equals the batch run."""
     out = tmp_path / "sil"
-    r = subprocess.run(PY + ["run", "guided-nominal", "--lockstep", "--duration", "30", "--out", str(out),
-                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(ELLIPSLED + ["run", "guided-nominal", "--lockstep", "--duration", "30", "--out", str(out),
+                                    "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     s_bat, h_bat, _ = batch.run("guided-nominal", duration_s=30)
     h_sil = np.load(out / "history.npz")
@@ -164,8 +163,8 @@ def test_realtime_sil_locks_to_the_plant_and_flies_the_fault_case(tmp_path, load
 def _realtime_run(out: Path, load: str):
     hogs = _hogs(2) if load != "idle" else []
     try:
-        r = subprocess.run(PY + ["run", "case1", "--realtime", "--rt", "--duration", "20", "--out", str(out),
-                                 "--rerun", "file", "--no-plots"], capture_output=True, text=True, timeout=300)
+        r = subprocess.run(ELLIPSLED + ["run", "case1", "--realtime", "--rt", "--duration", "20", "--out", str(out),
+                                        "--rerun", "file", "--no-plots"], capture_output=True, text=True, timeout=300)
     finally:
         for h in hogs:
             os.killpg(h.pid, signal.SIGKILL)

@@ -9,7 +9,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from tests.procs import PY
+from ellipsled.procs import ELLIPSLED
+
 from tests.rrd import RERUN, column, read_recording
 
 pytestmark = pytest.mark.slow
@@ -17,8 +18,8 @@ pytestmark = pytest.mark.slow
 
 def test_sil_recording_matches_the_run(tmp_path):
     out = tmp_path / "sil"
-    r = subprocess.run(PY + ["run", "case1", "--lockstep", "--duration", "20", "--out", str(out),
-                             "--rerun", "file", "--no-plots"],
+    r = subprocess.run(ELLIPSLED + ["run", "case1", "--lockstep", "--duration", "20", "--out", str(out),
+                                    "--rerun", "file", "--no-plots"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     rrd = out / "run.rrd"
@@ -48,8 +49,8 @@ def test_sil_guided_map_shows_each_guidance_answer_once_with_the_fsws_predicted_
     import math
     from interfaces.records import GUID_PREDICTION
     out = tmp_path / "sil"
-    r = subprocess.run(PY + ["run", "guided-nominal", "--lockstep", "--duration", "6", "--out", str(out),
-                             "--rerun", "file", "--no-plots"],
+    r = subprocess.run(ELLIPSLED + ["run", "guided-nominal", "--lockstep", "--duration", "6", "--out", str(out),
+                                    "--rerun", "file", "--no-plots"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     ents, _ = read_recording(out / "run.rrd")

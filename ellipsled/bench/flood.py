@@ -37,7 +37,7 @@ from collections import deque
 from pymavlink.dialects.v10 import common as v10
 
 from ellipsled.node_reports import read_fsw
-from ellipsled.procs import stop_process
+from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import parse_header
 from interfaces.mavlink.signing.keys import SigningKey
@@ -379,10 +379,10 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
         watch.start()
         log_path = Path(d) / "run.log"
         with open(log_path, "w") as log:
-            run = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", "run", scenario, "--realtime",
-                                    "--duration", f"{duration_s:g}", "--out", d, "--rerun", "none", "--no-plots",
-                                    "--signing-key", str(key_file),
-                                    "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
+            run = subprocess.Popen(ELLIPSLED + ["run", scenario, "--realtime", "--duration", f"{duration_s:g}",
+                                                "--out", d, "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
+                                                "--mavlink-bind", f"udp:127.0.0.1:{vehicle}",
+                                                "--gcs", f"udp:127.0.0.1:{gcs}"],
                                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
             sent = None
             try:

@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 from ellipsled.node_reports import read_fsw, read_sim
-from ellipsled.procs import stop_process
+from ellipsled.procs import ELLIPSLED, stop_process
 
 from .rows import NO_TARGET, Row, fmt, g, ratio, row
 
@@ -39,7 +39,7 @@ class _Procs:
     def start(self, name: str, argv: list[str]) -> None:
         log = open(self.d / f"{name}.log", "w")
         self.logs.append(log)
-        self.p[name] = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", *argv], cwd=self.d, stdout=log,
+        self.p[name] = subprocess.Popen(ELLIPSLED + argv, cwd=self.d, stdout=log,
                                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
 
     def log(self, name: str) -> str:

@@ -21,13 +21,12 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 from ellipsled.node_reports import read_fsw, read_sim
-from ellipsled.procs import die_with_parent, stop_process
+from ellipsled.procs import ELLIPSLED, die_with_parent, stop_process
 from ellipsled.reference import fault_free_reference
 from ellipsled.runlib import EXIT_NOT_COMPLETED, exit_code, format_summary, judge
 from ellipsled.terminal import RunProgress, files_written
@@ -143,7 +142,7 @@ class Launcher:
 
     def spawn(self, role: str, argv: list[str]) -> None:
         """A child with its output in ROLE.log (relayed to the terminal unless the console has it)."""
-        cmd = [sys.executable, "-m", "ellipsled.cli"] + argv
+        cmd = ELLIPSLED + argv
         path = self.out / f"{role}.log"
         log = open(path, "w")
         self.logs.append(log)

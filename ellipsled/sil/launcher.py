@@ -27,7 +27,6 @@ from pathlib import Path
 
 from ellipsled.node_reports import read_fsw, read_sim
 from ellipsled.procs import ELLIPSLED, die_with_parent, stop_process
-from ellipsled.reference import fault_free_reference
 from ellipsled.runlib import EXIT_NOT_COMPLETED, exit_code, format_summary, judge
 from ellipsled.terminal import RunProgress, files_written
 from interfaces import transport
@@ -271,6 +270,7 @@ class Launcher:
         scn = prepare_args(a)
         seed = scn.seed if a.seed is None else a.seed
         faults = [tuple(x) for x in sim_info["faults_applied"]]
+        from ellipsled.reference import fault_free_reference    # it flies twins: the FSW loads after the run
         ref = fault_free_reference(h, scn, seed, faults)
         summary = judge(h, scn, seed, sim_info["end_reason"], fsw_info, faults, fsw_info["params"], ref)
         summary["mode"] = f"sil-{a.mode}"

@@ -29,7 +29,7 @@ SETUPS = {"paper": True, "no-init-err": False}          # set-up -> initial bank
 SETUP_TEXT = {"paper": "paper set-up (5° initial bank error)", "no-init-err": "no initial error"}
 MODES = ["oracle", "detect"]
 BOUND_DEG = 5.0          # the paper's conclusion
-GOAL_DEG = 1.0           # the product's goal for the fault-attributable error (issue 14), reported, not tuned to
+GOAL_DEG = 1.0           # the product's goal for the fault-attributable error: reported, not tuned to
 # What the report keeps of each run (the figures' quantities), not the whole history.
 KEEP = ("k", "t_s", "bank_rad", "bank_ref_rad", "u_cal_B", "tau_jets_B", "tau_alloc_B", "theta_hat", "h_m",
         "V_rel_mps", "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa", "alpha_rad", "beta_rad")

@@ -123,9 +123,9 @@ N_TRUTH_F = 36 + 2 * N_JETS
 def _truth_kernel(x, aux, book, tau_jets, tau_ext, frac, fault_eta, fault_state, k, dt, dt_ns, om, mass, g0,
                   isp, out_f, out_i, out_s):
     """The truth at step k (spec 40-interfaces.md, sim/truth): floats into out_f (TRUTH_SCALARS
-    then TRUTH_VECTORS), [k, t_ns] into out_i, the fault states into out_s. The same
-    arithmetic, term for term, as the NumPy version it replaced (equal to it but for a rare
-    last-bit difference in gamma and psi, where NumPy summed the dot products differently)."""
+    then TRUTH_VECTORS), [k, t_ns] into out_i, the fault states into out_s. Scalar arithmetic,
+    term for term (a NumPy evaluation may differ in the last bit of gamma and psi, where it
+    sums the dot products in another order)."""
     rx, ry, rz = x[0], x[1], x[2]
     ux, uy, uz = x[3] + om * ry, x[4] - om * rx, x[5]          # v - Omega x r
     V = math.sqrt(ux * ux + uy * uy + uz * uz)

@@ -55,7 +55,7 @@ def net(tmp_path_factory):
 
 
 def start_router(n: netns.Network, name: str = "router", rt: bool = False) -> None:
-    # --rt: on this 2-core machine the router shares the cores with the nodes' spinning
+    # --rt: on a 2-core machine the router shares the cores with the nodes' spinning
     # real-time loops (on its own machine it would not need it)
     n.start(name, "router", ELLIPSLED + ["router", "--config", str(ZCONF / "router.json5"), "--listen", n.router_ep]
             + (["--rt"] if rt else []), cwd=n.work)

@@ -46,7 +46,7 @@ MODES = ("viewer", "web", "file", "none", "auto")
 LOOPBACK = "127.0.0.1"
 SERVER_MEMORY_LIMIT = "256MiB"   # a full entry at 50 Hz is ~40 MB of chunks
 VIEWER_MEMORY_LIMIT = "25%"
-FINALISE_TIMEOUT_S = 60.0        # `rerun rrd optimize` of a full entry takes ~1.2 s here
+FINALISE_TIMEOUT_S = 60.0        # a wide margin over `rerun rrd optimize` of a full entry (seconds)
 
 
 def rerun_exe() -> str:

@@ -38,7 +38,7 @@ from interfaces.vocabulary import HEALTH_NAMES, N_JETS, Mode, Severity
 DEG = 180.0 / math.pi
 TRUTH, FSW = "truth", "fsw"
 
-# Buffered fields per source: name -> trailing shape (names as ellipsled/history.py FIELDS,
+# Buffered fields per source: name -> trailing shape (names as ellipsled/sil/history.py FIELDS,
 # plus r_N [m] for the 3D view and the FSW loop-timing fields of the live FSW_STATE record).
 SOURCE_FIELDS: dict[str, dict[str, tuple[int, ...]]] = {
     TRUTH: {"bank_rad": (), "alpha_rad": (), "beta_rad": (), "omega_BN_B": (3,), "sigma_BN": (3,),

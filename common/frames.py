@@ -1,4 +1,4 @@
-"""Frame rotations and the wind/aerodynamic angles (spec 10-plant.md, frames).
+"""Frame rotations and the wind/aerodynamic angles (docs/plant.md, frames).
 
 R1, R2, R3 are frame-rotation matrices (they map components in the old frame to the
 new frame). W: w1 along v_rel, w2 = (v_rel x r)/|.| (right), w3 = w1 x w2 (down).

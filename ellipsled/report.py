@@ -1,6 +1,6 @@
 """``ellipsled report``: fly every paper case in both identification modes, with and without
 the initial bank error, and write a Markdown report that puts each claim of the paper
-(spec 30-scenarios.md) beside the product's measured figure, with a verdict and a figure
+(docs/scenarios.md) beside the product's measured figure, with a verdict and a figure
 per paper figure (4-14). The README's "Results against the paper" is this report's
 ``readme_section.md``.
 

@@ -71,7 +71,7 @@ class FlightSoftware(GroundCommands):
         self.params = self.registry.values          # current values, read by the owners below
 
         self.nav = Navigation(planet, veh)
-        # guidance mode (spec 60-guidance.md): the scenario's bank schedule, or the
+        # guidance mode (docs/fsw/entry-guidance.md): the scenario's bank schedule, or the
         # predictor-corrector's command through its shaper; the attitude chain is the same
         self.entry = None
         if scenario.guidance_mode == "npc":

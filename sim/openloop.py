@@ -6,7 +6,7 @@ acceleration-limited tracker (not the FSW's quintic guidance). The ideal torque 
 computed torque with the truth inertia: it cancels the gyroscopic and aerodynamic moments
 and adds a stiff PD to the reference attitude C_RN = R2(alpha_trim) R1(bank_r) C_WN.
 
-Under the conditions stated in 10-plant.md for its figures (non-rotating planet, nominal
+Under the conditions stated in docs/plant.md for its figures (non-rotating planet, nominal
 density, bank steps) this run gives ~455 s to Mach 2 at 9.4 km with peak qbar 6.6 kPa at
 101 s, as the spec says; gamma turns positive at ~139 s and back to negative at ~248 s (the
 spec's "positive again near 250 s" is that sign change, not a second up-crossing). The
@@ -71,7 +71,7 @@ class BankReference:
 
 @njit(cache=True)
 def ideal_torque(x, aux, I, phi, phidot, phiddot, alpha_trim, kp, kd, C, tau):
-    """Computed torque tau = I w_dot_cmd + w x I w - tau_aero (spec 20-fsw.md reference
+    """Computed torque tau = I w_dot_cmd + w x I w - tau_aero (docs/fsw/index.md reference
     attitude: C_RN = R2(alpha_trim) R1(phi_r) C_WN, omega_R = omega_W + phidot_r w1)."""
     mrp.dcm_into(x[6], x[7], x[8], C)
     cp, sp, ca, sa = math.cos(phi), math.sin(phi), math.cos(alpha_trim), math.sin(alpha_trim)

@@ -1,4 +1,4 @@
-"""Reconfiguration never stalls the loop (spec 20-fsw.md "Reconfiguration"): table rebuild
+"""Reconfiguration never stalls the loop (docs/fsw/index.md "Reconfiguration"): table rebuild
 time, the synchronous default (lockstep = batch), and the asynchronous mode, whose interim
 answers never fire a jet the new health forbids, are exact over the interim model (checked
 by brute force over the previous candidates), and switch to answers equal to the

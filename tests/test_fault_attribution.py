@@ -1,4 +1,4 @@
-"""The fault-attributable bank error (spec 30-scenarios.md): max over t >= t_fault of
+"""The fault-attributable bank error (docs/scenarios.md): max over t >= t_fault of
 |e_case(t) - e_ref(t)|, e_ref from the same scenario and seed flown without faults.
 Truth: a hand-computed synthetic history, and the determinism of the fault-free flight."""
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """FDIR jet monitor: detection, isolation, delay, overrides, against an independent plant-side
-chamber-pressure model written here (spec 10-plant.md: eta*u for a working jet, 1 stuck on,
+chamber-pressure model written here (docs/plant.md: eta*u for a working jet, 1 stuck on,
 0 failed off, + white noise sigma 0.02) and expected detection times counted directly from
 the command sequence (the N-th post-fault firing, or the N-th post-fault off period)."""
 from __future__ import annotations

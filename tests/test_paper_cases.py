@@ -1,4 +1,4 @@
-"""The paper's cases flown end to end in batch (spec 30-scenarios.md; issue: flight-software
+"""The paper's cases flown end to end in batch (docs/scenarios.md; issue: flight-software
 core acceptance): every fault case completes to parachute conditions with the bank error
 after the fault within the paper's 5 degrees, FDIR names exactly the injected jets with
 the right kind, the nominal run has no false alarm, case 4 reconfigures at 4.0 s, and

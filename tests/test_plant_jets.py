@@ -1,4 +1,4 @@
-"""Jets, faults and chamber pressures in the plant (spec 10-plant.md, jets and jet faults),
+"""Jets, faults and chamber pressures in the plant (docs/plant.md, jets and jet faults),
 and jets given by geometry (T = r x F)."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Release jitter of the real-time 50 Hz loop (spec 50-performance.md) next to cyclictest.
+"""Release jitter of the real-time 50 Hz loop (docs/benchmarks.md) next to cyclictest.
 
 The loop: fsw.executive.RealTimeClock + the FSW topology's rate groups (RG1 control,
 RG2 fdir_slow) fed by the plant in the same process (an extra RG1 task

@@ -1,4 +1,4 @@
-"""Round-trip latency between two processes on 127.0.0.1 (spec 50-performance.md):
+"""Round-trip latency between two processes on 127.0.0.1 (docs/benchmarks.md):
 
 - baseline: a plain Python UDP echo (blocking sockets), 64-byte datagrams;
 - Zenoh + codec: the client publishes an encoded SENSORS frame (interfaces/transport.py

@@ -1,4 +1,4 @@
-"""Numerical predictor-corrector entry guidance (spec 60-guidance.md), after P. Lu,
+"""Numerical predictor-corrector entry guidance (docs/fsw/entry-guidance.md), after P. Lu,
 "Entry Guidance: A Unified Method", JGCD 37(3), 2014 (FNPEG): ``EntryGuidance``, the
 guidance mode ``npc`` that drives the package's pieces (predictor, corrector, density
 estimator, lateral logic, bank shaper) from the rate groups, and the parameters they

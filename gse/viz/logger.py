@@ -3,7 +3,7 @@
 Plain code: no transport, no threads. Rows are copied into preallocated per-source
 buffers (``truth`` from the plant, ``fsw`` from the flight software) and sent column-wise
 when ``flush_rows`` rows are buffered or ``flush_s`` seconds have passed since the last
-send (spec 40-interfaces.md: batch with ``send_columns``, never one ``rr.log`` per signal
+send (docs/interfaces/index.md: batch with ``send_columns``, never one ``rr.log`` per signal
 per frame). Every entity carries the two timelines ``step`` (sequence, control step k) and
 ``sim_time`` (duration, simulated time).
 

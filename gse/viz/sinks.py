@@ -1,5 +1,5 @@
 """Where a recording goes: 'viewer' | 'web' | 'file' | 'none' | 'auto', or '+'-joined
-combinations such as 'web+file' (spec 40-interfaces.md, Rerun sinks).
+combinations such as 'web+file' (docs/interfaces/index.md, Rerun sinks).
 
 - viewer: a gRPC server hosted here on 127.0.0.1 plus a native viewer process connected to
   it (needs a display: DISPLAY or WAYLAND_DISPLAY); without a display it falls back to a

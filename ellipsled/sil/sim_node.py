@@ -292,9 +292,9 @@ class SimNode:
     def _await_ready(self) -> None:
         """Real time: the clock starts when the FSW has warmed up (its ``ready`` token), not
         before — the warm-up runs on a sensor frame, so frame k=0 is offered every 20 ms
-        meanwhile (counted: warmup_frames). Warmed up on a frame of a plant that was already
-        flying, the FSW lost ~0.9 s of commands at every start. An FSW that never says ready
-        (an older one) costs wait_peers, then the run starts anyway, said in the log."""
+        meanwhile (counted: warmup_frames): an FSW warming up on the frames of a plant already
+        flying would miss the first commands' deadlines. An FSW that never says ready costs
+        wait_peers, then the run starts anyway, said in the log."""
         def offer() -> None:
             self.publish_sensors()
             self.counts["warmup_frames"] += 1

@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test venv lock bench clean
+.PHONY: run test venv lock bench docs clean
 
 venv: $(STAMP)
 
@@ -31,6 +31,13 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/ellipsled bench --out runs/bench.json
+
+# The documentation site: the reference pages generated from the code (ellipsled/docsgen.py),
+# then MkDocs with --strict (a broken link or a page missing from the nav fails) into site/.
+docs: $(STAMP)
+	$(BIN)/python -m ellipsled.docsgen
+	$(BIN)/python -m interfaces.event_metadata
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 # Refresh the full lock from the direct dependencies (requirements-nodeps.in: without theirs).
 lock:

@@ -1,4 +1,4 @@
-"""Mars atmosphere models (spec 10-plant.md). Pure functions of altitude; the plant uses
+"""Mars atmosphere models (docs/plant.md). Pure functions of altitude; the plant uses
 them with a dispersion factor as truth, the FSW uses them undispersed as its own model."""
 from __future__ import annotations
 

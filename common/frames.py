@@ -1,4 +1,4 @@
-"""Frame rotations and the wind/aerodynamic angles (spec 10-plant.md, frames).
+"""Frame rotations and the wind/aerodynamic angles (docs/plant.md, frames).
 
 R1, R2, R3 are frame-rotation matrices (they map components in the old frame to the
 new frame). W: w1 along v_rel, w2 = (v_rel x r)/|.| (right), w3 = w1 x w2 (down).
@@ -29,7 +29,7 @@ def R3(t: float) -> np.ndarray:
 
 @njit(cache=True)
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b for 3-vectors (np.cross costs ~30 us of dispatch per call on small arrays)."""
+    """a x b for 3-vectors (np.cross's per-call dispatch outweighs the arithmetic on small arrays)."""
     out = np.empty(3)
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]

@@ -21,7 +21,7 @@ _INERTIA_IDX = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])
 
 
 def inertia_matrix(h: np.ndarray) -> np.ndarray:
-    """Inertia tensor from h = [I11 I22 I33 I12 I13 I23] (spec 20-fsw.md ordering); a new
+    """Inertia tensor from h = [I11 I22 I33 I12 I13 I23] (docs/fsw/index.md ordering); a new
     array of h's dtype."""
     return np.asarray(h)[_INERTIA_IDX]
 
@@ -71,7 +71,7 @@ class Vehicle:
     torque_matrix_Nm: np.ndarray  # (3, 18): column k = torque of jet k+1 at full thrust
     isp_s: float
     jet_force_B_N: np.ndarray | None = None  # (3, 18) when jets are given by geometry
-    nose_radius_m: float = 1.875             # Sutton-Graves heat rate (spec 60-guidance.md)
+    nose_radius_m: float = 1.875             # Sutton-Graves heat rate (docs/fsw/entry-guidance.md)
     max_load_g: float = 15.0                 # structural limit of the aerodynamic load factor [g0]
     max_heat_rate_wcm2: float = 100.0        # stagnation-point heat-rate limit [W/cm^2]
     inertia_uncertainty_frac: float = 0.0    # each inertia element known to within this fraction
@@ -142,7 +142,7 @@ class Scenario:
     sensors: SensorNoise
     faults: tuple[FaultEvent, ...]
     fsw: dict = field(default_factory=dict)  # overrides of data/fsw/default.toml, validated by fsw
-    guidance_mode: str = "profile"           # profile | npc (spec 60-guidance.md)
+    guidance_mode: str = "profile"           # profile | npc (docs/fsw/entry-guidance.md)
     end_speed_mps: float | None = None
     target_lat_rad: float | None = None      # deploy target (required by mode "npc")
     target_lon_rad: float | None = None

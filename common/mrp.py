@@ -1,7 +1,7 @@
 """Modified Rodrigues parameters (MRPs): the one set of attitude kernels the plant, the
 flight software and the ground tools use.
 
-Conventions (spec 10-plant.md): sigma_BN is the attitude of B relative to N, C_BN maps
+Conventions (docs/plant.md): sigma_BN is the attitude of B relative to N, C_BN maps
 N components to B components, omega is expressed in B. sigma_dot = 1/4 B(sigma) omega.
 
 The numba kernels (``*_into`` write into caller-owned arrays, no allocation) are what
@@ -120,7 +120,7 @@ def sigma_to_quat(sigma: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------- kinematics
 @njit(cache=True)
 def B_mul(s, x, out):
-    """out = B(s) x, B = (1 - s.s) I + 2[s x] + 2 s s^T (spec 10-plant.md)."""
+    """out = B(s) x, B = (1 - s.s) I + 2[s x] + 2 s s^T (docs/plant.md)."""
     s2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
     sx = s[0] * x[0] + s[1] * x[1] + s[2] * x[2]
     c0 = s[1] * x[2] - s[2] * x[1]
@@ -133,7 +133,7 @@ def B_mul(s, x, out):
 
 @njit(cache=True)
 def Bdot_mul(s, sd, x, out):
-    """out = Bdot(s, sd) x, Bdot = -2 (s.sd) I + 2[sd x] + 2 (sd s^T + s sd^T) (spec 20-fsw.md)."""
+    """out = Bdot(s, sd) x, Bdot = -2 (s.sd) I + 2[sd x] + 2 (sd s^T + s sd^T) (docs/fsw/index.md)."""
     ssd = s[0] * sd[0] + s[1] * sd[1] + s[2] * sd[2]
     sx = s[0] * x[0] + s[1] * x[1] + s[2] * x[2]
     sdx = sd[0] * x[0] + sd[1] * x[1] + sd[2] * x[2]
@@ -155,7 +155,7 @@ def sigma_dot_into(s, omega, out):
 
 @njit(cache=True)
 def sigma_derivatives(s, omega, domega, sdot, sddot):
-    """sdot = 1/4 B omega; sddot = 1/4 (Bdot omega + B domega) (spec 20-fsw.md)."""
+    """sdot = 1/4 B omega; sddot = 1/4 (Bdot omega + B domega) (docs/fsw/index.md)."""
     tmp = np.empty(3)
     sigma_dot_into(s, omega, sdot)
     Bdot_mul(s, sdot, omega, sddot)
@@ -167,7 +167,7 @@ def sigma_derivatives(s, omega, domega, sdot, sddot):
 @njit(cache=True)
 def omega_from_sigma_dot_into(s, x, out):
     """out = 4 B(s)^T x / (1 + s.s)^2 (the inverse of sigma_dot = 1/4 B omega, as
-    B^T B = (1 + s.s)^2 I), using B(s)^T = B(-s). SAMI's P_a (spec 20-fsw.md)."""
+    B^T B = (1 + s.s)^2 I), using B(s)^T = B(-s). SAMI's P_a (docs/fsw/index.md)."""
     ns = np.empty(3)
     ns[0], ns[1], ns[2] = -s[0], -s[1], -s[2]
     B_mul(ns, x, out)
@@ -248,13 +248,13 @@ def tilde(v: np.ndarray) -> np.ndarray:
 
 
 def B_matrix(sigma: np.ndarray) -> np.ndarray:
-    """B(sigma) = (1 - s.s) I + 2[s x] + 2 s s^T (spec 10-plant.md, kinematics)."""
+    """B(sigma) = (1 - s.s) I + 2[s x] + 2 s s^T (docs/plant.md, kinematics)."""
     s2 = float(sigma @ sigma)
     return (1.0 - s2) * np.eye(3) + 2.0 * tilde(sigma) + 2.0 * np.outer(sigma, sigma)
 
 
 def B_dot(sigma: np.ndarray, sigma_dot: np.ndarray) -> np.ndarray:
-    """Time derivative of B(sigma) (spec 20-fsw.md, SAMI notation)."""
+    """Time derivative of B(sigma) (docs/fsw/index.md, SAMI notation)."""
     return (-2.0 * float(sigma @ sigma_dot) * np.eye(3) + 2.0 * tilde(sigma_dot)
             + 2.0 * (np.outer(sigma_dot, sigma) + np.outer(sigma, sigma_dot)))
 

@@ -1,5 +1,5 @@
 """Runtime helpers of every ellipsled process (plant, FSW, ground tools): real-time
-hygiene (spec 20-fsw.md, Executive; 50-performance.md) and absolute sleeps.
+hygiene (docs/fsw/index.md, Executive; docs/benchmarks.md) and absolute sleeps.
 
 Call order in a process shell:
 

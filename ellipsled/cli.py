@@ -11,7 +11,7 @@ from common import rt
 rt.single_threaded_numerics()
 
 from common.config import ConfigError  # noqa: E402
-from ellipsled import argtypes  # noqa: E402
+from ellipsled.sil import argtypes  # noqa: E402
 
 
 def _add_plant(sub):
@@ -40,7 +40,7 @@ def _add_batch(sub):
     p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--rrd", action="store_true", help="also write DIR/run.rrd, the Rerun recording of the run")
-    from ellipsled.runlib import add_variant_arguments
+    from ellipsled.sil.variant import add_variant_arguments
     add_variant_arguments(p)
 
     def run(a):
@@ -95,21 +95,31 @@ def _add_params(sub):
     p.set_defaults(func=run)
 
 
-def _add_sil(sub):
-    from ellipsled.sil import fsw_node, launcher, sim_node
-
+def _add_run(sub):
     from ellipsled.runlib import EXIT_CODES_HELP
+    from ellipsled.sil import launcher
     p = sub.add_parser("run", help="the SIL: plant, flight software and viewers as processes over Zenoh",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     launcher.add_arguments(p)
     p.set_defaults(func=launcher.main)
+
+
+# The process shells get their own parsers: a SIL process loads its shell, not the launcher's judging.
+def _add_sim(sub):
+    from ellipsled.sil import sim_node
     p = sub.add_parser("sim", help="the plant process of the SIL")
     sim_node.add_arguments(p)
     p.set_defaults(func=sim_node.main)
+
+
+def _add_fsw(sub):
+    from ellipsled.sil import fsw_node
     p = sub.add_parser("fsw", help="the flight-software process of the SIL")
     fsw_node.add_arguments(p)
     p.set_defaults(func=fsw_node.main)
 
+
+def _add_viz(sub):
     def viz(a):
         from gse.viz.bridge import bridge_main
         return bridge_main(a)
@@ -144,19 +154,19 @@ def _add_bench(sub):
     add_bench_parser(sub)
 
 
-# (subcommand, its one-line help, the function adding it and its siblings in full). Only the
-# chosen subcommand's modules are imported: building every parser imported the batch runner,
-# the SIL, Rerun and the ground station (seconds) before any command could start.
+# (subcommand, its one-line help, the function adding its parser in full). Only the chosen
+# subcommand's modules are imported: building every parser would import the batch runner, the
+# SIL, Rerun and the ground station (seconds) before any command starts.
 COMMANDS: tuple[tuple[str, str, object], ...] = (
     ("plant", "open-loop plant run: attitude held on the reference by an ideal torque", _add_plant),
     ("batch", "fly a scenario: plant and FSW in one process, lockstep", _add_batch),
     ("report", "fly every paper case and write report.md (paper claims vs measured)", _add_report),
     ("params", "the FSW parameters: MAVLink id, owner, unit, bounds, default, description", _add_params),
     ("gse", "ground station: console and scripted commands (MAVLink 2, signed)", _add_gse),
-    ("run", "the SIL: plant, flight software and viewers as processes over Zenoh", _add_sil),
-    ("sim", "the plant process of the SIL", _add_sil),
-    ("fsw", "the flight-software process of the SIL", _add_sil),
-    ("viz", "the Rerun bridge: Zenoh truth/state/events -> Rerun", _add_sil),
+    ("run", "the SIL: plant, flight software and viewers as processes over Zenoh", _add_run),
+    ("sim", "the plant process of the SIL", _add_sim),
+    ("fsw", "the flight-software process of the SIL", _add_fsw),
+    ("viz", "the Rerun bridge: Zenoh truth/state/events -> Rerun", _add_viz),
     ("router", "the Zenoh router of a SIL across machines (TLS, access control)", _add_router),
     ("pki", "certificates for Zenoh's mutual TLS (a CA and one per role)", _add_pki),
     ("montecarlo", "dispersed Monte Carlo campaign on Dask (local or a cluster)", _add_montecarlo),
@@ -171,13 +181,9 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     chosen = next((w for w in argv if not w.startswith("-")), None)
     ap = argparse.ArgumentParser(prog="ellipsled", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    full = next((add for name, _, add in COMMANDS if name == chosen), None)
-    done = set()
     for name, hlp, add in COMMANDS:
-        if add is full:
-            if add not in done:
-                done.add(add)
-                add(sub)
+        if name == chosen:
+            add(sub)
         else:
             sub.add_parser(name, help=hlp)
     return ap

@@ -1,4 +1,4 @@
-"""Figures of merit of one run (spec 30-scenarios.md), from its History alone.
+"""Figures of merit of one run (docs/scenarios.md), from its History alone.
 
 Pure functions: the batch runner and the SIL launcher call the same code, so a lockstep
 SIL run and a batch run of the same seed produce the same summary.json figures.
@@ -9,11 +9,11 @@ import math
 
 import numpy as np
 
-from .history import History
+from .sil.history import History
 
 SETTLE_BAND_DEG = 1.0     # |e_phi| below this counts as settled
 SETTLE_HOLD_S = 2.0       # ... and must stay below it this long
-FINE_BAND_DEG = 0.2       # the tighter band a fault-tolerance claim is judged by (spec 30-scenarios.md)
+FINE_BAND_DEG = 0.2       # the tighter band a fault-tolerance claim is judged by (docs/scenarios.md)
 TRANSIENT_S = 10.0        # the initial bank error's decay is over by then (bank_err_max_after_transient_deg)
 RECOVERED_FRAC = 0.1      # recovered: the fault-attributable error back within this fraction of its peak
 RECOVERY_WINDOW_S = 5.0   # ... the peak of the fault's own transient: within this long after reconfiguration
@@ -48,7 +48,7 @@ def settle_time(t: np.ndarray, err_deg: np.ndarray, t0: float, band_deg: float =
 def fault_attributable_error_deg(case: History, ref: History) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], e_case - e_ref [deg]) on the control steps both runs flew, aligned on the
     step index k: the part of the bank error the faults caused, e_ref being the same
-    scenario, seed and reference flown without faults (spec 30-scenarios.md)."""
+    scenario, seed and reference flown without faults (docs/scenarios.md)."""
     kc, kr = case["k"], ref["k"]
     common = np.intersect1d(kc, kr)
     ic, ir = np.searchsorted(kc, common), np.searchsorted(kr, common)
@@ -208,12 +208,12 @@ def summarize(h: History, *, scenario: str, seed: int, end_reason: str, complete
     return _finite_json(s)
 
 
-SUTTON_GRAVES_MARS = 1.9027e-4     # q = k sqrt(rho / R_n) V^3 [SI] (spec 60-guidance.md)
+SUTTON_GRAVES_MARS = 1.9027e-4     # q = k sqrt(rho / R_n) V^3 [SI] (docs/fsw/entry-guidance.md)
 
 
 def deploy_figures(h: History, *, target_lat_rad: float, target_lon_rad: float, radius_m: float,
                    nose_radius_m: float, entry_altitude_m: float) -> dict:
-    """Figures of a guided entry (spec 60-guidance.md), from the truth in the history:
+    """Figures of a guided entry (docs/fsw/entry-guidance.md), from the truth in the history:
     the miss at the last row (the deploy trigger) as a great-circle distance and split along
     and across the vehicle's heading there (downrange positive beyond the target,
     crossrange positive to the right), peak load factor, peak Sutton-Graves heat rate, and

@@ -11,7 +11,7 @@ import numpy as np  # noqa: E402
 
 from interfaces.vocabulary import N_JETS  # noqa: E402
 
-from .history import History  # noqa: E402
+from .sil.history import History  # noqa: E402
 from .metrics import THETA_NAMES, bank_error_deg  # noqa: E402
 
 AXES = ("roll", "pitch", "yaw")

@@ -1,5 +1,5 @@
-"""Child processes we start: they die with us, and we stop them by their own pid, politely
-first, with bounded waits."""
+"""Child processes we start: the ``ellipsled`` command on this interpreter, children that die
+with us, and stopping them by their own pid, politely first, with bounded waits."""
 from __future__ import annotations
 
 import ctypes
@@ -10,6 +10,7 @@ import sys
 from typing import Callable
 
 PR_SET_PDEATHSIG = 1        # linux/prctl.h
+ELLIPSLED = [sys.executable, "-m", "ellipsled.cli"]     # the ``ellipsled`` command, on this interpreter
 
 
 def die_with_parent(sig: int = signal.SIGTERM) -> Callable[[], None] | None:
@@ -30,16 +31,29 @@ def die_with_parent(sig: int = signal.SIGTERM) -> Callable[[], None] | None:
 
 
 def stop_process(p: subprocess.Popen, timeout_s: float, kill_wait_s: float = 5.0,
-                 on_kill: Callable[[], None] | None = None) -> int | None:
-    """SIGTERM, then SIGKILL if it has not ended within ``timeout_s`` (``on_kill`` is called
-    first, e.g. to say so); nothing if it has ended. Returns its exit code."""
+                 on_kill: Callable[[], None] | None = None, sig: int = signal.SIGTERM,
+                 group: bool = False) -> int | None:
+    """``sig`` (SIGTERM unless told), then SIGKILL if it has not ended within ``timeout_s``
+    (``on_kill`` is called first, e.g. to say so); nothing if it has ended. ``group``: signal
+    the process group it leads (a child started with ``start_new_session=True``, and whatever
+    it started). Returns its exit code."""
     if p.poll() is None:
-        p.send_signal(signal.SIGTERM)
+        _signal(p, sig, group)
         try:
             p.wait(timeout_s)
         except subprocess.TimeoutExpired:
             if on_kill is not None:
                 on_kill()
-            p.kill()
+            _signal(p, signal.SIGKILL, group)
             p.wait(kill_wait_s)
     return p.returncode
+
+
+def _signal(p: subprocess.Popen, sig: int, group: bool) -> None:
+    if not group:
+        p.send_signal(sig)
+        return
+    try:
+        os.killpg(p.pid, sig)
+    except (ProcessLookupError, PermissionError):     # the group has gone meanwhile
+        pass

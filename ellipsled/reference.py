@@ -24,13 +24,16 @@ import numpy as np
 from common.model import Scenario
 from fsw.params import DEFAULT_FILE
 
-from .history import History
+from . import lockstep
+from .sil import fsw_report, history
+from .sil.history import History
 
 # What a twin keeps: enough for the bank error, aligned on k (a full entry ~0.5 MB compressed).
 TWIN_FIELDS = ("k", "t_s", "bank_rad", "bank_ref_rad")
-# Source trees whose code decides a flight (a change there invalidates every twin).
+# Source trees whose code decides a flight (a change there invalidates every twin), and the
+# harness modules that fly a twin.
 _CODE_DIRS = ("fsw", "sim", "common", "interfaces")
-_CODE_FILES = ("ellipsled/batch.py", "ellipsled/runlib.py", "ellipsled/history.py")
+_CODE_MODULES = (lockstep, history, fsw_report)
 _ROOT = Path(__file__).resolve().parent.parent
 _IGNORED = {"name", "description", "file", "faults"}
 
@@ -66,7 +69,7 @@ def code_digest() -> str:
     """Hash of the flight code and the FSW default parameters, read once per process."""
     h = hashlib.sha256()
     files = sorted(p for d in _CODE_DIRS for p in (_ROOT / d).rglob("*.py"))
-    files += [_ROOT / f for f in _CODE_FILES] + [Path(DEFAULT_FILE)]
+    files += [Path(m.__file__).resolve() for m in _CODE_MODULES] + [Path(DEFAULT_FILE)]
     for p in files:
         h.update(str(p.relative_to(_ROOT)).encode())
         h.update(p.read_bytes())
@@ -80,10 +83,7 @@ def twin_key(scn: Scenario, seed: int) -> str:
 
 
 def fly_twin(scn: Scenario, seed: int) -> History:
-    from .batch import run
-    _, h, fsw = run(fault_free(scn), seed=seed, verify_every=0, reference=False)
-    fsw.close()
-    return h
+    return lockstep.fly(fault_free(scn), seed, verify_every=0).history
 
 
 def fault_free_history(scn: Scenario, seed: int, cache_dir: str | Path | None = None) -> History:
@@ -116,3 +116,12 @@ def store_twin(scn: Scenario, seed: int, h: History, cache_dir: str | Path | Non
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def fault_free_reference(h: History, scn: Scenario, seed: int, faults_applied: list,
+                         cache_dir: str | Path | None = None) -> History:
+    """The fault-free twin of a run whose history is ``h``: the run itself when no fault was
+    applied, else fault_free_history()."""
+    if not faults_applied:
+        return h
+    return fault_free_history(scn, seed, cache_dir)

@@ -1,6 +1,6 @@
 """``ellipsled report``: fly every paper case in both identification modes, with and without
 the initial bank error, and write a Markdown report that puts each claim of the paper
-(spec 30-scenarios.md) beside the product's measured figure, with a verdict and a figure
+(docs/scenarios.md) beside the product's measured figure, with a verdict and a figure
 per paper figure (4-14). The README's "Results against the paper" is this report's
 ``readme_section.md``.
 
@@ -20,6 +20,8 @@ import numpy as np
 
 from . import batch, plots, reference, runlib
 from .metrics import FINE_BAND_DEG, THETA_NAMES, TRANSIENT_S
+from .sil.history import History
+from .sil.variant import prepare
 
 CASES = ["nominal", "case1", "case1-ft-off", "case2", "case3", "case4"]
 FAULT_CASES = ["case1", "case2", "case3", "case4"]
@@ -27,7 +29,7 @@ SETUPS = {"paper": True, "no-init-err": False}          # set-up -> initial bank
 SETUP_TEXT = {"paper": "paper set-up (5° initial bank error)", "no-init-err": "no initial error"}
 MODES = ["oracle", "detect"]
 BOUND_DEG = 5.0          # the paper's conclusion
-GOAL_DEG = 1.0           # the product's goal for the fault-attributable error (issue 14), reported, not tuned to
+GOAL_DEG = 1.0           # the product's goal for the fault-attributable error: reported, not tuned to
 # What the report keeps of each run (the figures' quantities), not the whole history.
 KEEP = ("k", "t_s", "bank_rad", "bank_ref_rad", "u_cal_B", "tau_jets_B", "tau_alloc_B", "theta_hat", "h_m",
         "V_rel_mps", "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa", "alpha_rad", "beta_rad")
@@ -66,7 +68,6 @@ class Runs:
 
     def load(self) -> None:
         """The runs a previous ``fly`` wrote under out/runs (re-writing the report without flying)."""
-        from .history import History
         self.commit = (self.out / "runs" / "commit.txt").read_text().strip()
         for setup in SETUPS:
             for mode in MODES:
@@ -82,7 +83,7 @@ class Runs:
                               identification=mode, initial_error=init_err, reference_cache=self.cache)
         fsw.close()
         if case == "nominal":        # its own twin: store it for the faulted cases that share it
-            scn = runlib.prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err)
+            scn = prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err)
             reference.store_twin(scn, s["seed"], h, self.cache)
         key = (case, setup, mode)
         self.s[key] = s
@@ -385,7 +386,7 @@ def notes(R: Runs, trans: dict, reshape_deg: float) -> list[str]:
 # ----------------------------------------------------------------------------- report
 def write_report(out: Path, R: Runs) -> Path:
     trans = translational(R)
-    figs = plots.paper_figures(R.h, out, trans, runlib.prepare("nominal").planet.radius_m)
+    figs = plots.paper_figures(R.h, out, trans, prepare("nominal").planet.radius_m)
     commit = R.commit
     rows = claims(R, trans)
     c2 = R.h[("case2", "paper", "oracle")]

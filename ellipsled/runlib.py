@@ -1,101 +1,21 @@
-"""The run functions batch and SIL share: the scenario with a run's command-line changes, what
-the FSW reports, the allocation samples and their offline check, and the judgement that
-turns a history into summary.json. The batch runner (ellipsled/batch.py) and the SIL nodes
-(ellipsled/sil/) call the same functions, so a lockstep SIL run is judged like its batch
-twin. The plant process imports this module: FSW modules are imported where they are used.
+"""The judgement batch and SIL share: the offline check of the allocation samples, the
+figures that turn a history and the FSW's report into summary.json, the end reasons that
+count as completed with their exit codes, and the summary's text. The batch runner
+(ellipsled/batch.py) and the SIL launcher (ellipsled/sil/launcher.py) call the same
+functions, so a lockstep SIL run is judged like its batch twin. FSW modules are imported
+where they are used: the launcher starts without loading the flight software.
 """
 from __future__ import annotations
 
 import math
-from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from common.config import ConfigError
-from common.model import Scenario, inertia_vector, load_scenario
+from common.model import Scenario, inertia_vector
 from interfaces.vocabulary import FAULT_HEALTH, HEALTH_NAMES
 
-from .history import History, budget_refusal
 from .metrics import deploy_figures, summarize, wrap_deg
-
-if TYPE_CHECKING:       # the plant process imports this module, never the FSW
-    from fsw.flightsoftware import FlightSoftware
-
-IDENTIFICATION = ("detect", "oracle")     # fdir.mode: the product's FDIR, or the test mode's fault log
-
-
-def _with_fsw(scn: Scenario, section: str, key: str, value, suffix: str) -> Scenario:
-    fsw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in scn.fsw.items()}
-    fsw.setdefault(section, {})[key] = value
-    return scn.with_(fsw=fsw, name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
-
-
-def prepare(scenario: Scenario | str, ft_off: bool = False, duration_s: float | None = None,
-            identification: str | None = None, initial_error: bool = True) -> Scenario:
-    """The scenario with the run's command-line changes applied: fault tolerance off,
-    duration, identification mode (None: the scenario's), and ``initial_error=False``: the
-    bank starts on the reference (no initial bank error)."""
-    scn = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
-    if ft_off:
-        scn = _with_fsw(scn, "allocator", "fault_tolerance", 0, "-ft-off")
-    if identification is not None:
-        if identification not in IDENTIFICATION:
-            raise ValueError(f"identification: must be one of {', '.join(IDENTIFICATION)}, got {identification!r}")
-        scn = _with_fsw(scn, "fdir", "mode", identification, "-oracle" if identification == "oracle" else "")
-    if not initial_error:
-        suffix = "-no-init-err"
-        scn = scn.with_(bank0_rad=scn.bank_schedule[0][1],
-                        name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
-    if duration_s is not None:
-        scn = scn.with_(max_duration_s=float(duration_s))
-    why = budget_refusal(scn.max_duration_s, scn.dt_control_s)
-    if why is not None:
-        raise ConfigError(scn.file, "--duration" if duration_s is not None else "scenario.max_duration_s", why)
-    return scn
-
-
-def add_variant_arguments(p) -> None:
-    """Command-line options of a run's variant, shared by batch, the SIL launcher and its nodes."""
-    p.add_argument("--identification", choices=IDENTIFICATION, default=None,
-                   help="detect: FDIR identifies faults (default); oracle: TEST MODE, the plant's fault log "
-                        "reaches FDIR at the fault time (the paper's assumption)")
-    p.add_argument("--no-initial-error", action="store_true",
-                   help="the bank starts on the reference (the paper's set-up has a 5 deg initial error)")
-
-
-def variant_argv(a) -> list[str]:
-    return ((["--identification", a.identification] if a.identification else [])
-            + (["--no-initial-error"] if a.no_initial_error else []))
-
-
-def prepare_args(a) -> Scenario:
-    """prepare() from parsed command-line arguments."""
-    return prepare(a.scenario, a.ft_off, a.duration, a.identification, not a.no_initial_error)
-
-
-def fsw_report(fsw: FlightSoftware, slips: int, alloc_samples: list) -> dict:
-    """What only the FSW knows, as plain JSON values (the SIL FSW process writes this)."""
-    return {
-        "detections": [{"jet": int(d["jet"]), "kind": d["kind"], "t_s": round(float(d["t_s"]), 6),
-                        **({"eta_hat": round(float(d["eta_hat"]), 4)} if d.get("eta_hat") is not None else {})}
-                       for d in fsw.fdir.detections],
-        "reconfig_times_s": list(fsw.reconfig_times),
-        "propellant_kg": float(fsw.driver.propellant_kg),
-        "jet_pulses_per_jet": [int(x) for x in fsw.driver.pulses],
-        "cycle_slips": int(slips),
-        "alloc_modulated": int(fsw.dutycycle.modulated_cycles),
-        "events": fsw.events.total,
-        "alloc_samples": alloc_samples,
-        **({"guidance": fsw.entry.stats()} if fsw.entry is not None else {}),
-    }
-
-
-def alloc_sample(fsw: FlightSoftware) -> dict:
-    """One allocator demand, its health and its objective, for an offline optimality check."""
-    hl = fsw.allocator_health()
-    return {"tau_d": fsw.dutycycle.demand_B.tolist(), "state": hl.state.tolist(), "eta": hl.eta.tolist(),
-            "inhibited": hl.inhibited.tolist(), "objective": float(fsw.allocator.objective)}
+from .sil.history import History
 
 
 def box_name(spill_jets: float) -> str:
@@ -216,13 +136,6 @@ def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> f
     return float(np.max(np.abs(wrap_deg(np.degrees(h["bank_rad"][m] - ref)))))
 
 
-def end_reason_of(reason: str, duration_s: float | None) -> str:
-    """The run's end reason from the plant's: its time limit reached is the requested
-    ``duration`` when the command line asked for one (``--duration``), else the scenario's
-    own time cap (``timeout``: the flight did not get to parachute deployment)."""
-    return "duration" if duration_s is not None and reason == "timeout" else reason
-
-
 # End reasons of a run that completed: the deploy conditions (Mach, speed, altitude) or the
 # requested duration. Any other (timeout, non_finite, fsw_timeout, no_fsw, stopped) did not.
 COMPLETED_END_REASONS = ("mach", "speed", "altitude", "duration")
@@ -242,16 +155,6 @@ exit codes (batch and run alike, for the same request):
 def exit_code(end_reason: str) -> int:
     """The process exit code of a run that ended for ``end_reason`` (batch and SIL)."""
     return EXIT_COMPLETED if end_reason in COMPLETED_END_REASONS else EXIT_NOT_COMPLETED
-
-
-def fault_free_reference(h: History, scn: Scenario, seed: int, faults_applied: list,
-                         cache_dir: str | Path | None = None) -> History:
-    """The run's fault-free twin: the run itself when no fault was applied, else flown (or
-    taken from the cache, see ellipsled/reference.py)."""
-    if not faults_applied:
-        return h
-    from .reference import fault_free_history
-    return fault_free_history(scn, seed, cache_dir)
 
 
 def format_summary(s: dict) -> str:

@@ -8,7 +8,6 @@ earlier ends before the bar fills, so the time left is an upper bound.
 """
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -22,6 +21,7 @@ FILES = {
     "history.npz": "every signal of the run (sim + fsw), numpy",
     "sim_history.npz": "the plant's records", "fsw_history.npz": "the flight software's records",
     "sim.json": "the plant process's report", "fsw.json": "the flight software process's report",
+    "sim_latency.npz": "the plant's latency samples", "fsw_timing.npz": "the FSW's jitter and frame-age samples",
     "run.rrd": "Rerun recording", "console.tlog": "ground console telemetry log (MAVLink)",
     "sim.log": "plant log", "fsw.log": "flight software log", "viz.log": "Rerun bridge log",
 }
@@ -84,37 +84,6 @@ class RunProgress:
 def _clock(s: float) -> str:
     s = int(round(s))
     return f"{s // 60}:{s % 60:02d}"
-
-
-class ProgressFile:
-    """How a process tells another its simulated time: one fixed-size line rewritten in
-    place (at most every ``every_s`` of wall time, so the hot loop pays a clock read per
-    step). The reader may see a torn line: it then gets None and tries again."""
-    WIDTH = 16
-
-    def __init__(self, path, every_s: float = 0.2):
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        self.every_s = every_s
-        self._next = 0.0
-
-    def write(self, t_s: float, force: bool = False) -> None:
-        now = time.monotonic()
-        if force or now >= self._next:
-            self._next = now + self.every_s
-            os.pwrite(self._fd, b"%15.3f\n" % t_s, 0)
-
-    def close(self) -> None:
-        if self._fd >= 0:
-            os.close(self._fd)
-            self._fd = -1
-
-    @staticmethod
-    def read(path) -> float | None:
-        try:
-            with open(path, "rb") as f:
-                return float(f.read(ProgressFile.WIDTH))
-        except (OSError, ValueError):
-            return None
 
 
 def files_written(out: Path) -> str:

@@ -1,3 +1,3 @@
 """Flight software: one module per function of the paper (guidance, control, allocation,
-fdir, jet driver, modes, executive). Plain algorithm code; no transport, threads or clocks.
-The FSW never imports the plant (sim/)."""
+fdir, jet driver, modes, executive). Plain algorithm code; no transport or clocks, and no
+threads but the background-job runner's (jobs.py). The FSW never imports the plant (sim/)."""

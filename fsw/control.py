@@ -1,4 +1,4 @@
-"""SAMI adaptive attitude control (spec 20-fsw.md, "SAMI adaptive control", paper section 2).
+"""SAMI adaptive attitude control (docs/fsw/index.md, "SAMI adaptive control", paper section 2).
 
 Notation (spec): J(sigma) = B(sigma)/4, sigma_dot = J omega; P_a = J^-1 = 4 B^T/(1+s.s)^2;
 I_a* = P_a^T I P_a; Lambda(v) h = I v with h = [I11 I22 I33 I12 I13 I23].
@@ -36,7 +36,7 @@ _D_V, _D_ADAPT, _D_SAT, _D_PROJ, _D_SWITCH, _D_BAD, _D_SHORT = range(7)
 
 @njit(cache=True)
 def _lam_rows(v, M, sign):
-    """M += sign * Lambda(v) (spec 20-fsw.md, linear parameterisation I v = Lambda(v) h)."""
+    """M += sign * Lambda(v) (docs/fsw/index.md, linear parameterisation I v = Lambda(v) h)."""
     M[0, 0] += sign * v[0]
     M[0, 3] += sign * v[1]
     M[0, 4] += sign * v[2]

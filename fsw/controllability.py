@@ -9,7 +9,7 @@ at d = 1 and form the bias b. Three questions are asked of it, each a small LP (
    the jets and the aerodynamic moment cancel the bias on average:
        min s   s.t.  C d + A theta = -b,  |theta_i| <= s,  0 <= d <= 1,
    A [N m/rad] the static moment per radian of alpha offset and of sideslip
-   (M = qbar S l (C_lbeta beta, C_malpha dalpha, C_nbeta beta), spec 20-fsw.md eqs 4-6).
+   (M = qbar S l (C_lbeta beta, C_malpha dalpha, C_nbeta beta), docs/fsw/index.md eqs 4-6).
    s = 0 when the jets alone cancel b; no solution (the bias outside what the jets and the
    aerodynamics can cancel) means no trim exists at this dynamic pressure.
 2. Bank authority, each way. The largest average angular acceleration a about the velocity

@@ -1,4 +1,4 @@
-"""The executive: rate groups driven by one base tick (spec 20-fsw.md, Executive).
+"""The executive: rate groups driven by one base tick (docs/fsw/index.md, Executive).
 
 After F Prime's ActiveRateGroup: each rate group is an integer divisor of the base tick
 (RG1 every tick = control, RG2 every 5 = 10 Hz, RG3 every 50 = 1 Hz at a 50 Hz base) and

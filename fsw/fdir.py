@@ -1,10 +1,10 @@
 """FDIR: jet fault detection and isolation from chamber pressure, the isolation-to-
 reconfiguration delay, ground overrides, and the analytic-redundancy torque residual
-(spec 20-fsw.md "FDIR").
+(docs/fsw/index.md "FDIR").
 
 Jet monitor, per jet and per control period, from the command of the period that just
 ended (u_k) and the chamber pressure measured over it (p_k, normalised, sensor noise
-sigma = 0.02, spec 10-plant.md):
+sigma = 0.02, docs/plant.md):
 
 | commanded | measured                        | evidence for  |
 |-----------|---------------------------------|---------------|
@@ -450,7 +450,7 @@ class Fdir:
     def residual_check(self, t_s: float, omega_B: np.ndarray, omega_prev_B: np.ndarray, dt_s: float,
                        tau_cmd_B: np.ndarray, tau_aero_est_B: np.ndarray, I_hat: np.ndarray) -> float:
         """Angular-acceleration residual r = I_hat w_dot + w x I_hat w - tau_aero_est - tau_cmd
-        (spec 20-fsw.md FDIR), with w_dot = (w - w_prev)/dt (the mean over the interval, which
+        (docs/fsw/index.md FDIR), with w_dot = (w - w_prev)/dt (the mean over the interval, which
         matches jets held over it) and w at the interval midpoint. ``tau_cmd_B`` is the (mean) torque
         the jets were commanded to give over that interval. r is low-passed (res_tau_s); when
         |r_f| > res_thr_Nm + res_rel (|tau_cmd| + |tau_aero_est|) (low-passed too) for

@@ -1,4 +1,4 @@
-"""Jet driver (spec 20-fsw.md "Jet driver"): arming, the ground inhibit mask and the mode
+"""Jet driver (docs/fsw/index.md "Jet driver"): arming, the ground inhibit mask and the mode
 gate; the command holds for exactly one control period; pulse, on-time and propellant
 bookkeeping; remembers what it sent for FDIR.
 

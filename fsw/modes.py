@@ -1,4 +1,4 @@
-"""Modes (spec 20-fsw.md "Modes") and the ordered failsafe list.
+"""Modes (docs/fsw/index.md "Modes") and the ordered failsafe list.
 
 STANDBY: the loop runs, jets inhibited.  ENTRY: closed loop, adaptation on.
 SAFE: rate damping only, adaptation frozen, jets enabled.

@@ -1,4 +1,4 @@
-"""Sensor-frame monitor (spec 20-fsw.md FDIR "Other monitors", 40-interfaces.md).
+"""Sensor-frame monitor (docs/fsw/index.md FDIR "Other monitors", docs/interfaces/index.md).
 
 How to call it, per control period of the executive:
 - ``check(t_s, frame)`` for each SENSORS record received; True = use it.

@@ -1,5 +1,5 @@
 """Navigation processing: from a sensor frame to what guidance and control need
-(spec 20-fsw.md, RG1 step 1). Uses only the FSW's own nominal models."""
+(docs/fsw/index.md, RG1 step 1). Uses only the FSW's own nominal models."""
 from __future__ import annotations
 
 import math

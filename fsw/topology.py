@@ -1,4 +1,4 @@
-"""The FSW topology: which function runs in which rate group (spec 20-fsw.md, Executive).
+"""The FSW topology: which function runs in which rate group (docs/fsw/index.md, Executive).
 
   RG1 (every tick, 50 Hz)  control: frame -> monitors -> FDIR -> nav -> guidance -> SAMI
                                      -> allocator -> jet driver

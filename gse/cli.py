@@ -19,7 +19,7 @@ import argparse
 import os
 import sys
 
-from interfaces.mavlink.signing import SigningKeyError
+from interfaces.mavlink.signing.keys import SigningKeyError
 from interfaces.vocabulary import DEFAULT_GCS, FAULT_KINDS, MARK_KINDS, N_JETS, Mode, parse_udp
 
 from .client import DEFAULT_VEHICLE, GroundClient, float32_equal, load_key, result_name

@@ -44,7 +44,9 @@ from pathlib import Path
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import FrameSplitter, parse_header, printable_text
 from interfaces.mavlink.intake import kernel_drops
-from interfaces.mavlink.signing import Rejection, SignedLink, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.link import SignedLink
+from interfaces.mavlink.signing.verify import Rejection
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, parse_udp
 
 from .commands import Request

@@ -1,6 +1,6 @@
 """Telemetry log (.tlog): every MAVLink frame the ground station sends or receives, as
 an 8-byte big-endian Unix timestamp [us] followed by the raw frame, one record per frame
-(spec 40-interfaces.md, "Telemetry log"). This is the layout pymavlink's ``mavutil``
+(docs/interfaces/index.md, "Telemetry log"). This is the layout pymavlink's ``mavutil``
 (``mavlink_connection(path)``) and ``mavlogdump.py`` read. pymavlink's own
 ``setup_logfile`` writes nothing on UDP links, so records are written here directly and
 flushed after each one (a crash loses at most the frame being written).

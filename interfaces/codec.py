@@ -18,7 +18,7 @@ be viewed in place):
                           corruption on transports without their own checksum (0.3 us)
 
 Decoding never raises and never passes a bad value on: it returns ``None`` and counts the
-reason in ``Codec.rejects`` (spec 40-interfaces.md, "A decoder rejects wrong size, unknown
+reason in ``Codec.rejects`` (docs/interfaces/index.md, "A decoder rejects wrong size, unknown
 version and non-finite numbers, counts the rejection and raises an event"). The process
 shell turns rejections into events through the ``on_reject`` callback.
 """

@@ -208,7 +208,7 @@ class EV:
     JETS_DISARMED = _ev(302, "driver", NOTICE, "JETS DISARMED", "The jet driver was disarmed.")
     JET_INHIBIT = _ev(303, "driver", NOTICE, "{jets} {inhibit}", "The ground set or cleared the inhibit mask of jets.",
                       jets=JETS, inhibit=INHIBIT)
-    # FDIR (fsw/fdir.py, fsw/flightsoftware.py)
+    # FDIR (fsw/fdir.py, fsw/commands.py)
     FDIR_ORACLE = _ev(401, "fdir", WARNING, "TEST MODE: FDIR ORACLE IDENTIFICATION",
                       "FDIR takes the plant's faults as given (a test mode), not from its jet monitor.")
     FDIR_DELAY = _ev(402, "fdir", NOTICE, "FDIR DELAY {delay_s:.2f} S",
@@ -247,7 +247,7 @@ class EV:
                          "The allocation problem was infeasible; the best effort was sent.", 1.0)
     ALLOC_SHORT = _ev(603, "allocator", WARNING, "ALLOCATION SHORT ON BANK AXIS",
                       "The allocated torque fell short of the demand on the bank axis.", 1.0)
-    # guidance (fsw/flightsoftware.py, fsw/guidance/npc.py)
+    # guidance (fsw/authority.py, fsw/guidance/npc.py, their background jobs: fsw/jobs.py)
     CONTROLLABILITY = _ev(701, "guidance", NOTICE, "AUTH +{auth_pos:.2f}/-{auth_neg:.2f} DEG/S2 BIAS {bias_Nm:.0f}NM "
                                               "TRIM {trim}DEG",
                           "The controllability LP's answer: bank authority each way [deg/s2], stuck-on bias, trim.",
@@ -265,7 +265,7 @@ class EV:
                            "A guidance cycle was skipped or answered late; the command in force stays.", 1.0,
                            what=OVERRUN)
     GUIDANCE_FAULT = _ev(707, "guidance", WARNING, "GUIDANCE FAULT: {error}",
-                         "The correction raised; the previous command stays.", 1.0, error=TEXT)
+                         "The correction raised (the exception); the previous command stays.", 1.0, error=TEXT)
     DEPLOY_ALT_FLOOR = _ev(708, "guidance", NOTICE, "DEPLOY ALT FLOOR: RANGE TRADED {miss_km:+.1f} KM",
                            "The deploy-altitude floor now limits the correction (range traded for altitude).",
                            miss_km=F32)
@@ -276,7 +276,12 @@ class EV:
                            miss_km=F32)
     NPC_PARAM = _ev(711, "guidance", INFO, "GUIDANCE {param} {value:g}",
                     "A guidance parameter took effect (between corrections).", param=TEXT, value=F32)
-    # ground commands (fsw/flightsoftware.py, fsw/groundlink/commands.py)
+    CONTROLLABILITY_OVERRUN = _ev(712, "guidance", WARNING, "CONTROLLABILITY CYCLE {what}",
+                                  "A controllability LP was skipped or answered late; the last answer stays.", 1.0,
+                                  what=OVERRUN)
+    CONTROLLABILITY_FAULT = _ev(713, "guidance", WARNING, "CONTROLLABILITY FAULT: {error}",
+                                "The controllability LP raised; the last answer stays.", 1.0, error=TEXT)
+    # ground commands (fsw/commands.py, fsw/groundlink/commands.py)
     FAULT_TOLERANCE = _ev(801, "ground", NOTICE, "GND FAULT TOLERANCE {state}",
                           "The ground switched the allocator's fault tolerance.", state=ON_OFF)
     INJECT = _ev(802, "link", NOTICE, ("GND INJECT {jets} {kind}", "GND INJECT {jets} {kind} ETA {eta:.2f}"),

@@ -98,7 +98,7 @@ def _cell(s: str) -> str:
 def markdown() -> str:
     """docs/events.md: the catalogue as a table, and its enums."""
     lines = [
-        "# Events",
+        "# Event catalogue",
         "",
         "Generated from the event catalogue (`interfaces/event_catalogue.py`) by",
         "`python -m interfaces.event_metadata`; a test checks that this file is up to date.",

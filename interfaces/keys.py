@@ -1,6 +1,6 @@
 """Zenoh key expressions: every topic of a run lives under one prefix, ``ellipsled/<vehicle>``.
 
-The suffixes below are the one definition of each topic (spec 40-interfaces.md, Zenoh
+The suffixes below are the one definition of each topic (docs/interfaces/index.md, Zenoh
 table); the codec registry (interfaces/codec.py) names its topic by these constants.
 """
 from __future__ import annotations

@@ -39,7 +39,7 @@ def new(dtype: np.dtype) -> np.ndarray:
     return np.zeros((), dtype=dtype)
 
 
-# fsw or test harness -> sim: inject or clear a jet fault (spec 40-interfaces.md, MAVLink
+# fsw or test harness -> sim: inject or clear a jet fault (docs/interfaces/index.md, MAVLink
 # MAV_CMD_INJECT_FAILURE mapping; kinds and codes: interfaces/vocabulary.py FAULT_KINDS).
 # Jet numbering follows the command: 1..N_JETS, 0 = all jets.
 FAULT_NAMES = {code: kind for kind, code in FAULT_KINDS.items()}     # wire code -> kind
@@ -94,7 +94,7 @@ EVENT = np.dtype([
     ("_pad", "u1", (6,)),          # keeps the record a multiple of 8 bytes
 ])
 
-# sim -> viewers: the full truth at step k (sim/plant.py Plant.fill_truth; spec 40-interfaces.md).
+# sim -> viewers: the full truth at step k (sim/plant.py Plant.fill_truth; docs/interfaces/index.md).
 # fault_state per jet: a jet health code (interfaces/vocabulary.py).
 TRUTH = np.dtype([
     ("k", "<i8"),                      # step index

@@ -1,4 +1,4 @@
-"""Zenoh sessions and the few helpers every process shell needs (spec 40-interfaces.md).
+"""Zenoh sessions and the few helpers every process shell needs (docs/interfaces/index.md).
 
 Embedded default: peer mode, multicast and gossip scouting off, explicit endpoints on
 loopback (one process listens on tcp/127.0.0.1:<port>, the others connect). Anything
@@ -42,8 +42,8 @@ def default_config(role: str, listen: list[str] | None, connect: list[str] | Non
                     "exit_on_failure": False, "retry": dict(CONNECT_RETRY)},
     }
     if lowlatency:
-        # saves ~30-60 us per hop here; both ends must agree; excludes QoS (spec
-        # 40-interfaces.md). Measured (zenoh 1.x): a low-latency publisher whose subscriber is
+        # saves ~30-60 us per hop here; both ends must agree; excludes QoS (
+        # docs/interfaces/index.md). Measured (zenoh 1.x): a low-latency publisher whose subscriber is
         # frozen (SIGSTOP, a debugger) blocks in put() for good once the socket buffers
         # (~3.5 MB on loopback) are full, whatever its congestion control; Zenoh's lease
         # (10 s) drops a frozen peer first when less than ~350 kB/s goes to it, as in the

@@ -60,7 +60,7 @@ FAULT_HEALTH: dict[str, int] = {"clear": NOMINAL, "off": FAILED_OFF, "stuck": ST
 
 # ---- flight-software modes (ELLIPSLED_MODE; HEARTBEAT.custom_mode)
 Mode = IntEnum("Mode", _enum("ELLIPSLED_MODE"), module=__name__)
-Mode.__doc__ = "Flight-software mode (spec 20-fsw.md Modes): STANDBY, ENTRY, SAFE."
+Mode.__doc__ = "Flight-software mode (docs/fsw/index.md Modes): STANDBY, ENTRY, SAFE."
 
 
 # ---- event severities: MAVLink MAV_SEVERITY numbering, so STATUSTEXT carries them 1:1

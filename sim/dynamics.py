@@ -1,4 +1,4 @@
-"""Entry dynamics of the plant (spec 10-plant.md): the 6-DOF equations of motion over a
+"""Entry dynamics of the plant (docs/plant.md): the 6-DOF equations of motion over a
 rotating Mars as numba kernels on flat float64 arrays, and the truth parameter vector they
 read. sim/plant.py steps them with the jets, faults and sensors.
 
@@ -47,7 +47,7 @@ _speed_of_sound = njit(cache=True)(atmosphere.speed_of_sound)
 
 @njit(cache=True)
 def deriv(x, p, tau_B, F_B, dx, C, aux, want_aux):
-    """dx = f(x) for the coupled 6-DOF state (spec 10-plant.md, translational and
+    """dx = f(x) for the coupled 6-DOF state (docs/plant.md, translational and
     rotational dynamics). tau_B: jet + external torque [N m]; F_B: jet force [N].
     C is scratch for C_BN. When want_aux, the derived outputs are written to aux."""
     rx, ry, rz = x[0], x[1], x[2]
@@ -234,7 +234,7 @@ def state_derivative(x: np.ndarray, p: np.ndarray, tau_B=None, F_B=None) -> tupl
 
 def params_vector(scenario: Scenario) -> np.ndarray:
     """The truth parameter vector p: nominal vehicle and planet, dispersed by scenario.truth
-    (spec 30-scenarios.md, uncertainty)."""
+    (docs/scenarios.md, uncertainty)."""
     pl, veh, tr = scenario.planet, scenario.vehicle, scenario.truth
     ae = veh.aero
     I = inertia_matrix(inertia_vector(veh.inertia_kgm2) * tr.inertia_scale)

@@ -6,16 +6,15 @@ acceleration-limited tracker (not the FSW's quintic guidance). The ideal torque 
 computed torque with the truth inertia: it cancels the gyroscopic and aerodynamic moments
 and adds a stiff PD to the reference attitude C_RN = R2(alpha_trim) R1(bank_r) C_WN.
 
-Measured (see the report of issue 2): under the conditions stated in 10-plant.md for its
-figures (non-rotating planet, nominal density, bank steps) this run gives ~455 s to Mach 2
-at 9.4 km with peak qbar 6.6 kPa at 101 s, as the spec says; gamma turns positive at
-~139 s and back to negative at ~248 s (the spec's "positive again near 250 s" is that
-sign change, not a second up-crossing). The nominal scenario as
-written (rotating Mars, eastward entry, truth density x1.2, rate-limited reversals through
-zero bank) skips out instead: the lift-up reversal at 60-90 s and the planet's rotation
-(+241 m/s inertial speed eastward) leave the vehicle on an escape-ish arc, so the run
-ends on max_duration_s. tests/test_plant_dynamics.py checks both against a separately
-integrated spherical 3-DOF model.
+Under the conditions stated in docs/plant.md for its figures (non-rotating planet, nominal
+density, bank steps) this run gives ~455 s to Mach 2 at 9.4 km with peak qbar 6.6 kPa at
+101 s, as the spec says; gamma turns positive at ~139 s and back to negative at ~248 s (the
+spec's "positive again near 250 s" is that sign change, not a second up-crossing). The
+nominal scenario as written (rotating Mars, eastward entry, truth density x1.2, rate-limited
+reversals through zero bank) skips out instead: the lift-up reversal at 60-90 s and the
+planet's rotation (+241 m/s inertial speed eastward) leave the vehicle on an escape-ish arc,
+so the run ends on max_duration_s. tests/test_plant_dynamics.py checks both against a
+separately integrated spherical 3-DOF model.
 """
 from __future__ import annotations
 
@@ -72,7 +71,7 @@ class BankReference:
 
 @njit(cache=True)
 def ideal_torque(x, aux, I, phi, phidot, phiddot, alpha_trim, kp, kd, C, tau):
-    """Computed torque tau = I w_dot_cmd + w x I w - tau_aero (spec 20-fsw.md reference
+    """Computed torque tau = I w_dot_cmd + w x I w - tau_aero (docs/fsw/index.md reference
     attitude: C_RN = R2(alpha_trim) R1(phi_r) C_WN, omega_R = omega_W + phidot_r w1)."""
     mrp.dcm_into(x[6], x[7], x[8], C)
     cp, sp, ca, sa = math.cos(phi), math.sin(phi), math.cos(alpha_trim), math.sin(alpha_trim)

@@ -1,5 +1,5 @@
 """The plant: 6-DOF entry vehicle over a rotating Mars, 18 on/off jets with faults, and
-the sensors it publishes to the FSW (spec 10-plant.md).
+the sensors it publishes to the FSW (docs/plant.md).
 
 State x (12,) = [r_N (3) m, v_N (3) m/s, sigma_BN (3), omega_BN_B (3) rad/s], integrated
 by the dynamics kernels of sim/dynamics.py; here the jets, their faults, the sensors and
@@ -61,7 +61,7 @@ def _step_kernel(x, u, gain, bias, T, Fj, has_force, tau_ext, p, n_sub, dt, thru
 @njit(cache=True)
 def _sense(x, aux, frac, sig, gyro_bias, blocks_g, blocks_a, blocks_n, blocks_c, i, nav_noise,
            out_w, out_s, out_r, out_v, out_a, out_c):
-    """Sample the sensor frame (spec 10-plant.md, sensors) from the state and unit-normal
+    """Sample the sensor frame (docs/plant.md, sensors) from the state and unit-normal
     noise rows i. sig = [gyro, attitude, pos, vel, chamber] noise 1-sigma."""
     for j in range(3):
         out_w[j] = x[9 + j] + gyro_bias[j] + sig[0] * blocks_g[i, j]
@@ -122,10 +122,10 @@ N_TRUTH_F = 36 + 2 * N_JETS
 @njit(cache=True)
 def _truth_kernel(x, aux, book, tau_jets, tau_ext, frac, fault_eta, fault_state, k, dt, dt_ns, om, mass, g0,
                   isp, out_f, out_i, out_s):
-    """The truth at step k (spec 40-interfaces.md, sim/truth): floats into out_f (TRUTH_SCALARS
-    then TRUTH_VECTORS), [k, t_ns] into out_i, the fault states into out_s. The same
-    arithmetic, term for term, as the NumPy version it replaced (equal to it but for a rare
-    last-bit difference in gamma and psi, where NumPy summed the dot products differently)."""
+    """The truth at step k (docs/interfaces/index.md, sim/truth): floats into out_f (TRUTH_SCALARS
+    then TRUTH_VECTORS), [k, t_ns] into out_i, the fault states into out_s. Scalar arithmetic,
+    term for term (a NumPy evaluation may differ in the last bit of gamma and psi, where it
+    sums the dot products in another order)."""
     rx, ry, rz = x[0], x[1], x[2]
     ux, uy, uz = x[3] + om * ry, x[4] - om * rx, x[5]          # v - Omega x r
     V = math.sqrt(ux * ux + uy * uy + uz * uz)
@@ -389,7 +389,7 @@ class Plant:
 
     # ---- faults ----
     def set_fault(self, jet: int, kind: str, eta: float = 1.0) -> None:
-        """Inject or clear a fault now (spec 10-plant.md, jet faults). jet 1..18, 0 = all;
+        """Inject or clear a fault now (docs/plant.md, jet faults). jet 1..18, 0 = all;
         kind 'off' | 'stuck' | 'degraded' (0 < eta < 1) | 'clear'."""
         _check_fault(jet, kind, eta)
         idx = range(N_JETS) if jet == 0 else (int(jet) - 1,)
@@ -452,7 +452,7 @@ class Plant:
                       out_f, out_i, out_s)
 
     def truth(self) -> dict:
-        """The full truth at t_k (spec 40-interfaces.md, sim/truth), as plain values (Python
+        """The full truth at t_k (docs/interfaces/index.md, sim/truth), as plain values (Python
         scalars; arrays are copies)."""
         f, s = np.empty(N_TRUTH_F), np.empty(N_JETS, np.int8)   # fresh: the arrays below are views of f
         self._truth_into(f, self._ti, s)

@@ -22,6 +22,8 @@ import subprocess
 import time
 from pathlib import Path
 
+from ellipsled.procs import stop_process
+
 PREFIX = "elsn"             # namespace names: elsn<pid>x<net>-<host>
 _NAME = re.compile(rf"^{PREFIX}(\d+)x")
 
@@ -130,15 +132,7 @@ class Network:
 
     def stop(self, name: str, sig: int = signal.SIGTERM, timeout_s: float = 10.0) -> int:
         """Signal the process by its pid, wait; SIGKILL after ``timeout_s``."""
-        p = self.procs[name][1]
-        if p.poll() is None:
-            p.send_signal(sig)
-        try:
-            return p.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait(5)
-            return p.returncode
+        return stop_process(self.procs[name][1], timeout_s, sig=sig)
 
     def unplug(self, host: str) -> None:
         """Cut the host's cable (its veth pair): nothing more reaches it or leaves it."""

@@ -1,5 +1,5 @@
 """Allocator behaviour with hand-derived truth: designed ties, infeasible (degraded)
-allocation, fault tolerance off, bad input, parameters, table cache (spec 20-fsw.md)."""
+allocation, fault tolerance off, bad input, parameters, table cache (docs/fsw/index.md)."""
 import numpy as np
 import pytest
 

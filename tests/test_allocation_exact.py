@@ -1,4 +1,4 @@
-"""The allocator is a global optimum with the spec's tie-break (spec 20-fsw.md), checked
+"""The allocator is a global optimum with the spec's tie-break (docs/fsw/index.md), checked
 against exhaustive enumeration on ≥ 10,000 demands over ≥ 20 configurations, and against
 HiGHS (mip_rel_gap = 0) on ≥ 1,000 of them; the enumeration oracle itself is checked
 against a plain Python loop."""

@@ -1,4 +1,4 @@
-"""Reconfiguration never stalls the loop (spec 20-fsw.md "Reconfiguration"): table rebuild
+"""Reconfiguration never stalls the loop (docs/fsw/index.md "Reconfiguration"): table rebuild
 time, the synchronous default (lockstep = batch), and the asynchronous mode, whose interim
 answers never fire a jet the new health forbids, are exact over the interim model (checked
 by brute force over the previous candidates), and switch to answers equal to the
@@ -97,7 +97,7 @@ def test_async_interim_is_safe_exact_over_its_model_then_switches_to_the_sync_an
         al.solve(np.zeros(3))
         assert not al.reconfig_pending
         old = al._tables
-        al._rebuilder.hold()                      # the build waits: a deterministic interim
+        al._rebuilder.job.hold()                      # the build waits: a deterministic interim
         al.set_health(after)
         assert al.reconfig_pending
         usable, cols, b, ck = effective_model(T, THRUST, after, al.penalty_per_N)
@@ -122,7 +122,7 @@ def test_async_interim_is_safe_exact_over_its_model_then_switches_to_the_sync_an
                 lo = np.minimum(d, 0.0) - al.spill - TOL_BOX_NM
                 hi = np.maximum(d, 0.0) + al.spill + TOL_BOX_NM
                 assert np.all((tau >= lo) & (tau <= hi)), ctx
-        al._rebuilder.release()
+        al._rebuilder.job.resume()
         assert al.wait_idle(10.0)
         v0 = al.tables_version
         for d in D:                                  # the first solve switches
@@ -154,7 +154,7 @@ def _worst_wait_on_the_builder(hold_s: float = 0.0) -> tuple[int, int, int]:
 def _measure_the_loop_beside_the_builder(hold_s: float) -> tuple[int, int, int]:
     rng = np.random.default_rng(5)
     al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
-    al._rebuilder._build = threadtime.holding_the_gil_first(al._rebuilder._build, hold_s)
+    al._rebuilder.job.fn = threadtime.holding_the_gil_first(al._rebuilder.job.fn, hold_s)
     switch = sys.getswitchinterval()
     sys.setswitchinterval(rt.GIL_SWITCH_S)              # as the real-time FSW runs
     meter = BlockedMeter()
@@ -198,13 +198,13 @@ def _longest_c_call_of_the_builder(burn=None) -> LongestCCall:
     rng = np.random.default_rng(5)
     meter = LongestCCall()
     al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
-    build = al._rebuilder._build
+    build = al._rebuilder.job.fn
 
     def job(*args):
         if burn is not None:
             burn()
         return build(*args)
-    al._rebuilder._build = meter.wrap(job)
+    al._rebuilder.job.fn = meter.wrap(job)
     try:
         for _ in range(6):
             h = JetHealth()
@@ -223,8 +223,8 @@ def test_the_table_builders_compiled_kernels_release_the_gil():
     """What lets the loop solve while tables are built: every compiled kernel of the table
     builder is built nogil."""
     from numba.core.registry import CPUDispatcher
-    from fsw.allocation import tables
-    kernels = [v for v in vars(tables).values() if isinstance(v, CPUDispatcher)]
+    from fsw.allocation import build
+    kernels = [v for v in vars(build).values() if isinstance(v, CPUDispatcher)]
     assert len(kernels) >= 8
     assert [k.py_func.__name__ for k in kernels if not k.targetoptions.get("nogil")] == []
 
@@ -263,13 +263,13 @@ def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():
         # candidate in each of the 8 octants (~4 MB per configuration)
         assert mb < (120.0 if al.spill.any() else 40.0)
         # a parameter change: previous tables and objective until the switch, then exact
-        al._rebuilder.hold()
+        al._rebuilder.job.hold()
         new = {**PARAMS, "allocator.w_yaw": 2.0}
         al.set_params(new)
         assert al.reconfig_pending
         al.solve(np.array([10.0, 20.0, 30.0]))
         assert al.interim
-        al._rebuilder.release()
+        al._rebuilder.job.resume()
         assert al.wait_idle(20.0)
         sync = Allocator(T, THRUST, new)
         sync.set_health(JetHealth.of(failed=(18,)))
@@ -292,7 +292,7 @@ def test_builder_thread_ends_on_close_and_on_garbage_collection():
     assert not al.builder_alive and not al.reconfig_pending
     assert not al.solve(np.array([50.0, 50.0, 50.0]))[[2, 3]].any()
     al2 = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
-    thread = al2._rebuilder._thread
+    thread = al2._rebuilder.job._thread
     del al2
     gc.collect()
     thread.join(5.0)

@@ -1,5 +1,6 @@
-"""The FSW's background workers -- the controllability LP (fsw/flightsoftware.py ``_LpWorker``)
-and the predictor-corrector's correction (fsw/guidance/npc.py ``EntryGuidance``) -- judged by their
+"""The FSW's background work -- the background-job runner (fsw/jobs.py ``BackgroundJob``), the
+controllability LP it runs for the authority supervisor (fsw/authority.py) and the
+predictor-corrector's correction (fsw/guidance/npc.py ``EntryGuidance``) -- judged by its
 logic, not by the host: each worker's job is injected (held on an Event the test controls,
 or made to keep the GIL for a known time with a C call). That no job keeps the loop from
 the GIL a control period by computing is judged in the job's own CPU time per C call
@@ -10,11 +11,17 @@ real-time FSW and the jobs one priority below it, so other load on the machine c
 in the loop's waits (they need root).
 
 The rules proven here:
+- the runner: the newest request wins (a request not yet started is replaced, an answer to an
+  overtaken request is never handed over; with every answer kept, each is kept by its tag);
+  in place the answer is there when ``submit`` returns; awaited, ``take`` at the due step
+  waits for it; in real time an answer missing at its due step is one overrun (event) and is
+  handed over by the first ``take`` after it arrives; a request while busy can be refused and
+  counted; a job that raises is a counted fault and an event, and the runner keeps serving;
+  warm-up discards its answer; close ends the thread;
 - the loop never waits on a worker: it keeps cycling while a job is held, no C call of a
   job computes for a control period, and the predictor's kernels are built nogil;
-- LP: the newest request wins: an answer to a request overtaken by a newer one (still
-  solving, or solved and not yet taken) is never applied; an answer is applied by the first
-  control cycle after it is ready;
+- LP (real time): the FSW flies on while it solves, and its answer is applied by the first
+  control cycle after it is ready (batch and lockstep: solved in place, on no thread);
 - guidance (real time): the answer is applied at its due step (release + apply_delay_s),
   never earlier; not there when due is one overrun (event; the previous answer's profile
   stays); a cycle released while it still computes is skipped (an overrun, its event
@@ -23,8 +30,7 @@ The rules proven here:
   release time, and its predicted time to deploy is aged from that release, not from the
   cycle it missed;
 - guidance (batch and lockstep): the loop waits for the answer at its due step, so a run
-  is the same bit for bit however slow the correction is. The LP has no worker there: it is
-  solved in place (``realtime`` False).
+  is the same bit for bit however slow the correction is.
 """
 from __future__ import annotations
 
@@ -41,8 +47,9 @@ from common.events import EventLog
 from common.model import load_scenario
 from ellipsled import batch
 from fsw.executive import LockstepClock
-from fsw.flightsoftware import FlightSoftware, _LpWorker
+from fsw.flightsoftware import FlightSoftware
 from fsw.health import JetHealth
+from fsw.jobs import AWAITED, EVERY, IN_PLACE, REALTIME, BackgroundJob
 from fsw.topology import Topology
 from sim.plant import Plant
 from tests import threadtime
@@ -123,21 +130,21 @@ def _worst_wait_on_the_lp(hold_s: float = 0.0) -> int:
 def _measure_the_loop_beside_the_lp(hold_s: float) -> int:
     fl = _Flight("nominal")
     f = fl.fsw
-    f._lp_worker._solve = threadtime.holding_the_gil_first(f._lp_worker._solve, hold_s)
+    f.authority.lp.fn = threadtime.holding_the_gil_first(f.authority.lp.fn, hold_s)
     f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
     f.health_changed()
     assert f.allocator.wait_idle(SANITY_S)               # the tables are not what is measured
-    _until(f._lp_worker.ready)
+    _until(lambda: f.authority.lp.ready)
     fl.step()                                            # the health's answer applied: now measure
-    assert f.controllability is not None and not f._lp_worker.busy()
+    assert f.controllability is not None and not f.authority.lp.busy
     applied = [0, f.controllability]
 
     def ask_again():
         if f.controllability is not applied[1]:
             applied[0] += 1
             applied[1] = f.controllability
-        if fl.plant.k % 10 == 0 and not f._lp_worker.busy():
-            f.assess_controllability(f.t_s, periodic=True)
+        if fl.plant.k % 10 == 0 and not (f.authority.lp.busy or f.authority.lp.ready):
+            f.authority.assess(f.t_s, periodic=True)
     try:
         return _worst_blocked(fl, lambda: applied[0] >= 4, ask_again)
     finally:
@@ -164,13 +171,13 @@ def _longest_c_call_of_the_lp(burn=None) -> LongestCCall:
     fl = _Flight("nominal")
     f = fl.fsw
     meter = LongestCCall()
-    solve = f._lp_worker._solve
+    solve = f.authority.lp.fn
 
     def job(*args):
         if burn is not None:
             burn()
         return solve(*args)
-    f._lp_worker._solve = meter.wrap(job)
+    f.authority.lp.fn = meter.wrap(job)
     try:
         for h in (JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]),
                   JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)]),
@@ -178,7 +185,7 @@ def _longest_c_call_of_the_lp(burn=None) -> LongestCCall:
             before = f.controllability
             f.fdir.health_active = h
             f.health_changed()
-            _until(f._lp_worker.ready)
+            _until(lambda: f.authority.lp.ready)
             fl.step()
             assert f.controllability is not before
     finally:
@@ -203,12 +210,12 @@ def test_the_fsw_flies_on_while_the_lp_is_held_and_applies_its_answer_at_the_nex
     fl = _Flight("nominal")
     f = fl.fsw
     go = threading.Event()
-    solve = f._lp_worker._solve
+    solve = f.authority.lp.fn
 
     def held(*args):
         go.wait(SANITY_S)
         return solve(*args)
-    f._lp_worker._solve = held
+    f.authority.lp.fn = held
     try:
         f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
         f.health_changed()
@@ -218,10 +225,10 @@ def test_the_fsw_flies_on_while_the_lp_is_held_and_applies_its_answer_at_the_nex
             assert f.controllability is None
         assert f.cycles == cycles + 100
         go.set()
-        _until(f._lp_worker.ready)
+        _until(lambda: f.authority.lp.ready)
         assert f.controllability is None                 # ready, but only a cycle applies it
         fl.step()
-        assert f.controllability is not None and not f._lp_worker.busy()
+        assert f.controllability is not None and not (f.authority.lp.busy or f.authority.lp.ready)
         assert any(e.code == "controllability" and e.t_s == f.t_s for e in f.events.history)
     finally:
         go.set()
@@ -259,49 +266,186 @@ class _TaggedJobs:
             ev.set()
 
 
-def test_an_lp_request_overtaken_while_solving_is_dropped_and_the_newest_answered():
-    jobs = _TaggedJobs()
-    w = _LpWorker(solve=jobs)
-    try:
-        w.submit(1.0, ("held-old",))
-        jobs.started("held-old")
-        w.submit(2.0, ("held-new",))                     # a newer health while the old one solves
-        jobs.go("held-old")
-        jobs.started("held-new")                         # the old one has finished: its answer ...
-        assert not w.ready()                             # ... was dropped
-        jobs.go("held-new")
-        _until(w.ready)
-        assert w.take() == (2.0, "held-new")
-        assert jobs.calls == ["held-old", "held-new"] and not w.busy()
-    finally:
-        jobs.release_all()
-        w.close()
-
-
-def test_an_lp_answer_not_yet_taken_is_dropped_by_a_newer_request():
-    jobs = _TaggedJobs()
-    w = _LpWorker(solve=jobs)
-    try:
-        w.submit(1.0, ("old",))
-        _until(w.ready)                                  # answered, not yet taken by a cycle ...
-        w.submit(2.0, ("held-new",))                     # ... when a newer health is asked
-        assert not w.ready()                             # the old answer is not there to apply
-        jobs.go("held-new")
-        _until(w.ready)
-        assert w.take() == (2.0, "held-new")
-    finally:
-        jobs.release_all()
-        w.close()
-
-
-def test_batch_and_lockstep_solve_the_lp_in_place_without_a_worker():
+def test_batch_and_lockstep_solve_the_lp_in_place_without_a_thread():
     f = FlightSoftware(load_scenario("nominal"))
     try:
         f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
         f.health_changed()
-        assert f.controllability is not None and f._lp_worker is None
+        assert f.controllability is not None
+        assert f.authority.lp.mode == IN_PLACE and not f.authority.lp.alive
     finally:
         f.close()
+
+
+# ---------------------------------------------------------------- the runner
+@pytest.fixture
+def jobs():
+    """Tagged jobs (``_TaggedJobs``); every one still held is let go at the end."""
+    tagged = _TaggedJobs()
+    yield tagged
+    tagged.release_all()
+
+
+@pytest.fixture
+def runner(jobs):
+    """``runner(fn=jobs, mode=REALTIME, **kw)``: a BackgroundJob named "test-job", closed at the end."""
+    made = []
+
+    def make(fn=jobs, mode=REALTIME, **kw) -> BackgroundJob:
+        made.append(BackgroundJob(fn, "test-job", mode=mode, **kw))
+        return made[-1]
+    yield make
+    jobs.release_all()
+    for w in made:
+        w.close()
+
+
+def test_a_request_overtaken_while_computing_is_dropped_and_the_newest_answered(jobs, runner):
+    w = runner()
+    w.submit("held-old", tag=1.0)
+    jobs.started("held-old")
+    w.submit("held-new", tag=2.0)                        # a newer request while the old one computes
+    jobs.go("held-old")
+    jobs.started("held-new")                             # the old one has finished: its answer ...
+    assert not w.ready                                   # ... was dropped
+    jobs.go("held-new")
+    _until(lambda: w.ready)
+    ans = w.take()
+    assert (ans.tag, ans.value) == (2.0, "held-new")
+    assert jobs.calls == ["held-old", "held-new"] and not w.busy and not w.ready
+
+
+def test_an_answer_not_yet_taken_is_dropped_by_a_newer_request(jobs, runner):
+    w = runner()
+    w.submit("old", tag=1.0)
+    _until(lambda: w.ready)                              # answered, not yet taken ...
+    w.submit("held-new", tag=2.0)                        # ... when a newer request comes
+    assert not w.ready                                   # the old answer is not there to take
+    jobs.go("held-new")
+    _until(lambda: w.ready)
+    assert w.take().tag == 2.0
+
+
+def test_a_request_not_yet_started_is_replaced_by_a_newer_one(jobs, runner):
+    w = runner()
+    w.submit("held-first")
+    jobs.started("held-first")
+    w.submit("second")                                   # waits behind the first ...
+    w.submit("third")                                    # ... and is replaced
+    jobs.go("held-first")
+    _until(lambda: w.ready)
+    assert w.take().value == "third" and jobs.calls == ["held-first", "third"]
+    assert w.released == 3
+
+
+def _a_request_behind_a_held_backlog(jobs, runner) -> BackgroundJob:
+    """A runner keeping every answer: computing held-b1 of its backlog (b1, b2), with r submitted."""
+    w = runner(keep=EVERY)
+    w.queue([("b1", ("held-b1",)), ("b2", ("b2",))])
+    jobs.started("held-b1")
+    w.submit("r", tag="r")
+    return w
+
+
+def test_every_answer_is_kept_by_its_tag_and_requests_go_before_the_backlog(jobs, runner):
+    w = _a_request_behind_a_held_backlog(jobs, runner)
+    jobs.go("held-b1")                                   # then r, before the rest of the backlog
+    assert w.wait_idle(SANITY_S)
+    assert jobs.calls == ["held-b1", "r", "b2"]
+    assert w.pop("r").value == "r" and w.pop("r") is None
+    assert [(a.tag, a.value) for a in w.pop_all()] == [("b1", "held-b1"), ("b2", "b2")]
+
+
+def test_cancel_drops_the_waiting_request_and_the_backlog(jobs, runner):
+    w = _a_request_behind_a_held_backlog(jobs, runner)
+    w.cancel()
+    jobs.go("held-b1")                                   # the running one finishes and is kept
+    assert w.wait_idle(SANITY_S)
+    assert jobs.calls == ["held-b1"] and [a.tag for a in w.pop_all()] == ["b1"]
+
+
+def test_in_place_the_answer_is_there_when_submit_returns_and_no_thread_runs(runner):
+    callers = []
+
+    def job(x):
+        callers.append(threading.current_thread())
+        return 2 * x
+    w = runner(job, mode=IN_PLACE)
+    w.submit(21, tag="t", t_s=3.0)
+    assert not w.alive and callers == [threading.current_thread()]
+    ans = w.take(3.0)
+    assert (ans.value, ans.tag, ans.t_s) == (42, "t", 3.0) and w.take(3.0) is None
+    assert w.warm(1) and callers == [threading.current_thread()]     # nothing to warm in place
+
+
+def test_awaited_the_answer_is_not_handed_over_before_its_due_step_and_waited_for_at_it(jobs, runner):
+    w = runner(mode=AWAITED)
+    w.submit("held", tag=1, t_s=0.0, due_t=0.5)
+    jobs.started("held")
+    assert w.take(0.48) is None                          # not due: returns at once, not late
+    threading.Timer(0.05, jobs.go, ("held",)).start()
+    ans = w.take(0.5)                                    # due: waits for it
+    assert ans.value == "held" and w.late == 0 and w.due_t == math.inf
+
+
+def test_in_real_time_an_answer_missing_at_its_due_step_is_one_overrun_and_taken_when_it_arrives(jobs, runner):
+    events = EventLog()
+    w = runner(events=events, source="guidance", event_name="guidance")
+    w.submit("held", tag=-1.0, t_s=1.0, due_t=1.5)
+    assert w.take(1.48) is None and w.late == 0
+    assert w.take(1.5) is None and w.late == 1 and w.overdue
+    assert w.take(1.52) is None and w.late == 1           # counted once
+    [ev] = [e for e in events.history if e.code == "guidance_overrun"]
+    assert (ev.t_s, ev.text, ev.source) == (1.5, "GUIDANCE CYCLE OVERRUN: COMMAND KEPT", "guidance")
+    jobs.go("held")
+    _until(lambda: w.ready)
+    ans = w.take(1.54)                                   # the first take after it arrived
+    assert (ans.value, ans.tag, ans.t_s) == ("held", -1.0, 1.0)
+    assert not w.overdue and w.due_t == math.inf and w.late == 1
+
+
+def test_a_request_while_busy_is_refused_and_counted_when_the_job_keeps_its_cadence(jobs, runner):
+    events = EventLog()
+    w = runner(skip_while_busy=True, events=events, source="guidance", event_name="guidance")
+    assert w.submit("held", t_s=1.0, due_t=1.5)
+    jobs.started("held")
+    assert not w.submit("next", t_s=2.0, due_t=2.5)
+    assert (w.released, w.skipped, w.due_t) == (1, 1, 1.5)
+    [ev] = [e for e in events.history if e.code == "guidance_overrun"]
+    assert (ev.t_s, ev.text) == (2.0, "GUIDANCE CYCLE SKIPPED: PREVIOUS STILL RUNNING")
+    jobs.go("held")
+    _until(lambda: w.ready)
+    assert w.take(2.0).value == "held" and jobs.calls == ["held"]
+
+
+@pytest.mark.parametrize("mode", [IN_PLACE, REALTIME])
+def test_a_job_that_raises_is_a_counted_fault_and_an_event_and_the_runner_serves_on(runner, mode):
+    def job(x):
+        if x == "bad":
+            raise ValueError("no answer")
+        return x
+    events = EventLog()
+    w = runner(job, mode=mode, events=events, source="guidance", event_name="controllability")
+    w.submit("bad", t_s=4.0)
+    assert w.wait_idle(SANITY_S) and w.faults == 1
+    assert w.take(5.0) is None                           # reported, not handed over
+    [ev] = [e for e in events.history if e.code == "controllability_fault"]
+    assert (ev.t_s, ev.text) == (4.0, "CONTROLLABILITY FAULT: ValueError: no answer")
+    w.submit("good", t_s=6.0)
+    assert w.wait_idle(SANITY_S) and w.take(6.0).value == "good" and w.faults == 1
+
+
+def test_warm_up_runs_the_job_on_its_own_thread_and_discards_the_answer(runner):
+    threads = []
+
+    def job(x):
+        threads.append(threading.current_thread().name)
+        return x
+    w = runner(job)
+    assert w.warm("x", timeout_s=SANITY_S)
+    assert threads == ["test-job"] and not w.ready and w.take() is None and w.released == 0
+    w.close()
+    assert not w.alive
 
 
 # ---------------------------------------------------------------- the guidance correction
@@ -309,8 +453,8 @@ def _guided(job=None) -> _Flight:
     """Guided flight; ``job(correct, *args)`` replaces the correction when given."""
     fl = _Flight("guided-nominal")
     if job is not None:
-        correct = fl.fsw.entry._correct
-        fl.fsw.entry._correct = lambda *a: job(correct, *a)
+        correct = fl.fsw.entry.job.fn
+        fl.fsw.entry.job.fn = lambda *a: job(correct, *a)
     return fl
 
 
@@ -350,7 +494,7 @@ def _longest_c_call_of_the_guidance(burn=None) -> LongestCCall:
         return correct(*a)
     fl = _guided(job)
     eg = fl.fsw.entry
-    eg._correct = meter.wrap(eg._correct)
+    eg.job.fn = meter.wrap(eg.job.fn)
     try:
         t_end = time.monotonic() + SANITY_S
         while eg.cycles < 3:
@@ -387,9 +531,9 @@ def test_a_guidance_answer_is_applied_at_its_due_step_not_before():
     eg = fl.fsw.entry
     try:
         fl.step()                                        # t = 0: the first cycle is released
-        t_rel, due = eg._t_cycle, eg._due_t
+        t_rel, due = eg._t_cycle, eg.job.due_t
         assert due == pytest.approx(t_rel + eg.apply_delay_s)
-        assert eg._done.wait(SANITY_S)                   # the answer is there long before it is due
+        assert eg.job.wait_idle(SANITY_S)                   # the answer is there long before it is due
         while fl.t_next < due:
             fl.step()
             assert eg.cycles == 0
@@ -426,10 +570,10 @@ def test_a_guidance_answer_late_for_its_due_step_is_an_overrun_and_the_previous_
     overruns = lambda: [e for e in fl.fsw.events.history if e.code == "guidance_overrun"]  # noqa: E731
     try:
         fl.step()                                        # t = 0: the first release
-        assert eg._done.wait(SANITY_S)                   # its answer in before it is due
+        assert eg.job.wait_idle(SANITY_S)                   # its answer in before it is due
         _fly_through(fl, 1.0)                            # applied at 0.5; the second released at 1.0
         assert eg.cycles == 1 and eg.overruns == 0
-        t_rel, due = eg._t_cycle, eg._due_t
+        t_rel, due = eg._t_cycle, eg.job.due_t
         assert t_rel == pytest.approx(1.0)
         kept = (eg.bank0_cmd, eg._line)
         _fly_through(fl, due)                            # the due step, no answer
@@ -439,10 +583,10 @@ def test_a_guidance_answer_late_for_its_due_step_is_an_overrun_and_the_previous_
         _fly_through(fl, t_rel + 1.0)                    # the next release, still computing
         # counted; its event ("SKIPPED") throttled with the overrun's (one code, 1 s apart)
         assert eg.overruns == 2 and len(overruns()) == 1 and fl.fsw.events._held["guidance_overrun"][0] == 1
-        assert eg._job[-1] == t_rel and len(n_jobs) <= 2  # no new job released
+        assert eg.job.released == 2 and len(n_jobs) <= 2  # no new job released
         assert eg.cycles == 1 and (eg.bank0_cmd, eg._line) == kept
         go.set()
-        assert eg._done.wait(SANITY_S)
+        assert eg.job.wait_idle(SANITY_S)
         assert eg.cycles == 1                            # arrived; only a control cycle applies it
         fl.step()
         assert eg.cycles == 2 and eg.t_hist[1] == t_rel  # stamped with its release, not now
@@ -475,10 +619,10 @@ def _correction_held_to_its_due_step(f: FlightSoftware) -> None:
     is due at: as late as an answer can come."""
     eg = f.entry
     due = threading.Event()
-    steer, correct = eg.steer, eg._correct
+    steer, correct = eg.steer, eg.job.fn
 
     def steer_noting_the_due_step(nav):
-        if nav.t_s >= eg._due_t:
+        if nav.t_s >= eg.job.due_t:
             due.set()
         steer(nav)
 
@@ -486,7 +630,7 @@ def _correction_held_to_its_due_step(f: FlightSoftware) -> None:
         assert due.wait(SANITY_S)
         due.clear()
         return correct(*a)
-    eg.steer, eg._correct = steer_noting_the_due_step, held
+    eg.steer, eg.job.fn = steer_noting_the_due_step, held
 
 
 def test_batch_is_the_same_bit_for_bit_when_every_answer_comes_only_at_its_due_step(monkeypatch):

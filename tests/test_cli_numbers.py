@@ -5,12 +5,14 @@ memory budget are refused with the budget named."""
 from __future__ import annotations
 
 import subprocess
-import sys
 
 import pytest
 
 from common.config import ConfigError
-from ellipsled import cli, runlib
+from ellipsled import cli
+from ellipsled.procs import ELLIPSLED
+from ellipsled.sil.variant import prepare
+
 
 BAD = [
     (["batch", "nominal", "--out", "/nonexistent", "--seed", "-1"], "--seed"),
@@ -63,29 +65,29 @@ def test_values_within_range_pass(argv):
 
 
 def test_a_huge_duration_ends_with_a_usage_error_not_a_traceback(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "batch", "nominal", "--out", str(tmp_path),
-                        "--duration", "1e300"], capture_output=True, text=True, timeout=120)
+    r = subprocess.run(ELLIPSLED + ["batch", "nominal", "--out", str(tmp_path), "--duration", "1e300"],
+                       capture_output=True, text=True, timeout=120)
     assert r.returncode == 2, r.stderr
     assert "Traceback" not in r.stderr and "argument --duration" in r.stderr
 
 
 def test_a_run_whose_history_exceeds_the_memory_budget_is_refused_naming_the_budget():
-    from ellipsled.history import HISTORY_BUDGET_BYTES, budget_refusal, row_bytes, rows_for
+    from ellipsled.sil.history import HISTORY_BUDGET_BYTES, budget_refusal, row_bytes, rows_for
     dt = 0.02
     longest_rows = HISTORY_BUDGET_BYTES // row_bytes()
     too_long = (longest_rows + 10) * dt
     with pytest.raises(ConfigError) as e:
-        runlib.prepare("nominal", duration_s=too_long)
+        prepare("nominal", duration_s=too_long)
     msg = str(e.value)
     assert "--duration" in msg and "memory budget" in msg and "GiB" in msg, msg
     assert budget_refusal((longest_rows - 10) * dt, dt) is None
     # a scenario's own max_duration_s is held to the same budget
-    scn = runlib.prepare("nominal")
+    scn = prepare("nominal")
     assert rows_for(scn.max_duration_s, scn.dt_control_s) * row_bytes() <= HISTORY_BUDGET_BYTES
 
 
 def test_a_campaign_whose_runs_exceed_the_memory_budget_is_refused_before_any_run(tmp_path, monkeypatch):
-    import ellipsled.history as history
+    import ellipsled.sil.history as history
     from ellipsled.montecarlo.engine import run_campaign
     monkeypatch.setattr(history, "HISTORY_BUDGET_BYTES", 1_000_000, raising=False)   # ~1,100 rows: 22 s
     with pytest.raises(ValueError, match="memory budget"):

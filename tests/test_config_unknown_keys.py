@@ -4,12 +4,13 @@ ignored: `[fsw.fdir] dealy_s = 1.5` would otherwise fly case 4 without its 1.5 s
 from __future__ import annotations
 
 import subprocess
-import sys
 
 import pytest
 
 from common.config import DATA_DIR, ConfigError
 from common.model import load_scenario, load_vehicle
+from ellipsled.procs import ELLIPSLED
+
 
 CASE4 = DATA_DIR / "scenarios" / "case4.toml"
 
@@ -57,8 +58,9 @@ def test_the_parameter_registry_refuses_an_override_nobody_declares():
 
 def test_batch_refuses_the_misspelt_override_with_exit_status_2(tmp_path):
     path = _copy(tmp_path, CASE4, "delay_s = 1.5", "dealy_s = 1.5")
-    r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "batch", str(path), "--out", str(tmp_path / "out"),
-                        "--duration", "0.1", "--no-plots"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(ELLIPSLED + ["batch", str(path), "--out", str(tmp_path / "out"), "--duration", "0.1",
+                                    "--no-plots"],
+                       capture_output=True, text=True, timeout=300)
     assert r.returncode == 2, r.stdout + r.stderr
     assert f"{path}: fsw.fdir.dealy_s: unknown key (did you mean delay_s?)" in r.stderr
     assert "Traceback" not in r.stderr

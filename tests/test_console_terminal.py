@@ -5,75 +5,31 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shlex
 import shutil
-import subprocess
-import sys
 import time
 
 import numpy as np
 import pytest
 
-from ellipsled.history import History
+from ellipsled.procs import ELLIPSLED
+from ellipsled.sil.history import History
 from gse.replay import TlogReplay
-from interfaces.mavlink.signing import SigningKey
 
-from tests.ground_procs import free_udp, stop
+from tests.procs import Tmux, start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow,         # its SIL runs --no-rt: no FIFO process, it may run beside others
               pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed (apt-get install tmux)")]
-PY = [sys.executable, "-m", "ellipsled.cli"]
 STATUSTEXT_LEN = 50
 
 
-
-class Tmux:
-    """One detached tmux session running one command; killed at the end whatever happens."""
-
-    def __init__(self, name: str, argv: list[str], size=(150, 45)):
-        self.name = f"{name}-{int(time.time() * 1e3) % 10**9}"
-        # a tmux server keeps the environment it started with: hand this one's over explicitly
-        env = " ".join(f"{k}={shlex.quote(os.environ[k])}" for k in ("PYTHONPATH", "PATH") if k in os.environ)
-        cmd = f"cd {shlex.quote(os.getcwd())} && env {env} {shlex.join(argv)}; echo EXIT-$?; sleep 120"
-        subprocess.run(["tmux", "new-session", "-d", "-s", self.name, "-x", str(size[0]), "-y", str(size[1]), cmd],
-                       check=True)
-
-    def screen(self) -> str:
-        return subprocess.run(["tmux", "capture-pane", "-p", "-t", self.name], capture_output=True,
-                              text=True).stdout
-
-    def keys(self, *keys: str, literal: bool = False) -> None:
-        subprocess.run(["tmux", "send-keys", "-t", self.name] + (["-l"] if literal else []) + list(keys), check=True)
-
-    def wait_for(self, cond, timeout_s: float, what: str) -> str:
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            s = self.screen()
-            if cond(s):
-                return s
-            time.sleep(0.3)
-        raise AssertionError(f"timed out waiting for {what}; screen:\n{self.screen()}")
-
-    def kill(self) -> None:
-        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
-
-
 def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(tmp_path):
-    key_file = tmp_path / "keys" / "signing.key"
-    key_file.parent.mkdir()
-    SigningKey.generate().write_file(str(key_file))
-    vehicle, gcs = free_udp(), free_udp()
-    out = tmp_path / "run"
+    sil = start_ground_sil(tmp_path, "nominal", 25.0, rt=False)
+    run, out = sil.run, sil.out
     tlog = out / "console.tlog"
-    out.mkdir()
-    log = open(tmp_path / "run.log", "w")
-    run = subprocess.Popen(PY + ["run", "nominal", "--realtime", "--no-rt", "--duration", "25", "--out", str(out),
-                                 "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
-                                 "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
-                           stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-    console = Tmux("ellipsled-console", PY + ["gse", "console", "--signing-key", str(key_file), "--gcs-port", str(gcs),
-                                              "--vehicle", f"udp:127.0.0.1:{vehicle}", "--tlog", str(tlog)])
+    out.mkdir(parents=True, exist_ok=True)      # the console may open its .tlog before the run makes the folder
+    console = Tmux("ellipsled-console", ELLIPSLED + ["gse", "console", "--signing-key", str(sil.key_file),
+                                                     "--gcs-port", str(sil.gcs), "--tlog", str(tlog),
+                                                     "--vehicle", f"udp:127.0.0.1:{sil.vehicle}"])
     replay = None
     try:
         console.wait_for(lambda s: "ENTRY" in s and "ARMED" in s, 120, "the vehicle on the console")
@@ -83,7 +39,7 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         console.keys("Enter")
         console.wait_for(lambda s: "inject jet 17 off: ACCEPTED" in s, 20, "the ACK on the screen")
         console.keys("Escape")
-        assert run.wait(120) == 0, (tmp_path / "run.log").read_text()
+        assert run.wait(120) == 0, sil.log()
         time.sleep(1.0)                               # the last telemetry in
         console.keys("q")
         console.wait_for(lambda s: "EXIT-0" in s, 20, "the console to quit")
@@ -115,7 +71,7 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         assert math.degrees(abs(math.remainder(at_end.bank - float(h["bank_rad"][i]), 2 * math.pi))) < 0.5
 
         # the same replay on the console's screens, in the terminal
-        replay = Tmux("ellipsled-replay", PY + ["gse", "console", "--replay", str(tlog), "--speed", "20"])
+        replay = Tmux("ellipsled-replay", ELLIPSLED + ["gse", "console", "--replay", str(tlog), "--speed", "20"])
         screen = replay.wait_for(lambda s: "(END)" in s, 60, "the replay to end")
         assert "REPLAY OF CONSOLE.TLOG" in screen
         assert f"{math.degrees(final.bank):8.2f}°" in screen, screen
@@ -127,4 +83,3 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         if replay is not None:
             replay.kill()
         stop(run)
-        log.close()

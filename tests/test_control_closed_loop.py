@@ -26,7 +26,7 @@ def _wind_frame():
 
 
 def _aero_torque(C_BN, C_WN, omega, aero_scale):
-    """Truth static + damping moments (spec 10-plant.md), test's own evaluation."""
+    """Truth static + damping moments (docs/plant.md), test's own evaluation."""
     a = VEH.aero
     w1_B = C_BN @ C_WN[0]                     # v_rel direction in B: V [cos a cos b, sin b, sin a cos b]
     alpha, beta = math.atan2(w1_B[2], w1_B[0]), math.asin(max(-1.0, min(1.0, w1_B[1])))

@@ -28,7 +28,7 @@ def _random_h(rng):
 
 
 def _direct(sigma, omega, h):
-    """J, P_a, Jdot, I_a*, C_a* from their definitions (spec 20-fsw.md)."""
+    """J, P_a, Jdot, I_a*, C_a* from their definitions (docs/fsw/index.md)."""
     B = mrp.B_matrix(sigma)
     J = 0.25 * B
     Pa = np.linalg.inv(J)

@@ -179,9 +179,9 @@ def test_a_background_job_below_the_loop_cannot_hold_its_release_back():
     wakes within a GIL switch interval of its release. The same-priority run is the
     control: it shows the harm is real on this machine.
 
-    Timing: the releases are judged on the wall clock (2 ms at most late, measured ~0.15 ms
-    idle and beside stress-ng on both CPUs): it needs root for SCHED_FIFO, whose priority
-    is what keeps other load off the loop's CPU."""
+    Timing: the releases are judged on the wall clock (2 ms at most late, an order of
+    magnitude above a FIFO loop's wake-up, idle or beside load on both CPUs): it needs root
+    for SCHED_FIFO, whose priority is what keeps other load off the loop's CPU."""
     def fly(mode):
         out = subprocess.run([sys.executable, "-c", BACKGROUND_CHILD, mode], cwd=ROOT, capture_output=True,
                              text=True, timeout=120)

@@ -1,4 +1,4 @@
-"""The fault-attributable bank error (spec 30-scenarios.md): max over t >= t_fault of
+"""The fault-attributable bank error (docs/scenarios.md): max over t >= t_fault of
 |e_case(t) - e_ref(t)|, e_ref from the same scenario and seed flown without faults.
 Truth: a hand-computed synthetic history, and the determinism of the fault-free flight."""
 from __future__ import annotations
@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from common.model import load_scenario
-from ellipsled import batch, reference, runlib
-from ellipsled.history import History
+from ellipsled import batch, reference
 from ellipsled.metrics import fault_attributable_error_deg, fault_attributable_max_deg, settle_time
+from ellipsled.sil.history import History
+from ellipsled.sil.variant import prepare
 
 
 def _history(k, bank_deg, ref_deg, dt=0.5) -> History:
@@ -57,7 +58,7 @@ def test_nominal_against_its_fault_free_twin_is_zero(tmp_path):
     because the code skips it)."""
     s, h, _ = batch.run("nominal", duration_s=15.0, reference_cache=tmp_path)
     assert s["bank_err_fault_attrib_max_deg"] == 0.0
-    twin = reference.fault_free_history(runlib.prepare("nominal", duration_s=15.0), 1, tmp_path)
+    twin = reference.fault_free_history(prepare("nominal", duration_s=15.0), 1, tmp_path)
     assert fault_attributable_max_deg(h, twin, 0.0) == 0.0
     assert twin.n == h.n
 
@@ -76,10 +77,10 @@ def test_a_faulted_run_is_judged_against_its_twin_and_the_twin_is_cached(tmp_pat
 
 
 def test_twin_key_depends_on_what_decides_the_flight_only():
-    c1 = runlib.prepare("case1")
+    c1 = prepare("case1")
     key = reference.twin_key(c1, 1)
     assert reference.twin_key(c1.with_(name="renamed", faults=()), 1) == key    # name and faults: not the twin's
-    assert reference.twin_key(runlib.prepare("nominal"), 1) == key                # same flight without faults
+    assert reference.twin_key(prepare("nominal"), 1) == key                # same flight without faults
     assert reference.twin_key(c1, 2) != key                                      # seed
     assert reference.twin_key(c1.with_(bank0_rad=math.radians(85.0)), 1) != key  # initial state
     assert reference.twin_key(load_scenario("case4"), 1) != key                  # FSW parameters (delay)

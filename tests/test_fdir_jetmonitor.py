@@ -1,5 +1,5 @@
 """FDIR jet monitor: detection, isolation, delay, overrides, against an independent plant-side
-chamber-pressure model written here (spec 10-plant.md: eta*u for a working jet, 1 stuck on,
+chamber-pressure model written here (docs/plant.md: eta*u for a working jet, 1 stuck on,
 0 failed off, + white noise sigma 0.02) and expected detection times counted directly from
 the command sequence (the N-th post-fault firing, or the N-th post-fault off period)."""
 from __future__ import annotations
@@ -14,9 +14,9 @@ from common.events import EventLog, Severity
 from fsw.fdir import Fdir
 from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
 from fsw.params import load_params
+from interfaces.vocabulary import HEALTH_NAMES, N_JETS
 
 DT = 0.02
-N_JETS = 18
 SIGMA = 0.02
 
 
@@ -79,7 +79,6 @@ CASES = {
     "case3": {j: (DEGRADED, 0.5) for j in (3, 7, 14, 15)},
     "mixed": {1: (FAILED_OFF, 0.0), 6: (STUCK_ON, 1.0), 11: (DEGRADED, 0.5), 13: (DEGRADED, 0.3)},
 }
-NAME = {FAILED_OFF: "failed_off", STUCK_ON: "stuck_on", DEGRADED: "degraded"}
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -91,7 +90,7 @@ def test_detects_exactly_the_faulty_jets_with_kind_time_and_eta(case, seed):
     assert set(got) == set(faults), f"detected {sorted(got)}, injected {sorted(faults)}"
     for jet, (kind, eta) in faults.items():
         d = got[jet]
-        assert d["kind"] == NAME[kind]
+        assert d["kind"] == HEALTH_NAMES[kind]
         assert d["t_s"] == pytest.approx(expected_detection_time(cmds, times, jet, kind), abs=1e-9)
         assert fdir.health_isolated.state[jet - 1] == kind
         assert fdir.health_active.state[jet - 1] == kind          # delay 0: applied at once

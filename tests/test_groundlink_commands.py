@@ -1,125 +1,22 @@
 """Ground link commands: every COMMAND_LONG the vehicle knows, answered with the right
 MAV_RESULT over real signed UDP on loopback, and its effect checked on the FSW objects
 (or on the plant the injection was forwarded to). Also: HEARTBEAT system_status follows
-mode and FDIR.
-
-The rig (``Rig``) is shared by the other ground-link and gse tests: a FlightSoftware built
-from case1 (its scheduled faults removed: the tests inject from the ground), the plant from sim.plant, a GroundLink on an ephemeral port with a fake
-scheduling clock, and a GroundClient with a key file written in tmp_path.
+mode and FDIR. On the shared ground-link rig (tests/rig.py).
 """
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
 
-from common.model import load_scenario
-from fsw.flightsoftware import FlightSoftware
-from fsw.groundlink import GroundLink
 from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
 from fsw.modes import Mode
-from gse.client import GroundClient
 from gse.commands import make_request
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import SigningKey
-from sim.plant import Plant
+from interfaces.vocabulary import FAULT_HEALTH
 
-ACCEPTED, DENIED, UNSUPPORTED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED, mav.MAV_RESULT_UNSUPPORTED
-
-
-class Clock:
-    def __init__(self, t: float = 1000.0):
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
-
-
-def write_key(tmp_path, name: str = "ground.key") -> SigningKey:
-    path = tmp_path / name
-    SigningKey.generate().write_file(path)
-    return SigningKey.from_file(path)
-
-
-class Rig:
-    """FSW + plant + ground link + ground client, stepped by the test."""
-
-    def __init__(self, tmp_path, *, inject="plant", rates=None, tlog=None, key=None, scenario="case1"):
-        # case1 with its scheduled faults removed: the ground injects them instead
-        self.scn = load_scenario(scenario).with_(faults=())
-        self.plant = Plant(self.scn)
-        self.fsw = FlightSoftware(self.scn)
-        self.key = key or write_key(tmp_path)
-        self.clock = Clock()
-        self.injected: list[tuple[int, str, float]] = []
-        self.inject_answer = True
-        self.gcs = GroundClient(self.key, listen="udp:127.0.0.1:0", tlog=tlog)
-        cb = self._inject if inject == "plant" else inject
-        self.gl = GroundLink(self.fsw, self.key, gcs=f"udp:127.0.0.1:{self.gcs.address[1]}",
-                             bind="udp:127.0.0.1:0", inject=cb, rates=rates, clock=self.clock)
-        self.gcs.set_vehicle(self.gl.address)
-        self.frame = self.plant.sensors
-        self.k = 0
-
-    def _inject(self, jet, kind, eta):
-        self.injected.append((jet, kind, eta))
-        if self.inject_answer is not True:
-            return self.inject_answer
-        self.plant.set_fault(jet, kind, eta)
-        return True
-
-    def fly(self, n: int, tick_every: int = 5) -> None:
-        """n control cycles; the link ticks every ``tick_every`` (RG2), the fake clock
-        advancing by the time that elapsed in simulation."""
-        rg3 = int(self.fsw.params["executive.rg3_divisor"])
-        for _ in range(n):
-            u = self.fsw.control_step(self.frame)
-            if self.k % rg3 == 0:
-                self.fsw.entry_guidance_step()        # mode npc only (a no-op in profile)
-            if self.k % tick_every == 0:
-                self.clock.t += tick_every * self.scn.dt_control_s
-                self.gl.tick(self.frame)
-                self.gcs.poll(0.0)
-            self.frame = self.plant.step(u)
-            self.k += 1
-
-    def exchange(self, until, timeout_s: float = 3.0) -> bool:
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            self.gl.tick(self.frame)
-            self.gcs.poll(0.005)
-            if until():
-                return True
-        return False
-
-    def command(self, *words):
-        pc = self.gcs.start(make_request(*words), timeout_s=1.0, retries=2)
-        assert self.exchange(lambda: pc.done), f"no ACK for {words}"
-        return pc.result
-
-    def raw_command(self, command: int, *params):
-        pc = self.gcs.start_command(command, *params, timeout_s=1.0, retries=2)
-        assert self.exchange(lambda: pc.done), f"no ACK for command {command}"
-        return pc.result
-
-    def texts(self) -> list[str]:
-        self.exchange(lambda: False, 0.05)
-        return [e.text for e in self.gcs.state.events]
-
-    def close(self):
-        self.gl.close()
-        self.gcs.close()
-        self.fsw.close()
-
-
-@pytest.fixture
-def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(10)
-    yield r
-    r.close()
+from tests.rig import ACCEPTED, DENIED, UNSUPPORTED, Rig, rig  # noqa: F401  (the shared fixture)
 
 
 # --------------------------------------------------------------------------- injection
@@ -134,7 +31,7 @@ def test_valid_injection_is_forwarded_to_the_plant_and_accepted(rig, words, expe
     assert rig.command(*words) == ACCEPTED
     jet, kind, eta = rig.injected[-1]
     assert (jet, kind) == expect[:2] and math.isclose(eta, expect[2], rel_tol=1e-6)
-    state = {"off": FAILED_OFF, "stuck": STUCK_ON, "degraded": DEGRADED, "clear": NOMINAL}[kind]
+    state = FAULT_HEALTH[kind]
     assert (rig.plant.fault_state == state).any() or (jet == 0 and (rig.plant.fault_state == NOMINAL).all())
     if jet:
         assert rig.plant.fault_state[jet - 1] == state

@@ -20,26 +20,16 @@ from interfaces.event_catalogue import EV
 from interfaces.mavlink import dialect as mav
 from interfaces.vocabulary import DEGRADED, Severity
 
-from tests.test_groundlink_commands import Rig
-from tests.test_groundlink_keyless import Keyless
+from tests.rig import flown, station  # noqa: F401  (the keyless station, over this module's rig)
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(3)
-    sent = r.sent = []
-    send = r.gl._send
-    r.gl._send = lambda msg, *a, **kw: (sent.append(msg), send(msg, *a, **kw))
-    yield r
-    r.close()
-
-
-@pytest.fixture
-def station(rig):
-    k = Keyless(rig)
-    yield k
-    k.close()
+    with flown(tmp_path, 3) as r:
+        sent = r.sent = []
+        send = r.gl._send
+        r.gl._send = lambda msg, *a, **kw: (sent.append(msg), send(msg, *a, **kw))
+        yield r
 
 
 def _of(msgs, name: str) -> list:

@@ -24,8 +24,8 @@ from pymavlink import mavftp, mavutil
 from fsw.groundlink import ftp, metadata
 from interfaces.mavlink import dialect as mav
 
-from tests.ground_procs import free_udp
-from tests.test_groundlink_commands import Rig, rig  # noqa: F401  (the shared fixture)
+from tests.procs import free_udp
+from tests.rig import Rig, rig  # noqa: F401  (the shared fixture)
 
 # parameter.schema.json "additionalProperties": false -> only these keys
 PARAM_KEYS = {"name", "type", "shortDesc", "longDesc", "units", "default", "decimalPlaces", "min", "max",

@@ -18,7 +18,7 @@ import pytest
 from fsw.groundlink import telemetry as tm
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import ACCEPTED, Rig
+from tests.rig import ACCEPTED, Rig
 
 MSG = "ELLIPSLED_GUIDANCE_STATUS"
 F = mav
@@ -112,16 +112,17 @@ def test_a_reversal_decision_reaches_the_ground_with_its_time_and_rule(guided):
 def test_non_finite_values_never_go_out(guided):
     rig = guided
     e, fsw = rig.fsw.entry, rig.fsw
-    saved = (e.pred_h_m, e.bank_cmd, fsw.controllability)
+    auth = fsw.authority
+    saved = (e.pred_h_m, e.bank_cmd, auth.controllability)
     try:
         e.pred_h_m = math.nan
         e.bank_cmd = math.inf
-        if fsw.controllability is not None:
-            fsw.controllability = dataclasses.replace(fsw.controllability, authority_neg_radps2=math.nan,
-                                                      trim_needed_deg=math.inf)
+        if auth.controllability is not None:
+            auth.controllability = dataclasses.replace(auth.controllability, authority_neg_radps2=math.nan,
+                                                       trim_needed_deg=math.inf)
         m = fresh(rig, fsw.t_s)
     finally:
-        e.pred_h_m, e.bank_cmd, fsw.controllability = saved
+        e.pred_h_m, e.bank_cmd, auth.controllability = saved
     assert all(math.isfinite(getattr(m, f)) for f in FLOATS)
     assert not m.flags & (F.ELLIPSLED_GUIDANCE_FLAGS_PREDICTION | F.ELLIPSLED_GUIDANCE_FLAGS_LP
                           | F.ELLIPSLED_GUIDANCE_FLAGS_TRIM)
@@ -184,10 +185,10 @@ def test_deploy_errors_split_a_known_geometry():
 
 
 def test_the_fsw_state_record_carries_the_same_guidance_figures_through_the_codec(guided):
-    """What the live bridge draws the map from (FSW_STATE v2, ellipsled.history.guidance_fields)
+    """What the live bridge draws the map from (FSW_STATE v2, ellipsled.sil.history.guidance_fields)
     survives the codec (which refuses non-finite numbers) and equals the corrector's values;
     a non-finite predicted point goes out as 0 with its flag clear, never refused."""
-    from ellipsled.history import guidance_fields
+    from ellipsled.sil.history import guidance_fields
     from interfaces import codec, records
     e, fsw = guided.fsw.entry, guided.fsw
     c = codec.Codec.for_schema("FSW_STATE")

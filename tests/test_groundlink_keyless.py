@@ -22,71 +22,16 @@ from fsw.groundlink import ftp, metadata, policy
 from fsw.groundlink.services import PRODUCT_ID, VENDOR_ID, flight_sw_version
 from fsw.groundlink.link import REFUSAL_EVENT
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Reject
+from interfaces.mavlink.signing.verify import Reject
 from interfaces.vocabulary import Mode
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Keyless, flown, station  # noqa: F401  (the keyless station, over this module's rig)
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(3)
-    yield r
-    r.close()
-
-
-class Keyless:
-    """A ground station without the key on its own UDP port: packs unsigned, parses all."""
-
-    def __init__(self, rig):
-        self.rig = rig
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.setblocking(False)
-        self.mav = mav.MAVLink(None, srcSystem=245, srcComponent=190)
-        self.parser = mav.MAVLink(None)
-        self.got: list = []
-
-    @property
-    def address(self):
-        return self.sock.getsockname()
-
-    def send(self, msg) -> None:
-        self.sock.sendto(msg.pack(self.mav), self.rig.gl.address)
-
-    def command(self, command: int, *p: float) -> None:
-        p = list(p) + [0.0] * (7 - len(p))
-        self.send(mav.MAVLink_command_long_message(1, 1, command, 0, *p))
-
-    def _drain(self) -> None:
-        while True:
-            try:
-                data = self.sock.recv(4096)
-            except BlockingIOError:
-                return
-            for m in self.parser.parse_buffer(data) or []:
-                self.got.append(m)
-
-    def wait(self, cond, timeout_s: float = 2.0) -> bool:
-        def done():
-            self._drain()
-            return cond()
-        return self.rig.exchange(done, timeout_s)
-
-    def of(self, name: str) -> list:
-        self._drain()
-        return [m for m in self.got if m.get_type() == name]
-
-    def close(self) -> None:
-        self.sock.close()
-
-
-@pytest.fixture
-def station(rig):
-    k = Keyless(rig)
-    yield k
-    k.close()
+    with flown(tmp_path, 3) as r:
+        yield r
 
 
 def vehicle_sent(rig, name: str) -> list:

@@ -16,9 +16,9 @@ import pytest
 from fsw.flightsoftware import all_params, declarations
 from fsw.params import ParamRegistry, param_id, param_ids
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Reject
+from interfaces.mavlink.signing.verify import Reject
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Rig, flown
 
 
 def f32(x: float) -> float:
@@ -27,10 +27,8 @@ def f32(x: float) -> float:
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(3)
-    yield r
-    r.close()
+    with flown(tmp_path, 3) as r:
+        yield r
 
 
 def settable():

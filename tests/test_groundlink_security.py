@@ -18,19 +18,19 @@ import time
 import pytest
 
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Reject, Signer, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.sign import Signer
+from interfaces.mavlink.signing.verify import Reject
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Rig, flown
 
 ARM_OFF = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0)
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(3)
-    yield r
-    r.close()
+    with flown(tmp_path, 3) as r:
+        yield r
 
 
 def send_raw(rig, data: bytes) -> None:
@@ -363,7 +363,7 @@ def test_the_bench_flood_mix_changes_nothing_and_events_still_go_out_each_tick(r
 def test_an_unsigned_parameter_list_goes_to_the_requester_at_the_read_pace(rig):
     """Keyless, a stock ground station still gets the whole list, to its own address only;
     one 20-byte request cannot make the vehicle send more than the read pace allows."""
-    from fsw.groundlink.link import READ_BURST, READ_RATE_HZ
+    from fsw.groundlink.senders import READ_BURST, READ_RATE_HZ
     evil = attacker_socket()
     to_requester = []
     send = rig.gl._send

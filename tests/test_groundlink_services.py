@@ -18,9 +18,9 @@ import pytest
 from fsw.groundlink import DEFAULT_RATES_HZ
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import Rig, rig  # noqa: F401  (the shared fixture)
+from tests.rig import ACCEPTED, DENIED, flown, rig  # noqa: F401  (the shared fixture)
 
-ACCEPTED, DENIED, TEMP = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED, mav.MAV_RESULT_TEMPORARILY_REJECTED
+TEMP = mav.MAV_RESULT_TEMPORARILY_REJECTED
 REQ, SET_IV, GET_IV = mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAV_CMD_GET_MESSAGE_INTERVAL
 
 
@@ -31,10 +31,8 @@ def msg_id(name: str) -> int:
 @pytest.fixture
 def quiet(tmp_path):
     """Every stream off: whatever arrives was asked for."""
-    r = Rig(tmp_path, rates={n: 0.0 for n in DEFAULT_RATES_HZ})
-    r.fly(10)
-    yield r
-    r.close()
+    with flown(tmp_path, rates={n: 0.0 for n in DEFAULT_RATES_HZ}) as r:
+        yield r
 
 
 def arrived(rig, name: str) -> bool:

@@ -18,14 +18,13 @@ from pymavlink.quaternion import Quaternion
 from fsw.groundlink import DEFAULT_RATES_HZ, GroundLink
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import Clock, Rig, write_key
+from tests.rig import Clock, Rig, flown, write_key
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    yield r
-    r.close()
+    with flown(tmp_path, 0) as r:
+        yield r
 
 
 def test_stream_rates_follow_the_configuration(tmp_path):

@@ -17,7 +17,7 @@ from gse import cli
 from gse.tlog import read_records
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Rig
 
 
 class LiveLink:

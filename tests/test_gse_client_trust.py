@@ -10,9 +10,11 @@ import time
 
 from gse.client import GroundClient
 from interfaces.mavlink import dialect as mav
-from interfaces.mavlink.signing import Signer, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.sign import Signer
+from interfaces.vocabulary import DEFAULT_VEHICLE, parse_udp
 
-VEHICLE_A, VEHICLE_B = ("127.0.0.1", 14555), ("127.0.0.1", 40000)
+VEHICLE_A, VEHICLE_B = parse_udp(DEFAULT_VEHICLE, "vehicle"), ("127.0.0.1", 40000)
 
 
 def heartbeat(armed: bool):

@@ -10,17 +10,16 @@ import math
 import pytest
 
 from gse.console import GroundConsole
+from interfaces.event_catalogue import EV
 from interfaces.mavlink import dialect as mav
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Rig, flown
 
 
 @pytest.fixture
 def rig(tmp_path):
-    r = Rig(tmp_path)
-    r.fly(30)
-    yield r
-    r.close()
+    with flown(tmp_path, 30) as r:
+        yield r
 
 
 def test_console_shows_state_and_injects_with_ack(rig):
@@ -120,8 +119,6 @@ def test_console_shows_guidance_and_position_as_the_vehicle_reports_them(tmp_pat
 
 
 def test_the_events_panel_filters_by_the_catalogues_severities_sources_and_names(rig):
-    from interfaces.event_catalogue import EV
-
     async def scenario():
         app = GroundConsole(rig.gcs, timeout_s=0.5, retries=2, poll_s=0.1, refresh_s=0.3)
         async with app.run_test(size=(140, 45)) as pilot:

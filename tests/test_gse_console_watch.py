@@ -1,7 +1,7 @@
 """The console's screens without commanding: watching live telemetry without the signing
 key (nothing sent), and replaying a recorded .tlog (the same final state and events as the
 live session that recorded it). Headless, Textual's pilot; the FSW and its ground link in
-this process (tests/test_groundlink_commands.py's Rig)."""
+this process (tests/rig.py)."""
 from __future__ import annotations
 
 import asyncio
@@ -13,7 +13,7 @@ from gse.console import GroundConsole
 from gse.replay import TlogReplay
 from gse.tlog import TlogWriter
 
-from tests.test_groundlink_commands import Rig
+from tests.rig import Rig
 
 
 async def _type(pilot, line: str) -> None:

@@ -214,10 +214,10 @@ def test_an_answer_equal_to_the_event_precision_does_not_reshape_the_reference_a
     n = sum(e.code == "reference_reshaped" for e in f.events.history)
     assert n == 1
     for k, scale in enumerate((1 + 1e-12, 1 - 1e-9, 1 + 1e-4)):
-        f._replan_to(4.0 + k, 0.0, dataclasses.replace(r, authority_neg_radps2=r.authority_neg_radps2 * scale))
+        f.authority._replan_to(4.0 + k, 0.0, dataclasses.replace(r, authority_neg_radps2=r.authority_neg_radps2 * scale))
     assert sum(e.code == "reference_reshaped" for e in f.events.history) == n
     assert f.guidance.profile.accel_limit_radps2 == limit
-    f._replan_to(8.0, 0.0, dataclasses.replace(r, authority_neg_radps2=r.authority_neg_radps2 * 0.9))
+    f.authority._replan_to(8.0, 0.0, dataclasses.replace(r, authority_neg_radps2=r.authority_neg_radps2 * 0.9))
     assert sum(e.code == "reference_reshaped" for e in f.events.history) == n + 1
     assert f.guidance.profile.accel_limit_radps2 == pytest.approx(0.9 * limit)
     f.close()
@@ -241,14 +241,11 @@ def test_the_lp_runs_off_the_loop_in_real_time_and_is_applied_when_ready():
         f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
         f.t_s = 3.0
         f.health_changed()
-        assert f.controllability is None or f._lp_worker is not None
-        import time
-        t_end = time.monotonic() + 10.0
-        while not f._lp_worker.ready() and time.monotonic() < t_end:
-            time.sleep(0.01)
-        need, r = f._lp_worker.take()
-        f._apply_controllability(3.5, need, r)
-        assert f.controllability is r and f.guidance.profile.accel_limit_radps2 < SC.bank_accel_limit_radps2
+        assert f.authority.lp.alive and f.authority.lp.wait_idle(10.0)
+        assert f.controllability is None                     # ready: applied by the next cycle
+        f.authority.step(3.5, False)
+        assert f.controllability is not None and not f.authority.lp.ready
+        assert f.guidance.profile.accel_limit_radps2 < SC.bank_accel_limit_radps2
     finally:
         f.close()
 
@@ -273,7 +270,7 @@ def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows(
         f.t_s, f.cycles = 230.0, 1
         f.health_changed()
         r0 = f.controllability
-        assert not math.isfinite(r0.trim_needed_deg) and not r0.controllable and f._trim_ref is None
+        assert not math.isfinite(r0.trim_needed_deg) and not r0.controllable and f.authority._trim_ref is None
         n_events = sum(e.code == "controllability" for e in f.events.history)
         f.nav.state.qbar_pa = 3000.0
         f.t_s = 231.0
@@ -281,23 +278,23 @@ def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows(
         r1 = f.controllability
         assert r1 is not r0 and math.isfinite(r1.trim_needed_deg) and r1.qbar_pa == 3000.0
         assert 0.0 < r1.trim_needed_deg <= f.params["guidance.trim_max_deg"] and r1.controllable
-        assert f._trim_ref is not None and f._trim_ref[2] == 3000.0
+        assert f.authority._trim_ref is not None and f.authority._trim_ref[2] == 3000.0
         # the same LP asked directly gives the same trim
-        _, args = f._lp_problem(231.0)
+        _, args = f.authority.lp_problem(231.0)
         assert lp(*args).trim_needed_deg == pytest.approx(r1.trim_needed_deg)
         texts = [e.text for e in f.events.history if e.code == "controllability"]
         assert len(texts) == n_events + 1 and texts[-1] == r1.text()
         f.nav.state.qbar_pa = 5000.0
         f.t_s = 232.0
-        tr, limit = f._trim_ref, f.guidance.profile.accel_limit_radps2
-        f._hold_trim(5000.0)                               # what the control cycle does
+        tr, limit = f.authority._trim_ref, f.guidance.profile.accel_limit_radps2
+        f.authority.hold_trim(5000.0)                               # what the control cycle does
         f.reassess_step()          # a trim exists: carried by its qbar scaling, the authority asked with it
         r2 = f.controllability
-        assert f._trim_ref is tr and r2 is not r1
+        assert f.authority._trim_ref is tr and r2 is not r1
         assert r2.trim_alpha_deg == pytest.approx(r1.trim_alpha_deg * 3000.0 / 5000.0)
         assert r2.trim_beta_deg == pytest.approx(r1.trim_beta_deg * 3000.0 / 5000.0)
         # the same LP asked directly with that trim held
-        _, args = f._lp_problem(232.0, (math.radians(r2.trim_alpha_deg), math.radians(r2.trim_beta_deg)))
+        _, args = f.authority.lp_problem(232.0, (math.radians(r2.trim_alpha_deg), math.radians(r2.trim_beta_deg)))
         r3 = lp(*args)
         assert (r2.authority_pos_radps2, r2.authority_neg_radps2) == (r3.authority_pos_radps2, r3.authority_neg_radps2)
         # more air, more authority: the reference is not re-shaped, nothing said
@@ -308,7 +305,7 @@ def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows(
         # less air than at the trim's solve: the jets take more of the bias, the authority drops
         # and the reference is slowed to it (once: the same answer again changes nothing)
         f.nav.state.qbar_pa = 200.0
-        f._hold_trim(200.0)
+        f.authority.hold_trim(200.0)
         f.t_s = 233.0
         f.reassess_step()
         r4 = f.controllability

@@ -13,7 +13,10 @@ from pymavlink.dialects.v10 import common as v10
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
-from interfaces.mavlink.signing import Reject, SignedLink, Signer, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.link import SignedLink
+from interfaces.mavlink.signing.sign import Signer
+from interfaces.mavlink.signing.verify import Reject
 
 ACCEPT = {mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_PARAM_SET}
 ARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 1, 0, 0, 0, 0, 0, 0)

@@ -18,9 +18,10 @@ from pymavlink.dialects.v20 import common as stock
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import FrameSplitter, parse_header
-from interfaces.mavlink.signing import (
-    KEY_ENV, REPO_ROOT, Reject, SignedLink, Signer, SigningKey, SigningKeyError, signing_timestamp,
-    stream_state_path)
+from interfaces.mavlink.signing.keys import KEY_ENV, REPO_ROOT, SigningKey, SigningKeyError, stream_state_path
+from interfaces.mavlink.signing.link import SignedLink
+from interfaces.mavlink.signing.sign import Signer, signing_timestamp
+from interfaces.mavlink.signing.verify import Reject
 
 T0 = 1_760_000_000.0            # fake Unix time [s] (2025-10)
 TS0 = signing_timestamp(T0)

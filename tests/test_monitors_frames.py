@@ -1,4 +1,5 @@
-"""Sensor-frame monitor: rejections by reason, staleness within 3 periods, recovery."""
+"""Sensor-frame monitor: rejections by reason, staleness within 3 periods, recovery; one
+record object refilled every period."""
 from __future__ import annotations
 
 import numpy as np
@@ -137,3 +138,44 @@ def test_params_loaded_by_default_and_validated():
         SensorMonitor(EventLog(), DT, p)
     with pytest.raises(ValueError, match="dt_s"):
         SensorMonitor(EventLog(), -1.0)
+
+
+# ---------------------------------------------------------------- one record reused every period
+# The batch runner hands the monitor the plant's one SENSORS record each period: each check
+# sees the record's current contents, and a record made read-only or re-shaped since the last
+# check is rejected as before.
+
+def test_one_record_refilled_each_period_is_checked_afresh():
+    m = SensorMonitor(EventLog(), DT, radius_m=R_MARS)
+    f = fill(new(SENSORS), 0)
+    assert m.check(0.0, f)
+    fill(f, 1)
+    f["r_N"][0] = R_MARS - 50e3                    # underground: range
+    assert not m.check(DT, f) and m.counts["range"] == 1
+    fill(f, 2)
+    f["chamber"][4] = 99.0                          # one bad transducer: NaN in place, frame kept
+    assert m.check(2 * DT, f) and np.isnan(f["chamber"][4]) and m.counts["chamber_range"] == 1
+    assert not m.check(3 * DT, f) and m.counts["duplicate"] == 1     # k not advanced: k read afresh
+    fill(f, 3)
+    f["omega_BN_B"][1] = np.nan
+    assert not m.check(3 * DT, f) and m.counts["nonfinite"] == 1
+    g = fill(new(SENSORS), 4)                       # another record, then the first one again
+    assert m.check(4 * DT, g)
+    fill(f, 5)
+    assert m.check(5 * DT, f) and m.last_k == 5 and m.accepted == 4
+
+
+def test_a_record_made_read_only_or_reshaped_is_rejected_untouched():
+    m = SensorMonitor(EventLog(), DT, radius_m=R_MARS)
+    f = fill(new(SENSORS), 0)
+    assert m.check(0.0, f)
+    fill(f, 1)
+    f["chamber"][0] = 99.0
+    f.flags.writeable = False
+    assert not m.check(DT, f) and m.counts["format"] == 1
+    assert f["chamber"][0] == 99.0
+    f.flags.writeable = True
+    assert m.check(DT, f) and np.isnan(f["chamber"][0])
+    fill(f, 2)
+    f.shape = (1,)
+    assert not m.check(2 * DT, f) and m.counts["format"] == 2

@@ -13,13 +13,14 @@ from pathlib import Path
 import pytest
 
 from ellipsled.net import pki
+from ellipsled.procs import ELLIPSLED
 
-from . import netns
+from tests import netns
+
 
 pytestmark = pytest.mark.slow
 
 BIN = Path(sys.executable).parent
-PY = [sys.executable, "-m", "ellipsled.cli"]
 START_S = 180                 # process start-up on a loaded 2-core machine
 
 
@@ -75,9 +76,9 @@ def test_tls_campaign_across_hosts_loses_no_run_when_a_worker_host_is_torn_down(
     addr = _cluster(hosts, d, env)
     assert addr.startswith("tls://")
     out, runs = tmp_path / "mc", 16
-    hosts.start("campaign", "sched", PY + ["montecarlo", "default", "--runs", str(runs), "--duration", "60",
-                                           "--out", str(out), "--scheduler", addr, "--flush-s", "0.2",
-                                           "--no-progress", *tls])
+    hosts.start("campaign", "sched", ELLIPSLED + ["montecarlo", "default", "--runs", str(runs), "--duration", "60",
+                                                  "--out", str(out), "--scheduler", addr, "--flush-s", "0.2",
+                                                  "--no-progress", *tls])
     w2 = f"tls://{hosts.addr('w2')}:"
     deadline = time.monotonic() + START_S
     while not any(str(r.get("worker", "")).startswith(w2) for r in _results(out)):
@@ -99,13 +100,14 @@ def test_tls_campaign_across_hosts_loses_no_run_when_a_worker_host_is_torn_down(
     assert f"{runs} of {runs} runs recorded" in hosts.log("campaign")
     # half the TLS options: refused before connecting; a certificate of another CA: the
     # scheduler refuses the client, nothing is recorded
-    hosts.start("nocert", "sched", PY + ["montecarlo", "default", "--runs", "1", "--out", str(tmp_path / "mc2"),
-                                         "--scheduler", addr, "--no-progress", *tls[:2]])
+    hosts.start("nocert", "sched", ELLIPSLED + ["montecarlo", "default", "--runs", "1", "--out", str(tmp_path / "mc2"),
+                                                "--scheduler", addr, "--no-progress", *tls[:2]])
     rogue = tmp_path / "rogue"
     pki.init(rogue)
-    hosts.start("rogue", "sched", PY + ["montecarlo", "default", "--runs", "1", "--out", str(tmp_path / "mc3"),
-                                        "--scheduler", addr, "--no-progress", *tls[:2],
-                                        "--tls-cert", str(rogue / "dask.pem"), "--tls-key", str(rogue / "dask.key")])
+    hosts.start("rogue", "sched", ELLIPSLED + ["montecarlo", "default", "--runs", "1", "--out", str(tmp_path / "mc3"),
+                                               "--scheduler", addr, "--no-progress", *tls[:2],
+                                               "--tls-cert", str(rogue / "dask.pem"),
+                                               "--tls-key", str(rogue / "dask.key")])
     assert hosts.wait("nocert", 120) == 2 and "--tls-cert" in hosts.log("nocert"), hosts.log("nocert")
     assert hosts.wait("rogue", 120) != 0, hosts.log("rogue")
     assert not _results(tmp_path / "mc3")

@@ -19,16 +19,18 @@ import numpy as np
 import pytest
 
 from ellipsled import batch
-from ellipsled.history import History, merge
 from ellipsled.net import pki
+from ellipsled.node_reports import read_fsw, read_sim
+from ellipsled.procs import ELLIPSLED
+from ellipsled.sil.history import History, merge
 from interfaces.keys import keys
 
-from . import netns
+from tests import netns
+
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 ZCONF = Path(__file__).resolve().parent.parent / "data" / "zenoh"
-PY = [sys.executable, "-m", "ellipsled.cli"]
 PORT = 7447
 HOSTS = ["router", "plant", "fsw", "viewer"]
 START_S = 180      # a process's start-up on a loaded 2-core machine (imports, numba caches)
@@ -53,22 +55,22 @@ def net(tmp_path_factory):
 
 
 def start_router(n: netns.Network, name: str = "router", rt: bool = False) -> None:
-    # --rt: on this 2-core machine the router shares the cores with the nodes' spinning
+    # --rt: on a 2-core machine the router shares the cores with the nodes' spinning
     # real-time loops (on its own machine it would not need it)
-    n.start(name, "router", PY + ["router", "--config", str(ZCONF / "router.json5"), "--listen", n.router_ep]
+    n.start(name, "router", ELLIPSLED + ["router", "--config", str(ZCONF / "router.json5"), "--listen", n.router_ep]
             + (["--rt"] if rt else []), cwd=n.work)
     n.wait_log(name, "listening on", 60)
 
 
 def node(n: netns.Network, role: str, mode: str, out: Path, prefix: str, extra=()) -> list[str]:
     """`ellipsled sim|fsw ... --zenoh-config data/zenoh/<role>.json5 --connect tls/ROUTER:7447`."""
-    return PY + [role, "case1", f"--{mode}", "--prefix", prefix, "--out", str(out),
-                 "--zenoh-config", str(ZCONF / f"{role}.json5"), "--connect", n.router_ep, *extra]
+    return ELLIPSLED + [role, "case1", f"--{mode}", "--prefix", prefix, "--out", str(out),
+                        "--zenoh-config", str(ZCONF / f"{role}.json5"), "--connect", n.router_ep, *extra]
 
 
 def viewer(n: netns.Network, out: Path, prefix: str) -> list[str]:
-    return PY + ["viz", "--prefix", prefix, "--rerun", "file", "--out", str(out), "--name", "run",
-                 "--zenoh-config", str(ZCONF / "viz.json5"), "--connect", n.router_ep]
+    return ELLIPSLED + ["viz", "--prefix", prefix, "--rerun", "file", "--out", str(out), "--name", "run",
+                        "--zenoh-config", str(ZCONF / "viz.json5"), "--connect", n.router_ep]
 
 
 def _stop_all(n: netns.Network, *names: str) -> None:
@@ -247,8 +249,7 @@ def test_realtime_through_the_router_answers_the_plant(net):
         _stop_all(net, "fsw-rt")
     finally:
         _stop_all(net, "router-rt")
-    fsw = json.loads((out / "fsw.json").read_text())
-    sim = json.loads((out / "sim.json").read_text())
+    fsw, sim = read_fsw(out), read_sim(out)
     print(f"through the router: latency p50 {sim['latency_p50_us']:.0f} us p99 {sim['latency_p99_us']:.0f} us, "
           f"jitter p99 {fsw['jitter_p99_us']:.0f} us, slips {fsw['cycle_slips']}, samples {sim['latency_samples']}, "
           f"plant counts {sim['counts']}, rejects {sim['rejects']}")

@@ -7,7 +7,6 @@ import json
 import os
 import stat
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -15,14 +14,14 @@ import pytest
 import zenoh
 
 from ellipsled.net import pki
-from ellipsled.procs import stop_process
+from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces import transport
 from interfaces.keys import keys
+
 
 pytestmark = pytest.mark.slow
 
 ZCONF = Path(__file__).resolve().parent.parent / "data" / "zenoh"
-PY = [sys.executable, "-m", "ellipsled.cli"]
 K = keys("ellipsled/acltest")
 
 
@@ -48,7 +47,7 @@ def test_pki_init_writes_a_ca_and_one_certificate_per_role_with_private_keys(tmp
 
 def test_pki_init_refuses_to_write_inside_the_repository(tmp_path):
     repo = Path(pki.__file__).resolve().parents[2]
-    r = subprocess.run(PY + ["pki", "init", str(repo / "pki-test")], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(ELLIPSLED + ["pki", "init", str(repo / "pki-test")], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "inside the repository" in r.stderr, r.stderr
     assert not (repo / "pki-test").exists()
     (tmp_path / "other" / ".git").mkdir(parents=True)          # any git work tree
@@ -57,7 +56,7 @@ def test_pki_init_refuses_to_write_inside_the_repository(tmp_path):
 
 
 def test_router_refuses_a_configuration_not_in_router_mode(tmp_path):
-    r = subprocess.run(PY + ["router", "--config", str(ZCONF / "sim.json5")], capture_output=True, text=True,
+    r = subprocess.run(ELLIPSLED + ["router", "--config", str(ZCONF / "sim.json5")], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "needs mode" in r.stderr, r.stderr
 
@@ -89,7 +88,7 @@ def router(tmp_path_factory):
     pki.init(d / "pki")
     endpoint = f"tls/localhost:{transport.free_port()}"
     log = open(d / "router.log", "w")
-    p = subprocess.Popen(PY + ["router", "--config", str(ZCONF / "router.json5"), "--listen", endpoint],
+    p = subprocess.Popen(ELLIPSLED + ["router", "--config", str(ZCONF / "router.json5"), "--listen", endpoint],
                          cwd=d, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 30

@@ -1,4 +1,4 @@
-"""Predictor-corrector entry guidance (fsw/guidance/, spec 60-guidance.md), each piece
+"""Predictor-corrector entry guidance (fsw/guidance/, docs/fsw/entry-guidance.md), each piece
 against independent truth: the plant's own trajectory, a known root, a scripted heading
 history, a known density scale."""
 from __future__ import annotations

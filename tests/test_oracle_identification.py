@@ -6,20 +6,18 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from common.events import EventLog
 from common.model import load_scenario
 from ellipsled import batch, runlib
-from common.events import EventLog
+from ellipsled.procs import ELLIPSLED
 from fsw.fdir import Fdir
 from fsw.flightsoftware import all_params
 from fsw.health import DEGRADED, FAILED_OFF
 from fsw.params import load_params
-
-PY = [sys.executable, "-m", "ellipsled.cli"]
 
 
 def _fault(name: str):
@@ -69,8 +67,8 @@ def test_oracle_declares_degraded_with_the_plants_eta_and_detect_mode_refuses_it
 
 def test_lockstep_sil_oracle_reconfigures_at_fault_time_plus_delay_and_equals_batch(tmp_path):
     out = tmp_path / "sil"
-    r = subprocess.run(PY + ["run", "case4", "--lockstep", "--identification", "oracle", "--duration", "6",
-                             "--out", str(out), "--rerun", "none", "--no-plots"],
+    r = subprocess.run(ELLIPSLED + ["run", "case4", "--lockstep", "--identification", "oracle", "--duration", "6",
+                                    "--out", str(out), "--rerun", "none", "--no-plots"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "TEST MODE" in r.stdout

@@ -1,4 +1,4 @@
-"""The paper's cases flown end to end in batch (spec 30-scenarios.md; issue: flight-software
+"""The paper's cases flown end to end in batch (docs/scenarios.md; issue: flight-software
 core acceptance): every fault case completes to parachute conditions with the bank error
 after the fault within the paper's 5 degrees, FDIR names exactly the injected jets with
 the right kind, the nominal run has no false alarm, case 4 reconfigures at 4.0 s, and
@@ -10,9 +10,9 @@ import pytest
 
 from common.model import load_scenario
 from ellipsled import batch
+from interfaces.vocabulary import FAULT_HEALTH, HEALTH_NAMES
 
 BOUND_DEG = 5.0
-KIND = {"off": "failed_off", "stuck": "stuck_on", "degraded": "degraded"}
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +35,7 @@ def test_fault_case_completes_within_the_papers_bound(runs, case):
 def test_fdir_finds_exactly_the_injected_jets(runs, case):
     """Injected = the scenario file's fault schedule (what the plant applies)."""
     s = runs[case]
-    injected = {(j, KIND[f.kind]) for f in load_scenario(case).faults for j in f.jets}
+    injected = {(j, HEALTH_NAMES[FAULT_HEALTH[f.kind]]) for f in load_scenario(case).faults for j in f.jets}
     found = {(d["jet"], d["kind"]) for d in s["fdir"]["detections"]}
     assert found == injected
     assert len(s["fdir"]["detections"]) == len(injected)           # each once

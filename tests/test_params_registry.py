@@ -18,7 +18,7 @@ def test_a_parameter_declared_by_two_owners_is_refused():
 
 def test_a_ground_settable_parameter_without_its_owners_hook_is_a_construction_error():
     reg = ParamRegistry(declarations())
-    for owner in ("FlightSoftware", "SamiController", "Allocator", "Fdir", "SensorMonitor", "Failsafes"):
+    for owner in ("AuthoritySupervisor", "SamiController", "Allocator", "Fdir", "SensorMonitor", "Failsafes"):
         reg.bind(owner, lambda n, v: None)
     with pytest.raises(ValueError, match="without an owner's hook: driver.arm_on_entry"):
         reg.check_bound()

@@ -32,7 +32,7 @@ from gse.commands import make_request
 from interfaces.mavlink import dialect as mav
 from sim.plant import Plant
 
-from tests.test_groundlink_commands import Clock, write_key
+from tests.rig import Clock, write_key
 
 JET = 2          # the jet case1 fires most in its first seconds
 

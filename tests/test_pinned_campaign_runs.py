@@ -7,10 +7,10 @@ alpha/beta offset far beyond the trim limit at the lowest dynamic pressure after
 controller of these jets can fly them, and the label must say so. 9, 19 and 54 are controllable
 (9: little roll without pitch/yaw spill one way; 19: one way nearly gone; 54: a bias the jets
 cannot cancel but a small trim absorbs) and must fly within 5 degrees. 2026/190: a braking
-reversal whose bank torque the single-cycle allocation cannot give without pitch/yaw spill (it
-gave a fifth of the duty-cycle average: 18.5 deg) must fly within 5 degrees. 2026/82: a fault in a
-reversal at 180 Pa whose weak way needs pitch/yaw spill held by a 3.4-degree trim (one pattern per
-cycle, with or without the shortfall carry: lost) must fly within 5 degrees.
+reversal whose bank torque no single jet pattern gives without pitch/yaw spill (only the
+duty-cycle average does, fsw/allocation/dutycycle.py) must fly within 5 degrees. 2026/82: a
+fault in a reversal at 180 Pa whose weak way needs pitch/yaw spill held by a 3.4-degree trim
+(again a duty-cycle average) must fly within 5 degrees.
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""Plant dynamics against independent truth: the spherical 3-DOF entry equations (spec
-10-plant.md), conservation laws with aero off, a closed-form spin, and a full-trajectory
+"""Plant dynamics against independent truth: the spherical 3-DOF entry equations (
+docs/plant.md), conservation laws with aero off, a closed-form spin, and a full-trajectory
 comparison with a separately integrated 3-DOF model."""
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ def state_at(h, V, gamma, psi, lat, lon, bank, alpha):
 
 
 def vinh_rates(s, bank, rho, veh):
-    """Spec 10-plant.md spherical equations with rotation (psi from north, clockwise)."""
+    """Spec docs/plant.md spherical equations with rotation (psi from north, clockwise)."""
     r, th, la, V, g, psi = s
     q = 0.5 * rho * V * V
     D = q * veh.S_ref_m2 * veh.aero.C_D / veh.mass_kg
@@ -276,7 +276,7 @@ def test_open_loop_trajectory_follows_the_spherical_model_for_200_s():
 
 
 def test_open_loop_entry_reproduces_the_spec_figures_under_the_spec_conditions():
-    """10-plant.md: ~450 s to Mach 2 near 9 km, peak qbar ~6.6 kPa near 100 s, gamma > 0
+    """docs/plant.md: ~450 s to Mach 2 near 9 km, peak qbar ~6.6 kPa near 100 s, gamma > 0
     near 140 s and changing sign again near 250 s — stated for a non-rotating planet, nominal
     density, bank steps."""
     from sim.openloop import fly
@@ -298,7 +298,7 @@ def rot3(t):
 
 
 def test_aero_force_moment_and_kinematics_off_trim_with_sideslip_and_rates():
-    """Spec 10-plant.md: F = qbar S (-C_D w1 + C_L l + C_Y beta y), C_L about trim; moments
+    """Spec docs/plant.md: F = qbar S (-C_D w1 + C_L l + C_Y beta y), C_L about trim; moments
     from the truth-dispersed static derivatives plus damping; sigma_dot = B(sigma) omega / 4."""
     plant = Plant(SC)
     veh, tr, ae = SC.vehicle, SC.truth, SC.vehicle.aero

@@ -1,4 +1,4 @@
-"""Jets, faults and chamber pressures in the plant (spec 10-plant.md, jets and jet faults),
+"""Jets, faults and chamber pressures in the plant (docs/plant.md, jets and jet faults),
 and jets given by geometry (T = r x F)."""
 from __future__ import annotations
 
@@ -115,10 +115,11 @@ def test_bad_fault_requests_raise_value_error(jet, kind, eta):
     assert np.all(plant.fault_state == NOMINAL)
 
 
-@pytest.mark.parametrize("case,jets,kind,eta", [("case1", [1, 2, 17, 18], "off", 1.0),
-                                                ("case2", [2, 3, 4, 5, 8, 9, 10], "stuck", 1.0),
-                                                ("case3", [3, 7, 14, 15], "degraded", 0.5)])
-def test_scheduled_faults_apply_at_the_first_step_boundary_at_or_after_t_s(case, jets, kind, eta):
+# (case, its faulted jets, their fault kind, the fraction of its thrust a faulted jet delivers)
+@pytest.mark.parametrize("case,jets,kind,thrust_frac", [("case1", [1, 2, 17, 18], "off", 0.0),
+                                                        ("case2", [2, 3, 4, 5, 8, 9, 10], "stuck", 1.0),
+                                                        ("case3", [3, 7, 14, 15], "degraded", 0.5)])
+def test_scheduled_faults_apply_at_the_first_step_boundary_at_or_after_t_s(case, jets, kind, thrust_frac):
     sc = quiet(load_scenario(case))
     plant = Plant(sc)
     u = np.ones(18, np.uint8) if kind != "stuck" else np.zeros(18, np.uint8)
@@ -131,7 +132,7 @@ def test_scheduled_faults_apply_at_the_first_step_boundary_at_or_after_t_s(case,
     assert plant.k == k_fault and np.all(plant.fault_state[idx] != NOMINAL)
     plant.step(u)
     frac = u.astype(float)
-    frac[idx] = {"off": 0.0, "stuck": 1.0, "degraded": eta}[kind]
+    frac[idx] = thrust_frac
     assert np.allclose(plant.truth()["tau_jets_B"], T @ frac)
     assert np.allclose(plant.sensors["chamber"], frac)
 

@@ -1,4 +1,4 @@
-"""Plant sensors, seeds, time keeping, truth record and end conditions (spec 10-plant.md)."""
+"""Plant sensors, seeds, time keeping, truth record and end conditions (docs/plant.md)."""
 from __future__ import annotations
 
 import math

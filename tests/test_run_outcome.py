@@ -15,8 +15,9 @@ import pytest
 
 from common.config import DATA_DIR
 from ellipsled import cli
-from ellipsled.procs import stop_process
+from ellipsled.procs import ELLIPSLED, stop_process
 from ellipsled.runlib import COMPLETED_END_REASONS, exit_code
+
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -40,8 +41,8 @@ def sil(tmp_path_factory):
     d = tmp_path_factory.mktemp("sil")
     env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
     with open(d / "stdout", "w") as so, open(d / "stderr", "w") as se:
-        p = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", "run", "case1", "--duration", DURATION,
-                              "--rerun", "file", "--no-plots", "--out", str(d / "out")],
+        p = subprocess.Popen(ELLIPSLED + ["run", "case1", "--duration", DURATION, "--rerun", "file", "--no-plots",
+                                          "--out", str(d / "out")],
                              cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=so, stderr=se)
         try:
             p.wait(SIL_TIMEOUT_S)

@@ -7,19 +7,19 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 import urllib.request
 
 import pytest
 
-from ellipsled.terminal import ProgressFile, RunProgress, files_written
+from ellipsled.procs import ELLIPSLED, stop_process
+from ellipsled.sil.progress import ProgressFile
+from ellipsled.terminal import RunProgress, files_written
 
-from tests.ground_procs import free_udp
+from tests.procs import Tmux, free_udp
 
 pytestmark = pytest.mark.slow
-PY = [sys.executable, "-m", "ellipsled.cli"]
 URL = re.compile(r"https?://127\.0\.0\.1:\d+/\S*")
 
 
@@ -65,9 +65,9 @@ def _get(url: str, timeout_s: float) -> tuple[int, bytes]:
 
 def test_run_with_the_web_viewer_prints_a_url_that_answers_and_names_its_files(tmp_path):
     out = tmp_path / "run"
-    run = subprocess.Popen(PY + ["run", "nominal", "--duration", "600", "--rerun", "web+file", "--no-plots",
-                                 "--out", str(out), "--mavlink-bind", f"udp:127.0.0.1:{free_udp()}",
-                                 "--gcs", f"udp:127.0.0.1:{free_udp()}"],
+    run = subprocess.Popen(ELLIPSLED + ["run", "nominal", "--duration", "600", "--rerun", "web+file", "--no-plots",
+                                        "--out", str(out), "--mavlink-bind", f"udp:127.0.0.1:{free_udp()}",
+                                        "--gcs", f"udp:127.0.0.1:{free_udp()}"],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True)
     lines = Lines(run)
     try:
@@ -79,9 +79,7 @@ def test_run_with_the_web_viewer_prints_a_url_that_answers_and_names_its_files(t
         run.send_signal(signal.SIGINT)                    # the user stops the run
         run.wait(60)
     finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait(10)
+        stop_process(run, 10.0)
     text = lines.text()
     assert "━" not in text, "no progress bar when the output is not a terminal"
     assert f"files in {out}" in text and "run.rrd" in text and "viz.log" in text, text
@@ -124,9 +122,8 @@ def test_files_written_lists_what_exists_and_how_to_open_the_recording(tmp_path)
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed (apt-get install tmux)")
 def test_batch_shows_a_progress_bar_in_a_real_terminal(tmp_path):
     """A batch run inside tmux (a real pseudo-terminal): the bar shows simulated time and speed."""
-    from tests.test_console_terminal import Tmux
     out = tmp_path / "b"
-    term = Tmux("ellipsled-bar", PY + ["batch", "nominal", "--no-plots", "--out", str(out)], size=(150, 30))
+    term = Tmux("ellipsled-bar", ELLIPSLED + ["batch", "nominal", "--no-plots", "--out", str(out)], size=(150, 30))
     try:
         screen = term.wait_for(lambda s: "EXIT-" in s, 240, "the batch run to end")
         assert "EXIT-0" in screen, screen

@@ -22,7 +22,7 @@ from gse.commands import make_request
 from gse.tlog import TlogWriter, read_records
 from interfaces.mavlink.framing import parse_header
 
-from tests.ground_procs import start_ground_sil, stop
+from tests.procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime, pytest.mark.timing]
 RATE, FLOOD_S = 2500.0, 12.0

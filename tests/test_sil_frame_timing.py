@@ -76,7 +76,7 @@ def test_one_late_frame_costs_its_tick_only_while_locked_to_the_plant():
             next_k = k + 1
     assert flown[15] is None
     assert all(flown[t] == t for t in range(10, 30) if t != 15), flown
-    # the rule it replaced: "the step after the last one flown" is a period late from tick 16 on
+    # the unlocked rule, "the step after the last one flown", would be a period late from tick 16 on
     assert due_step(15, 16, locked_plant=False) == 15
 
 

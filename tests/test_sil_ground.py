@@ -6,19 +6,18 @@ from __future__ import annotations
 
 import asyncio
 import subprocess
-import sys
 import time
 
 import pytest
 
+from ellipsled.procs import ELLIPSLED
 from gse.client import GroundClient
 from gse.console import GroundConsole
 from gse.tlog import read_records
 
-from tests.ground_procs import start_ground_sil, stop
+from tests.procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
-PY = [sys.executable, "-m", "ellipsled.cli"]
 
 
 
@@ -53,7 +52,7 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
             top = str(app.query_one("#top").render())
             assert "ENTRY" in top and "ARMED" in top, top
             # jet 18 through the scripted CLI (its own port and link), at the same moment ...
-            cli_task = asyncio.create_task(asyncio.to_thread(subprocess.run, PY + [
+            cli_task = asyncio.create_task(asyncio.to_thread(subprocess.run, ELLIPSLED + [
                 "gse", "inject", "--jet", "18", "--kind", "off", "--vehicle", f"udp:127.0.0.1:{vehicle}",
                 "--signing-key", str(key_file)], capture_output=True, text=True, timeout=60))
             # ... and jets 2, 17, 1 from the console: two by its command handler (what Enter

@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 from pymavlink import mavftp, mavutil
 
-from ellipsled.history import History
-from tests.ground_procs import start_ground_sil, stop
+from ellipsled.sil.history import History
+from tests.procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 MSG_PROTOCOL_VERSION, MSG_COMPONENT_METADATA = 300, 397

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import pytest
+
+from ellipsled.procs import ELLIPSLED
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
@@ -18,8 +19,8 @@ DURATION_S = 30.0      # the entry interface's cold corrector and the longest pr
 
 def test_guided_entry_in_real_time_answers_every_guidance_cycle_off_the_loop(tmp_path):
     out = tmp_path / "rt"
-    r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "run", "guided-nominal", "--realtime", "--rt",
-                        "--duration", f"{DURATION_S:g}", "--out", str(out), "--rerun", "none", "--no-plots"],
+    r = subprocess.run(ELLIPSLED + ["run", "guided-nominal", "--realtime", "--rt", "--duration", f"{DURATION_S:g}",
+                                    "--out", str(out), "--rerun", "none", "--no-plots"],
                        capture_output=True, text=True, timeout=DURATION_S + 240)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     s = json.loads((out / "summary.json").read_text())

@@ -8,22 +8,21 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import time
 
 import numpy as np
 import pytest
 
-from ellipsled.procs import stop_process
+from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces import records, transport
 from interfaces.codec import Codec
 from interfaces.keys import keys
+
 
 pytestmark = pytest.mark.slow
 
 PREFIX = "ellipsled/malformed"
 K = keys(PREFIX)
-PY = [sys.executable, "-m", "ellipsled.cli"]
 START_S = 120.0         # a plant's start-up on a loaded machine (imports, compiled kernels)
 
 
@@ -65,9 +64,9 @@ class FakeFsw:
 def _plant(tmp_path, endpoint: str, mode: str, duration_s: float) -> subprocess.Popen:
     log = open(tmp_path / "sim.log", "w")
     try:
-        return subprocess.Popen(PY + ["sim", "nominal", f"--{mode}", "--prefix", PREFIX, "--listen", endpoint,
-                                      "--out", str(tmp_path), "--duration", str(duration_s),
-                                      "--wait-peers", str(START_S), "--fsw-timeout", "60"],
+        return subprocess.Popen(ELLIPSLED + ["sim", "nominal", f"--{mode}", "--prefix", PREFIX, "--listen", endpoint,
+                                             "--out", str(tmp_path), "--duration", str(duration_s),
+                                             "--wait-peers", str(START_S), "--fsw-timeout", "60"],
                                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     finally:
         log.close()

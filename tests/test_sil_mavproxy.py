@@ -27,11 +27,11 @@ import time
 import numpy as np
 import pytest
 
-from ellipsled.history import History
+from ellipsled.sil.history import History
 from fsw.flightsoftware import declarations
 from fsw.params import ParamRegistry
-from interfaces.mavlink.signing import SigningKey
-from tests.ground_procs import start_ground_sil, stop
+from interfaces.mavlink.signing.keys import SigningKey
+from tests.procs import start_ground_sil, stop
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is not installed (requirements.lock pins it, "
                                        "installed with --no-deps)")

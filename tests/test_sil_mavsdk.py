@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from common.model import load_scenario
-from ellipsled.history import History
+from ellipsled.sil.history import History
 from fsw.flightsoftware import declarations
 from fsw.groundlink.link import REFUSAL_EVENT
 from fsw.groundlink.services import PRODUCT_ID, VENDOR_ID
@@ -30,7 +30,7 @@ from fsw.params import ParamRegistry
 from interfaces import event_metadata
 from interfaces.event_catalogue import CATALOGUE, COMPONENT_ID, NAMESPACE
 from interfaces.vocabulary import Mode
-from tests.ground_procs import start_ground_sil, stop
+from tests.procs import start_ground_sil, stop
 
 pytest.importorskip("mavsdk", reason="MAVSDK is not installed (requirements.lock pins it)")
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]

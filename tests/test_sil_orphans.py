@@ -9,19 +9,17 @@ import re
 import signal
 import socket
 import subprocess
-import sys
 import time
 
 import pytest
 
-from ellipsled.procs import stop_process
-from ellipsled.terminal import ProgressFile
+from ellipsled.procs import ELLIPSLED, stop_process
+from ellipsled.sil.progress import ProgressFile
 from interfaces import transport
-from tests.ground_procs import start_ground_sil
+from tests.procs import start_ground_sil
 
 pytestmark = pytest.mark.slow
 
-PY = [sys.executable, "-m", "ellipsled.cli"]
 PREFIX = "ellipsled/orphans"
 START_S = 120.0         # start-up on a loaded machine (imports, compiled kernels, warm-up)
 
@@ -87,11 +85,11 @@ def test_the_fsw_leaves_when_the_plants_liveliness_is_gone(tmp_path):
     procs = {}
     logs = {r: open(tmp_path / f"{r}.log", "w") for r in ("sim", "fsw")}
     try:
-        procs["sim"] = subprocess.Popen(PY + ["sim", *common, "--listen", e_sim, "--out", str(tmp_path / "sim"),
-                                              "--progress-file", str(progress)],
+        procs["sim"] = subprocess.Popen(ELLIPSLED + ["sim", *common, "--listen", e_sim, "--out", str(tmp_path / "sim"),
+                                                     "--progress-file", str(progress)],
                                         stdout=logs["sim"], stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-        procs["fsw"] = subprocess.Popen(PY + ["fsw", *common, "--connect", e_sim, "--out", str(tmp_path / "fsw"),
-                                              "--plant-gone-s", "2"],
+        procs["fsw"] = subprocess.Popen(ELLIPSLED + ["fsw", *common, "--connect", e_sim, "--out", str(tmp_path / "fsw"),
+                                                     "--plant-gone-s", "2"],
                                         stdout=logs["fsw"], stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         deadline = time.monotonic() + START_S
         while (ProgressFile.read(str(progress)) or 0.0) < 1.0:       # flying, FSW answering

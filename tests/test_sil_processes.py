@@ -15,12 +15,13 @@ import numpy as np
 import pytest
 
 from ellipsled import batch
+from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces import transport
+
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 PREFIX = "ellipsled/test"
-PY = [sys.executable, "-m", "ellipsled.cli"]
 
 
 class Procs:
@@ -32,7 +33,7 @@ class Procs:
 
     def start(self, name: str, argv: list[str]) -> subprocess.Popen:
         log = open(self.tmp / f"{name}.log", "w")
-        p = subprocess.Popen(PY + argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        p = subprocess.Popen(ELLIPSLED + argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         self.p[name] = p
         return p
 
@@ -40,15 +41,12 @@ class Procs:
         return (self.tmp / f"{name}.log").read_text()
 
     def stop(self, name: str, sig=signal.SIGTERM, timeout: float = 10.0) -> int:
-        p = self.p[name]
-        if p.poll() is None:
-            p.send_signal(sig)
-        try:
-            return p.wait(timeout)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait(5)
+        """``sig``, then SIGKILL after ``timeout``; a process that had to be killed fails the test."""
+        p, killed = self.p[name], []
+        rc = stop_process(p, timeout, sig=sig, on_kill=lambda: killed.append(True))
+        if killed:
             raise AssertionError(f"{name} (pid {p.pid}) did not stop within {timeout} s")
+        return rc
 
     def wait(self, name: str, timeout: float) -> int:
         try:
@@ -89,8 +87,8 @@ def test_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
     """`ellipsled run --lockstep` (sim and fsw processes over Zenoh) flies exactly the
     batch run: every history array and every summary figure equal, faults at 2.5 s."""
     out = tmp_path / "sil"
-    r = subprocess.run(PY + ["run", "case1", "--lockstep", "--duration", "30", "--out", str(out),
-                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(ELLIPSLED + ["run", "case1", "--lockstep", "--duration", "30", "--out", str(out),
+                                    "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     s_sil = _json(out / "summary.json")
     s_bat, h_bat, _ = batch.run("case1", duration_s=30)
@@ -115,8 +113,8 @@ def test_guided_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
     """Guidance mode npc computes on a worker thread; its answer is applied at a fixed step
     after the release, so the multi-process lockstep run still equals the batch run."""
     out = tmp_path / "sil"
-    r = subprocess.run(PY + ["run", "guided-nominal", "--lockstep", "--duration", "30", "--out", str(out),
-                             "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(ELLIPSLED + ["run", "guided-nominal", "--lockstep", "--duration", "30", "--out", str(out),
+                                    "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     s_bat, h_bat, _ = batch.run("guided-nominal", duration_s=30)
     h_sil = np.load(out / "history.npz")
@@ -165,8 +163,8 @@ def test_realtime_sil_locks_to_the_plant_and_flies_the_fault_case(tmp_path, load
 def _realtime_run(out: Path, load: str):
     hogs = _hogs(2) if load != "idle" else []
     try:
-        r = subprocess.run(PY + ["run", "case1", "--realtime", "--rt", "--duration", "20", "--out", str(out),
-                                 "--rerun", "file", "--no-plots"], capture_output=True, text=True, timeout=300)
+        r = subprocess.run(ELLIPSLED + ["run", "case1", "--realtime", "--rt", "--duration", "20", "--out", str(out),
+                                        "--rerun", "file", "--no-plots"], capture_output=True, text=True, timeout=300)
     finally:
         for h in hogs:
             os.killpg(h.pid, signal.SIGKILL)

@@ -22,7 +22,7 @@ from gse.viz.sinks import add_rrd_footer, rerun_exe
 from interfaces import codec, records
 from interfaces import keys as K
 from interfaces import transport as T
-from tests.test_viz_recording import _column, _read
+from tests.rrd import column, read_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -89,20 +89,20 @@ def test_bridge_logs_what_is_published_survives_bad_payloads_and_publisher_resta
         sinks.close()
     assert stats["truth_rejects"] == {"size": 2, "crc": 2}        # garbage + corrupted, each round
     assert stats["logger"]["rows_truth"] == 40 and stats["logger"]["rows_fsw"] == 40
-    ents, _ = _read(sinks.rrd_path)
-    steps, _, bank = _column(ents["/bank/actual_deg"], "Scalars:scalars")
+    ents, _ = read_recording(sinks.rrd_path)
+    steps, _, bank = column(ents["/bank/actual_deg"], "Scalars:scalars")
     expected_k = list(range(20)) + list(range(40, 60))
     assert list(steps) == expected_k
     np.testing.assert_allclose([b[0] for b in bank], np.degrees(0.01 * np.array(expected_k)), atol=1e-12)
-    steps, _, ref = _column(ents["/bank/reference_deg"], "Scalars:scalars")
+    steps, _, ref = column(ents["/bank/reference_deg"], "Scalars:scalars")
     np.testing.assert_allclose([b[0] for b in ref], np.degrees(-0.01 * np.array(expected_k)), atol=1e-12)
     # the map: track every 10th step, the predicted point once per guidance answer
-    assert list(_column(ents["/map/track"], "LineStrips3D:strips")[0]) == [0, 10, 40, 50]
-    steps, _, pts = _column(ents["/map/predicted"], "Points3D:positions")
+    assert list(column(ents["/map/track"], "LineStrips3D:strips")[0]) == [0, 10, 40, 50]
+    steps, _, pts = column(ents["/map/predicted"], "Points3D:positions")
     assert list(steps) == [0, 10, 40, 50]
     np.testing.assert_allclose([p[0][1] for p in pts], np.degrees(0.1 + 0.001 * np.array([0, 1, 4, 5])), rtol=1e-6)
-    assert len(_column(ents["/map/target"], "Points3D:positions")[0]) == 1
-    _, _, text = _column(ents["/events"], "TextLog:text")
+    assert len(column(ents["/map/target"], "Points3D:positions")[0]) == 1
+    _, _, text = column(ents["/events"], "TextLog:text")
     flat = [t for row in text for t in row]
     assert sum("jet_failed_off" in t for t in flat) == 2
     assert any("bad_payload" in t for t in flat)                 # rejections shown as events

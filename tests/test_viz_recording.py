@@ -4,27 +4,25 @@ from __future__ import annotations
 
 import math
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
-from rerun.chunk import RrdReader
 
-from common.model import load_planet
-from ellipsled.history import History
 from common.events import Event, Severity
-from interfaces.event_catalogue import EV
-from interfaces.event_metadata import markdown
+from common.model import load_planet
+from ellipsled.sil.history import History
 from gse.viz import RerunLogger, open_sinks, record_history
 from gse.viz.blueprint import VIEW_NAMES
 from gse.viz.logger import SCALAR_CHANNELS, TRUTH
 from gse.viz.record import r_N_from_history
 from gse.viz.sinks import parse_mode
+from interfaces.event_catalogue import EV
+from interfaces.event_metadata import markdown
 from interfaces.records import GUID_NPC, GUID_PREDICTION, GUID_TARGET
+from interfaces.vocabulary import N_JETS
 
-RERUN = str(Path(sys.executable).parent / "rerun")
+from tests.rrd import RERUN, column, read_recording
+
 N = 240
 DT = 0.02
 
@@ -47,7 +45,7 @@ def _history(n: int = N) -> History:
     a["V_rel_mps"][:] = 5500 - 10 * t
     a["theta_hat"][:] = np.arange(9)[None, :] + t[:, None]
     a["u_cal_B"][:] = np.stack([np.sin(t), np.cos(t), t], axis=1)
-    a["jets_cmd"][:] = (np.arange(n)[:, None] + np.arange(18)[None, :]) % 4 == 0
+    a["jets_cmd"][:] = (np.arange(n)[:, None] + np.arange(N_JETS)[None, :]) % 4 == 0
     a["health"][n // 2:, 6] = 1            # jet 7 failed off halfway
     a["mode"][:] = 1
     a["compute_us"][:] = 300 + np.arange(n) % 7
@@ -61,37 +59,13 @@ def _history(n: int = N) -> History:
     return h
 
 
-def _read(path: Path) -> tuple[dict, RrdReader]:
-    """entity -> list of record-batch dicts (all its chunks)."""
-    r = RrdReader(path)
-    out: dict[str, list] = {}
-    for c in r.stream():
-        rb = c.to_record_batch()
-        d = {name: (col.cast(pa.int64()) if pa.types.is_temporal(col.type) else col).to_pylist()
-             for name, col in zip(rb.schema.names, rb.columns)}     # times as int64 [ns]
-        out.setdefault(c.entity_path, []).append(d)
-    return out, r
-
-
-def _column(chunks: list, comp: str) -> tuple[np.ndarray, np.ndarray, list]:
-    steps, times, vals = [], [], []
-    for d in chunks:
-        if "step" not in d:
-            continue
-        steps += d["step"]
-        times += d["sim_time"]
-        vals += d[comp]
-    order = np.argsort(steps, kind="stable")
-    return np.asarray(steps)[order], np.asarray(times, dtype=object)[order], [vals[i] for i in order]
-
-
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     h = _history()
     events = [Event(1.0, Severity.WARNING, "fdir", "jet_failed_off", "jet 7 failed off"),
               Event(2.5, Severity.CRITICAL, "modes", "safe", "safe mode")]
     path = record_history(h, events, tmp_path_factory.mktemp("viz") / "batch.rrd")
-    ents, reader = _read(path)
+    ents, reader = read_recording(path)
     return h, path, ents, reader
 
 
@@ -118,7 +92,7 @@ def test_recording_has_expected_entities_and_blueprint(recorded):
 
 def test_map_has_the_ground_track_the_target_and_one_predicted_point_per_guidance_answer(recorded):
     h, _, ents, reader = recorded
-    steps, _, strips = _column(ents["/map/track"], "LineStrips3D:strips")
+    steps, _, strips = column(ents["/map/track"], "LineStrips3D:strips")
     assert list(steps) == list(range(0, N, 10))                # decimated: every 10th step
     ends = np.array([s[0][-1] for s in strips])
     np.testing.assert_allclose(ends[:, 0], np.degrees(h["lon_rad"][::10]), rtol=1e-6)
@@ -126,15 +100,15 @@ def test_map_has_the_ground_track_the_target_and_one_predicted_point_per_guidanc
     assert np.all(ends[:, 2] == 0.0)
     starts = np.array([s[0][0] for s in strips])
     np.testing.assert_allclose(starts[1:], ends[:-1])          # a connected track
-    steps, _, tgt = _column(ents["/map/target"], "Points3D:positions")
+    steps, _, tgt = column(ents["/map/target"], "Points3D:positions")
     assert len(steps) == 1 and np.allclose(tgt[0][0], [math.degrees(0.05), math.degrees(0.2), 0.0])
     # a predicted point at each new answer only (guidance rate, not the 50 Hz rows)
-    steps, _, pts = _column(ents["/map/predicted"], "Points3D:positions")
+    steps, _, pts = column(ents["/map/predicted"], "Points3D:positions")
     assert list(steps) == [20, 70, 120, 170, 220]
     cyc = (np.array(steps) + 30) // 50
     np.testing.assert_allclose([p[0][:2] for p in pts],
                                np.degrees(np.stack([0.05 + 0.02 * cyc, 0.2 + 0.01 * cyc], axis=1)), rtol=1e-6)
-    steps, _, miss = _column(ents["/guidance/predicted_miss_km"], "Scalars:scalars")
+    steps, _, miss = column(ents["/guidance/predicted_miss_km"], "Scalars:scalars")
     R = load_planet("mars").radius_m
     lat1, lon1 = 0.2 + 0.01 * cyc, 0.05 + 0.02 * cyc
     # independent: the spherical law of cosines
@@ -147,7 +121,7 @@ def test_map_has_the_ground_track_the_target_and_one_predicted_point_per_guidanc
 
 def test_bank_series_equals_history_at_every_step(recorded):
     h, _, ents, _ = recorded
-    steps, times, vals = _column(ents["/bank/actual_deg"], "Scalars:scalars")
+    steps, times, vals = column(ents["/bank/actual_deg"], "Scalars:scalars")
     assert list(steps) == list(range(N))
     got = np.array([v[0] for v in vals])
     np.testing.assert_allclose(got, np.degrees(h["bank_rad"]), rtol=0, atol=1e-12)
@@ -155,16 +129,16 @@ def test_bank_series_equals_history_at_every_step(recorded):
     t_ns = np.asarray(times, dtype=np.int64)
     np.testing.assert_array_equal(t_ns, np.rint(h["t_s"] * 1e9).astype(np.int64))
     # error = wrap(bank - ref) = 0.3 rad exactly here
-    _, _, err = _column(ents["/bank/error_deg"], "Scalars:scalars")
+    _, _, err = column(ents["/bank/error_deg"], "Scalars:scalars")
     np.testing.assert_allclose([e[0] for e in err], math.degrees(0.3), atol=1e-9)
-    _, _, th = _column(ents["/adapt/theta_hat"], "Scalars:scalars")
+    _, _, th = column(ents["/adapt/theta_hat"], "Scalars:scalars")
     np.testing.assert_allclose(np.array(th), h["theta_hat"], atol=1e-12)
 
 
 def test_vehicle_pose_is_attitude_and_position(recorded):
     h, _, ents, _ = recorded
-    steps, _, q = _column(ents["/world/vehicle"], "Transform3D:quaternion")
-    _, _, tr = _column(ents["/world/vehicle"], "Transform3D:translation")
+    steps, _, q = column(ents["/world/vehicle"], "Transform3D:quaternion")
+    _, _, tr = column(ents["/world/vehicle"], "Transform3D:translation")
     for k in (0, 77, N - 1):
         x, y, z, w = q[k][0]
         # body x axis expressed in N by the quaternion (active rotation) ...
@@ -193,22 +167,22 @@ def test_r_N_from_history_matches_spherical_position():
 
 def test_jets_health_mode_and_events(recorded):
     h, _, ents, _ = recorded
-    _, _, lanes = _column(ents["/jets/lanes"], "Scalars:scalars")
+    _, _, lanes = column(ents["/jets/lanes"], "Scalars:scalars")
     on = np.array(lanes) - np.arange(1, 19)[None, :]
     np.testing.assert_allclose(on, 0.8 * h["jets_cmd"], atol=1e-12)
-    steps, _, arrows = _column(ents["/attitude/body/jets"], "Arrows3D:vectors")
+    steps, _, arrows = column(ents["/attitude/body/jets"], "Arrows3D:vectors")
     assert [len(a or []) for a in arrows] == list(h["jets_cmd"].sum(axis=1))
-    steps, _, states = _column(ents["/jets/health"], "StateChange:state")
+    steps, _, states = column(ents["/jets/health"], "StateChange:state")
     assert list(steps) == [0, N // 2]                   # logged on change only
     assert states[1][6] == "failed_off" and states[0][6] == "nominal"
-    steps, _, modes = _column(ents["/fsw/mode"], "StateChange:state")
+    steps, _, modes = column(ents["/fsw/mode"], "StateChange:state")
     assert list(steps) == [0] and modes[0] == ["ENTRY"]
-    steps, _, text = _column(ents["/events"], "TextLog:text")
-    _, _, level = _column(ents["/events"], "TextLog:level")
+    steps, _, text = column(ents["/events"], "TextLog:text")
+    _, _, level = column(ents["/events"], "TextLog:level")
     assert list(steps) == [50, 125] and "jet_failed_off" in text[0][0]
     assert level == [["WARN"], ["CRITICAL"]]
     # the events table: each event's catalogue fields (a code the catalogue does not know: id 0)
-    table = [[_column(ents["/events"], c)[2][i][0] for c in ("event_id", "event_name", "source", "severity")]
+    table = [[column(ents["/events"], c)[2][i][0] for c in ("event_id", "event_name", "source", "severity")]
              for i in range(2)]
     assert table == [[EV.JET_FAILED_OFF.id, "jet_failed_off", "fdir", "WARNING"], [0, "safe", "modes", "CRITICAL"]]
     (doc,) = [d for d in ents["/event_catalogue"] if "TextDocument:text" in d]
@@ -294,11 +268,11 @@ def test_bad_input_does_not_crash_and_is_not_passed_on(tmp_path):
     log.close()
     s.close()
     assert log.stats["bad_values"] >= 4 and log.stats["send_errors"] == 0
-    ents, _ = _read(s.rrd_path)
-    steps, _, vals = _column(ents["/bank/actual_deg"], "Scalars:scalars")
+    ents, _ = read_recording(s.rrd_path)
+    steps, _, vals = column(ents["/bank/actual_deg"], "Scalars:scalars")
     assert list(steps) == [0, 5, 7]                         # only the finite rows
     np.testing.assert_allclose([v[0] for v in vals], np.degrees([0.1, 0.3, 0.4]))
-    steps, _, st = _column(ents["/jets/health"], "StateChange:state")
+    steps, _, st = column(ents["/jets/health"], "StateChange:state")
     assert st[0][0] == "code9"
     r = subprocess.run([RERUN, "rrd", "verify", str(s.rrd_path)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr

@@ -17,6 +17,8 @@ import pytest
 from interfaces import vocabulary as voc
 from interfaces.mavlink import dialect as mav
 
+from tests import import_graph
+
 ROOT = Path(__file__).resolve().parents[1]
 TREES = ("fsw", "sim", "gse", "common", "interfaces", "ellipsled")
 # tree -> trees it must not import (the FSW never sees the plant or the ground station's
@@ -28,8 +30,16 @@ FORBIDDEN = {
     "common": {"fsw", "sim", "gse", "ellipsled"},
     "interfaces": {"fsw", "sim", "gse", "ellipsled"},
 }
+# The SIL's process shells -> the tree each flies. A shell depends on its tree, interfaces/
+# and common/, and on shell helpers in ellipsled/sil/ that obey the same rule; the judging
+# (figures of merit, summaries, fault-free twins) stays with the launcher, which runs after.
+SHELLS = {"ellipsled.sil.fsw_node": "fsw", "ellipsled.sil.sim_node": "sim"}
+SHELL_HELPERS = "ellipsled.sil."
+LAUNCHER = "ellipsled.sil.launcher"
 VOCABULARY = ROOT / "interfaces" / "vocabulary.py"
-GENERATED = ROOT / "interfaces" / "mavlink" / "generated"
+GENERATED = import_graph.GENERATED
+MODULES = import_graph.modules()
+NAMES = {p: name for name, p in MODULES.items()}
 
 
 def sources(*trees):
@@ -40,14 +50,8 @@ def sources(*trees):
 
 
 def imported_trees(path: Path) -> set[str]:
-    """Top-level packages a module imports, anywhere in it (function bodies too)."""
-    out = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            out.update(a.name.split(".")[0] for a in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            out.add(node.module.split(".")[0])
-    return out
+    """Our top-level packages a module imports, anywhere in it (function bodies too)."""
+    return {m.split(".")[0] for m in import_graph.imports_of(NAMES.get(path, path.stem), path, MODULES)}
 
 
 def test_the_import_direction_test_sees_a_forbidden_import(tmp_path):
@@ -66,6 +70,33 @@ def test_no_tree_imports_across_the_interfaces(tree):
     assert bad == {}, f"{tree}/ must not import {sorted(FORBIDDEN[tree])}"
 
 
+def shell_violations(graph: dict[str, set[str]], shell: str, tree: str) -> dict[str, list[str]]:
+    """Modules the process shell ``shell`` reaches that it may not: module -> the import path to it."""
+    allowed = {tree, "interfaces", "common"}
+    bad = {}
+    for m in import_graph.reachable(graph, shell, with_packages=True):
+        helper = m in ("ellipsled", "ellipsled.sil") or (m.startswith(SHELL_HELPERS) and m != LAUNCHER)
+        if m.split(".")[0] not in allowed and not helper:
+            bad[m] = import_graph.import_path(graph, shell, m)
+    return bad
+
+
+@pytest.mark.parametrize("shell", sorted(SHELLS))
+def test_the_process_shells_depend_only_on_their_tree_interfaces_common_and_shell_helpers(shell):
+    bad = shell_violations(import_graph.graph(), shell, SHELLS[shell])
+    assert bad == {}, f"{shell} must not reach: " + "; ".join(" -> ".join(p) for p in bad.values())
+
+
+def test_the_shell_check_sees_judging_or_the_other_tree_reached_through_a_helper():
+    g = import_graph.graph()
+    g["ellipsled.sil.history"] = g["ellipsled.sil.history"] | {"ellipsled.metrics"}     # a planted judging import
+    g["ellipsled.sil.variant"] = g["ellipsled.sil.variant"] | {"fsw.params"}            # the FSW, for the plant
+    bad = shell_violations(g, "ellipsled.sil.sim_node", "sim")
+    assert bad["ellipsled.metrics"] == ["ellipsled.sil.sim_node", "ellipsled.sil.history", "ellipsled.metrics"]
+    assert "fsw.params" in bad and "ellipsled.metrics" in shell_violations(g, "ellipsled.sil.fsw_node", "fsw")
+    assert "fsw.params" not in shell_violations(g, "ellipsled.sil.fsw_node", "fsw")
+
+
 # ------------------------------------------------------------------ one definition
 
 KIND_WORDS = set(voc.FAULT_KINDS) | set(voc.MARK_KINDS) | set(voc.HEALTH_NAMES.values()) | {"failed"}
@@ -73,11 +104,16 @@ PORTS = {voc.parse_udp(voc.DEFAULT_GCS, "")[1], voc.parse_udp(voc.DEFAULT_VEHICL
 MODE_WORDS = {m.name for m in voc.Mode} | {m.name.lower() for m in voc.Mode}
 
 
-def literal_findings(path: Path) -> list[str]:
+def literal_findings(path: Path, expectations: bool = False) -> list[str]:
     """Places that define shared vocabulary again: an assignment of the jet count, a
-    collection literal of two or more kind or mode words, an endpoint port."""
+    collection literal of two or more kind or mode words, an endpoint port. ``expectations``
+    (a test module): what an ``assert`` states is the test's own truth, not a definition."""
+    tree = ast.parse(path.read_text(), str(path))
+    asserted = {id(n) for a in ast.walk(tree) if expectations and isinstance(a, ast.Assert) for n in ast.walk(a)}
     found = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node in ast.walk(tree):
+        if id(node) in asserted:
+            continue
         if isinstance(node, (ast.Assign, ast.AnnAssign)) and isinstance(node.value, ast.Constant) \
                 and node.value.value == voc.N_JETS and type(node.value.value) is int:
             found.append(f"line {node.lineno}: = {voc.N_JETS}")
@@ -95,13 +131,16 @@ def literal_findings(path: Path) -> list[str]:
 
 def test_the_literal_scan_finds_a_second_definition(tmp_path):
     p = tmp_path / "m.py"
-    p.write_text('N_JETS = 18\nK = {"failed": 1, "stuck_on": 2}\nM = {0: "STANDBY", 1: "ENTRY"}\nG = "udp:h:14550"\n')
-    assert len(literal_findings(p)) == 4
+    p.write_text('N_JETS = 18\nK = {"failed": 1, "stuck_on": 2}\nM = {0: "STANDBY", 1: "ENTRY"}\nG = "udp:h:14550"\n'
+                 'def test_x():\n    assert f() == {"off": 1, "stuck": 2}\n')
+    assert len(literal_findings(p)) == 5
+    assert len(literal_findings(p, expectations=True)) == 4     # the assert's table is the test's truth
 
 
 def test_jet_count_kind_mode_and_endpoint_words_are_defined_only_in_the_vocabulary():
     bad = {str(p.relative_to(ROOT)): f for p in sources(*TREES) if p != VOCABULARY
            for f in [literal_findings(p)] if f}
+    bad.update({str(p.relative_to(ROOT)): f for p in sources("tests") for f in [literal_findings(p, True)] if f})
     assert bad == {}
 
 

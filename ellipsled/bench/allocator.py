@@ -1,4 +1,4 @@
-"""Allocator benchmark (spec 50-performance.md): solve time of fsw.allocation.Allocator
+"""Allocator benchmark (docs/benchmarks.md): solve time of fsw.allocation.Allocator
 against a plain HiGHS MILP of the same problem in the same run, with optimality checked on
 every demand against HiGHS (mip_rel_gap = 0) and exhaustive enumeration.
 

@@ -1,4 +1,4 @@
-"""Batch benchmark (spec 50-performance.md): one process, no transport, a full nominal
+"""Batch benchmark (docs/benchmarks.md): one process, no transport, a full nominal
 entry through ``ellipsled.batch.run`` — wall time against the simulated time (real-time
 factor, target ≥ 200×).
 

@@ -7,8 +7,8 @@
 - Memory is judged flat when RSS grows by at most ``MEM_FLAT_MB_PER_10K_STEPS`` per 10,000
   steps over the second half of the run (the first half includes allocator warm-up). RSS is
   sampled every ``RSS_SAMPLE_STEPS`` so the shape (linear or saturating) is in the report.
-  With the SDK's footer-writing FileSink the file run grew ~12.7 MB per 10,000 steps
-  (+28.6 MB over a full entry), linearly: gse/viz/sinks.py says why and what changed.
+  An SDK FileSink that writes a footer grows linearly (it keeps every chunk's manifest
+  entry): gse/viz/sinks.py says why the live file is streamed without one.
 - Baseline in the same run: one ``rr.log`` per signal per frame (the ~40 scalar signals)
   vs the batched ``send_columns`` path, per frame.
 """

@@ -1,4 +1,4 @@
-"""FSW control-cycle benchmark (spec 50-performance.md): compute time of the rate-group
+"""FSW control-cycle benchmark (docs/benchmarks.md): compute time of the rate-group
 tasks (RG1 control, RG2 fdir_slow) and of a whole cycle, p50/p99/max,
 over a full nominal entry flown in lockstep — against the control period.
 

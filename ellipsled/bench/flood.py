@@ -36,9 +36,12 @@ from collections import deque
 
 from pymavlink.dialects.v10 import common as v10
 
+from ellipsled.node_reports import read_fsw
+from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.framing import parse_header
-from interfaces.mavlink.signing import Signer, SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
+from interfaces.mavlink.signing.sign import Signer
 
 from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
@@ -222,7 +225,7 @@ def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
     (every datagram split, CRC-checked and verified, up to 64 a tick). Same run, same
     datagrams."""
     from interfaces.mavlink.intake import DatagramIntake
-    from interfaces.mavlink.signing import SignedLink
+    from interfaces.mavlink.signing.link import SignedLink
     ticks = 100 if quick else 400
     per_tick = int(rate / RG2_HZ)
     key = SigningKey.generate()
@@ -376,10 +379,10 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
         watch.start()
         log_path = Path(d) / "run.log"
         with open(log_path, "w") as log:
-            run = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", "run", scenario, "--realtime",
-                                    "--duration", f"{duration_s:g}", "--out", d, "--rerun", "none", "--no-plots",
-                                    "--signing-key", str(key_file),
-                                    "--mavlink-bind", f"udp:127.0.0.1:{vehicle}", "--gcs", f"udp:127.0.0.1:{gcs}"],
+            run = subprocess.Popen(ELLIPSLED + ["run", scenario, "--realtime", "--duration", f"{duration_s:g}",
+                                                "--out", d, "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
+                                                "--mavlink-bind", f"udp:127.0.0.1:{vehicle}",
+                                                "--gcs", f"udp:127.0.0.1:{gcs}"],
                                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
             sent = None
             try:
@@ -392,11 +395,9 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
                     sent = send(("127.0.0.1", vehicle), rate, flood_s, flood=fl)
                 run.wait(timeout_s)
             finally:
-                if run.poll() is None:
-                    run.kill()
-                    run.wait(10)
+                stop_process(run, 10.0)
                 watch.stop()
-        fsw = json.loads((Path(d) / "fsw.json").read_text())
+        fsw = read_fsw(d)
     ex, gl = fsw["executive"], fsw["tasks_us"].get("groundlink", {})
     link = fsw.get("ground_link") or {}
     n_fdir, lat = watch.event_latencies(fsw.get("event_log", []))

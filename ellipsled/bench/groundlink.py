@@ -20,7 +20,7 @@ import numpy as np
 from common.model import load_scenario
 from fsw.flightsoftware import FlightSoftware
 from fsw.groundlink import GroundLink
-from interfaces.mavlink.signing import SigningKey
+from interfaces.mavlink.signing.keys import SigningKey
 from sim.plant import Plant
 
 from .rows import NO_TARGET, Row, fmt, g, row

@@ -1,4 +1,4 @@
-"""Guidance benchmark (spec 60-guidance.md): one predictor-corrector cycle, p99 target
+"""Guidance benchmark (docs/fsw/entry-guidance.md): one predictor-corrector cycle, p99 target
 <= 20 ms, next to the control cycle of the same run.
 
 - ``flight``: the guided-nominal entry through ``ellipsled.batch.run``; every guidance cycle's

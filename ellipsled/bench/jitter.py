@@ -1,4 +1,4 @@
-"""Release jitter of the real-time 50 Hz loop (spec 50-performance.md) next to cyclictest.
+"""Release jitter of the real-time 50 Hz loop (docs/benchmarks.md) next to cyclictest.
 
 The loop: fsw.executive.RealTimeClock + the FSW topology's rate groups (RG1 control,
 RG2 fdir_slow) fed by the plant in the same process (an extra RG1 task
@@ -27,10 +27,11 @@ import contextlib
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
+
+from ellipsled.procs import stop_process
 
 from .rows import NO_TARGET, Row, fmt, g, le, ratio, row, speed
 
@@ -63,22 +64,6 @@ def ensure_tools(tools=("cyclictest", "stress-ng"), packages=("rt-tests", "stres
     return True, ""
 
 
-def _end(p: subprocess.Popen, grace_s: float = 5.0) -> None:
-    """End a child we started (and its process group, which it leads) by its id."""
-    if p.poll() is not None:
-        return
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        try:
-            os.killpg(p.pid, sig)
-        except (ProcessLookupError, PermissionError):
-            pass
-        try:
-            p.wait(timeout=grace_s)
-            return
-        except subprocess.TimeoutExpired:
-            continue
-
-
 @contextlib.contextmanager
 def background_load(cpus: int = 2, timeout_s: float = 600.0):
     """``stress-ng --cpu <cpus>`` for the duration of the block (started and ended by pid,
@@ -93,7 +78,7 @@ def background_load(cpus: int = 2, timeout_s: float = 600.0):
             raise RuntimeError(f"stress-ng exited at once (code {p.returncode})")
         yield p
     finally:
-        _end(p)
+        stop_process(p, 5.0, group=True)
 
 
 # --------------------------------------------------------------------------- cyclictest
@@ -259,7 +244,7 @@ def run_child(seconds: float, priority: int | None = PRIORITY, cpu: int | None =
     try:
         out, err = p.communicate(timeout=seconds + 120.0)
     except subprocess.TimeoutExpired:
-        _end(p)
+        stop_process(p, 5.0, group=True)
         raise RuntimeError(f"real-time loop child timed out after {seconds + 120.0:.0f} s")
     for line in out.splitlines():
         if line.startswith(RESULT_TAG):

@@ -1,4 +1,4 @@
-"""Round-trip latency between two processes on 127.0.0.1 (spec 50-performance.md):
+"""Round-trip latency between two processes on 127.0.0.1 (docs/benchmarks.md):
 
 - baseline: a plain Python UDP echo (blocking sockets), 64-byte datagrams;
 - Zenoh + codec: the client publishes an encoded SENSORS frame (interfaces/transport.py
@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import socket
 import subprocess
 import sys
 import time
 
 import numpy as np
+
+from ellipsled.procs import stop_process
 
 from .rows import NO_TARGET, Row, fmt, ratio, row
 
@@ -171,16 +172,11 @@ def _start_echo(kind: str, port: int, placement: str = "default", rate_hz: float
 
 
 def _stop(p: subprocess.Popen) -> None:
-    if p.poll() is None:
-        try:
-            p.wait(timeout=2.0)
-        except subprocess.TimeoutExpired:
-            os.kill(p.pid, signal.SIGTERM)
-            try:
-                p.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                os.kill(p.pid, signal.SIGKILL)
-                p.wait()
+    """An echo process ends by itself once its client is done; one that has not after 2 s is stopped."""
+    try:
+        p.wait(timeout=2.0)
+    except subprocess.TimeoutExpired:
+        stop_process(p, 5.0)
 
 
 def udp_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:

@@ -1,4 +1,4 @@
-"""Monte Carlo engine benchmark (issue 8): campaign runs per minute on an embedded Dask
+"""Monte Carlo engine benchmark: campaign runs per minute on an embedded Dask
 cluster of 1 and 2 worker processes, next to the same runs flown one after the other in
 one process (the batch rate), and the engine's overhead per run.
 

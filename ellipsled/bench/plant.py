@@ -1,4 +1,4 @@
-"""Plant benchmark (spec 50-performance.md): cost of one control period of sim.plant.Plant
+"""Plant benchmark (docs/benchmarks.md): cost of one control period of sim.plant.Plant
 (RK4 kernel + jets + faults + sensor sampling) against the control period, and the
 open-loop full entry's wall time against the simulated time (real-time factor).
 

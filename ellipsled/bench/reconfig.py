@@ -1,4 +1,4 @@
-"""Reconfiguration latency of the real-time allocator (spec 50-performance.md): from the
+"""Reconfiguration latency of the real-time allocator (docs/benchmarks.md): from the
 request (``set_health``, what the FSW calls in the cycle FDIR declares a fault) to the new
 tables in use (the first ``solve`` on them), p50/p99/max over every single-jet fault set
 (each jet failed off, stuck on, degraded to eta 0.5) and the paper's multi-jet fault sets

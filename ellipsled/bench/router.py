@@ -7,8 +7,9 @@ then ``ellipsled fsw`` and ``ellipsled sim`` (``--realtime --rt``, CPUs 1 and 0)
 with ``data/zenoh/fsw.json5`` / ``sim.json5`` — the commands of the README's "Running
 across machines", on one machine. Baseline: ``ellipsled run --realtime`` (plant and FSW
 peer to peer on loopback, no TLS). Both runs: the nominal scenario for the same duration;
-figures from each run's ``sim.json`` (sensor-to-actuator latency: plant publishes step k ->
-plant has the command answering k) and ``fsw.json`` (release jitter, cycle slips).
+figures from each run's plant report (sensor-to-actuator latency: plant publishes step k ->
+plant has the command answering k) and FSW report (release jitter, cycle slips), read with
+ellipsled/node_reports.py.
 
 Every process is stopped by its pid (SIGTERM, then SIGKILL after a timeout).
 """
@@ -21,7 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from ellipsled.procs import stop_process
+from ellipsled.node_reports import read_fsw, read_sim
+from ellipsled.procs import ELLIPSLED, stop_process
 
 from .rows import NO_TARGET, Row, fmt, g, ratio, row
 
@@ -37,7 +39,7 @@ class _Procs:
     def start(self, name: str, argv: list[str]) -> None:
         log = open(self.d / f"{name}.log", "w")
         self.logs.append(log)
-        self.p[name] = subprocess.Popen([sys.executable, "-m", "ellipsled.cli", *argv], cwd=self.d, stdout=log,
+        self.p[name] = subprocess.Popen(ELLIPSLED + argv, cwd=self.d, stdout=log,
                                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
 
     def log(self, name: str) -> str:
@@ -91,8 +93,7 @@ def through_router(duration_s: float, start_timeout_s: float = 180.0) -> dict:
             pr.close()
         if not (out / "sim.json").is_file() or not (out / "fsw.json").is_file():
             raise RuntimeError(f"no sim.json/fsw.json (plant exit {rc}): {pr.log('sim')[-300:]}")
-        sim = json.loads((out / "sim.json").read_text())
-        fsw = json.loads((out / "fsw.json").read_text())
+        sim, fsw = read_sim(out), read_fsw(out)
     return {"latency_p50_us": sim["latency_p50_us"], "latency_p99_us": sim["latency_p99_us"],
             "latency_max_us": sim["latency_max_us"], "latency_samples": sim["latency_samples"],
             "jitter_p99_us": fsw["jitter_p99_us"], "slips": fsw["cycle_slips"], "exit_code": rc,

@@ -18,6 +18,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from ellipsled.node_reports import read_fsw
+from ellipsled.procs import ELLIPSLED
+
 from .jitter import jitter_verdict
 from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
@@ -30,8 +33,7 @@ SIL_KEYS = ("realtime_factor", "latency_p50_us", "latency_p99_us", "jitter_p50_u
 def run_command_available() -> tuple[bool, str]:
     """Whether ``ellipsled run`` exists in this tree (asks the CLI itself)."""
     try:
-        r = subprocess.run([sys.executable, "-m", "ellipsled.cli", "run", "--help"], capture_output=True,
-                           text=True, timeout=60)
+        r = subprocess.run(ELLIPSLED + ["run", "--help"], capture_output=True, text=True, timeout=60)
     except (OSError, subprocess.TimeoutExpired) as e:
         return False, f"`ellipsled run --help` failed: {type(e).__name__}: {e}"
     if r.returncode != 0 or "--lockstep" not in r.stdout or "--realtime" not in r.stdout:
@@ -43,7 +45,7 @@ def run_command_available() -> tuple[bool, str]:
 def sil_run(mode: str, scenario: str, duration_s: float | None, timeout_s: float, extra=()) -> dict:
     """One ``ellipsled run``; returns {summary, sil, wall_s}. Raises RuntimeError with the cause."""
     with tempfile.TemporaryDirectory(prefix="bench-sil-") as d:
-        cmd = [sys.executable, "-m", "ellipsled.cli", "run", scenario, f"--{mode}", "--out", d, "--rerun", "none"]
+        cmd = ELLIPSLED + ["run", scenario, f"--{mode}", "--out", d, "--rerun", "none"]
         if duration_s is not None:
             cmd += ["--duration", f"{duration_s:g}"]
         cmd += list(extra)
@@ -56,7 +58,7 @@ def sil_run(mode: str, scenario: str, duration_s: float | None, timeout_s: float
         out = Path(d)
         summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").is_file() else None
         sil = json.loads((out / "sil.json").read_text()) if (out / "sil.json").is_file() else None
-        fsw = json.loads((out / "fsw.json").read_text()) if (out / "fsw.json").is_file() else None
+        fsw = read_fsw(out) if (out / "fsw.json").is_file() else None
         if sil is None and summary is None:
             raise RuntimeError(f"`{' '.join(cmd[2:])}` exit {r.returncode}, no summary.json/sil.json: "
                                f"{(r.stderr or r.stdout).strip()[-300:]}")

@@ -1,4 +1,4 @@
-"""``ellipsled bench [--quick] --out FILE.json``: every benchmark of spec 50-performance.md
+"""``ellipsled bench [--quick] --out FILE.json``: every benchmark of docs/benchmarks.md
 in one invocation, each figure next to its baseline measured in the same run.
 
 Writes FILE.json (machine-readable) and FILE.md (the table, also printed). Each section

@@ -1,4 +1,4 @@
-"""Monte Carlo campaigns (spec 30-scenarios.md), executed on Dask distributed.
+"""Monte Carlo campaigns (docs/scenarios.md), executed on Dask distributed.
 
 - ``campaign``: the campaign data file (data/campaigns/*.toml), the per-run draw from
   (master seed, run_id), the dispersed Scenario;

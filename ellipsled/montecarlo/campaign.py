@@ -1,6 +1,6 @@
 """A Monte Carlo campaign: its data file, the per-run draw, and the dispersed scenario.
 
-Spec 30-scenarios.md (Monte Carlo campaign). A run's noise seed and dispersions are a pure
+Spec docs/scenarios.md (Monte Carlo campaign). A run's noise seed and dispersions are a pure
 function of (master seed, run_id): ``draw_run`` never depends on other runs, on the order
 runs finish, or on the machine, so a campaign can be resumed, extended or spread over a
 cluster, and any run is rebuilt from its record by ``apply_dispersion``.

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import NamedTuple
 
 from common.model import Scenario
-from ellipsled import argtypes
-from ellipsled.argtypes import nonneg_int
+from ellipsled.sil import argtypes
+from ellipsled.sil.argtypes import nonneg_int
 
 from .campaign import MAX_RUNS
 

@@ -1,5 +1,5 @@
 """Deploy-point statistics of a guided campaign: miss percentiles and the 99 % ellipse,
-beside the flown Mars landers (spec 60-guidance.md).
+beside the flown Mars landers (docs/fsw/entry-guidance.md).
 
 ``python -m ellipsled.montecarlo.deploy runs/mc-guided`` reads the campaign's
 results.parquet and prints (and writes deploy.md) the table.

@@ -35,7 +35,7 @@ import pyarrow as pa
 
 from common.config import resolve
 from common.model import INERTIA_KEYS, Scenario, load_scenario
-from ellipsled.history import budget_refusal
+from ellipsled.sil.history import budget_refusal
 
 from .campaign import (AERO_KEYS, Campaign, Criteria, apply_dispersion, campaign_base, dispersion_columns, draw_run,
                        load_campaign)

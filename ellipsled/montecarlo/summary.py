@@ -19,7 +19,7 @@ FIGURES = (("bank_err_max_after_fault_deg", "max |bank error| after the fault [d
            ("control_cycle.compute_overruns", "control cycles over the period (host figure) [-]"))
 N_WORST = 10
 FAULT_ATTRIB = "bank_err_fault_attrib_max_deg"
-ATTRIB_GOAL_DEG = 1.0      # issue 13's goal: fault-attributable error <= 1 deg in >= 95 % of controllable runs
+ATTRIB_GOAL_DEG = 1.0      # the product's goal: fault-attributable error <= 1 deg in >= 95 % of controllable runs
 
 
 def _col(rows: list[dict], name: str) -> np.ndarray:

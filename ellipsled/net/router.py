@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from common.config import DATA_DIR
-from ellipsled import argtypes
+from ellipsled.sil import argtypes
 
 DEFAULT_CONFIG = DATA_DIR / "zenoh" / "router.json5"
 

@@ -7,10 +7,11 @@ import signal
 import sys
 import time
 
-from ellipsled import argtypes
 from interfaces import transport
 from interfaces.keys import DEFAULT_PREFIX, keys
 
+from . import argtypes
+from .variant import add_variant_arguments
 
 
 def add_common_arguments(p: argparse.ArgumentParser) -> None:
@@ -18,7 +19,6 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=argtypes.seed, default=None)
     p.add_argument("--ft-off", action="store_true", help="fault tolerance off")
     p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop after S seconds of simulated time")
-    from ellipsled.runlib import add_variant_arguments
     add_variant_arguments(p)
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",

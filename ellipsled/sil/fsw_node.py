@@ -22,9 +22,6 @@ from common import rt
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
 from common.events import EventLog, Severity  # noqa: E402
-from ellipsled import argtypes  # noqa: E402
-from ellipsled.history import History, guidance_fields, record_fsw  # noqa: E402
-from ellipsled.runlib import alloc_sample, fsw_report, prepare_args  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock  # noqa: E402
 from fsw.flightsoftware import FlightSoftware  # noqa: E402
 from fsw.topology import Topology  # noqa: E402
@@ -33,8 +30,12 @@ from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 from interfaces.vocabulary import (DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_HEALTH, FAULT_KINDS, MARK_NAMES,  # noqa: E402
                                    NOMINAL)
 
+from . import argtypes  # noqa: E402
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
 from .frame_timing import due_step, phase_origin_ns, take_due_frame  # noqa: E402
+from .fsw_report import alloc_sample, fsw_report  # noqa: E402
+from .history import History, guidance_fields, record_fsw  # noqa: E402
+from .variant import prepare_args  # noqa: E402
 
 ROLE = "fsw"
 
@@ -255,7 +256,7 @@ class FswNode:
             return None
         from fsw.groundlink import GroundLink
         from interfaces.event_catalogue import EV
-        from interfaces.mavlink.signing import SigningKey
+        from interfaces.mavlink.signing.keys import SigningKey
         key = SigningKey.from_file(path)
         try:
             gl = GroundLink(self.fsw, key, gcs=self.args.gcs, bind=self.args.mavlink_bind, inject=self.inject)
@@ -384,17 +385,13 @@ class FswNode:
         out = Path(self.args.out)
         out.mkdir(parents=True, exist_ok=True)
         self.history.save(out / "fsw_history.npz")
+        # every tick's release jitter and every frame's age, raw (ellipsled/node_reports.py sums them up)
+        np.savez_compressed(out / "fsw_timing.npz", jitter_ns=self.jitter_ns[: self.ticks],
+                            frame_age_ns=self.frame_age_ns[: self.n_frames])
         rep = fsw_report(self.fsw, self.topo.executive.slips, self.samples)
         ex = self.topo.executive.telemetry()
-        jit = self.jitter_ns[: self.ticks] / 1e3
-        age = self.frame_age_ns[: self.n_frames] / 1e3
         rep.update({
             "mode": self.args.mode, "ticks": self.ticks,
-            "jitter_p50_us": float(np.percentile(jit, 50)) if len(jit) else None,
-            "jitter_p99_us": float(np.percentile(jit, 99)) if len(jit) else None,
-            "jitter_max_us": float(np.max(jit)) if len(jit) else None,
-            "frame_age_p50_us": float(np.percentile(age, 50)) if len(age) else None,
-            "frame_age_p99_us": float(np.percentile(age, 99)) if len(age) else None,
             "executive": ex, "tasks_us": self.topo.task_percentiles(), "params": self.fsw.params, "sensor_rejects": dict(self.dec_sensors.rejects),
             "monitor_counts": dict(self.fsw.monitor.counts), "answers_repeated": self.answers_repeated,
             "event_log": [{"t_s": e.t_s, "severity": e.severity.name, "source": e.source, "code": e.code,

@@ -21,26 +21,26 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-from ellipsled import argtypes
-from ellipsled.history import History, merge
-from ellipsled.procs import die_with_parent, stop_process
-from ellipsled.runlib import (EXIT_NOT_COMPLETED, add_variant_arguments, exit_code, fault_free_reference,
-                              format_summary, judge, prepare_args, variant_argv)
-from ellipsled.terminal import ProgressFile, RunProgress, files_written
+from ellipsled.node_reports import read_fsw, read_sim
+from ellipsled.procs import ELLIPSLED, die_with_parent, stop_process
+from ellipsled.runlib import EXIT_NOT_COMPLETED, exit_code, format_summary, judge
+from ellipsled.terminal import RunProgress, files_written
 from interfaces import transport
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE
 
+from . import argtypes
 from .common import DEFAULT_PREFIX, say
+from .history import History, merge
+from .progress import ProgressFile
+from .variant import add_variant_arguments, prepare_args, variant_argv
 
 ROLE = "run"
 STOP_TIMEOUT_S = 5.0
 ROLES = ("viz", "fsw", "sim")
-
 
 
 def add_arguments(p) -> None:
@@ -127,7 +127,7 @@ class Launcher:
             return self.args.signing_key
         if os.environ.get("ELLIPSLED_SIGNING_KEY_FILE"):
             return os.environ["ELLIPSLED_SIGNING_KEY_FILE"]
-        from interfaces.mavlink.signing import SigningKey
+        from interfaces.mavlink.signing.keys import SigningKey
         self.tmpdir = tempfile.mkdtemp(prefix="ellipsled-key-")
         path = os.path.join(self.tmpdir, "signing.key")
         SigningKey.generate().write_file(path)
@@ -141,7 +141,7 @@ class Launcher:
 
     def spawn(self, role: str, argv: list[str]) -> None:
         """A child with its output in ROLE.log (relayed to the terminal unless the console has it)."""
-        cmd = [sys.executable, "-m", "ellipsled.cli"] + argv
+        cmd = ELLIPSLED + argv
         path = self.out / f"{role}.log"
         log = open(path, "w")
         self.logs.append(log)
@@ -260,8 +260,8 @@ class Launcher:
     def summarize(self, rc_sim) -> int:
         a = self.args
         try:
-            sim_info = json.loads((self.out / "sim.json").read_text())
-            fsw_info = json.loads((self.out / "fsw.json").read_text())
+            sim_info = read_sim(self.out)
+            fsw_info = read_fsw(self.out)
             h = merge(History.load(self.out / "sim_history.npz"), History.load(self.out / "fsw_history.npz"))
         except (OSError, ValueError, KeyError) as e:
             self.say(f"no complete records to summarize ({e}); see the logs")
@@ -270,6 +270,7 @@ class Launcher:
         scn = prepare_args(a)
         seed = scn.seed if a.seed is None else a.seed
         faults = [tuple(x) for x in sim_info["faults_applied"]]
+        from ellipsled.reference import fault_free_reference    # it flies twins: the FSW loads after the run
         ref = fault_free_reference(h, scn, seed, faults)
         summary = judge(h, scn, seed, sim_info["end_reason"], fsw_info, faults, fsw_info["params"], ref)
         summary["mode"] = f"sil-{a.mode}"

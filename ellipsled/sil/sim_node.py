@@ -17,16 +17,16 @@ from pathlib import Path
 import numpy as np
 
 from common.rt import sleep_until_ns
-from ellipsled import argtypes
-from ellipsled.history import History, record_truth
-from ellipsled.runlib import end_reason_of, prepare_args
-from ellipsled.terminal import ProgressFile
 from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard
 from interfaces.vocabulary import FAULT_KINDS
 from sim.plant import Plant
 
+from . import argtypes
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say
+from .history import History, record_truth
+from .progress import ProgressFile
+from .variant import end_reason_of, prepare_args
 
 ROLE = "sim"
 
@@ -292,9 +292,9 @@ class SimNode:
     def _await_ready(self) -> None:
         """Real time: the clock starts when the FSW has warmed up (its ``ready`` token), not
         before — the warm-up runs on a sensor frame, so frame k=0 is offered every 20 ms
-        meanwhile (counted: warmup_frames). Warmed up on a frame of a plant that was already
-        flying, the FSW lost ~0.9 s of commands at every start. An FSW that never says ready
-        (an older one) costs wait_peers, then the run starts anyway, said in the log."""
+        meanwhile (counted: warmup_frames): an FSW warming up on the frames of a plant already
+        flying would miss the first commands' deadlines. An FSW that never says ready costs
+        wait_peers, then the run starts anyway, said in the log."""
         def offer() -> None:
             self.publish_sensors()
             self.counts["warmup_frames"] += 1
@@ -329,19 +329,14 @@ class SimNode:
         out = Path(self.args.out)
         out.mkdir(parents=True, exist_ok=True)
         self.history.save(out / "sim_history.npz")
-        lat = self.latency_ns[: self.n_latency] / 1e3
-        wall = getattr(self, "wall_s", None)
+        # every sensor-to-actuator latency and its command leg, raw (ellipsled/node_reports.py sums them up)
+        np.savez_compressed(out / "sim_latency.npz", latency_ns=self.latency_ns[: self.n_latency],
+                            latency_cmd_ns=self.latency_cmd_ns[: self.n_latency])
         info = {
             "scenario": self.scn.name, "seed": self.seed, "mode": self.args.mode,
             "end_reason": end_reason_of(self.end_reason, self.args.duration), "message": self.message,
-            "t_end_s": self.plant.t_s, "steps": self.history.n, "wall_s": wall,
-            "realtime_factor": (self.plant.t_s / wall) if wall else None,
+            "t_end_s": self.plant.t_s, "steps": self.history.n, "wall_s": getattr(self, "wall_s", None),
             "faults_applied": self.plant.fault_log, "counts": self.counts, "rejects": self.rejects,
-            "latency_p50_us": float(np.percentile(lat, 50)) if len(lat) else None,
-            "latency_p99_us": float(np.percentile(lat, 99)) if len(lat) else None,
-            "latency_max_us": float(np.max(lat)) if len(lat) else None,
-            "latency_samples": int(len(lat)),
-            "latency_split_us": latency_split(lat, self.latency_cmd_ns[: self.n_latency] / 1e3),
         }
         (out / "sim.json").write_text(json.dumps(info, indent=2) + "\n")
 
@@ -351,17 +346,6 @@ class SimNode:
             self.progress.close()
         transport.close(self.token, self.sub_jets, self.sub_faults, self.pub_sensors, self.pub_truth,
                         self.pub_fault_log, self.session)
-
-
-def latency_split(total_us: np.ndarray, command_us: np.ndarray) -> dict | None:
-    """Where the sensor-to-actuator time goes: the sensor leg with the FSW's wait and
-    compute (plant publishes -> FSW publishes its answer) and the command leg (FSW
-    publishes -> plant has it), p50 / p99 each [us]."""
-    if len(total_us) == 0:
-        return None
-    legs = {"sensor_and_fsw": total_us - command_us, "command": command_us}
-    return {f"{name}_{q}_us": float(np.percentile(v, p)) for name, v in legs.items()
-            for q, p in (("p50", 50), ("p99", 99))}
 
 
 def main(args) -> int:

@@ -1,8 +1,10 @@
-"""Fault-tolerant discrete control allocation (spec 20-fsw.md; paper section 3).
+"""Fault-tolerant discrete control allocation (paper section 3).
 
 model      the problem: health -> effective model, tolerances, problem checks
-tables     candidate tables of a health configuration (numba kernels, work buffers)
-allocator  the Allocator and its solve kernels
+tables     candidate tables of a health configuration: the types, work buffers, build_tables
+build      the table build's numba kernels (enumeration, octant tables, tree)
+query      the solve kernels over one configuration's tables
+allocator  the Allocator: parameters, table cache, switching, interim model
 rebuild    the background table builder (real time)
 reference  HiGHS and enumeration solvers: test and benchmark references, not flown
 """

@@ -2,7 +2,7 @@
 
 Method (exact by construction, see tests/test_allocation_*.py):
   1. Per health configuration, the distinct achievable torques and their octant tables
-     (fsw/allocation/tables.py).
+     (fsw/allocation/tables.py); the queries below are fsw/allocation/query.py's kernels.
   2. Inside the sign box the objective is linear: with s_i = sign(tau_d,i) (+1 for 0),
      objective = sum_i w_i |tau_d,i| - score,  score = sum_i w_i s_i tau_i - c.
      score does not depend on the demand, only on its octant, so for each of the 8
@@ -17,7 +17,7 @@ Method (exact by construction, see tests/test_allocation_*.py):
   branch and bound on the objective itself: a node's bound is the weighted distance from
   the demand to its bounding box clipped to the box, plus its smallest penalty; nearer
   child first; a node is pruned once its bound exceeds the best objective + the tie
-  tolerance, so every tie is visited and the spec tie-break is applied to them. With no
+  tolerance, so every tie is visited and the tie-break (model.py) is applied to them. With no
   candidate in the box, the same search without the box (degraded). The tree does not
   depend on the demand's octant (one tree, not 8 sorted tables), and the interim model of
   an asynchronous reconfiguration (forbidden jets, shifted bias) is the same search.
@@ -25,8 +25,9 @@ Method (exact by construction, see tests/test_allocation_*.py):
 Non-finite demand: ``solve`` returns u = 0 (all usable jets off), sets ``rejected`` and
 leaves ``objective`` = NaN; it never raises in the cycle.
 
-One job in one file (~600 lines): the query kernels and the class that switches the tables
-they scan change together (the interim model of an asynchronous reconfiguration lives in both).
+Here: the ``Allocator`` (its parameters, the cache of configurations' tables, the switch
+between them, and the interim model while a new configuration's tables are being built);
+the query kernels it calls are in fsw/allocation/query.py.
 """
 from __future__ import annotations
 
@@ -35,20 +36,17 @@ import weakref
 from collections import OrderedDict
 
 import numpy as np
-from numba import njit
 
 from fsw.health import FAILED_OFF, JetHealth
 from fsw.params import Param
 
 from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE, effective_model, spill_of, validate_problem
 from .rebuild import Rebuilder
-from .tables import BLOCK, Tables, Workspace, build_tables
+from .tables import Tables, Workspace, build_tables
+from .query import (STATUS_DEGRADED, STATUS_REJECTED, TREE_STACK, ZERO3, solve_kernel, solve_scan_kernel,
+                    solve_tree_kernel)
 
 CACHE_MAX_CONFIGS = 16     # health configurations whose tables are kept
-STATUS_OK, STATUS_DEGRADED, STATUS_REJECTED = 0, 1, 2
-ZERO3 = np.zeros(N_AXES)
-TREE_STACK = 128          # >= 2 x the tree's depth + 2 (depth <= 16 for 2^18 candidates)
-
 
 PARAMS: list[Param] = [
     Param("allocator.w_roll", 0.0, 1e3, "-", "weight of the roll-torque error in the objective"),
@@ -63,265 +61,6 @@ PARAMS: list[Param] = [
           "1: allocate with the FDIR jet health; 0: assume every jet nominal (paper fig. 5)",
           integer=True),
 ]
-
-
-@njit(cache=True)
-def _in_box(X, j, hi0, hi1, hi2):
-    # the lower bounds x_i >= -tol_box hold for every member of an octant by construction
-    # bitwise & (not `and`): one well-predicted branch instead of three unpredictable ones
-    return (X[j, 0] <= hi0) & (X[j, 1] <= hi1) & (X[j, 2] <= hi2)
-
-
-@njit(cache=True)
-def _write_answer(r, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out):
-    tau_out[0] = cand_tau[r, 0] + delta[0]
-    tau_out[1] = cand_tau[r, 1] + delta[1]
-    tau_out[2] = cand_tau[r, 2] + delta[2]
-    obj_out[0] = (w[0] * abs(d0 - tau_out[0]) + w[1] * abs(d1 - tau_out[1])
-                  + w[2] * abs(d2 - tau_out[2]) + cand_pen[r])
-    pat = cand_pat[r]
-    for k in range(u_out.shape[0]):
-        u_out[k] = (pat >> k) & 1
-
-
-@njit(cache=True)
-def _reject(u_out, obj_out):
-    for k in range(u_out.shape[0]):
-        u_out[k] = 0
-    obj_out[0] = np.nan
-    return 2
-
-
-@njit(cache=True)
-def _tie_break(scratch, lim, cand_pen, cand_pat, tol_pen):
-    """Of the candidates whose objective (scratch) is at most lim: the smallest penalty
-    (within tol_pen), then the smallest bit pattern; its index."""
-    m = cand_pen.shape[0]
-    min_pen = np.inf
-    for r in range(m):
-        if scratch[r] <= lim and cand_pen[r] < min_pen:
-            min_pen = cand_pen[r]
-    chosen = -1
-    for r in range(m):
-        if scratch[r] <= lim and cand_pen[r] <= min_pen + tol_pen:
-            if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
-                chosen = r
-    return chosen
-
-
-@njit(cache=True)
-def _solve_kernel(tau_d, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch,
-                  forbid, tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
-    """One allocation over the candidates whose pattern has no bit of ``forbid`` (0: all).
-    Writes u_out (n jets), tau_out (3,), obj_out[0]; returns STATUS_OK / STATUS_DEGRADED /
-    STATUS_REJECTED. No allocation."""
-    d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
-    if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
-        return _reject(u_out, obj_out)
-    o = 0
-    if d0 < 0.0:
-        o |= 1
-    if d1 < 0.0:
-        o |= 2
-    if d2 < 0.0:
-        o |= 4
-    hi0 = abs(d0) + tol_box
-    hi1 = abs(d1) + tol_box
-    hi2 = abs(d2) + tol_box
-    tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
-    first, stop = start[o], start[o + 1]
-    best = -1
-    # first allowed candidate inside the sign box = max score; skip blocks whose
-    # component-wise minimum already leaves the box
-    for blk in range(bstart[o], bstart[o + 1]):
-        if (bmin[blk, 0] > hi0) | (bmin[blk, 1] > hi1) | (bmin[blk, 2] > hi2):
-            continue
-        j0 = first + (blk - bstart[o]) * BLOCK
-        for j in range(j0, min(j0 + BLOCK, stop)):
-            if _in_box(X, j, hi0, hi1, hi2) and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0):
-                best = j
-                break
-        if best >= 0:
-            break
-    status = 0
-    chosen = -1
-    if best >= 0:
-        lim = S[best] - tol
-        end = best + 1
-        while end < stop and S[end] >= lim:
-            end += 1
-        min_pen = P[best]
-        for j in range(best + 1, end):    # score ties: smallest penalty ...
-            if (P[j] < min_pen and _in_box(X, j, hi0, hi1, hi2)
-                    and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0)):
-                min_pen = P[j]
-        for j in range(best, end):        # ... then smallest bit pattern
-            if (P[j] <= min_pen + tol_pen and _in_box(X, j, hi0, hi1, hi2)
-                    and (forbid == 0 or (cand_pat[R[j]] & forbid) == 0)):
-                r = R[j]
-                if chosen < 0 or cand_pat[r] < cand_pat[chosen]:
-                    chosen = r
-    else:                                 # empty sign box: unconstrained exhaustive scan
-        status = 1
-        m = cand_pen.shape[0]
-        best_obj = np.inf
-        for r in range(m):
-            if forbid != 0 and (cand_pat[r] & forbid) != 0:
-                scratch[r] = np.inf
-                continue
-            v = (w[0] * abs(d0 - cand_tau[r, 0]) + w[1] * abs(d1 - cand_tau[r, 1])
-                 + w[2] * abs(d2 - cand_tau[r, 2]) + cand_pen[r])
-            scratch[r] = v
-            if v < best_obj:
-                best_obj = v
-        chosen = _tie_break(scratch, best_obj + tol, cand_pen, cand_pat, tol_pen)
-    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, ZERO3, u_out, tau_out, obj_out)
-    return status
-
-
-@njit(cache=True)
-def _node_bound(k, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2):
-    """A lower bound of the objective over the candidates under tree node k whose torque
-    (+ delta) lies in the box [lo, hi]; inf if none can. Rounding is monotone, so the bound
-    never exceeds an objective computed as in the leaves."""
-    a0, b0 = max(nlo[k, 0] + delta[0], lo0), min(nhi[k, 0] + delta[0], hi0)
-    a1, b1 = max(nlo[k, 1] + delta[1], lo1), min(nhi[k, 1] + delta[1], hi1)
-    a2, b2 = max(nlo[k, 2] + delta[2], lo2), min(nhi[k, 2] + delta[2], hi2)
-    if (a0 > b0) | (a1 > b1) | (a2 > b2):
-        return np.inf
-    e0 = a0 - d0 if d0 < a0 else (d0 - b0 if d0 > b0 else 0.0)
-    e1 = a1 - d1 if d1 < a1 else (d1 - b1 if d1 > b1 else 0.0)
-    e2 = a2 - d2 if d2 < a2 else (d2 - b2 if d2 > b2 else 0.0)
-    return w[0] * e0 + w[1] * e1 + w[2] * e2 + nminpen[k]
-
-
-@njit(cache=True)
-def _solve_tree_kernel(tau_d, w, spill, nlo, nhi, nminpen, nstart, nend, n_internal, cand_tau,
-                       cand_pen, cand_pat, ties, tie_obj, forbid, delta, tol_box, tol_tie, tie_rel,
-                       tol_pen, stack_k, stack_lb, u_out, tau_out, obj_out):
-    """One allocation in the spill box over the candidates with no bit of ``forbid`` whose
-    torque is cand_tau + delta (module docstring, spill box): depth-first branch and bound
-    over the candidates' tree, nearer child first, a node pruned when its bound exceeds the best
-    objective found + the tie tolerance; every candidate within that tolerance is kept
-    (ties, tie_obj: work buffers of n rows) for the spec tie-break. With no candidate in the
-    box, the same search without it (degraded). Same outputs as _solve_kernel; stack_k,
-    stack_lb: work buffers of >= 2 x tree depth + 2 entries. No allocation."""
-    d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
-    if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
-        return _reject(u_out, obj_out)
-    tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
-    status = 0
-    best = np.inf
-    nt = 0
-    for attempt in range(2):              # 0: inside the box; 1: anywhere (degraded)
-        if attempt == 0:
-            lo0, hi0 = min(d0, 0.0) - spill[0] - tol_box, max(d0, 0.0) + spill[0] + tol_box
-            lo1, hi1 = min(d1, 0.0) - spill[1] - tol_box, max(d1, 0.0) + spill[1] + tol_box
-            lo2, hi2 = min(d2, 0.0) - spill[2] - tol_box, max(d2, 0.0) + spill[2] + tol_box
-        else:
-            status = 1
-            lo0 = lo1 = lo2 = -np.inf
-            hi0 = hi1 = hi2 = np.inf
-        best = np.inf
-        nt = 0
-        sp = 0
-        lb = _node_bound(0, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2)
-        if lb < np.inf:
-            stack_k[0] = 0
-            stack_lb[0] = lb
-            sp = 1
-        while sp > 0:
-            sp -= 1
-            if stack_lb[sp] > best + tol:
-                continue
-            k = stack_k[sp]
-            if k >= n_internal:
-                for j in range(nstart[k], nend[k]):
-                    if forbid != 0 and (cand_pat[j] & forbid) != 0:
-                        continue
-                    t0 = cand_tau[j, 0] + delta[0]
-                    t1 = cand_tau[j, 1] + delta[1]
-                    t2 = cand_tau[j, 2] + delta[2]
-                    if not ((lo0 <= t0) & (t0 <= hi0) & (lo1 <= t1) & (t1 <= hi1)
-                            & (lo2 <= t2) & (t2 <= hi2)):
-                        continue
-                    v = w[0] * abs(d0 - t0) + w[1] * abs(d1 - t1) + w[2] * abs(d2 - t2) + cand_pen[j]
-                    if v <= best + tol:
-                        ties[nt] = j
-                        tie_obj[nt] = v
-                        nt += 1
-                        if v < best:
-                            best = v
-                continue
-            c1 = 2 * k + 1
-            l1 = _node_bound(c1, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2)
-            l2 = _node_bound(c1 + 1, nlo, nhi, nminpen, d0, d1, d2, w, delta, lo0, hi0, lo1, hi1, lo2, hi2)
-            near, far, l_near, l_far = (c1, c1 + 1, l1, l2) if l1 <= l2 else (c1 + 1, c1, l2, l1)
-            lim = best + tol
-            if l_far <= lim:
-                stack_k[sp] = far
-                stack_lb[sp] = l_far
-                sp += 1
-            if l_near <= lim:
-                stack_k[sp] = near
-                stack_lb[sp] = l_near
-                sp += 1
-        if nt > 0:
-            break
-    lim = best + tol                      # ties: smallest penalty, then smallest bit pattern
-    min_pen = np.inf
-    for q in range(nt):
-        if tie_obj[q] <= lim and cand_pen[ties[q]] < min_pen:
-            min_pen = cand_pen[ties[q]]
-    chosen = -1
-    for q in range(nt):
-        j = ties[q]
-        if tie_obj[q] <= lim and cand_pen[j] <= min_pen + tol_pen and (chosen < 0 or cand_pat[j] < cand_pat[chosen]):
-            chosen = j
-    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out)
-    return status
-
-
-@njit(cache=True)
-def _solve_scan_kernel(tau_d, w, spill, cand_tau, cand_pen, cand_pat, scratch, forbid, delta,
-                       tol_box, tol_tie, tie_rel, tol_pen, u_out, tau_out, obj_out):
-    """One allocation over the candidates with no bit of ``forbid``, whose torque is
-    cand_tau + delta (delta: a stuck-on bias the tables were not built with, else 0):
-    exhaustive scan with the box of allowance ``spill`` (3,), else without it (degraded).
-    Same tie-break and outputs as _solve_kernel."""
-    d0, d1, d2 = tau_d[0], tau_d[1], tau_d[2]
-    if not (np.isfinite(d0) and np.isfinite(d1) and np.isfinite(d2)):
-        return _reject(u_out, obj_out)
-    lo0, hi0 = min(d0, 0.0) - spill[0] - tol_box, max(d0, 0.0) + spill[0] + tol_box
-    lo1, hi1 = min(d1, 0.0) - spill[1] - tol_box, max(d1, 0.0) + spill[1] + tol_box
-    lo2, hi2 = min(d2, 0.0) - spill[2] - tol_box, max(d2, 0.0) + spill[2] + tol_box
-    tol = tol_tie + tie_rel * (w[0] * abs(d0) + w[1] * abs(d1) + w[2] * abs(d2))
-    m = cand_pen.shape[0]
-    status = 0
-    for attempt in range(2):              # 0: inside the box; 1: anywhere (degraded)
-        best_obj = np.inf
-        for r in range(m):
-            scratch[r] = np.inf
-            if (cand_pat[r] & forbid) != 0:
-                continue
-            t0 = cand_tau[r, 0] + delta[0]
-            t1 = cand_tau[r, 1] + delta[1]
-            t2 = cand_tau[r, 2] + delta[2]
-            if attempt == 0 and not ((lo0 <= t0) & (t0 <= hi0) & (lo1 <= t1) & (t1 <= hi1)
-                                     & (lo2 <= t2) & (t2 <= hi2)):
-                continue
-            v = w[0] * abs(d0 - t0) + w[1] * abs(d1 - t1) + w[2] * abs(d2 - t2) + cand_pen[r]
-            scratch[r] = v
-            if v < best_obj:
-                best_obj = v
-        if best_obj < np.inf:
-            break
-        status = 1
-    chosen = _tie_break(scratch, best_obj + tol, cand_pen, cand_pat, tol_pen)
-    _write_answer(chosen, d0, d1, d2, w, cand_tau, cand_pen, cand_pat, delta, u_out, tau_out, obj_out)
-    return status
-
-
 
 
 class Allocator:
@@ -339,10 +78,10 @@ class Allocator:
       (``reconfig_pending`` is True, ``interim`` True for the answers meanwhile), ``solve``
       answers with the previous tables under a SAFE interim model: every jet whose treatment
       changed (newly failed, inhibited, stuck, degraded with another eta, or back from
-      stuck) is kept off, and the stuck-on bias is the new one (``_solve_scan_kernel``
+      stuck) is kept off, and the stuck-on bias is the new one (``solve_scan_kernel``
       when it differs; the spill box's tree search takes both). The interim answer never fires a jet the new health forbids, its
       tau_B and objective are those of the new model for the returned u, and it is the
-      exact optimum (spec tie-break, sign box, degraded answer) over the previous
+      exact optimum (tie-break of model.py, sign box, degraded answer) over the previous
       configuration's candidates that avoid the changed jets. It is NOT necessarily the
       optimum of the new model: combinations that need a changed jet, or a twin of a changed
       jet (the previous tables keep one representative pattern per torque), are missing, and
@@ -418,15 +157,15 @@ class Allocator:
             t = build_tables(usable, cols, ZERO3, c, self.w, spill, self._ws)
             for d in (np.array([100.0, -50.0, 0.0]), np.array([np.nan, 0.0, 0.0]), np.full(N_AXES, 1e9)):
                 if t.spill_box:
-                    _solve_tree_kernel(d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
-                                       t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch, 1, ZERO3,
-                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, self._stack_k, self._stack_lb,
-                                       u, tau, obj)
+                    solve_tree_kernel(d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
+                                      t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch, 1, ZERO3,
+                                      TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, self._stack_k, self._stack_lb,
+                                      u, tau, obj)
                 else:
-                    _solve_kernel(d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen,
-                                  t.pat, t.scratch, 1, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u, tau, obj)
-                    _solve_scan_kernel(d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch, 1, ZERO3,
-                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u, tau, obj)
+                    solve_kernel(d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen,
+                                 t.pat, t.scratch, 1, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u, tau, obj)
+                    solve_scan_kernel(d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch, 1, ZERO3,
+                                      TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u, tau, obj)
 
     # -- configuration (not in the cycle's hot path)
     def set_params(self, params: dict[str, float]) -> None:
@@ -533,10 +272,8 @@ class Allocator:
         """Move finished background builds of this parameter generation into the stores."""
         if self._rebuilder is None:
             return
-        done = self._rebuilder.done
-        for key in list(done):
-            t = done.pop(key, None)
-            if t is None or isinstance(t, Exception) or key[0] != self._gen:
+        for key, t in self._rebuilder.finished():
+            if isinstance(t, Exception) or key[0] != self._gen:
                 continue
             if key in self._prebuild_keys:
                 self._prebuilt[key] = t
@@ -607,7 +344,7 @@ class Allocator:
         self._rebuilder.submit(job)
 
     def _try_switch(self) -> bool:
-        t = self._rebuilder.done.pop(self._target_key, None) if self._rebuilder is not None else None
+        t = self._rebuilder.take(self._target_key) if self._rebuilder is not None else None
         if t is None:
             return False
         if isinstance(t, Exception):       # never expected; build it here rather than lose it
@@ -631,21 +368,21 @@ class Allocator:
         t = self._tables
         self.interim = self.reconfig_pending
         if t.spill_box:
-            status = _solve_tree_kernel(tau_d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
-                                        t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch,
-                                        self._forbid, self._delta if self._shifted else ZERO3,
-                                        TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                                        self._stack_k, self._stack_lb, self.u, self.tau_B, self._obj)
+            status = solve_tree_kernel(tau_d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
+                                       t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch,
+                                       self._forbid, self._delta if self._shifted else ZERO3,
+                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                       self._stack_k, self._stack_lb, self.u, self.tau_B, self._obj)
         elif self.reconfig_pending and self._shifted:
-            status = _solve_scan_kernel(tau_d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch,
-                                        self._forbid, self._delta,
-                                        TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                                        self.u, self.tau_B, self._obj)
+            status = solve_scan_kernel(tau_d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch,
+                                       self._forbid, self._delta,
+                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                       self.u, self.tau_B, self._obj)
         else:
-            status = _solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
-                                   t.tau, t.pen, t.pat, t.scratch,
-                                   self._forbid, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
-                                   self.u, self.tau_B, self._obj)
+            status = solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
+                                  t.tau, t.pen, t.pat, t.scratch,
+                                  self._forbid, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                  self.u, self.tau_B, self._obj)
         if status == STATUS_REJECTED:
             if self.interim:
                 np.add(t.bias, self._delta, out=self.tau_B)

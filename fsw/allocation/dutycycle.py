@@ -39,6 +39,8 @@ asynchronous reconfiguration is pending (real time: the interim model) neither.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .model import N_AXES
@@ -68,6 +70,7 @@ class DutyCycleRealiser:
         self.acc = np.zeros(n)                    # sigma-delta accumulators
         self.modulated = False                    # the last answer came from the modulator
         self.modulated_cycles = 0
+        self.solve_ns = 0                         # compute time of the last ``solve`` [ns]
         self._uf = np.zeros(n)
         self._rhs = np.zeros(N_AXES)
         self._rows = np.arange(N_AXES, dtype=np.int32)
@@ -138,7 +141,13 @@ class DutyCycleRealiser:
     def solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
         """The jets array to fly for demand ``u_B`` [N m]: the allocator's exact answer, or while
         the bank axis is short the sigma-delta of the LP's duty cycles. ``tau_B`` is the
-        modelled torque of the answer flown."""
+        modelled torque of the answer flown; ``solve_ns`` the time this call took."""
+        t0 = time.perf_counter_ns()
+        u = self._solve(allocator, u_B)
+        self.solve_ns = time.perf_counter_ns() - t0
+        return u
+
+    def _solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
         jets = allocator.solve(u_B)
         self.demand_B[:] = u_B
         if (allocator.rejected or allocator.reconfig_pending or not allocator._tables.spill_box

@@ -1,4 +1,4 @@
-"""The allocation problem (spec 20-fsw.md "Fault-tolerant discrete control allocation";
+"""The allocation problem (docs/fsw/index.md "Fault-tolerant discrete control allocation";
 paper section 3): the model a jet-health configuration leaves, and the problem's checks.
 
 Problem, per control cycle, for demand tau_d (3,) [N m]:
@@ -53,7 +53,7 @@ def spill_of(T: np.ndarray, spill_jets: float) -> np.ndarray:
 
 def effective_model(T: np.ndarray, thrust: np.ndarray, health: JetHealth | None,
                     penalty_per_N: float, fault_tolerance: bool = True):
-    """The allocation model for a health configuration (spec 20-fsw.md):
+    """The allocation model for a health configuration (docs/fsw/index.md):
     (usable bool[n], columns eta_k T_k (3, n) with zeros for unusable jets,
     stuck-on bias b (3,), per-jet penalty c (n,)). Health is ignored when fault
     tolerance is off or health is None."""

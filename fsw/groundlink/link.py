@@ -39,13 +39,16 @@ events and answers to requests; answers (parameter lists included) take at most
 
 Why in the control thread and not a receive thread: a Python thread that verifies
 datagrams holds the GIL, and the control loop then waits for it up to the interpreter's
-switch interval (5 ms) at every release (measured: release lateness p50 6 ms with such a
-thread, 0.08 ms without); the budget bounds the cost in the same thread, between cycles.
+switch interval (5 ms) at every release; the budget bounds the cost in the same thread,
+between cycles.
+
+Here: the socket, the tick, and the judgement and answer of each received message;
+beside it, senders.py (the peers and the read budgets kept per address) and streams.py
+(the telemetry streams and what each says).
 """
 from __future__ import annotations
 
 import logging
-import math
 import socket
 import time
 from collections import OrderedDict, deque
@@ -53,7 +56,9 @@ from collections.abc import Callable, Mapping
 
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
-from interfaces.mavlink.signing import Reject, Rejection, SignedLink, SigningKey, stream_state_path
+from interfaces.mavlink.signing.keys import SigningKey, stream_state_path
+from interfaces.mavlink.signing.link import SignedLink
+from interfaces.mavlink.signing.verify import Reject, Rejection
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, Severity, parse_udp
 
 from . import metadata, policy
@@ -61,8 +66,10 @@ from . import telemetry as tm
 from .commands import CommandTranslator, InjectFn, ParamProtocol
 from . import ftp
 from .ftp import FtpServer
+from .senders import Peers, ReadBudgets
 from .services import COMMANDS as LINK_COMMANDS
 from .services import LinkServices
+from .streams import ATTITUDE_GROUP, MAX_RATE_HZ, POSITION_GROUP, SINGLE_STREAMS, TelemetryStreams, check_rates
 
 log = logging.getLogger(__name__)
 
@@ -70,36 +77,7 @@ SYSTEM_ID = 1
 COMPONENT_ID = mav.MAV_COMP_ID_AUTOPILOT1        # 1
 DEFAULT_BIND = DEFAULT_VEHICLE
 
-# Telemetry streams and their default rates [Hz]; 0 disables a stream. The achieved rate
-# is at most the rate at which tick() is called.
-DEFAULT_RATES_HZ: dict[str, float] = {
-    "HEARTBEAT": 1.0,
-    "SYS_STATUS": 1.0,
-    "ATTITUDE": 10.0,
-    "ATTITUDE_QUATERNION": 10.0,
-    "ATTITUDE_TARGET": 10.0,
-    "ACTUATOR_OUTPUT_STATUS": 10.0,
-    "NAMED_VALUE_FLOAT": 5.0,
-    "ELLIPSLED_ENTRY_STATE": 5.0,
-    "ELLIPSLED_JET_STATUS": 5.0,
-    "ELLIPSLED_CONTROL_STATUS": 5.0,
-    "ELLIPSLED_LOOP_TIMING": 1.0,
-    "ELLIPSLED_GUIDANCE_STATUS": 2.0,        # guidance re-predicts at 0.5-1 Hz; range to go moves ~7 km/s
-    "GLOBAL_POSITION_INT": 5.0,
-    "VFR_HUD": 5.0,
-    "ALTITUDE": 1.0,
-    "SYSTEM_TIME": 1.0,
-    "LOCAL_POSITION_NED": 5.0,
-    "CURRENT_MODE": 0.5,                     # and at each mode change
-}
-ATTITUDE_GROUP = ("ATTITUDE", "ATTITUDE_QUATERNION", "ATTITUDE_TARGET", "NAMED_VALUE_FLOAT", "ELLIPSLED_ENTRY_STATE")
-POSITION_GROUP = ("GLOBAL_POSITION_INT", "VFR_HUD", "ALTITUDE")
-# streams of one message type each, built one by one (the groups share their geometry)
-SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STATUS", "ELLIPSLED_JET_STATUS",
-                  "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS",
-                  "LOCAL_POSITION_NED", "CURRENT_MODE")
-MAX_RATE_HZ = 100.0
-DUE_SLACK = 0.05         # a stream may go out up to 5 % of its period early
+DUE_SLACK = 0.05                 # a stream may go out up to 5 % of its period early
 
 # What a ground station may send unsigned, and what must be signed: the one table is
 # policy.py (read-only messages, commands and FTP opcodes; everything else signed only).
@@ -112,11 +90,8 @@ _UNTARGETED = frozenset({mav.MAVLINK_MSG_ID_TIMESYNC})
 COMMAND_CLASS = policy.COMMAND_CLASS
 REFUSAL_EVENT = "link_refused"   # the one event code of every refusal on the link ...
 REFUSAL_EVENT_INTERVAL_S = 60.0  # ... told at once, then at most once in this interval (a summary)
-FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends (~1.5 ms of packing)
+FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends
 EVENT_SHARE = 16                 # frames a tick no answer to a request can take from the events
-READ_RATE_HZ = 10.0              # read-only requests and answer frames per second and unsigned sender ...
-READ_BURST = 30.0                # ... after a burst of this many (a ground station connecting)
-MAX_READ_SENDERS = 64            # unsigned senders whose read budget is remembered
 MAX_PARAM_LISTS = 4              # parameter lists queued at once (one per requester)
 
 
@@ -154,10 +129,8 @@ class GroundLink:
         self.wall_clock = wall_clock
         self.max_rx_per_tick = int(max_rx_per_tick)
         self.max_tx_per_tick = int(max_tx_per_tick)
-        self.peer_timeout_s = float(peer_timeout_s)
         self.refusal_event_interval_s = float(refusal_event_interval_s)
-        self.max_peers = int(max_peers)
-        self.rates_hz = self._check_rates(rates)
+        self.rates_hz = check_rates(rates)
         # no stream can go out more often than the link ticks (RG2): the fastest rate a
         # ground station may ask for
         self.max_rate_hz = min(MAX_RATE_HZ, 1.0 / (fsw.dt_s * fsw.params["executive.rg2_divisor"]))
@@ -182,24 +155,19 @@ class GroundLink:
                                      own_sysid=SYSTEM_ID)
         self._drops_reported = 0
 
-        self.peers: dict[tuple[str, int], float] = {}                     # addr -> last signed command
+        self.peers = Peers(peer_timeout_s, max_peers)
         self._param_lists: OrderedDict[tuple[str, int], tuple[deque[str], bool]] = OrderedDict()  # requester -> (names left, signed)
-        self._read_budget: OrderedDict[tuple[str, int], list[float]] = OrderedDict()  # sender -> [tokens, t]
+        self.reads = ReadBudgets()                                        # unsigned senders' read budgets
         self._reply_budget = self.max_tx_per_tick - EVENT_SHARE          # this tick's answers left
         self._next_due = {name: 0.0 for name in self.rates_hz}
-        self._sensors = None                           # latest sensor frame given to tick()
+        self.streams = TelemetryStreams(self)
         self.files = metadata.build(fsw.registry, fsw.scenario.vehicle.name)
         self.ftp = FtpServer(self.files)
         self._ftp_budget = FTP_REPLIES_PER_TICK
-        self._origin = None                            # LOCAL_POSITION_NED's, at the first navigation fix
-        self._mode_sent = None                         # the Mode CURRENT_MODE last told
         self.services = LinkServices(self, {mav.MAVLINK_MSG_ID_COMPONENT_METADATA: lambda p: [self.component_metadata()],
-                                            mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self._origin_message})
+                                            mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self.streams.origin_message})
         self._event_index = 0                          # the start-up events go out too
         self._pack_only = False                        # warm_up packs without sending
-        self._loop_timing: dict[int, tuple] = {}
-        self._alloc_ns: deque[int] = deque(maxlen=512)
-        self._alloc_degraded = 0
         self.ground_heartbeat_t: float | None = None                     # clock() of last GCS heartbeat
         self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
         self.stats = {"rx_datagrams": 0, "rx_bytes": 0, "rx_messages": 0, "tx_frames": 0,
@@ -211,18 +179,6 @@ class GroundLink:
         self.send_ns_peak = 0
 
     # -------------------------------------------------------------- configuration
-    @staticmethod
-    def _check_rates(rates: Mapping[str, float] | None) -> dict[str, float]:
-        out = dict(DEFAULT_RATES_HZ)
-        for name, hz in (rates or {}).items():
-            if name not in DEFAULT_RATES_HZ:
-                raise ValueError(f"rates: unknown stream {name!r} (known: {', '.join(DEFAULT_RATES_HZ)})")
-            if isinstance(hz, bool) or not isinstance(hz, (int, float)) or not math.isfinite(hz) \
-                    or not 0.0 <= hz <= MAX_RATE_HZ:
-                raise ValueError(f"rates.{name}: must be a number in [0, {MAX_RATE_HZ:g}] Hz, got {hz!r}")
-            out[name] = float(hz)
-        return out
-
     @property
     def inject(self) -> InjectFn | None:
         return self.commands_in.inject
@@ -254,8 +210,8 @@ class GroundLink:
                         compute_max_us: float, cycle_slips: int) -> None:
         """Latest timing statistics of one rate group (from the executive), sent as
         ELLIPSLED_LOOP_TIMING (one message per rate group at that stream's rate)."""
-        self._loop_timing[int(rate_group)] = (jitter_p50_us, jitter_p99_us, jitter_max_us, compute_p50_us,
-                                              compute_p99_us, compute_max_us, int(cycle_slips))
+        self.streams.loop_timing[int(rate_group)] = (jitter_p50_us, jitter_p99_us, jitter_max_us, compute_p50_us,
+                                                     compute_p99_us, compute_max_us, int(cycle_slips))
 
     # -------------------------------------------------------------- the tick
     def tick(self, sensors=None, deadline_ns: int | None = None) -> None:
@@ -275,7 +231,7 @@ class GroundLink:
                 self.poll(budget)
             else:
                 self.stats["rx_deferred"] += 1
-            self._sample_allocator()
+            self.streams.sample_allocator()
             t_send = time.perf_counter_ns()
             self.send_due(sensors)
             sent_ns = time.perf_counter_ns() - t_send
@@ -291,8 +247,8 @@ class GroundLink:
         FlightSoftware that has flown a cycle — and send nothing: the first encode of each
         message type costs milliseconds, which would otherwise land in the first real-time
         cycles. Schedules, counters and the link's sequence numbers are left as they were."""
-        saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq, self._origin,
-                 self._mode_sent)
+        saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq, self.streams.origin,
+                 self.streams.mode_sent)
         self.fsw = spare_fsw
         self._pack_only = True
         try:
@@ -308,7 +264,8 @@ class GroundLink:
         except Exception:                       # a warm-up failure must not stop the FSW
             log.exception("ground link warm-up failed")
         finally:
-            self.fsw, self._next_due, self._event_index, self.link.signer.seq, self._origin, self._mode_sent = saved
+            (self.fsw, self._next_due, self._event_index, self.link.signer.seq, self.streams.origin,
+             self.streams.mode_sent) = saved
             self._pack_only = False
 
     def poll(self, budget_ns: int | None = None) -> int:
@@ -436,22 +393,8 @@ class GroundLink:
         return msg.target_system in (0, SYSTEM_ID) and msg.target_component in (0, COMPONENT_ID)
 
     def _take_read(self, addr) -> bool:
-        """One unit of ``addr``'s unsigned read budget (a token bucket: READ_RATE_HZ, burst
-        READ_BURST; the last MAX_READ_SENDERS senders remembered), if it has one."""
-        now = self.clock()
-        b = self._read_budget.get(addr)
-        if b is None:
-            if len(self._read_budget) >= MAX_READ_SENDERS:
-                self._read_budget.popitem(last=False)
-            b = self._read_budget[addr] = [READ_BURST, now]
-        else:
-            self._read_budget.move_to_end(addr)
-            b[0] = min(READ_BURST, b[0] + (now - b[1]) * READ_RATE_HZ)
-            b[1] = now
-        if b[0] >= 1.0:
-            b[0] -= 1.0
-            return True
-        return False
+        """One unit of ``addr``'s unsigned read budget (senders.ReadBudgets), if it has one."""
+        return self.reads.take(addr, self.clock())
 
     def _may_read(self, addr) -> bool:
         """One unsigned read-only request from ``addr`` within its budget; counted and told
@@ -495,16 +438,8 @@ class GroundLink:
                 return
 
     def _add_peer(self, addr) -> None:
-        now = self.clock()
-        if addr not in self.peers:
+        if self.peers.add(addr, self.clock()):
             self.stats["peers_added"] += 1
-        self.peers[addr] = now
-        for a, t in list(self.peers.items()):
-            if now - t > self.peer_timeout_s:
-                del self.peers[a]
-        while len(self.peers) > self.max_peers:
-            oldest = min(self.peers, key=self.peers.get)
-            del self.peers[oldest]
 
     def _refuse(self, code: str, text: str) -> None:
         self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", code, text[:tm.STATUSTEXT_LEN])
@@ -530,7 +465,7 @@ class GroundLink:
             budget = 1 + self._take_reads(addr, min(want, self._ftp_budget, self._reply_budget) - 1)
         replies = self.ftp.handle(msg.payload, budget, client=addr)
         if not signed and len(replies) < budget:     # what a short burst did not use goes back
-            self._read_budget[addr][0] += budget - max(1, len(replies))
+            self.reads.give_back(addr, budget - max(1, len(replies)))
         self._ftp_budget -= len(replies)
         for payload in replies:
             reply = mav.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(),
@@ -576,32 +511,17 @@ class GroundLink:
             self._send(reply, only=None if broadcast else addr)
 
     # -------------------------------------------------------------- send side
-    def _destinations(self, extra=None) -> list[tuple[str, int]]:
-        now = self.clock()
-        dest = [self.gcs]
-        for a, t in self.peers.items():
-            if now - t <= self.peer_timeout_s and a not in dest:
-                dest.append(a)
-        if extra is not None and extra not in dest:
-            dest.append(extra)
-        return dest
-
     def _send(self, msg, extra=None, only=None) -> None:
         frame = self.link.pack(msg)
         if self._pack_only:                     # warm_up: encode, send nothing
             return
-        for addr in ((only,) if only is not None else self._destinations(extra)):
+        for addr in ((only,) if only is not None else self.peers.destinations(self.gcs, self.clock(), extra)):
             try:
                 self.sock.sendto(frame, addr)
                 self.stats["tx_frames"] += 1
                 self.stats["tx_bytes"] += len(frame)
             except OSError:
                 self.stats["tx_errors"] += 1
-
-    def _sample_allocator(self) -> None:
-        self._alloc_ns.append(int(getattr(self.fsw, "alloc_ns", 0)))
-        if self.fsw.allocator.degraded:
-            self._alloc_degraded += 1
 
     def _due(self, name: str, now: float) -> bool:
         hz = self.rates_hz[name]
@@ -622,70 +542,21 @@ class GroundLink:
         return tm.system_status(self.fsw)
 
     def stream_messages(self, name: str) -> list:
-        """The messages of stream ``name`` now, outside its schedule (a one-shot request);
-        empty while what it reports does not exist yet (no navigation, no timing)."""
-        fsw = self.fsw
-        ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
-        if name in SINGLE_STREAMS:
-            return list(self._single(name, ms))
-        if not tm.nav_valid(fsw):
-            return []
-        C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
-        if name in ATTITUDE_GROUP:
-            return list(tm.attitude(fsw, ms, C_LN, tuple(n == name for n in ATTITUDE_GROUP)))
-        return list(tm.position(fsw, ms, C_LN, tuple(n == name for n in POSITION_GROUP)))
-
-    def _single(self, name: str, ms: int):
-        fsw = self.fsw
-        if name == "HEARTBEAT":
-            yield tm.heartbeat(fsw)
-        elif name == "SYS_STATUS":
-            yield tm.sys_status(fsw, self._loop_timing, self.rejections, self.stats["kernel_drops"],
-                                self.stats["refused_early"], self.link.counts[Reject.UNSIGNED],
-                                self.stats["reads_limited"])
-        elif name == "SYSTEM_TIME":
-            yield tm.system_time(fsw, self.wall_clock())
-        elif name == "ACTUATOR_OUTPUT_STATUS":
-            yield tm.actuator_output_status(fsw)
-        elif name == "ELLIPSLED_JET_STATUS":
-            yield tm.jet_status(fsw, ms, self._sensors)
-        elif name == "ELLIPSLED_CONTROL_STATUS":
-            yield tm.control_status(fsw, ms, self._alloc_ns, self._alloc_degraded)
-        elif name == "ELLIPSLED_LOOP_TIMING":
-            yield from tm.loop_timing(ms, self._loop_timing)
-        elif name == "ELLIPSLED_GUIDANCE_STATUS":
-            yield tm.guidance_status(fsw, ms)
-        elif name == "LOCAL_POSITION_NED":
-            origin = self._local_origin()
-            if origin is not None:
-                yield tm.local_position_ned(fsw, ms, origin)
-        elif name == "CURRENT_MODE":
-            self._mode_sent = fsw.modes.mode
-            yield tm.current_mode(fsw)
-
-    def _local_origin(self):
-        """LOCAL_POSITION_NED's origin (telemetry.local_origin), taken at the first navigation
-        fix; None before it."""
-        if self._origin is None and tm.nav_valid(self.fsw):
-            self._origin = tm.local_origin(self.fsw)
-        return self._origin
-
-    def _origin_message(self, p) -> list:
-        origin = self._local_origin()
-        return [] if origin is None else [tm.gps_global_origin(self.fsw, origin)]
+        """The messages of stream ``name`` now, outside its schedule (a one-shot request)."""
+        return self.streams.messages(name)
 
     def send_due(self, sensors=None) -> None:
         """Send every telemetry stream that is due, queued parameters and new events."""
         now = self.clock()
         fsw = self.fsw
-        self._sensors = sensors
+        self.streams.sensors = sensors
         self._ftp_budget = FTP_REPLIES_PER_TICK
         ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
-        if fsw.modes.mode != self._mode_sent and self.rates_hz["CURRENT_MODE"] > 0.0:
+        if fsw.modes.mode != self.streams.mode_sent and self.rates_hz["CURRENT_MODE"] > 0.0:
             self.schedule_now("CURRENT_MODE")                 # a mode change is told at once
         for name in SINGLE_STREAMS:
             if self._due(name, now):
-                for msg in self._single(name, ms):
+                for msg in self.streams.single(name, ms):
                     self._send(msg)
         if tm.nav_valid(fsw):
             want_att = tuple(self._due(n, now) for n in ATTITUDE_GROUP)

@@ -1,5 +1,5 @@
 """Guidance: the bank-angle reference the attitude chain tracks, and the entry guidance that
-commands it towards a deploy target (spec 20-fsw.md, spec 60-guidance.md). Import from
+commands it towards a deploy target (docs/fsw/index.md, docs/fsw/entry-guidance.md). Import from
 the module that does the job:
 
 - ``reference``: the scheduled bank profile (mode ``profile``) and the reference attitude

@@ -1,4 +1,4 @@
-"""The entry guidance's corrector (spec 60-guidance.md): from a planet-fixed state, the bank
+"""The entry guidance's corrector (docs/fsw/entry-guidance.md): from a planet-fixed state, the bank
 profile whose predicted deploy reaches the target.
 
 - ``bank_profile``: the one-parameter family it searches (the line in energy from phi_0 to

@@ -5,7 +5,7 @@ import math
 
 
 class LateralLogic:
-    """Bank sign, two rules (spec 60-guidance.md, lateral channel):
+    """Bank sign, two rules (docs/fsw/entry-guidance.md, lateral channel):
 
     - corridor: reverse when the heading error to the target leaves a corridor whose
       half-width narrows linearly with speed (dpsi_hi at v_hi, dpsi_lo at v_lo). Positive

@@ -1,4 +1,4 @@
-"""Numerical predictor-corrector entry guidance (spec 60-guidance.md), after P. Lu,
+"""Numerical predictor-corrector entry guidance (docs/fsw/entry-guidance.md), after P. Lu,
 "Entry Guidance: A Unified Method", JGCD 37(3), 2014 (FNPEG): ``EntryGuidance``, the
 guidance mode ``npc`` that drives the package's pieces (predictor, corrector, density
 estimator, lateral logic, bank shaper) from the rate groups, and the parameters they
@@ -7,14 +7,14 @@ take (``PARAMS``).
 from __future__ import annotations
 
 import math
-import threading
 from typing import NotRequired, TypedDict
 
 import numpy as np
 
-from common import atmosphere, rt
+from common import atmosphere
 from common.model import Scenario
 from common.events import EventLog, Severity
+from ..jobs import AWAITED, REALTIME, BackgroundJob
 from ..params import Param
 from .corrector import Correction, Corrector
 from .estimator import DensityEstimator
@@ -109,11 +109,8 @@ class EntryGuidance(Corrector):
         self.xr_keep_m = math.nan        # predicted deploy crossrange, sign kept [+ left]
         self.xr_rev_m = math.nan         # ... reversed at the next cycle
         self._t_cycle = math.nan         # release time of the last cycle
-        self.released = 0                # corrections handed to the worker
-        self.cycles = 0                  # ... whose answers were applied
+        self.cycles = 0                  # corrections whose answers were applied
         self.no_root = 0
-        self.overruns = 0
-        self.faults = 0                  # corrections that raised (command kept)
         self.calls = np.zeros(self.STATS, np.int32)
         self.compute_ns = np.zeros(self.STATS, np.int64)
         self.k_rho_hist = np.zeros(self.STATS)
@@ -123,11 +120,11 @@ class EntryGuidance(Corrector):
         self._frozen = False
         self.realtime = realtime
         self.apply_delay_s = apply_delay_s
-        self._due_t = math.inf          # when the running correction's answer is due
-        self._late = False
-        self._correct = self.solve      # the worker's job (tests wrap it to inject delays)
         self._warm_up()
-        self._start_worker()
+        # the correction off the loop: due apply_delay_s after its release, awaited then in
+        # lockstep and batch; a release while the previous one computes is skipped
+        self.job = BackgroundJob(self.solve, "npc-guidance", mode=REALTIME if realtime else AWAITED,
+                                 skip_while_busy=True, events=events, source="guidance", event_name="guidance")
 
     def _warm_up(self) -> None:
         """Compile (or load from numba's cache) every kernel with the argument types flight
@@ -165,26 +162,15 @@ class EntryGuidance(Corrector):
         self._t_cycle = t_s
         if self._frozen:
             return
-        if not self._claim_worker():        # real time only: lockstep has collected every answer by now
-            self.overruns += 1
-            self.events.emit(t_s, Severity.WARNING, "guidance", "guidance_overrun",
-                             "GUIDANCE CYCLE SKIPPED: PREVIOUS STILL RUNNING", rate_limited=True)
-            return
-        self._due_t = t_s + self.apply_delay_s - 1e-9
         sign = self.lateral.sign
         # a reversal decided at the next cycle, in effect laterally at its shaped transition's
         # mid-point (half-way the lateral lift has turned over)
         t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
         shp = self.shaper.state(self.bank_cmd)
-        self.released += 1
-        self._hand_over((x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp, t_s))
+        self.job.submit(x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp,
+                        tag=sign, t_s=t_s, due_t=t_s + self.apply_delay_s - 1e-9)
 
-    def _apply(self, res: Correction | CorrectionFault) -> None:
-        if "error" in res:              # the correction raised: the previous command stays
-            self.faults += 1
-            self.events.emit(res["t_s"], Severity.WARNING, "guidance", "guidance_fault",
-                             f"GUIDANCE FAULT: {res['error']}"[:50], rate_limited=True)
-            return
+    def _apply(self, res: Correction) -> None:
         i = self.cycles % self.STATS
         self.calls[i], self.compute_ns[i] = res["predictions"], res["compute_ns"]
         self.k_rho_hist[i], self.t_hist[i] = self.estimator.k_rho, res["t_s"]
@@ -219,19 +205,11 @@ class EntryGuidance(Corrector):
     def steer(self, nav) -> None:
         """Every control period: the density estimate, the last answer's bank profile at today's
         energy, the path limits, then the shaper."""
-        if nav.t_s >= self._due_t:
-            if not self.realtime:
-                self._wait_for_answer()
-            if not self._answer_ready() and not self._late:
-                self._late = True
-                self.overruns += 1
-                self.events.emit(nav.t_s, Severity.WARNING, "guidance", "guidance_overrun",
-                                 "GUIDANCE CYCLE OVERRUN: COMMAND KEPT", rate_limited=True)
-            res = self._take_answer()
-            if res is not None:
-                self._due_t = math.inf
-                self._late = False
-                self._apply(res)
+        ans = self.job.take(nav.t_s)
+        if ans is not None:
+            res = ans.value
+            res["t_s"], res["sign"] = ans.t_s, ans.tag
+            self._apply(res)
         self.estimator.update(self.dt_control_s, nav.accel_B, nav.C_BN, nav.vrel_N, nav.rho_kgpm3)
         V = nav.V_rel_mps
         r = nav.r_N
@@ -253,73 +231,20 @@ class EntryGuidance(Corrector):
                                           self.params["npc.hdot_gain"])
         self.shaper.command(self.lateral.sign * self.bank_cmd)
 
-    # ------------------------------------------------------------------ the worker thread
-    # The correction runs here, off the control loop. Only this section knows of the thread:
-    # cycle hands a job over, steer takes the answer, _take_params waits for an idle worker.
-    def _start_worker(self) -> None:
-        self._result = None             # the answer, until steer takes it
-        self._busy = False              # a job handed over and not yet answered
-        self._lock = threading.Lock()
-        self._go = threading.Event()    # a job is there (or the worker is to stop)
-        self._done = threading.Event()  # its answer is there
-        self._job = None
-        self._stop = False
-        self._thread = threading.Thread(target=self._worker, name="npc-guidance", daemon=True)
-        self._thread.start()
-
-    def _worker(self) -> None:
-        rt.run_below_loop()
-        while True:
-            self._go.wait()
-            self._go.clear()
-            if self._stop:
-                return
-            x, sign, k_rho, k_ld, t_flip, shp, t_s = self._job
-            try:
-                res = self._correct(x, sign, k_rho, k_ld, t_flip, shp)
-            except Exception as e:      # noqa: BLE001 -- a fault in the correction must not stall the FSW
-                res = CorrectionFault(error=f"{type(e).__name__}: {e}")
-            res["t_s"], res["sign"] = t_s, sign
-            with self._lock:
-                self._result = res
-                self._busy = False
-            self._done.set()
-
-    def _claim_worker(self) -> bool:
-        """True, and the worker reserved for a new job, when no correction is running."""
-        with self._lock:
-            busy = self._busy
-            if not busy:
-                self._busy = True
-        if not busy:
-            self._done.clear()
-        return not busy
-
-    def _hand_over(self, job: tuple) -> None:
-        self._job = job
-        self._go.set()
-
-    def _worker_idle(self) -> bool:
-        with self._lock:
-            return not self._busy
-
-    def _wait_for_answer(self) -> None:
-        self._done.wait()
-
-    def _answer_ready(self) -> bool:
-        return self._result is not None
-
-    def _take_answer(self) -> Correction | CorrectionFault | None:
-        if self._result is None:
-            return None
-        with self._lock:
-            res, self._result = self._result, None
-        return res
-
     def close(self) -> None:
-        self._stop = True
-        self._go.set()
-        self._thread.join(timeout=5.0)
+        self.job.close()
+
+    @property
+    def released(self) -> int:
+        return self.job.released
+
+    @property
+    def overruns(self) -> int:
+        return self.job.late + self.job.skipped
+
+    @property
+    def faults(self) -> int:
+        return self.job.faults
 
     # ------------------------------------------------------------------ parameters
     def set_param(self, name: str, value: float) -> None:
@@ -335,7 +260,7 @@ class EntryGuidance(Corrector):
     def _take_params(self, t_s: float) -> None:
         """Apply the pending sets where the construction put each value (the worker is idle:
         lockstep has its answer; in real time a cycle with a correction still running waits)."""
-        if not self._worker_idle():
+        if self.job.busy:
             return
         p, scn = self.params, self.scenario
         p.update(self._pending)

@@ -1,4 +1,4 @@
-"""The entry guidance's predictor (spec 60-guidance.md), in the FSW's own models only:
+"""The entry guidance's predictor (docs/fsw/entry-guidance.md), in the FSW's own models only:
 point-mass gravity, the planet file's atmosphere scaled by the in-flight density estimate,
 C_L and C_D at trim.
 
@@ -58,7 +58,7 @@ O_FLAG = 8                      # how it ended: REACHED, SKIPPED, GROUND or TIME
 N_O = 9
 REACHED, SKIPPED, GROUND, TIMEOUT = 0, 1, 2, 3
 T_PRED_MAX_S = 1500.0           # a prediction longer than this is a skip-out
-SUTTON_GRAVES_MARS = 1.9027e-4  # k of q = k sqrt(rho / R_n) V^3 [SI] (spec 60-guidance.md)
+SUTTON_GRAVES_MARS = 1.9027e-4  # k of q = k sqrt(rho / R_n) V^3 [SI] (docs/fsw/entry-guidance.md)
 
 
 @njit(cache=True, nogil=True)
@@ -88,7 +88,7 @@ def path_limited_bank(bank_mag_rad: float, h_m: float, hdot_mps: float, n_g: flo
 def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux, bank_fix=math.nan):
     """dx = f(x), x = [r (3), v (3)] in the rotating planet-fixed frame (v planet-relative):
     r'' = g - D w1 + L l - 2 Omega x v - Omega x (Omega x r); w1 = v/V, w2 = (v x r)/|.|,
-    w3 = w1 x w2, l = sin(bank) w2 - cos(bank) w3 (the plant's frames, spec 10-plant.md).
+    w3 = w1 x w2, l = sin(bank) w2 - cos(bank) w3 (the plant's frames, docs/plant.md).
     bank_fix: the signed bank flown instead of the law's (NaN: the law), for a shaped transition.
     aux: [h, V, load factor (g), heat rate (W/m^2), the law's bank magnitude (rad)]."""
     rx, ry, rz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
@@ -106,7 +106,7 @@ def _deriv(x, c, b0, bf, e0, ef, sign, dx, aux, bank_fix=math.nan):
     q = 0.5 * rho * V * V * c[C_S_M]
     D = q * c[C_CD]
     L = q * c[C_CL] * c[C_KLD]
-    # bank magnitude linear in energy e = mu/r - V^2/2 (spec 60-guidance.md, longitudinal),
+    # bank magnitude linear in energy e = mu/r - V^2/2 (docs/fsw/entry-guidance.md, longitudinal),
     # within the phi_0 bounds (a line from beyond one holds it: bank_profile), then the same
     # altitude-rate path-limit feedback the vehicle flies (EntryGuidance.steer):
     # without it the prediction misses the lift-up the feedback adds near peak load, and the

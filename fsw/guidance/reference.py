@@ -1,4 +1,4 @@
-"""Guidance: the smoothed bank-angle reference and the reference attitude (spec 20-fsw.md,
+"""Guidance: the smoothed bank-angle reference and the reference attitude (docs/fsw/index.md,
 "Guidance: the reference bank-angle trajectory").
 
 BankProfile turns the scenario's bank steps into a twice-differentiable reference that
@@ -217,7 +217,7 @@ class BankProfile:
 def wind_rate(r_N, v_N, vrel_N, C_WN, a_N, omega_planet, out_W):
     """Angular velocity of W relative to N, in W components [rad/s].
 
-    W: w1 = v_rel/|v_rel|, w2 = (v_rel x r)/|.|, w3 = w1 x w2 (spec 10-plant.md). With
+    W: w1 = v_rel/|v_rel|, w2 = (v_rel x r)/|.|, w3 = w1 x w2 (docs/plant.md). With
     d(v_rel)/dt = a - Omega x v (a = inertial acceleration, v = dr/dt) and h = v_rel x r:
     omega1 = hdot.w3/|h|, omega2 = -vrel_dot.w3/V, omega3 = vrel_dot.w2/V
     (from dw1/dt = omega x w1 and dw2/dt = omega x w2).

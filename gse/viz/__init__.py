@@ -1,4 +1,4 @@
-"""Rerun dashboards (spec 40-interfaces.md, "Rerun"): one logger for batch and live runs.
+"""Rerun dashboards (docs/interfaces/index.md, "Rerun"): one logger for batch and live runs.
 
 - ``RerunLogger`` (logger.py): buffers truth / FSW rows and sends them with
   ``send_columns`` every N steps or T seconds, on the ``sim_time`` and ``step`` timelines;

@@ -1,4 +1,4 @@
-"""The default Rerun blueprint shipped with every recording (spec 40-interfaces.md, Rerun).
+"""The default Rerun blueprint shipped with every recording (docs/interfaces/index.md, Rerun).
 
 Tabs, one per group of the spec's list, each a grid of views over the entities that
 gse/viz/logger.py writes (the entity names are the contract between the two files).

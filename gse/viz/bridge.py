@@ -1,6 +1,6 @@
 """The ``ellipsled viz`` process: Zenoh (sim/truth, fsw/state, fsw/events) -> RerunLogger.
 
-A thin shell (spec 40-interfaces.md, Rerun): it polls three subscribers, decodes each
+A thin shell (docs/interfaces/index.md, Rerun): it polls three subscribers, decodes each
 payload with the one codec (interfaces/codec.py) in ``decode_sample``, and hands the
 records to the RerunLogger. The FSW never calls Rerun.
 

@@ -3,7 +3,7 @@
 Plain code: no transport, no threads. Rows are copied into preallocated per-source
 buffers (``truth`` from the plant, ``fsw`` from the flight software) and sent column-wise
 when ``flush_rows`` rows are buffered or ``flush_s`` seconds have passed since the last
-send (spec 40-interfaces.md: batch with ``send_columns``, never one ``rr.log`` per signal
+send (docs/interfaces/index.md: batch with ``send_columns``, never one ``rr.log`` per signal
 per frame). Every entity carries the two timelines ``step`` (sequence, control step k) and
 ``sim_time`` (duration, simulated time).
 
@@ -40,7 +40,7 @@ from interfaces.vocabulary import HEALTH_NAMES, N_JETS, Mode, Severity
 DEG = 180.0 / math.pi
 TRUTH, FSW = "truth", "fsw"
 
-# Buffered fields per source: name -> trailing shape (names as ellipsled/history.py FIELDS,
+# Buffered fields per source: name -> trailing shape (names as ellipsled/sil/history.py FIELDS,
 # plus r_N [m] for the 3D view and the FSW loop-timing fields of the live FSW_STATE record).
 SOURCE_FIELDS: dict[str, dict[str, tuple[int, ...]]] = {
     TRUTH: {"bank_rad": (), "alpha_rad": (), "beta_rad": (), "omega_BN_B": (3,), "sigma_BN": (3,),

@@ -56,7 +56,7 @@ def history_blocks(history, planet: Planet) -> tuple[np.ndarray, np.ndarray, dic
 
 def record_history(history, events: list, path: Path, blueprint: bool = True, *,
                    planet: Planet | None = None, glyph: VehicleGlyph | None = None) -> Path:
-    """Write ``history`` (ellipsled/history.py History) and ``events`` (common.events.Event
+    """Write ``history`` (ellipsled/sil/history.py History) and ``events`` (common.events.Event
     list) to the .rrd ``path``; returns the path. The planet (default Mars) places the
     trajectory; ``glyph`` draws the vehicle (default data/vehicles/ellipsled.toml)."""
     path = Path(path)

@@ -1,5 +1,5 @@
 """Where a recording goes: 'viewer' | 'web' | 'file' | 'none' | 'auto', or '+'-joined
-combinations such as 'web+file' (spec 40-interfaces.md, Rerun sinks).
+combinations such as 'web+file' (docs/interfaces/index.md, Rerun sinks).
 
 - viewer: a gRPC server hosted here on 127.0.0.1 plus a native viewer process connected to
   it (needs a display: DISPLAY or WAYLAND_DISPLAY); without a display it falls back to a
@@ -46,7 +46,7 @@ MODES = ("viewer", "web", "file", "none", "auto")
 LOOPBACK = "127.0.0.1"
 SERVER_MEMORY_LIMIT = "256MiB"   # a full entry at 50 Hz is ~40 MB of chunks
 VIEWER_MEMORY_LIMIT = "25%"
-FINALISE_TIMEOUT_S = 60.0        # `rerun rrd optimize` of a full entry takes ~1.2 s here
+FINALISE_TIMEOUT_S = 60.0        # a wide margin over `rerun rrd optimize` of a full entry (seconds)
 
 
 def rerun_exe() -> str:

@@ -41,7 +41,8 @@ from collections import OrderedDict
 from collections.abc import Callable, Collection
 
 from . import framing
-from .signing import Reject, Rejection, SignedLink
+from .signing.link import SignedLink
+from .signing.verify import Reject, Rejection
 
 SO_MEMINFO = getattr(socket, "SO_MEMINFO", 55)       # Linux: the socket's memory counters
 SK_MEMINFO_DROPS = 8                                  # ... of which: datagrams dropped

@@ -64,7 +64,7 @@ def positive_float(s: str) -> float:
 # the options several commands share, with their ranges
 seed = int_range(0, SEED_MAX)
 # simulated seconds: an entry lasts minutes; the run's history must also fit the memory
-# budget (ellipsled.history.check_budget, checked once the scenario's step is known)
+# budget (history.budget_refusal, checked once the scenario's step is known)
 MAX_DURATION_S = 86_400.0
 duration_s = float_range(0.0, MAX_DURATION_S, lo_open=True)
 timeout_s = float_range(0.0, 3600.0, lo_open=True)

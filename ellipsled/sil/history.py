@@ -1,8 +1,9 @@
 """Run history: preallocated per-control-step arrays shared by the batch runner and the SIL.
 
-One row per control step k. The batch runner fills it in-process; the SIL launcher fills
-it from the truth and FSW-state records the processes publish. Figures of merit
-(ellipsled/metrics.py) and plots read only this, so batch and SIL are judged alike.
+One row per control step k. The batch runner fills it in-process; in the SIL each process
+fills its half (sim_history.npz, fsw_history.npz) and the launcher merges them on k.
+Figures of merit (ellipsled/metrics.py) and plots read only this, so batch and SIL are
+judged alike.
 """
 from __future__ import annotations
 
@@ -38,7 +39,7 @@ _DTYPES = {"k": np.int64, "guid_cycles": np.int64, "guid_flags": np.uint8, "jets
 
 # Every process preallocates its run's history (nothing grows while flying; the pages are
 # locked under --rt). A run whose history would not fit this budget is refused before it
-# starts (runlib.prepare) instead of failing, or swapping, mid-flight.
+# starts (sil.variant.prepare) instead of failing, or swapping, mid-flight.
 HISTORY_BUDGET_BYTES = 2 * 1024**3
 
 
@@ -63,7 +64,7 @@ def budget_refusal(duration_s: float, dt_s: float, budget_bytes: int | None = No
     longest = (budget_bytes // row_bytes() - 2) * dt_s
     return (f"{duration_s:g} s at a {dt_s:g}-s control step needs {need / 1e9:.3g} GB of run history per "
             f"process, beyond the memory budget of {budget_bytes / 1024**3:g} GiB "
-            f"(ellipsled.history.HISTORY_BUDGET_BYTES): at most {longest:.0f} s")
+            f"(ellipsled.sil.history.HISTORY_BUDGET_BYTES): at most {longest:.0f} s")
 
 
 class History:

@@ -1,0 +1,133 @@
+"""The ground link's telemetry streams: their names and default rates, and what each one
+says now (telemetry.py builds the messages; when a stream is due and where it goes is
+link.py's)."""
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+
+from interfaces.mavlink.signing.verify import Reject
+
+from . import telemetry as tm
+
+# Telemetry streams and their default rates [Hz]; 0 disables a stream. The achieved rate
+# is at most the rate at which the link ticks.
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "HEARTBEAT": 1.0,
+    "SYS_STATUS": 1.0,
+    "ATTITUDE": 10.0,
+    "ATTITUDE_QUATERNION": 10.0,
+    "ATTITUDE_TARGET": 10.0,
+    "ACTUATOR_OUTPUT_STATUS": 10.0,
+    "NAMED_VALUE_FLOAT": 5.0,
+    "ELLIPSLED_ENTRY_STATE": 5.0,
+    "ELLIPSLED_JET_STATUS": 5.0,
+    "ELLIPSLED_CONTROL_STATUS": 5.0,
+    "ELLIPSLED_LOOP_TIMING": 1.0,
+    "ELLIPSLED_GUIDANCE_STATUS": 2.0,        # guidance re-predicts at 0.5-1 Hz; range to go moves ~7 km/s
+    "GLOBAL_POSITION_INT": 5.0,
+    "VFR_HUD": 5.0,
+    "ALTITUDE": 1.0,
+    "SYSTEM_TIME": 1.0,
+    "LOCAL_POSITION_NED": 5.0,
+    "CURRENT_MODE": 0.5,                     # and at each mode change
+}
+ATTITUDE_GROUP = ("ATTITUDE", "ATTITUDE_QUATERNION", "ATTITUDE_TARGET", "NAMED_VALUE_FLOAT", "ELLIPSLED_ENTRY_STATE")
+POSITION_GROUP = ("GLOBAL_POSITION_INT", "VFR_HUD", "ALTITUDE")
+# streams of one message type each, built one by one (the groups share their geometry)
+SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STATUS", "ELLIPSLED_JET_STATUS",
+                  "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS",
+                  "LOCAL_POSITION_NED", "CURRENT_MODE")
+MAX_RATE_HZ = 100.0
+
+
+def check_rates(rates: Mapping[str, float] | None) -> dict[str, float]:
+    """DEFAULT_RATES_HZ with ``rates`` {stream: Hz} over it; ValueError naming a bad entry."""
+    out = dict(DEFAULT_RATES_HZ)
+    for name, hz in (rates or {}).items():
+        if name not in DEFAULT_RATES_HZ:
+            raise ValueError(f"rates: unknown stream {name!r} (known: {', '.join(DEFAULT_RATES_HZ)})")
+        if isinstance(hz, bool) or not isinstance(hz, (int, float)) or not math.isfinite(hz) \
+                or not 0.0 <= hz <= MAX_RATE_HZ:
+            raise ValueError(f"rates.{name}: must be a number in [0, {MAX_RATE_HZ:g}] Hz, got {hz!r}")
+        out[name] = float(hz)
+    return out
+
+
+class TelemetryStreams:
+    """The messages of each telemetry stream of one GroundLink, from its FlightSoftware
+    (``link.fsw``, which the link's warm-up swaps) and what is kept here between ticks: the
+    executive's loop timing, the allocator's solve times, the tick's sensor frame, the local
+    origin and the mode CURRENT_MODE last told. SYS_STATUS reads the link's counters."""
+
+    def __init__(self, link) -> None:
+        self.link = link
+        self.loop_timing: dict[int, tuple] = {}       # rate group -> ELLIPSLED_LOOP_TIMING fields
+        self.alloc_ns: deque[int] = deque(maxlen=512)
+        self.alloc_degraded = 0
+        self.sensors = None                            # latest sensor frame given to tick()
+        self.origin = None                             # LOCAL_POSITION_NED's, at the first navigation fix
+        self.mode_sent = None                          # the Mode CURRENT_MODE last told
+
+    def sample_allocator(self) -> None:
+        fsw = self.link.fsw
+        self.alloc_ns.append(int(getattr(fsw, "alloc_ns", 0)))
+        if fsw.allocator.degraded:
+            self.alloc_degraded += 1
+
+    def messages(self, name: str) -> list:
+        """The messages of stream ``name`` now, outside its schedule (a one-shot request);
+        empty while what it reports does not exist yet (no navigation, no timing)."""
+        fsw = self.link.fsw
+        ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
+        if name in SINGLE_STREAMS:
+            return list(self.single(name, ms))
+        if not tm.nav_valid(fsw):
+            return []
+        C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
+        if name in ATTITUDE_GROUP:
+            return list(tm.attitude(fsw, ms, C_LN, tuple(n == name for n in ATTITUDE_GROUP)))
+        return list(tm.position(fsw, ms, C_LN, tuple(n == name for n in POSITION_GROUP)))
+
+    def single(self, name: str, ms: int):
+        """The messages of one of SINGLE_STREAMS at ``ms`` (time_boot_ms)."""
+        link = self.link
+        fsw = link.fsw
+        if name == "HEARTBEAT":
+            yield tm.heartbeat(fsw)
+        elif name == "SYS_STATUS":
+            yield tm.sys_status(fsw, self.loop_timing, link.rejections, link.stats["kernel_drops"],
+                                link.stats["refused_early"], link.link.counts[Reject.UNSIGNED],
+                                link.stats["reads_limited"])
+        elif name == "SYSTEM_TIME":
+            yield tm.system_time(fsw, link.wall_clock())
+        elif name == "ACTUATOR_OUTPUT_STATUS":
+            yield tm.actuator_output_status(fsw)
+        elif name == "ELLIPSLED_JET_STATUS":
+            yield tm.jet_status(fsw, ms, self.sensors)
+        elif name == "ELLIPSLED_CONTROL_STATUS":
+            yield tm.control_status(fsw, ms, self.alloc_ns, self.alloc_degraded)
+        elif name == "ELLIPSLED_LOOP_TIMING":
+            yield from tm.loop_timing(ms, self.loop_timing)
+        elif name == "ELLIPSLED_GUIDANCE_STATUS":
+            yield tm.guidance_status(fsw, ms)
+        elif name == "LOCAL_POSITION_NED":
+            origin = self.local_origin()
+            if origin is not None:
+                yield tm.local_position_ned(fsw, ms, origin)
+        elif name == "CURRENT_MODE":
+            self.mode_sent = fsw.modes.mode
+            yield tm.current_mode(fsw)
+
+    def local_origin(self):
+        """LOCAL_POSITION_NED's origin (telemetry.local_origin), taken at the first navigation
+        fix; None before it."""
+        if self.origin is None and tm.nav_valid(self.link.fsw):
+            self.origin = tm.local_origin(self.link.fsw)
+        return self.origin
+
+    def origin_message(self, p) -> list:
+        """GPS_GLOBAL_ORIGIN, when requested (``p``: the request's parameters, unused)."""
+        origin = self.local_origin()
+        return [] if origin is None else [tm.gps_global_origin(self.link.fsw, origin)]

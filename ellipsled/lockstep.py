@@ -72,7 +72,7 @@ def fly(scn: Scenario, seed: int, verify_every: int = 1000, on_progress=None) ->
             on_progress(plant.t_s)
         i = h.row()
         record_truth(h, i, plant.fill_truth(trec))
-        record_fsw(h, i, fsw, u, topo.last_compute_ns)
+        record_fsw(h, i, fsw.output)
         done, reason = plant.done()
         if done:
             break

@@ -31,6 +31,7 @@ from .jetdriver import JetDriver
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation
+from .output import OutputFiller
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .params import Param, ParamRegistry
 from . import executive
@@ -149,10 +150,20 @@ class FlightSoftware(GroundCommands):
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self.realtime = realtime
+        # the outputs of each control cycle, one FSW_STATE record (interfaces/records.py) that
+        # every reader takes: refilled in place at the end of control_step and no_frame
+        self._output = OutputFiller(scenario)
+        self.output = self._output.rec
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
-        """One control cycle on a SENSORS record; returns the jet command (uint8, one per jet)."""
+        """One control cycle on a SENSORS record; returns the jet command (uint8, one per jet).
+        Its outputs are in ``output`` afterwards."""
+        u = self._run_cycle(frame)
+        self._output.fill(self, u)
+        return u
+
+    def _run_cycle(self, frame) -> np.ndarray:
         self.cycles += 1
         self._count_torque()
         t_s = float(frame["t_ns"]) * 1e-9     # a Python float (a 0-d field times 1e-9 is a NumPy scalar)
@@ -237,7 +248,12 @@ class FlightSoftware(GroundCommands):
 
     def no_frame(self, t_s: float) -> np.ndarray:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards
-        STALE and holds the jets off once stale."""
+        STALE and holds the jets off once stale. Its outputs are in ``output`` afterwards."""
+        u = self._run_no_frame(t_s)
+        self._output.fill(self, u)
+        return u
+
+    def _run_no_frame(self, t_s: float) -> np.ndarray:
         self.cycles += 1
         self._count_torque()
         self._tau_last[:] = 0.0

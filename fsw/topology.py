@@ -5,7 +5,9 @@
   RG2 (every 5th, 10 Hz)   fdir_slow: analytic-redundancy residual
   RG3 (every 50th, 1 Hz)   entry guidance (mode "npc": predictor-corrector)
 Process shells append their own tasks (publish the jet command, ground link) with add().
-The batch runner and the SIL FSW process both fly through this object.
+The batch runner and the SIL FSW process both fly through this object. It stamps the loop
+timing fields (records.FSW_STATE_SHELL) of the FSW's output record: release, jitter and
+slips when the control task has run, the compute time when the tick has ended.
 """
 from __future__ import annotations
 
@@ -30,6 +32,9 @@ class Topology:
         self.executive.event_time = lambda: fsw.t_s     # its events in mission time, as every other
         self.u: np.ndarray = fsw.driver.last_command
         self.got_frame = False
+        out = fsw.output        # views of its loop timing fields, made once
+        self._t_release_ns, self._jitter_us, self._slips, self._compute_us = (
+            out["t_release_ns"], out["jitter_us"], out["slips"], out["compute_us"])
         self._frame = None
         if frame_source is not None:
             # real time: fetching the newest frame (and waiting briefly for the one due) is its
@@ -52,6 +57,9 @@ class Topology:
             self.u = self.fsw.no_frame(self.fsw.t_s + self.fsw.dt_s)
         else:
             self.u = self.fsw.control_step(frame)
+        self._t_release_ns[()] = cyc.t_release_ns
+        self._jitter_us[()] = (cyc.t_start_ns - cyc.t_release_ns) * 1e-3
+        self._slips[()] = self.executive.slips
 
     def warm_up(self, frame) -> FlightSoftware:
         """Run one control cycle of a throwaway FlightSoftware on ``frame`` so every compiled
@@ -77,8 +85,11 @@ class Topology:
     def tick(self, frame=None) -> bool:
         """One base tick (lockstep: with the frame of step k). True if on time."""
         if frame is not None:
-            return self.executive.tick(frame, k=int(frame["k"]), t_s=float(frame["t_ns"]) * 1e-9)
-        return self.executive.tick()
+            on_time = self.executive.tick(frame, k=int(frame["k"]), t_s=float(frame["t_ns"]) * 1e-9)
+        else:
+            on_time = self.executive.tick()
+        self._compute_us[()] = self.last_compute_ns * 1e-3
+        return on_time
 
     @property
     def last_compute_ns(self) -> int:

@@ -127,7 +127,12 @@ TRUTH = np.dtype([
     ("_pad", "u1", (6,)),              # keeps the record a multiple of 8 bytes
 ])
 
-# fsw -> viewers, once per control cycle: what the flight software is doing (fsw/state).
+# fsw -> viewers, ground, run history, once per control cycle: the flight software's outputs,
+# the one list of them. FlightSoftware.output is this record, filled at the end of every control
+# cycle (fsw/output.py); the fields of FSW_STATE_SHELL are the loop timing the rate-group
+# driver stamps (fsw/topology.py). Readers take their field lists from this dtype: the run
+# history keeps every field but FSW_STATE_LIVE (ellipsled/sil/history.py), the SIL publishes
+# the record as it is (fsw/state), the Rerun bridge buffers every field (gse/viz/logger.py).
 FSW_STATE = np.dtype([
     ("k", "<i8"),                          # step index of the sensor frame answered
     ("t_ns", "<i8"),                       # simulated time of frame k [ns]
@@ -140,12 +145,13 @@ FSW_STATE = np.dtype([
     ("tau_alloc_B", "<f8", (3,)),          # torque of the allocated jet set [N m]
     ("theta_hat", "<f8", (9,)),            # adaptive parameter estimates [kg m^2 x6, d x3]
     ("eta_hat", "<f8", (N_JETS,)),         # estimated jet thrust factors [-]
-    ("compute_us", "<f8"),                 # FSW cycle compute time [us]
+    ("compute_us", "<f8"),                 # compute time of the last finished cycle [us] (published
+                                           # during a cycle: the one before; in the run history: its own)
     ("alloc_us", "<f8"),                   # allocator time [us]
     ("jitter_us", "<f8"),                  # release time - scheduled release time [us]
-    ("slips", "<u4"),                      # cycle slips so far
+    ("slips", "<i8"),                      # cycle slips so far
     # entry guidance (mode npc; 0 where guid_flags says not available: never NaN on the wire)
-    ("guid_cycles", "<u4"),                # predictor-corrector answers applied so far
+    ("guid_cycles", "<i8"),                # predictor-corrector answers applied so far
     ("target_lat_rad", "<f8"),             # deploy target, planet-fixed (GUID_TARGET)
     ("target_lon_rad", "<f8"),
     ("pred_lat_rad", "<f8"),               # predicted deploy point of the last answer (GUID_PREDICTION)
@@ -155,8 +161,18 @@ FSW_STATE = np.dtype([
     ("health", "i1", (N_JETS,)),           # jet health codes (interfaces/vocabulary.py)
     ("mode", "i1"),                        # Mode (interfaces/vocabulary.py)
     ("alloc_degraded", "u1"),              # 1 = allocation infeasible, degraded solution
+    ("alloc_short", "u1"),                 # 1 = the allocated torque falls short on the bank axis
     ("guid_flags", "u1"),                  # GUID_TARGET | GUID_PREDICTION | GUID_NPC
-    ("_pad", "u1", (5,)),
 ])
 # guid_flags bits of FSW_STATE
 GUID_TARGET, GUID_PREDICTION, GUID_NPC = 1, 2, 4
+# FSW_STATE fields the rate-group driver stamps (its loop timing); FlightSoftware fills the rest.
+FSW_STATE_SHELL = ("t_release_ns", "compute_us", "jitter_us", "slips")
+# FSW_STATE fields for live viewers only, not kept in the run history: wall-clock loop timing the
+# SIL's FSW process records raw itself (fsw_timing.npz, fsw.json).
+FSW_STATE_LIVE = ("t_release_ns", "jitter_us", "slips")
+
+
+def field_shapes(dtype: np.dtype) -> dict[str, tuple[int, ...]]:
+    """name -> trailing shape of every field of a record, padding left out."""
+    return {n: dtype[n].shape for n in dtype.names if not n.startswith("_")}

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
 from fsw.groundlink import telemetry as tm
@@ -185,17 +186,20 @@ def test_deploy_errors_split_a_known_geometry():
 
 
 def test_the_fsw_state_record_carries_the_same_guidance_figures_through_the_codec(guided):
-    """What the live bridge draws the map from (FSW_STATE v2, ellipsled.sil.history.guidance_fields)
-    survives the codec (which refuses non-finite numbers) and equals the corrector's values;
-    a non-finite predicted point goes out as 0 with its flag clear, never refused."""
-    from ellipsled.sil.history import guidance_fields
+    """What the live bridge draws the map from (the FSW's output record FSW_STATE, filled by
+    fsw/output.py) survives the codec (which refuses non-finite numbers) and equals the
+    corrector's values; a non-finite predicted point goes out as 0 with its flag clear, never
+    refused."""
+    from fsw.output import OutputFiller
     from interfaces import codec, records
     e, fsw = guided.fsw.entry, guided.fsw
     c = codec.Codec.for_schema("FSW_STATE")
-    st = records.new(records.FSW_STATE)
-    (st["guid_cycles"], st["guid_flags"], st["target_lat_rad"], st["target_lon_rad"], st["pred_lat_rad"],
-     st["pred_lon_rad"], st["bank_cmd_rad"]) = guidance_fields(fsw)
-    got = c.decode(c.encode(st, 1, 0))
+    filler = OutputFiller(fsw.scenario)
+    filler.fill(fsw, fsw.driver.last_command)
+    for name in records.FSW_STATE.names:                         # what the FSW filled at its last cycle
+        if name not in records.FSW_STATE_SHELL:
+            assert np.array_equal(filler.rec[name], fsw.output[name]), name
+    got = c.decode(c.encode(fsw.output, 1, 0))
     assert got is not None and int(got["guid_cycles"]) == e.cycles
     assert int(got["guid_flags"]) == records.GUID_TARGET | records.GUID_PREDICTION | records.GUID_NPC
     assert (float(got["pred_lat_rad"]), float(got["pred_lon_rad"])) == tuple(e.pred_impact)
@@ -203,8 +207,9 @@ def test_the_fsw_state_record_carries_the_same_guidance_figures_through_the_code
     saved = e.pred_impact.copy()
     try:
         e.pred_impact[0] = math.nan
-        fields = guidance_fields(fsw)
+        filler.fill(fsw, fsw.driver.last_command)
     finally:
         e.pred_impact[:] = saved
-    assert not fields[1] & records.GUID_PREDICTION and fields[4] == fields[5] == 0.0
-    assert all(math.isfinite(x) for x in fields)
+    st = filler.rec
+    assert not st["guid_flags"] & records.GUID_PREDICTION and st["pred_lat_rad"] == st["pred_lon_rad"] == 0.0
+    assert c.decode(c.encode(st, 2, 0)) is not None

@@ -36,6 +36,7 @@ def _history(n: int = N) -> History:
     a["t_s"][:] = t
     a["bank_rad"][:] = 0.6 * np.sin(0.7 * t) + 0.3
     a["bank_ref_rad"][:] = 0.6 * np.sin(0.7 * t)
+    a["bank_err_rad"][:] = 0.3             # the FSW's own: navigation exact here
     a["alpha_rad"][:] = np.deg2rad(20) + 0.01 * np.cos(t)
     a["omega_BN_B"][:] = np.stack([0.01 * t, -0.02 * t, 0.005 * np.ones(n)], axis=1)
     a["sigma_BN"][:] = np.stack([0.05 * np.sin(t), 0.1 * np.cos(t), 0.2 * t / t[-1]], axis=1)

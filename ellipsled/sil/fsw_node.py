@@ -34,7 +34,7 @@ from . import argtypes  # noqa: E402
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
 from .frame_timing import due_step, phase_origin_ns, take_due_frame  # noqa: E402
 from .fsw_report import alloc_sample, fsw_report  # noqa: E402
-from .history import History, guidance_fields, record_fsw  # noqa: E402
+from .history import History, record_fsw  # noqa: E402
 from .variant import prepare_args  # noqa: E402
 
 ROLE = "fsw"
@@ -92,7 +92,6 @@ class FswNode:
         self.enc_faults = Codec.for_schema("FAULT")
         self.frame = records.new(records.SENSORS)        # our own copy of the newest frame
         self.jets = records.new(records.JETS)
-        self.state = records.new(records.FSW_STATE)
         self.fault = records.new(records.FAULT)
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
         self.samples: list[dict] = []
@@ -211,23 +210,9 @@ class FswNode:
         self.pub_jets.put(self.enc_jets.encode(j, self.jets_seq, t))
         self.jets_seq += 1
         self.answered_k = fsw.k
-        st = self.state
-        g = fsw.guidance
-        st["k"], st["t_ns"], st["t_release_ns"] = fsw.k, int(round(fsw.t_s * 1e9)), cyc.t_release_ns
-        st["bank_ref_rad"], st["bankdot_ref_radps"] = g.phi_r, g.phidot_r
-        st["bank_err_rad"] = fsw.bank_err_rad
-        st["sigma_RN"], st["u_cal_B"], st["tau_alloc_B"] = g.sigma_RN, fsw.u_cal_B, fsw.tau_alloc_B
-        st["theta_hat"] = fsw.control.theta_hat
-        st["eta_hat"] = fsw.health.eta
-        st["compute_us"] = topo.last_compute_ns * 1e-3
-        st["alloc_us"] = fsw.alloc_ns * 1e-3
-        st["jitter_us"] = (cyc.t_start_ns - cyc.t_release_ns) * 1e-3
-        st["slips"] = topo.executive.slips
-        st["jets_cmd"], st["health"] = topo.u, fsw.health.state
-        st["mode"], st["alloc_degraded"] = int(fsw.modes.mode), fsw.allocator.degraded
-        (st["guid_cycles"], st["guid_flags"], st["target_lat_rad"], st["target_lon_rad"], st["pred_lat_rad"],
-         st["pred_lon_rad"], st["bank_cmd_rad"]) = guidance_fields(fsw)
-        self.pub_state.put(self.enc_state.encode(st, fsw.k, t))
+        # the FSW's output record as it is (the rate-group driver has stamped this cycle's
+        # release, jitter and slips; its compute time is the last finished cycle's)
+        self.pub_state.put(self.enc_state.encode(fsw.output, fsw.k, t))
 
     def _publish_events(self, cyc) -> None:
         first, new = self.events.since(self.events_sent)
@@ -276,7 +261,7 @@ class FswNode:
         self.ticks += 1
         if not self.topo.got_frame:
             return
-        record_fsw(self.history, self.history.row(), self.fsw, self.topo.u, self.topo.last_compute_ns)
+        record_fsw(self.history, self.history.row(), self.fsw.output)
         if self.fsw.k % 1000 == 0:
             self.samples.append(alloc_sample(self.fsw))
 

@@ -11,31 +11,17 @@ import math
 
 import numpy as np
 
-from interfaces.records import GUID_NPC, GUID_PREDICTION, GUID_TARGET, TRUTH
-from interfaces.vocabulary import N_JETS
+from interfaces.records import FSW_STATE, FSW_STATE_LIVE, TRUTH, field_shapes
 
-
-# name -> trailing shape; all float64 except where noted in _DTYPES
-FIELDS: dict[str, tuple[int, ...]] = {
-    "k": (), "t_s": (),
-    # truth (plant)
-    "bank_rad": (), "alpha_rad": (), "beta_rad": (), "omega_BN_B": (3,), "sigma_BN": (3,),
-    "h_m": (), "V_rel_mps": (), "gamma_rad": (), "psi_rad": (), "lat_rad": (), "lon_rad": (),
-    "mach": (), "qbar_pa": (), "decel_g": (), "tau_jets_B": (3,),
-    # flight software
-    "bank_ref_rad": (), "bankdot_ref_radps": (), "sigma_RN": (3,), "u_cal_B": (3,), "tau_alloc_B": (3,),
-    "theta_hat": (9,), "jets_cmd": (N_JETS,), "health": (N_JETS,), "mode": (),
-    "alloc_degraded": (), "alloc_short": (), "compute_us": (), "alloc_us": (),
-    # entry guidance (FSW_STATE's guidance fields: 0 where guid_flags says not available)
-    "guid_cycles": (), "guid_flags": (), "target_lat_rad": (), "target_lon_rad": (), "pred_lat_rad": (),
-    "pred_lon_rad": (), "bank_cmd_rad": (),
-}
-# Which side of the SIL records each field (the batch runner records both).
+# Which side of the SIL records each field (the batch runner records both): the plant's
+# (from its TRUTH record) and the flight software's (its output record FSW_STATE, every field
+# but the live-only loop timing). Both sides carry the step index k: merge() aligns on it.
 TRUTH_FIELDS = ("k", "t_s", "bank_rad", "alpha_rad", "beta_rad", "omega_BN_B", "sigma_BN", "h_m", "V_rel_mps",
                 "gamma_rad", "psi_rad", "lat_rad", "lon_rad", "mach", "qbar_pa", "decel_g", "tau_jets_B")
-FSW_FIELDS = tuple(k for k in FIELDS if k not in TRUTH_FIELDS)
-
-_DTYPES = {"k": np.int64, "guid_cycles": np.int64, "guid_flags": np.uint8, "jets_cmd": np.uint8, "health": np.int8, "mode": np.int8, "alloc_degraded": np.uint8, "alloc_short": np.uint8}
+FSW_FIELDS = tuple(n for n in field_shapes(FSW_STATE) if n not in FSW_STATE_LIVE and n not in TRUTH_FIELDS)
+# name -> trailing shape of every column
+FIELDS: dict[str, tuple[int, ...]] = {**{n: TRUTH[n].shape for n in TRUTH_FIELDS},
+                                      **{n: FSW_STATE[n].shape for n in FSW_FIELDS}}
 
 # Every process preallocates its run's history (nothing grows while flying; the pages are
 # locked under --rt). A run whose history would not fit this budget is refused before it
@@ -44,9 +30,8 @@ HISTORY_BUDGET_BYTES = 2 * 1024**3
 
 
 def row_bytes() -> int:
-    """Bytes of one history row (every field, both sides)."""
-    return sum(int(np.dtype(_DTYPES.get(k, np.float64)).itemsize * math.prod(shp))
-               for k, shp in FIELDS.items() if k not in TRUTH_FIELDS) + TRUTH.itemsize
+    """Bytes of one history row (both sides' records)."""
+    return FSW_STATE.itemsize + TRUTH.itemsize
 
 
 def rows_for(duration_s: float, dt_s: float) -> int:
@@ -71,15 +56,17 @@ class History:
     def __init__(self, n_max: int):
         self.n = 0
         self.n_max = n_max
-        self.a = {k: np.zeros((n_max,) + shp, dtype=_DTYPES.get(k, np.float64)) for k, shp in FIELDS.items()
-                  if k not in TRUTH_FIELDS}
-        self._truth_rows(np.zeros(n_max, dtype=TRUTH))
+        self.a: dict[str, np.ndarray] = {}
+        self._rows(np.zeros(n_max, dtype=TRUTH), np.zeros(n_max, dtype=FSW_STATE))
 
-    def _truth_rows(self, rows: np.ndarray) -> None:
-        """The truth half lives in one TRUTH-record array; a[name] are views of its fields."""
-        self.truth_rows = rows
+    def _rows(self, truth_rows: np.ndarray, fsw_rows: np.ndarray) -> None:
+        """Each half lives in one array of its record (TRUTH, FSW_STATE); a[name] are views
+        of their fields."""
+        self.truth_rows, self.fsw_rows = truth_rows, fsw_rows
+        for k in FSW_FIELDS:
+            self.a[k] = fsw_rows[k]
         for k in TRUTH_FIELDS:
-            self.a[k] = rows[k]
+            self.a[k] = truth_rows[k]
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.a[name][: self.n]
@@ -87,10 +74,8 @@ class History:
     def row(self) -> int:
         """Index of a new row (grows by doubling if a run outlives its estimate)."""
         if self.n >= self.n_max:
-            for k, v in self.a.items():
-                if k not in TRUTH_FIELDS:
-                    self.a[k] = np.concatenate((v, np.zeros_like(v)))
-            self._truth_rows(np.concatenate((self.truth_rows, np.zeros_like(self.truth_rows))))
+            self._rows(np.concatenate((self.truth_rows, np.zeros_like(self.truth_rows))),
+                       np.concatenate((self.fsw_rows, np.zeros_like(self.fsw_rows))))
             self.n_max *= 2
         i = self.n
         self.n += 1
@@ -121,45 +106,11 @@ def record_truth(h: History, i: int, truth: dict) -> None:
         a[k][i] = truth[k]
 
 
-def record_fsw(h: History, i: int, fsw, u: np.ndarray, compute_ns: int) -> None:
-    """The flight software's half of row i, after its control cycle for that step."""
-    a = h.a
-    a["k"][i] = fsw.k          # the same step index as the truth half: merge() aligns on it
-    g = fsw.guidance
-    a["bank_ref_rad"][i] = g.phi_r
-    a["bankdot_ref_radps"][i] = g.phidot_r
-    a["sigma_RN"][i] = g.sigma_RN
-    a["u_cal_B"][i] = fsw.u_cal_B
-    a["tau_alloc_B"][i] = fsw.tau_alloc_B
-    a["theta_hat"][i] = fsw.control.theta_hat
-    a["jets_cmd"][i] = u
-    a["health"][i] = fsw.health.state
-    a["mode"][i] = int(fsw.modes.mode)
-    a["alloc_degraded"][i] = fsw.allocator.degraded
-    a["alloc_short"][i] = fsw.alloc_short
-    a["compute_us"][i] = compute_ns * 1e-3
-    a["alloc_us"][i] = fsw.alloc_ns * 1e-3
-    (a["guid_cycles"][i], a["guid_flags"][i], a["target_lat_rad"][i], a["target_lon_rad"][i],
-     a["pred_lat_rad"][i], a["pred_lon_rad"][i], a["bank_cmd_rad"][i]) = guidance_fields(fsw)
-
-
-def guidance_fields(fsw) -> tuple:
-    """(guid_cycles, guid_flags, target lat, lon, predicted deploy lat, lon [rad], bank command
-    [rad]) of the FSW now, as FSW_STATE carries them: a value not available (no target, no
-    answer yet, profile mode, non-finite) is 0 with its guid_flags bit clear."""
-    scn, e = fsw.scenario, fsw.entry
-    flags, tlat, tlon, plat, plon, bank, cycles = 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0
-    if scn.target_lat_rad is not None and math.isfinite(scn.target_lat_rad) and math.isfinite(scn.target_lon_rad):
-        flags, tlat, tlon = GUID_TARGET, scn.target_lat_rad, scn.target_lon_rad
-    if e is not None:
-        flags |= GUID_NPC
-        cycles = e.cycles
-        bank = e.bank_cmd if math.isfinite(e.bank_cmd) else 0.0
-        p = e.pred_impact
-        if cycles > 0 and math.isfinite(p[0]) and math.isfinite(p[1]):
-            flags |= GUID_PREDICTION
-            plat, plon = float(p[0]), float(p[1])
-    return cycles, flags, tlat, tlon, plat, plon, bank
+def record_fsw(h: History, i: int, out: np.ndarray) -> None:
+    """The flight software's half of row i: its output record (FlightSoftware.output, an
+    FSW_STATE) after its control cycle for that step."""
+    h.fsw_rows[i] = out
+    h.a["k"][i] = out["k"]      # the same step index as the truth half: merge() aligns on it
 
 
 def merge(truth: History, fsw: History) -> History:

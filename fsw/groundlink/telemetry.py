@@ -1,6 +1,12 @@
 """Telemetry messages of the ground link, each built from the FlightSoftware's state
 (what each one carries: interfaces/mavlink/README.md). Pure functions of their arguments;
 scheduling and sending are link.py's.
+
+What the control cycle computes (references, torques, estimates, the jet command, the
+predicted deploy point) is read from its output record ``fsw.output`` (interfaces/records.py
+FSW_STATE), as every other reader takes it. Mode, health, arming and the navigation state are
+read from their owners: a ground command handled earlier in the same link tick changes them,
+and what follows it must show the change.
 """
 from __future__ import annotations
 
@@ -12,6 +18,7 @@ import numpy as np
 from common import frames, mrp
 from common.frames import local_axes
 from interfaces.mavlink import dialect as mav
+from interfaces.records import GUID_PREDICTION
 from interfaces.vocabulary import INHIBITED, N_JETS, NOMINAL, Mode
 
 STATUSTEXT_LEN = 50
@@ -87,7 +94,7 @@ def attitude(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool, bool,
     """The attitude group relative to local NED (C_LN: ``local_ned_dcm`` at the vehicle):
     ATTITUDE, ATTITUDE_QUATERNION, ATTITUDE_TARGET, the NAMED_VALUE_FLOATs,
     ELLIPSLED_ENTRY_STATE (those ``want`` selects)."""
-    nav, g = fsw.nav.state, fsw.guidance
+    nav, g, out = fsw.nav.state, fsw.guidance, fsw.output
     w = nav.omega_BN_B
     if want[0] or want[1]:
         C_BL = nav.C_BN @ C_LN.T
@@ -98,23 +105,23 @@ def attitude(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool, bool,
             q = mrp.dcm_to_quat(C_BL)
             yield mav.MAVLink_attitude_quaternion_message(ms, q[0], q[1], q[2], q[3], w[0], w[1], w[2])
     if want[2]:
-        q = mrp.dcm_to_quat(mrp.to_dcm(g.sigma_RN) @ C_LN.T)
+        q = mrp.dcm_to_quat(mrp.to_dcm(out["sigma_RN"]) @ C_LN.T)
         wr = g.omega_RN_R
         yield mav.MAVLink_attitude_target_message(
             ms, mav.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE, [float(x) for x in q], wr[0], wr[1], wr[2], 0.0)
     if want[3]:
-        bank_err = frames.wrap_pi(nav.bank_rad - g.phi_r)
-        for name, value in (("bank_deg", math.degrees(nav.bank_rad)), ("bref_deg", math.degrees(g.phi_r)),
-                            ("berr_deg", math.degrees(bank_err)), ("mach", nav.mach),
+        for name, value in (("bank_deg", math.degrees(nav.bank_rad)),
+                            ("bref_deg", math.degrees(float(out["bank_ref_rad"]))),
+                            ("berr_deg", math.degrees(float(out["bank_err_rad"]))), ("mach", nav.mach),
                             ("qbar_pa", nav.qbar_pa), ("alt_km", nav.h_m * 1e-3)):
             yield mav.MAVLink_named_value_float_message(ms, name.encode(), float(value))
         if fsw.entry is not None:          # guided: range to go and predicted miss, for stock stations
             tgt, veh, rtg = target_range(fsw)
             if rtg is not None:
                 yield mav.MAVLink_named_value_float_message(ms, b"rtg_km", rtg * 1e-3)
-                p = fsw.entry.pred_impact
-                if fsw.entry.cycles > 0 and _finite(p[0], p[1]):
-                    miss = _angle(_unit(float(p[0]), float(p[1])), _unit(*tgt)) * fsw.scenario.planet.radius_m
+                if out["guid_flags"] & GUID_PREDICTION:
+                    miss = _angle(_unit(float(out["pred_lat_rad"]), float(out["pred_lon_rad"])),
+                                  _unit(*tgt)) * fsw.scenario.planet.radius_m
                     yield mav.MAVLink_named_value_float_message(ms, b"miss_km", miss * 1e-3)
     if want[4]:
         yield entry_state(fsw, ms, C_LN)
@@ -139,7 +146,7 @@ def entry_state(fsw, ms: int, C_LN: np.ndarray):
     lat, lon = lat_lon(fsw)
     return mav.MAVLink_ellipsled_entry_state_message(
         ms, nav.h_m, nav.V_rel_mps, gamma, psi, lat, lon, nav.mach, nav.qbar_pa, nav.alpha_rad,
-        nav.beta_rad, nav.bank_rad, fsw.guidance.phi_r)
+        nav.beta_rad, nav.bank_rad, float(fsw.output["bank_ref_rad"]))
 
 
 # ---------------------------------------------------------------- position group
@@ -373,7 +380,7 @@ def system_time(fsw, unix_s: float):
 
 def actuator_output_status(fsw):
     act = [0.0] * 32
-    act[:N_JETS] = [float(x) for x in fsw.driver.last_command]
+    act[:N_JETS] = [float(x) for x in fsw.output["jets_cmd"]]
     return mav.MAVLink_actuator_output_status_message(int(fsw.t_s * 1e6), (1 << N_JETS) - 1, act)
 
 
@@ -385,7 +392,7 @@ def jet_status(fsw, ms: int, sensors):
     for i in range(N_JETS):
         if h.inhibited[i] and health[i] == NOMINAL:
             health[i] = INHIBITED
-    cmd = int(np.dot(fsw.driver.last_command.astype(np.int64) != 0, _JET_BITS))
+    cmd = int(np.dot(fsw.output["jets_cmd"].astype(np.int64) != 0, _JET_BITS))
     firing = 0
     if sensors is not None:
         on = np.asarray(sensors["chamber"]) > fsw.params["fdir.on_threshold"]
@@ -398,9 +405,10 @@ def jet_status(fsw, ms: int, sensors):
 def control_status(fsw, ms: int, alloc_ns: Iterable[int], alloc_degraded: int):
     a = np.fromiter(alloc_ns, dtype=np.int64)
     p99 = float(np.percentile(a, 99)) * 1e-3 if a.size else 0.0
+    out = fsw.output
     return mav.MAVLink_ellipsled_control_status_message(
-        ms, [float(x) for x in fsw.u_cal_B], [float(x) for x in fsw.tau_alloc_B],
-        [float(x) for x in fsw.control.theta_hat], int(fsw.cycles) & 0xFFFFFFFF, p99,
+        ms, [float(x) for x in out["u_cal_B"]], [float(x) for x in out["tau_alloc_B"]],
+        [float(x) for x in out["theta_hat"]], int(fsw.cycles) & 0xFFFFFFFF, p99,
         alloc_degraded & 0xFFFFFFFF)
 
 

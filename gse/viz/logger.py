@@ -34,23 +34,21 @@ from common.model import load_planet, load_vehicle
 from common.mrp import sigma_to_quat
 from interfaces.event_catalogue import BY_NAME
 from interfaces.event_metadata import markdown as event_catalogue_markdown
-from interfaces.records import GUID_PREDICTION, GUID_TARGET
+from interfaces.records import FSW_STATE, GUID_PREDICTION, GUID_TARGET, field_shapes
 from interfaces.vocabulary import HEALTH_NAMES, N_JETS, Mode, Severity
 
 DEG = 180.0 / math.pi
 TRUTH, FSW = "truth", "fsw"
 
-# Buffered fields per source: name -> trailing shape (names as ellipsled/sil/history.py FIELDS,
-# plus r_N [m] for the 3D view and the FSW loop-timing fields of the live FSW_STATE record).
+# Buffered fields per source: name -> trailing shape. The plant's: names as
+# ellipsled/sil/history.py TRUTH_FIELDS, plus r_N [m] for the 3D view. The FSW's: every field
+# of its output record (interfaces/records.py FSW_STATE) but the step and time, which every
+# row carries as its timelines.
 SOURCE_FIELDS: dict[str, dict[str, tuple[int, ...]]] = {
     TRUTH: {"bank_rad": (), "alpha_rad": (), "beta_rad": (), "omega_BN_B": (3,), "sigma_BN": (3,),
             "r_N": (3,), "h_m": (), "V_rel_mps": (), "gamma_rad": (), "mach": (), "qbar_pa": (),
             "decel_g": (), "tau_jets_B": (3,), "lat_rad": (), "lon_rad": ()},
-    FSW: {"bank_ref_rad": (), "bank_err_rad": (), "sigma_RN": (3,), "u_cal_B": (3,),
-          "tau_alloc_B": (3,), "theta_hat": (9,), "jets_cmd": (N_JETS,), "health": (N_JETS,),
-          "mode": (), "alloc_degraded": (), "compute_us": (), "alloc_us": (), "jitter_us": (),
-          "slips": (), "guid_cycles": (), "guid_flags": (), "target_lat_rad": (), "target_lon_rad": (),
-          "pred_lat_rad": (), "pred_lon_rad": ()},
+    FSW: {n: shp for n, shp in field_shapes(FSW_STATE).items() if n not in ("k", "t_ns")},
 }
 MAP_EVERY = 10             # ground-track points: every 10th control step (5 Hz at 50 Hz)
 

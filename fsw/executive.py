@@ -24,8 +24,8 @@ from typing import Callable
 import numpy as np
 
 from common.events import EventLog
-from interfaces.event_catalogue import EV
 from common.rt import sleep_until_ns
+from interfaces.event_catalogue import EV
 from .params import Param
 
 PARAMS = [

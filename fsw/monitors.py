@@ -27,10 +27,10 @@ import math
 import numpy as np
 from numba import njit
 
-from interfaces.records import SENSORS
-
 from common.events import EventLog
 from interfaces.event_catalogue import EV, EventDef
+from interfaces.records import SENSORS
+
 from .params import Param, load_params
 
 MARS_RADIUS_M = 3396.2e3   # default only; pass the planet's radius from data/planets

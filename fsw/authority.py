@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from common.events import EventLog, Severity
+from common.events import EventLog
 from common.model import Scenario
+from interfaces.event_catalogue import EV
 
 from .controllability import (Controllability, aero_moment_per_rad, controllability, velocity_dir_B,
                               schedule_accel_need_radps2)
@@ -55,7 +56,8 @@ class AuthoritySupervisor:
         self.controllability: Controllability | None = None   # the LP's answer at the last reconfiguration
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
         self.lp = BackgroundJob(controllability, "controllability", mode=REALTIME if realtime else IN_PLACE,
-                                events=events, source="guidance")
+                                events=events, overrun_event=EV.CONTROLLABILITY_OVERRUN,
+                                fault_event=EV.CONTROLLABILITY_FAULT)
 
     # ---------------------------------------------------------------- the cycle
     def step(self, t_s: float, health_changed: bool) -> None:
@@ -160,22 +162,20 @@ class AuthoritySupervisor:
         last, self.controllability = self.controllability, r
         if held:
             if last is not None and r.controllable != last.controllable and not r.controllable:
-                self.events.emit(t_s, Severity.WARNING, "guidance", "not_controllable",
-                                 f"NOT CONTROLLABLE: {r.reason}"[:50])
+                self.events.emit(t_s, EV.NOT_CONTROLLABLE, reason=r.reason)
             if self._reference_limit(need, r)[0] < self.guidance.profile.accel_limit_radps2:
                 self._replan_to(t_s, need, r)      # says so when the limit's text changes
             return
         if periodic and last is not None and r.text() == last.text() and r.controllable == last.controllable:
             self._set_trim_ref(r)
             return
-        self.events.emit(t_s, Severity.NOTICE, "guidance", "controllability", r.text())
+        self.events.emit(t_s, EV.CONTROLLABILITY, **r.event_args())
         self._set_trim_ref(r)
         if periodic and last is not None and r.controllable == last.controllable:
             self._replan_to(t_s, need, r)
             return
         if not r.controllable:
-            self.events.emit(t_s, Severity.WARNING, "guidance", "not_controllable",
-                             f"NOT CONTROLLABLE: {r.reason}"[:50])
+            self.events.emit(t_s, EV.NOT_CONTROLLABLE, reason=r.reason)
         self._replan_to(t_s, need, r)
 
     def _set_trim_ref(self, r: Controllability) -> None:
@@ -196,8 +196,7 @@ class AuthoritySupervisor:
         limit, low = self._reference_limit(need, r)
         if low:
             weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
-            self.events.emit(t_s, Severity.WARNING, "guidance", "authority_low",
-                             f"BANK AUTH {np.degrees(weak):.2f} DEG/S2: REF KEPT AT NEED")
+            self.events.emit(t_s, EV.AUTHORITY_LOW, auth=float(np.degrees(weak)))
         if limit <= 0.0:
             return
         prof = self.guidance.profile
@@ -206,8 +205,7 @@ class AuthoritySupervisor:
         if _limit_text(limit) == _limit_text(prof.accel_limit_radps2):
             return
         if prof.replan(t_s, prof.rate_limit_radps, limit):
-            self.events.emit(t_s, Severity.NOTICE, "guidance", "reference_reshaped",
-                             f"REFERENCE ACCEL LIMIT {_limit_text(limit)} DEG/S2")
+            self.events.emit(t_s, EV.REFERENCE_RESHAPED, limit=math.degrees(limit))
 
     # ---------------------------------------------------------------- parameters, life cycle
     def set_param(self, name: str, value: float) -> None:

@@ -11,8 +11,9 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from common.events import EventLog, Severity
+from common.events import EventLog
 from interfaces.vocabulary import MARK_KINDS, N_JETS, CommandResult
+from interfaces.event_catalogue import EV
 
 from .modes import Mode
 
@@ -62,8 +63,7 @@ class GroundCommands:
 
     def cmd_fault_tolerance(self, on: bool) -> Reply:
         self.set_param("allocator.fault_tolerance", float(bool(on)))
-        self.events.emit(self.t_s, Severity.NOTICE, "ground", "fault_tolerance",
-                         f"GND FAULT TOLERANCE {'ON' if on else 'OFF'}")
+        self.events.emit(self.t_s, EV.FAULT_TOLERANCE, state=int(bool(on)))
         return CommandResult.ACCEPTED, ""
 
     def cmd_mark(self, jet: int, kind: str, eta: float = 1.0) -> Reply:
@@ -108,7 +108,7 @@ class GroundCommands:
             v = self.set_param("fdir.delay_s", delay_s)
         except ValueError as e:
             return CommandResult.DENIED, f"DELAY DENIED: {str(e).split(': ', 1)[-1]}"
-        self.events.emit(self.t_s, Severity.NOTICE, "fdir", "fdir_delay", f"FDIR DELAY {v:.2f} S")
+        self.events.emit(self.t_s, EV.FDIR_DELAY, delay_s=v)
         return CommandResult.ACCEPTED, ""
 
     def set_param(self, name: str, value: float) -> float:

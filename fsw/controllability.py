@@ -37,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from interfaces.event_catalogue import EV
+
 from .guidance.reference import _S2_MAX
 from .health import STUCK_ON, JetHealth
 from .lp import set_colwise_matrix, solve_or_none
@@ -67,14 +69,18 @@ class Controllability:
     def bias_Nm(self) -> float:
         return float(np.linalg.norm(self.bias_B_Nm))
 
-    def text(self) -> str:
-        """One event line (<= 50 characters, one STATUSTEXT): bank authority +X / -Y deg/s^2,
-        stuck-on bias Z N m, trim needed W deg."""
+    def event_args(self) -> dict:
+        """The arguments of its catalogue event (EV.CONTROLLABILITY): bank authority each way
+        [deg/s^2], stuck-on bias [N m], trim needed [deg] as text (INF, >90 or the value)."""
         tr = ("INF" if not math.isfinite(self.trim_needed_deg) else
               f">{TRIM_PHYSICAL_DEG:.0f}" if self.trim_needed_deg > TRIM_PHYSICAL_DEG else
               f"{self.trim_needed_deg:.1f}")
-        return (f"AUTH +{math.degrees(self.authority_pos_radps2):.2f}/-{math.degrees(self.authority_neg_radps2):.2f}"
-                f" DEG/S2 BIAS {self.bias_Nm:.0f}NM TRIM {tr}DEG")
+        return {"auth_pos": math.degrees(self.authority_pos_radps2), "auth_neg": math.degrees(self.authority_neg_radps2),
+                "bias_Nm": self.bias_Nm, "trim": tr}
+
+    def text(self) -> str:
+        """Its event line as the catalogue renders it (<= 50 characters, one STATUSTEXT)."""
+        return EV.CONTROLLABILITY.render(self.event_args())[1]
 
 
 def schedule_accel_need_radps2(schedule, t_from_s: float) -> float:

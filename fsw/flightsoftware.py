@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.events import EventLog, Severity
+from common.events import EventLog
 from common.frames import wrap_pi
 from common.model import Scenario
+from interfaces.event_catalogue import EV
 
 from .allocation import Allocator
 from .allocation.dutycycle import DutyCycleRealiser
@@ -209,11 +210,9 @@ class FlightSoftware(GroundCommands):
         if self.allocator.tables_version != self._tables_version:      # new tables in use
             self._tables_version = self.allocator.tables_version
             self.dutycycle.reset()
-            self.events.emit(t_s, Severity.NOTICE, "allocator", "reconfigured",
-                             f"ALLOCATOR RECONFIGURED ({self.allocator.rebuild_time_s * 1e3:.1f} ms)")
+            self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
         if self.allocator.degraded:
-            self.events.emit(t_s, Severity.WARNING, "allocator", "alloc_degraded",
-                             "ALLOCATION DEGRADED (infeasible)", rate_limited=True)
+            self.events.emit(t_s, EV.ALLOC_DEGRADED)
         self._check_bank_shortfall(t_s)
         self._have_prev = True
         self._tau_last[:] = self.tau_alloc_B
@@ -243,8 +242,7 @@ class FlightSoftware(GroundCommands):
                             and (d - got) * np.sign(d) > self.params["control.shortfall_frac"] * abs(d))
         if self.alloc_short:
             self.alloc_short_cycles += 1
-            self.events.emit(t_s, Severity.WARNING, "allocator", "alloc_short",
-                             "ALLOCATION SHORT ON BANK AXIS", rate_limited=True)
+            self.events.emit(t_s, EV.ALLOC_SHORT)
 
     def no_frame(self, t_s: float) -> np.ndarray:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards

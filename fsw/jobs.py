@@ -37,7 +37,10 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from common import rt
-from common.events import EventLog, Severity
+from common.events import EventLog
+from interfaces.event_catalogue import EV, EventDef
+
+OVERRUN_SKIPPED, OVERRUN_LATE = 0, 1       # the catalogue's overrun_t: what a late job did
 
 IN_PLACE, AWAITED, REALTIME = "in place", "awaited", "real time"
 LATEST, EVERY = "latest", "every"
@@ -65,13 +68,12 @@ class BackgroundJob:
     """``fn(*args)`` computed for the newest request (module docstring).
 
     ``fn`` is public: tests replace it to inject delays or faults. ``name`` names the
-    thread. With ``events``, lateness, skipped requests and faults are reported under
-    ``source`` with codes ``<event_name>_overrun`` and ``<event_name>_fault`` (``event_name``
-    defaults to ``name``); without, they are only counted."""
+    thread. With ``events``, lateness and skipped requests are reported as ``overrun_event``
+    and faults as ``fault_event`` (catalogue entries); without, they are only counted."""
 
     def __init__(self, fn: Callable, name: str, *, mode: str = REALTIME, keep: str = LATEST,
-                 skip_while_busy: bool = False, events: EventLog | None = None, source: str = "",
-                 event_name: str = "") -> None:
+                 skip_while_busy: bool = False, events: EventLog | None = None,
+                 overrun_event: EventDef | None = None, fault_event: EventDef | None = None) -> None:
         if mode not in (IN_PLACE, AWAITED, REALTIME) or keep not in (LATEST, EVERY):
             raise ValueError(f"{name}: mode {mode!r}, keep {keep!r}")
         self.fn = fn
@@ -79,7 +81,7 @@ class BackgroundJob:
         self.mode = mode
         self.keep = keep
         self.skip_while_busy = skip_while_busy
-        self.events, self.source, self.event_name = events, source or name, event_name or name
+        self.events, self.overrun_event, self.fault_event = events, overrun_event, fault_event
         self.released = 0                 # requests accepted
         self.skipped = 0                  # requests refused while busy (skip_while_busy)
         self.late = 0                     # answers not there at their due step
@@ -122,7 +124,7 @@ class BackgroundJob:
                 self.released += 1
                 self._cv.notify()
         if refused:
-            self._report(t_s, "_overrun", f"{self.event_name.upper()} CYCLE SKIPPED: PREVIOUS STILL RUNNING")
+            self._report(t_s, self.overrun_event, what=OVERRUN_SKIPPED)
             return False
         self._deadline = due_t is not None
         self.due_t = -math.inf if due_t is None else due_t
@@ -162,11 +164,11 @@ class BackgroundJob:
             if self._deadline and not self.overdue:
                 self.overdue = True
                 self.late += 1
-                self._report(t_s, "_overrun", f"{self.event_name.upper()} CYCLE OVERRUN: COMMAND KEPT")
+                self._report(t_s, self.overrun_event, what=OVERRUN_LATE)
             return None
         self.due_t, self.overdue = math.inf, False
         if ans.error is not None:
-            self._report(ans.t_s, "_fault", f"{self.event_name.upper()} FAULT: {type(ans.error).__name__}: {ans.error}"[:50])
+            self._report(ans.t_s, self.fault_event, error=f"{type(ans.error).__name__}: {ans.error}")
             return None
         return ans
 
@@ -292,6 +294,6 @@ class BackgroundJob:
             with self._cv:
                 self._finish(req, ans)
 
-    def _report(self, t_s: float, suffix: str, text: str) -> None:
-        if self.events is not None:
-            self.events.emit(t_s, Severity.WARNING, self.source, self.event_name + suffix, text, rate_limited=True)
+    def _report(self, t_s: float, event: EventDef | None, **args) -> None:
+        if self.events is not None and event is not None:
+            self.events.emit(t_s, event, **args)

@@ -68,6 +68,10 @@ class ArgType:
         name = re.sub(r"[^a-z0-9]+", "_", self.labels[value].lower()).strip("_")
         return name if name[:1].isalpha() else f"none{name}"
 
+    def code_of(self, label: str) -> int:
+        """The value of an enum's label (KeyError for none)."""
+        return next(k for k, v in self.labels.items() if v == label)
+
     def value(self, v):
         """``v`` as the renderer formats it: the label of an enum, a Python int or float."""
         if self.is_text:

@@ -44,6 +44,7 @@ import pytest
 
 from common import rt
 from common.events import EventLog
+from interfaces.event_catalogue import EV
 from common.model import load_scenario
 from ellipsled import batch
 from fsw.executive import LockstepClock
@@ -390,7 +391,7 @@ def test_awaited_the_answer_is_not_handed_over_before_its_due_step_and_waited_fo
 
 def test_in_real_time_an_answer_missing_at_its_due_step_is_one_overrun_and_taken_when_it_arrives(jobs, runner):
     events = EventLog()
-    w = runner(events=events, source="guidance", event_name="guidance")
+    w = runner(events=events, overrun_event=EV.GUIDANCE_OVERRUN)
     w.submit("held", tag=-1.0, t_s=1.0, due_t=1.5)
     assert w.take(1.48) is None and w.late == 0
     assert w.take(1.5) is None and w.late == 1 and w.overdue
@@ -406,7 +407,7 @@ def test_in_real_time_an_answer_missing_at_its_due_step_is_one_overrun_and_taken
 
 def test_a_request_while_busy_is_refused_and_counted_when_the_job_keeps_its_cadence(jobs, runner):
     events = EventLog()
-    w = runner(skip_while_busy=True, events=events, source="guidance", event_name="guidance")
+    w = runner(skip_while_busy=True, events=events, overrun_event=EV.GUIDANCE_OVERRUN)
     assert w.submit("held", t_s=1.0, due_t=1.5)
     jobs.started("held")
     assert not w.submit("next", t_s=2.0, due_t=2.5)
@@ -425,7 +426,7 @@ def test_a_job_that_raises_is_a_counted_fault_and_an_event_and_the_runner_serves
             raise ValueError("no answer")
         return x
     events = EventLog()
-    w = runner(job, mode=mode, events=events, source="guidance", event_name="controllability")
+    w = runner(job, mode=mode, events=events, fault_event=EV.CONTROLLABILITY_FAULT)
     w.submit("bad", t_s=4.0)
     assert w.wait_idle(SANITY_S) and w.faults == 1
     assert w.take(5.0) is None                           # reported, not handed over

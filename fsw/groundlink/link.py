@@ -54,6 +54,7 @@ import time
 from collections import OrderedDict, deque
 from collections.abc import Callable, Mapping
 
+from interfaces.event_catalogue import EV
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
 from interfaces.mavlink.signing.keys import SigningKey, stream_state_path
@@ -88,7 +89,7 @@ _ADDRESSED = frozenset(policy.MESSAGES) - {mav.MAVLINK_MSG_ID_HEARTBEAT}
 _UNTARGETED = frozenset({mav.MAVLINK_MSG_ID_TIMESYNC})
 # Frames that must be signed in some form, and only they (signed) make a telemetry peer.
 COMMAND_CLASS = policy.COMMAND_CLASS
-REFUSAL_EVENT = "link_refused"   # the one event code of every refusal on the link ...
+REFUSAL_EVENT = EV.LINK_REFUSED.name   # the one event code of every refusal on the link ...
 REFUSAL_EVENT_INTERVAL_S = 60.0  # ... told at once, then at most once in this interval (a summary)
 FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends
 EVENT_SHARE = 16                 # frames a tick no answer to a request can take from the events
@@ -129,7 +130,7 @@ class GroundLink:
         self.wall_clock = wall_clock
         self.max_rx_per_tick = int(max_rx_per_tick)
         self.max_tx_per_tick = int(max_tx_per_tick)
-        self.refusal_event_interval_s = float(refusal_event_interval_s)
+        self.refusal_event_interval_s = refusal_event_interval_s
         self.rates_hz = check_rates(rates)
         # no stream can go out more often than the link ticks (RG2): the fastest rate a
         # ground station may ask for
@@ -281,8 +282,7 @@ class GroundLink:
         dropped = ist["kernel_drops"] - self._drops_reported
         if dropped > 0:
             self._drops_reported = ist["kernel_drops"]
-            self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", "link_flood",
-                                 f"link flooded: {dropped} datagrams dropped", rate_limited=True)
+            self.fsw.events.emit(self.fsw.t_s, EV.LINK_FLOOD, dropped=dropped)
         return n
 
     def _handle_one(self, msg, addr) -> None:
@@ -298,6 +298,16 @@ class GroundLink:
         return dict(self.intake.refused_by_sender)
 
     @property
+    def refusal_event_interval_s(self) -> float:
+        """How often the one refusal event is told at most (the rest summarised) [s]."""
+        return self._refusal_event_interval_s
+
+    @refusal_event_interval_s.setter
+    def refusal_event_interval_s(self, s: float) -> None:
+        self._refusal_event_interval_s = float(s)
+        self.fsw.events.set_throttle(EV.LINK_REFUSED, self._refusal_event_interval_s)
+
+    @property
     def rejections(self) -> int:
         """Frames and datagrams refused so far, all reasons (SigningVerifier counts)."""
         return self.link.verifier.rejected
@@ -309,8 +319,7 @@ class GroundLink:
     def _tell_refusal(self, text: str) -> None:
         """The link's one refusal event: the first told at once, the others held and told
         as one summary (the last one's text, + how many) once REFUSAL_EVENT_INTERVAL_S is over."""
-        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", REFUSAL_EVENT, text[:tm.STATUSTEXT_LEN],
-                             rate_limited=True, min_interval_s=self.refusal_event_interval_s)
+        self.fsw.events.emit(self.fsw.t_s, EV.LINK_REFUSED, detail=text)
 
     def handle(self, msg, addr: tuple[str, int]) -> None:
         """Act on one verified, decoded message that arrived from ``addr``, by its class
@@ -357,7 +366,7 @@ class GroundLink:
             if name is not None:
                 self._reply(self.params_in.value_msg(name), addr)
             elif signed:
-                self._refuse("param_unknown", why)
+                self._refuse(EV.PARAM_UNKNOWN, why)
             else:                                # counted, told in the one throttled event
                 self.stats["reads_unknown"] += 1
                 self.intake.count_sender(addr)
@@ -365,7 +374,7 @@ class GroundLink:
         elif mid == mav.MAVLINK_MSG_ID_PARAM_SET and signed:
             name, why = self.params_in.set(msg)
             if why:
-                self._refuse("param_unknown" if name is None else "param_refused", why)
+                self._refuse(EV.PARAM_UNKNOWN if name is None else EV.PARAM_REFUSED, why)
             elif name is not None:
                 self.stats["params_set"] += 1
             if name is not None:
@@ -441,8 +450,8 @@ class GroundLink:
         if self.peers.add(addr, self.clock()):
             self.stats["peers_added"] += 1
 
-    def _refuse(self, code: str, text: str) -> None:
-        self.fsw.events.emit(self.fsw.t_s, Severity.WARNING, "link", code, text[:tm.STATUSTEXT_LEN])
+    def _refuse(self, event, text: str) -> None:
+        self.fsw.events.emit(self.fsw.t_s, event, detail=text)
 
     def _take_reads(self, addr, n: int) -> int:
         """Up to ``n`` units of ``addr``'s read budget: how many it had."""
@@ -493,7 +502,7 @@ class GroundLink:
         else:
             result, why = self.commands_in.execute(msg.command, p)
         if result != CommandResult.ACCEPTED and why and signed:
-            self._refuse("cmd_refused", why)
+            self._refuse(EV.CMD_REFUSED, why)
         self.commands[result] = self.commands.get(result, 0) + 1
         if result == CommandResult.ACCEPTED and signed:
             self.stats["commands_accepted"] += 1

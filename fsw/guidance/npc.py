@@ -13,7 +13,8 @@ import numpy as np
 
 from common import atmosphere
 from common.model import Scenario
-from common.events import EventLog, Severity
+from common.events import EventLog
+from interfaces.event_catalogue import EV, REVERSAL_RULE
 from ..jobs import AWAITED, REALTIME, BackgroundJob
 from ..params import Param
 from .corrector import Correction, Corrector
@@ -124,7 +125,8 @@ class EntryGuidance(Corrector):
         # the correction off the loop: due apply_delay_s after its release, awaited then in
         # lockstep and batch; a release while the previous one computes is skipped
         self.job = BackgroundJob(self.solve, "npc-guidance", mode=REALTIME if realtime else AWAITED,
-                                 skip_while_busy=True, events=events, source="guidance", event_name="guidance")
+                                 skip_while_busy=True, events=events,
+                                 overrun_event=EV.GUIDANCE_OVERRUN, fault_event=EV.GUIDANCE_FAULT)
 
     def _warm_up(self) -> None:
         """Compile (or load from numba's cache) every kernel with the argument types flight
@@ -156,8 +158,8 @@ class EntryGuidance(Corrector):
         if self.lateral.update(t_s, V, dpsi, self.xr_keep_m, self.xr_rev_m, t_go,
                                self.shaper.reversal_s(self.bank_cmd)):
             self.xr_keep_m = self.xr_rev_m = math.nan      # for the sign just left
-            self.events.emit(t_s, Severity.INFO, "guidance", "bank_reversal",
-                             f"BANK REVERSAL ({self.lateral.rules[-1].upper()}) DPSI {math.degrees(dpsi):+.1f} DEG")
+            self.events.emit(t_s, EV.BANK_REVERSAL, rule=REVERSAL_RULE.code_of(self.lateral.rules[-1].upper()),
+                             dpsi_deg=math.degrees(dpsi))
         period = t_s - self._t_cycle if math.isfinite(self._t_cycle) else 1.0
         self._t_cycle = t_s
         if self._frozen:
@@ -181,8 +183,7 @@ class EntryGuidance(Corrector):
         self._line = (res["e0_jpkg"], res["bank_line_rad"], res["bank_final_rad"])
         if res["floor"]:
             if self.floor_cycles == 0:
-                self.events.emit(res["t_s"], Severity.NOTICE, "guidance", "deploy_alt_floor",
-                                 f"DEPLOY ALT FLOOR: RANGE TRADED {res['miss_m'] / 1e3:+.1f} KM"[:50])
+                self.events.emit(res["t_s"], EV.DEPLOY_ALT_FLOOR, miss_km=res["miss_m"] / 1e3)
             self.floor_cycles += 1
         self.held_cycles += bool(res["held"])
         self.miss_m = res["miss_m"]
@@ -191,14 +192,12 @@ class EntryGuidance(Corrector):
         self.t_go_s, self._t_answer = res["t_go_s"], res["t_s"]
         if self.shaper.turn_round(res["turn_rad"], res["sign"]):
             # the reversal under way turned round (solve: no range solution the way it went)
-            self.events.emit(res["t_s"], Severity.INFO, "guidance", "reversal_way",
-                             f"REVERSAL TURNED ROUND: MISS {res['miss_m'] / 1e3:+.1f} KM"[:50])
+            self.events.emit(res["t_s"], EV.REVERSAL_WAY, miss_km=res["miss_m"] / 1e3)
         if res["sign"] == self.lateral.sign:        # not for a sign left since the job started
             self.xr_keep_m, self.xr_rev_m = res["xr_keep_m"], res["xr_rev_m"]
         if not res["ok"]:
             self.no_root += 1
-            self.events.emit(res["t_s"], Severity.NOTICE, "guidance", "guidance_no_root",
-                             f"NO RANGE SOLUTION: MISS {res['miss_m'] / 1e3:+.1f} KM", rate_limited=True)
+            self.events.emit(res["t_s"], EV.GUIDANCE_NO_ROOT, miss_km=res["miss_m"] / 1e3)
         if res["t_go_s"] < self.params["npc.tgo_freeze_s"]:
             self._frozen = True         # too close to the deploy for the range to respond
 
@@ -276,7 +275,7 @@ class EntryGuidance(Corrector):
         lat.dpsi_hi_rad, lat.dpsi_lo_rad = math.radians(p["npc.dpsi_hi_deg"]), math.radians(p["npc.dpsi_lo_deg"])
         lat.gap_s, lat.v_norev_mps, lat.t_settle_s = p["npc.rev_gap_s"], p["npc.v_norev_mps"], p["npc.tgo_freeze_s"]
         for n in sorted(names):
-            self.events.emit(t_s, Severity.INFO, "guidance", "npc_param", f"GUIDANCE {n.upper()} {p[n]:g}"[:50])
+            self.events.emit(t_s, EV.NPC_PARAM, param=n.upper(), value=p[n])
 
     def stats(self) -> dict:
         n = min(self.cycles, self.STATS)

@@ -168,7 +168,7 @@ def own_slips(records: list[dict], period_us: float, last_k: int | None = None) 
     elsewhere: a higher-priority thread, the host), or a late release whose tasks still took
     half the period or more. With ``last_k`` (the plant's last step), a slip after it is no
     one's deadline: the plant had gone (its leaving costs Zenoh's threads, one priority above
-    the loop, up to ~17 ms once in fresh-clone CI, 15 cycles after a guided run's end)."""
+    the loop, time the loop cannot use)."""
     return [r for r in records
             if (last_k is None or r["k"] <= last_k)
             and (r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us)]

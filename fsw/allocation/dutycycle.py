@@ -22,17 +22,15 @@ over any run of N short cycles the jets' mean firing equals the mean d within 1/
 the mean torque b + C mean(d) within sum_k |C_k| / N. A cycle that is not short flies the exact
 allocator's answer and clears the accumulators (a new run of short cycles starts from zero).
 
-Why that gate and not any shortfall beyond rounding to the finest jet: with the latter, the
-nominal entry flew 5,753 modulated cycles and the paper's case 2 (seven stuck jets) 16,000 of
-31,000, its reversals on the LP's weighted optimum (roll -20 N m of -245 asked, pitch/yaw
-exact), fault-attributable error 0.77 and 1.85 deg in the detect modes; with the FSW's rule
-case 2 flies 0-28 modulated cycles and campaign 2026 run 82 flies 159 (1.95 deg; lost with one
-pattern per cycle). A demand one pattern delivers within that rule is left to the attitude loop,
-which integrates the rest.
+Why that gate and not any shortfall beyond rounding to the finest jet: that wider gate
+modulates a third to a half of the cycles of a many-fault case, flying its reversals on the
+LP's weighted optimum (short in roll, exact in pitch and yaw), and the tracking suffers; the
+FSW's own rule modulates only the cycles where one pattern cannot deliver the bank axis. A
+demand one pattern delivers within that rule is left to the attitude loop, which integrates the
+rest (docs/decisions.md keeps the figures).
 
-Cost: one HiGHS solve per modulated cycle (~150-220 us on these shared cores, against ~20 us
-for the exact allocator), the LP model built at the first short cycle after a change of
-tables (~0.6 ms).
+Cost: one HiGHS solve per modulated cycle (about ten times the exact allocator's query), the LP
+model built at the first short cycle after a change of tables.
 
 The paper's sign box (allocator.spill_jets 0) is flown as before: no modulation. While an
 asynchronous reconfiguration is pending (real time: the interim model) neither.

@@ -360,10 +360,14 @@ def test_the_bench_flood_mix_changes_nothing_and_events_still_go_out_each_tick(r
     assert rig.gl.link.counts[Reject.OWN_SYSTEM] > 0 and rig.gl.link.counts[Reject.GARBAGE] > 0
 
 
-def test_an_unsigned_parameter_list_goes_to_the_requester_at_the_read_pace(rig):
+def test_an_unsigned_parameter_list_goes_to_the_requester_at_the_read_pace(rig, monkeypatch):
     """Keyless, a stock ground station still gets the whole list, to its own address only;
-    one 20-byte request cannot make the vehicle send more than the read pace allows."""
-    from fsw.groundlink.senders import READ_BURST, READ_RATE_HZ
+    one 20-byte request cannot make the vehicle send more than the read pace allows (the
+    pace made smaller than the list here: the default burst holds a whole connection)."""
+    from fsw.groundlink import senders
+    monkeypatch.setattr(senders, "READ_BURST", 30.0)
+    monkeypatch.setattr(senders, "READ_RATE_HZ", 10.0)
+    READ_BURST, READ_RATE_HZ = senders.READ_BURST, senders.READ_RATE_HZ
     evil = attacker_socket()
     to_requester = []
     send = rig.gl._send

@@ -93,10 +93,11 @@ def test_tls_campaign_across_hosts_loses_no_run_when_a_worker_host_is_torn_down(
     assert sorted(r["run_id"] for r in rows) == list(range(runs))            # every run, once
     assert all(r["status"] == "ok" for r in rows), [(r["run_id"], r["error"]) for r in rows if r["status"] != "ok"]
     assert {str(r["worker"]).split("//")[0] for r in rows} == {"tls:"}
-    # every run once (above); w2 may record one more between the count above and its
-    # teardown, and the surviving worker flew all it did not
+    # every run once (above): w2 flew some (what it recorded before it vanished, however many
+    # its last flushes carried: the host's pace decides that, not the code), the surviving
+    # worker all the others, those w2 had in hand when it vanished among them
     by_w2 = [r for r in rows if str(r["worker"]).startswith(w2)]
-    assert 1 <= len(by_w2) <= before + 1 < runs, (len(by_w2), before)
+    assert 1 <= len(by_w2) < runs, (len(by_w2), before)
     assert f"{runs} of {runs} runs recorded" in hosts.log("campaign")
     # half the TLS options: refused before connecting; a certificate of another CA: the
     # scheduler refuses the client, nothing is recorded

@@ -7,8 +7,8 @@ from collections import OrderedDict
 
 Address = tuple[str, int]
 
-READ_RATE_HZ = 10.0              # read-only requests and answer frames per second and unsigned sender ...
-READ_BURST = 30.0                # ... after a burst of this many (a ground station connecting)
+READ_RATE_HZ = 50.0              # read-only requests and answer frames per second and unsigned sender ...
+READ_BURST = 300.0               # ... after a burst of this many (a ground station connecting)
 MAX_READ_SENDERS = 64            # unsigned senders whose read budget is remembered
 
 

@@ -449,6 +449,10 @@ def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, w
         res.interrupted = True
     finally:
         old = _ignore_sigint()
+        if res.interrupted:
+            # Ctrl-C may land inside a callback of the client's event loop, which tornado
+            # then logs with its traceback: the interruption is ours and already handled
+            logging.getLogger("tornado.application").setLevel(logging.CRITICAL)
         try:
             flush()
             prog.close()

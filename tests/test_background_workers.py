@@ -59,6 +59,7 @@ from tests.threadtime import BlockedMeter, LongestCCall, gil_keeping_burn
 PERIOD_NS = 20_000_000                       # the 50 Hz control period
 GIL_HOLD_S = 1.5 * PERIOD_NS * 1e-9          # a job that keeps the GIL this long must be caught
 SANITY_S = 30.0                              # only against a hang: no outcome depends on it
+PACE_S = 0.001                               # wall time a measured flight's step takes: 20x real time
 
 
 def _until(cond) -> None:
@@ -95,18 +96,30 @@ class _Flight:
         self.fsw.close()
 
 
-def _worst_blocked(fl: _Flight, done, between=None) -> int:
+def _worst_blocked(fl: _Flight, done, between=None, job: BackgroundJob | None = None) -> int:
     """The longest time one loop iteration (``between()``, a tick and the plant's step) slept
     [ns], with the flight's GIL switch interval, flying until ``done()``. Every iteration is
-    measured, back to back: a wait for the GIL always falls inside one of them."""
+    measured, back to back: a wait for the GIL always falls inside one of them.
+
+    The flight is paced at PACE_S of wall time a step, spun on the CPU (a spin holds the GIL as
+    the tick does and gives it up when a job asks, so a wait for it still falls inside an
+    iteration): unpaced, the loop flies mission time as fast as the host runs it, and a
+    correction slower than the rest of the flight on a slow host never lands in it."""
     switch = sys.getswitchinterval()
     sys.setswitchinterval(rt.GIL_SWITCH_S)               # as the real-time FSW runs
     meter = BlockedMeter()
     worst = 0
+    t_next = time.perf_counter()
     t_end = time.monotonic() + SANITY_S
     try:
         while not done():
-            assert time.monotonic() < t_end, "the workers never answered"
+            assert time.monotonic() < t_end, (
+                "the workers never answered"
+                + ("" if job is None else f" ({job.name}: released {job.released}, skipped {job.skipped}, "
+                   f"late {job.late}, faults {job.faults}, busy {job.busy}; mission t {fl.t_next:.1f} s)"))
+            t_next += PACE_S
+            while time.perf_counter() < t_next:
+                pass
             if between is not None:
                 between()
             fl.step()
@@ -147,7 +160,7 @@ def _measure_the_loop_beside_the_lp(hold_s: float) -> int:
         if fl.plant.k % 10 == 0 and not (f.authority.lp.busy or f.authority.lp.ready):
             f.authority.assess(f.t_s, periodic=True)
     try:
-        return _worst_blocked(fl, lambda: applied[0] >= 4, ask_again)
+        return _worst_blocked(fl, lambda: applied[0] >= 4, ask_again, f.authority.lp)
     finally:
         fl.close()
 
@@ -467,7 +480,7 @@ def _worst_wait_on_the_guidance(hold_s: float = 0.0) -> int:
     with threadtime.as_the_realtime_loop():
         fl = _guided(holding_the_gil)
         try:
-            return _worst_blocked(fl, lambda: fl.fsw.entry.cycles >= 3)
+            return _worst_blocked(fl, lambda: fl.fsw.entry.cycles >= 3, job=fl.fsw.entry.job)
         finally:
             fl.close()
 

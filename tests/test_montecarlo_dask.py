@@ -4,7 +4,9 @@ and one run reproduced from its record."""
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
+import logging
 import os
 import signal
 import subprocess
@@ -20,7 +22,7 @@ from common.model import INERTIA_KEYS
 from ellipsled.batch import run as batch_run
 from ellipsled.montecarlo import apply_campaign_run, load_campaign, scenario_for_run
 from ellipsled.montecarlo.campaign import dispersion_columns, draw_run
-from ellipsled.montecarlo.engine import is_reproducible_column, run_campaign
+from ellipsled.montecarlo.engine import _interrupted_sync_cancel, is_reproducible_column, run_campaign
 from ellipsled.montecarlo.store import ResultStore, flatten
 
 pytestmark = pytest.mark.timeout(180)
@@ -148,6 +150,56 @@ def test_killing_a_worker_mid_campaign_loses_no_run(campaign_file, cluster, tmp_
     with Client(cluster.scheduler_address) as c:                                # cluster left running (not ours)
         pids = c.run(os.getpid)
         assert pids and killed["pid"] not in pids.values()
+
+
+def _tornado_records_of_a_sync_interrupted_before_its_call_started() -> list[logging.LogRecord]:
+    """Dask's real race, made certain: the client's event loop is kept busy while ``sync`` is
+    interrupted at once, so the cancel it queues runs before the call has started."""
+    import threading
+    import distributed.utils as du
+    records: list[logging.LogRecord] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            records.append(record)
+
+    class Interrupted(threading.Event):
+        def wait(self, timeout=None):
+            raise KeyboardInterrupt
+    log = logging.getLogger("tornado.application")
+    keep = Keep()
+    log.addHandler(keep)
+    runner = du.LoopRunner(asynchronous=False)
+    runner.start()
+    try:
+        runner.loop.add_callback(time.sleep, 0.2)
+        real = du.threading.Event
+        du.threading.Event = Interrupted
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                du.sync(runner.loop, asyncio.sleep, 0.01)
+        finally:
+            du.threading.Event = real
+        t_end = time.monotonic() + 10.0
+        while not records and time.monotonic() < t_end:
+            time.sleep(0.01)
+    finally:
+        runner.stop()
+        log.removeHandler(keep)
+    return records
+
+
+def test_the_traceback_dask_logs_for_an_interrupted_call_is_the_one_muted():
+    """What a Ctrl-C can make the client's event loop print (one fresh-clone run in six did):
+    the engine's filter drops that record and lets every other one through."""
+    rec = _tornado_records_of_a_sync_interrupted_before_its_call_started()
+    assert len(rec) == 1 and isinstance(rec[0].exc_info[1], NameError)
+    assert _interrupted_sync_cancel(rec[0]) is False
+    other = logging.LogRecord("tornado.application", logging.ERROR, __file__, 1, rec[0].msg, (), (
+        ZeroDivisionError, ZeroDivisionError("x"), None))
+    assert _interrupted_sync_cancel(other) is True
+    assert _interrupted_sync_cancel(logging.LogRecord("tornado.application", logging.ERROR, __file__, 1,
+                                                      "Exception in callback x", (), None)) is True
 
 
 def test_ctrl_c_stops_cleanly_and_resume_finishes_without_duplicates(campaign_file, cluster, tmp_path):

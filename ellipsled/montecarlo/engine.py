@@ -399,6 +399,8 @@ def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, w
 
     client = cluster = None
     pending: dict = {}
+    tornado_log = logging.getLogger("tornado.application")
+    tornado_log.addFilter(_interrupted_sync_cancel)
     try:
         client, cluster = connect(scheduler, workers, dashboard, security)
         res.dashboard = client.dashboard_link if dashboard else None
@@ -449,10 +451,6 @@ def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, w
         res.interrupted = True
     finally:
         old = _ignore_sigint()
-        if res.interrupted:
-            # Ctrl-C may land inside a callback of the client's event loop, which tornado
-            # then logs with its traceback: the interruption is ours and already handled
-            logging.getLogger("tornado.application").setLevel(logging.CRITICAL)
         try:
             flush()
             prog.close()
@@ -464,6 +462,18 @@ def _execute(camp, base, todo, master_seed, duration_s, store, res, scheduler, w
                 cluster.close()
         finally:
             _restore_sigint(old)
+            tornado_log.removeFilter(_interrupted_sync_cancel)
+
+
+def _interrupted_sync_cancel(record: logging.LogRecord) -> bool:
+    """False for the one traceback a Ctrl-C handled here makes Dask's event loop log: the
+    client's ``sync`` answers the interruption by queueing a cancel of its call, and when the
+    call has not started yet that cancel reads a variable not yet set (NameError on
+    ``future``), which tornado logs as an exception in a callback. Nothing was running, so
+    nothing is lost; any other record passes."""
+    exc = record.exc_info[1] if record.exc_info else None
+    return not (isinstance(exc, NameError) and getattr(exc, "name", None) == "future"
+                and "sync.<locals>.cancel" in record.getMessage())
 
 
 class _deferred_sigint:

@@ -52,8 +52,11 @@ class Rig:
         self.inject_answer = True
         self.gcs = GroundClient(self.key, listen="udp:127.0.0.1:0", tlog=tlog)
         cb = self._inject if inject == "plant" else inject
+        # the tick's budget on a clock that stands still: what a tick sends is the logic's,
+        # not the host's (tests/test_groundlink_budget.py prices the frames instead)
         self.gl = GroundLink(self.fsw, self.key, gcs=f"udp:127.0.0.1:{self.gcs.address[1]}",
-                             bind="udp:127.0.0.1:0", inject=cb, rates=rates, clock=self.clock)
+                             bind="udp:127.0.0.1:0", inject=cb, rates=rates, clock=self.clock,
+                             tick_clock_ns=lambda: 0)
         self.gcs.set_vehicle(self.gl.address)
         self.frame = self.plant.sensors
         self.k = 0

@@ -85,7 +85,7 @@ def test_every_stream_can_be_requested_once(quiet):
         assert arrived(quiet, name), name
     # loop timing exists only once the executive has reported it
     assert quiet.raw_command(REQ, msg_id("ELLIPSLED_LOOP_TIMING")) == TEMP
-    quiet.gl.set_loop_timing(0, jitter_p50_us=1, jitter_p99_us=2, jitter_max_us=3, compute_p50_us=4,
+    quiet.gl.streams.set_loop_timing(0, jitter_p50_us=1, jitter_p99_us=2, jitter_max_us=3, compute_p50_us=4,
                              compute_p99_us=5, compute_max_us=6, cycle_slips=0)
     assert quiet.raw_command(REQ, msg_id("ELLIPSLED_LOOP_TIMING")) == ACCEPTED
     assert arrived(quiet, "ELLIPSLED_LOOP_TIMING")

@@ -173,7 +173,7 @@ def test_position_hud_altitude_and_time_agree_with_the_plant_truth(rig):
 
 
 def test_loop_timing_from_the_executive_is_forwarded(rig):
-    rig.gl.set_loop_timing(0, jitter_p50_us=12, jitter_p99_us=40, jitter_max_us=90, compute_p50_us=300,
+    rig.gl.streams.set_loop_timing(0, jitter_p50_us=12, jitter_p99_us=40, jitter_max_us=90, compute_p50_us=300,
                            compute_p99_us=700, compute_max_us=1500, cycle_slips=2)
     rig.fly(10)
     assert rig.exchange(lambda: "ELLIPSLED_LOOP_TIMING" in rig.gcs.state.latest)
@@ -192,7 +192,8 @@ def test_stock_pymavlink_common_client_sees_vehicle_attitude_and_statustext(tmp_
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
     try:
         key = write_key(tmp_path, "k3")
-        gl = GroundLink(rig.fsw, key, gcs=f"udp:127.0.0.1:{port}", bind="udp:127.0.0.1:0", clock=rig.clock)
+        gl = GroundLink(rig.fsw, key, gcs=f"udp:127.0.0.1:{port}", bind="udp:127.0.0.1:0", clock=rig.clock,
+                        tick_clock_ns=lambda: 0)
         try:
             seen = {}
             for _ in range(30):
@@ -221,7 +222,7 @@ def test_warm_up_encodes_every_stream_and_sends_nothing(rig):
     from fsw.flightsoftware import FlightSoftware
     spare = FlightSoftware(rig.scn)
     spare.control_step(rig.frame)
-    seq, due = rig.gl.link.signer.seq, dict(rig.gl._next_due)
+    seq, due = rig.gl.link.signer.seq, dict(rig.gl.schedule.next_due)
     tx = rig.gl.stats["tx_frames"]
     calls = []
     orig = rig.gl.link.pack
@@ -230,7 +231,7 @@ def test_warm_up_encodes_every_stream_and_sends_nothing(rig):
     rig.gl.link.pack = orig
     spare.close()
     assert rig.gl.stats["tx_frames"] == tx and rig.gl.link.signer.seq == seq
-    assert rig.gl._next_due == due and rig.gl._event_index == 0 and rig.gl.fsw is rig.fsw
+    assert rig.gl.schedule.next_due == due and rig.gl._event_index == 0 and rig.gl.fsw is rig.fsw
     assert {"HEARTBEAT", "ATTITUDE", "ELLIPSLED_ENTRY_STATE", "ELLIPSLED_JET_STATUS", "PARAM_VALUE",
             "STATUSTEXT"} <= set(calls)
     rig.fly(1)

@@ -54,7 +54,7 @@ class Flight:
         self.clock = Clock()
         self.gcs = GroundClient(key, listen="udp:127.0.0.1:0")
         self.gl = GroundLink(self.fsw, key, gcs=f"udp:127.0.0.1:{self.gcs.address[1]}", bind="udp:127.0.0.1:0",
-                             inject=self._inject, clock=self.clock)
+                             inject=self._inject, clock=self.clock, tick_clock_ns=lambda: 0)
         self.gcs.set_vehicle(self.gl.address)
         self.topo.add(2, "groundlink", lambda c: self.gl.tick(self.frame))
         self.frame = self.plant.sensors

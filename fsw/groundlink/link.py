@@ -8,8 +8,9 @@ change FSW state, so they must not run concurrently with a control cycle). ``tic
 the socket within a budget (interfaces/mavlink/intake.py: at most ``max_rx_per_tick``
 datagrams and ``rx_budget_us`` a tick; what cannot be a command refused before any CRC or
 signature work; the receive buffer sized to one tick's budget, the kernel dropping the
-excess), answers what arrived, then sends the telemetry that is due; it never blocks and
-never raises on anything from the network. What the link refused and dropped is in
+excess), answers what arrived, then sends the telemetry that is due, all within its time
+budget per tick (schedule.py: a share of the control period; what does not fit waits for a
+later tick, counted); it never blocks and never raises on anything from the network. What the link refused and dropped is in
 ``stats``, in SYS_STATUS (errors_comm: rejections; errors_count1: datagrams dropped on the
 full queue; errors_count2: datagrams refused before verification; errors_count3: unsigned
 state-changing frames refused; errors_count4: reads over budget), per sender in
@@ -34,17 +35,10 @@ Who the link listens to:
   ``REFUSAL_EVENT``: at once, then at most once per ``REFUSAL_EVENT_INTERVAL_S`` (a summary).
 
 Downlink per tick, beyond the telemetry streams: at most ``max_tx_per_tick`` frames of
-events and answers to requests; answers (parameter lists included) take at most
-``max_tx_per_tick - EVENT_SHARE``, so events always keep ``EVENT_SHARE`` frames a tick.
-
-Why in the control thread and not a receive thread: a Python thread that verifies
-datagrams holds the GIL, and the control loop then waits for it up to the interpreter's
-switch interval (5 ms) at every release; the budget bounds the cost in the same thread,
-between cycles.
-
-Here: the socket, the tick, and the judgement and answer of each received message;
-beside it, senders.py (the peers and the read budgets kept per address) and streams.py
-(the telemetry streams and what each says).
+events and answers; answers take at most ``max_tx_per_tick - EVENT_SHARE`` of them, so
+events always keep ``EVENT_SHARE`` frames a tick. Why in the control thread and not a
+receive thread: docs/decisions.md. Beside this module: senders.py (peers, read budgets),
+streams.py (what each stream says), schedule.py (the tick's budget, when streams are due).
 """
 from __future__ import annotations
 
@@ -70,15 +64,14 @@ from .ftp import FtpServer
 from .senders import Peers, ReadBudgets
 from .services import COMMANDS as LINK_COMMANDS
 from .services import LinkServices
-from .streams import ATTITUDE_GROUP, MAX_RATE_HZ, POSITION_GROUP, SINGLE_STREAMS, TelemetryStreams, check_rates
+from .schedule import TICK_BUDGET_FRAC, StreamSchedule, TickBudget
+from .streams import MAX_RATE_HZ, TelemetryStreams, check_rates
 
 log = logging.getLogger(__name__)
 
 SYSTEM_ID = 1
 COMPONENT_ID = mav.MAV_COMP_ID_AUTOPILOT1        # 1
 DEFAULT_BIND = DEFAULT_VEHICLE
-
-DUE_SLACK = 0.05                 # a stream may go out up to 5 % of its period early
 
 # What a ground station may send unsigned, and what must be signed: the one table is
 # policy.py (read-only messages, commands and FTP opcodes; everything else signed only).
@@ -94,6 +87,10 @@ REFUSAL_EVENT_INTERVAL_S = 60.0  # ... told at once, then at most once in this i
 FTP_REPLIES_PER_TICK = 32        # what MAVLink FTP may add to one tick's sends
 EVENT_SHARE = 16                 # frames a tick no answer to a request can take from the events
 MAX_PARAM_LISTS = 4              # parameter lists queued at once (one per requester)
+STAT_NAMES = ("rx_datagrams", "rx_bytes", "rx_messages", "tx_frames", "tx_bytes", "tx_errors", "refused_early",
+              "kernel_drops", "rx_budget_hits", "rx_poll_max_us", "rx_deferred", "ftp_deferred", "tx_deferred",
+              "reads_limited", "reads_unknown", "peers_added", "refused_senders", "commands_accepted", "params_set",
+              "unsigned_writes", "unsigned_reads")
 
 
 class GroundLink:
@@ -111,6 +108,8 @@ class GroundLink:
     stream_state  where the signing streams' last timestamps are kept across restarts:
              "beside-key" (the key file's name + ".streams"; none for a key not read from a
              file), a path, or None (only the start-time rule refuses older frames).
+    tick_budget_frac  the share of the control period one tick may take (schedule.py).
+    tick_clock_ns  the clock that budget is kept on (tests pass a fake one).
     """
 
     SEND_MARGIN_NS = 1_000_000       # kept free before the deadline beyond the send side's peak
@@ -120,7 +119,8 @@ class GroundLink:
                  clock: Callable[[], float] = time.monotonic, wall_clock: Callable[[], float] = time.time,
                  max_rx_per_tick: int = 256,
                  rx_budget_us: float = 2000.0, max_tx_per_tick: int = 64, peer_timeout_s: float = 10.0, max_peers: int = 4,
-                 stream_state: str | None = "beside-key", refusal_event_interval_s: float = REFUSAL_EVENT_INTERVAL_S):
+                 stream_state: str | None = "beside-key", refusal_event_interval_s: float = REFUSAL_EVENT_INTERVAL_S,
+                 tick_budget_frac: float = TICK_BUDGET_FRAC, tick_clock_ns: Callable[[], int] = time.perf_counter_ns):
         if not isinstance(key, SigningKey):
             raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
         if not int(max_tx_per_tick) > EVENT_SHARE:
@@ -132,6 +132,10 @@ class GroundLink:
         self.max_tx_per_tick = int(max_tx_per_tick)
         self.refusal_event_interval_s = refusal_event_interval_s
         self.rates_hz = check_rates(rates)
+        if not 0.0 < tick_budget_frac <= 1.0:
+            raise ValueError(f"tick_budget_frac must be in (0, 1], got {tick_budget_frac}")
+        self.budget = TickBudget(round(tick_budget_frac * fsw.dt_s * 1e9), tick_clock_ns)
+        self.in_tick = False
         # no stream can go out more often than the link ticks (RG2): the fastest rate a
         # ground station may ask for
         self.max_rate_hz = min(MAX_RATE_HZ, 1.0 / (fsw.dt_s * fsw.params["executive.rg2_divisor"]))
@@ -160,7 +164,7 @@ class GroundLink:
         self._param_lists: OrderedDict[tuple[str, int], tuple[deque[str], bool]] = OrderedDict()  # requester -> (names left, signed)
         self.reads = ReadBudgets()                                        # unsigned senders' read budgets
         self._reply_budget = self.max_tx_per_tick - EVENT_SHARE          # this tick's answers left
-        self._next_due = {name: 0.0 for name in self.rates_hz}
+        self.schedule = StreamSchedule(self.rates_hz)
         self.streams = TelemetryStreams(self)
         self.files = metadata.build(fsw.registry, fsw.scenario.vehicle.name)
         self.ftp = FtpServer(self.files)
@@ -171,11 +175,8 @@ class GroundLink:
         self._pack_only = False                        # warm_up packs without sending
         self.ground_heartbeat_t: float | None = None                     # clock() of last GCS heartbeat
         self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
-        self.stats = {"rx_datagrams": 0, "rx_bytes": 0, "rx_messages": 0, "tx_frames": 0,
-                      "tx_bytes": 0, "tx_errors": 0, "refused_early": 0, "kernel_drops": 0,
-                      "rx_budget_hits": 0, "rx_poll_max_us": 0.0, "rx_deferred": 0, "ftp_deferred": 0,
-                      "reads_limited": 0, "reads_unknown": 0, "peers_added": 0, "refused_senders": 0,
-                      "commands_accepted": 0, "params_set": 0, "unsigned_writes": 0, "unsigned_reads": 0}
+        self.stats = dict.fromkeys(STAT_NAMES, 0)
+        self.stats["rx_poll_max_us"] = 0.0
         self.tick_ns_max = 0
         self.send_ns_peak = 0
 
@@ -206,49 +207,42 @@ class GroundLink:
     def __exit__(self, *exc):
         self.close()
 
-    def set_loop_timing(self, rate_group: int, *, jitter_p50_us: float, jitter_p99_us: float,
-                        jitter_max_us: float, compute_p50_us: float, compute_p99_us: float,
-                        compute_max_us: float, cycle_slips: int) -> None:
-        """Latest timing statistics of one rate group (from the executive), sent as
-        ELLIPSLED_LOOP_TIMING (one message per rate group at that stream's rate)."""
-        self.streams.loop_timing[int(rate_group)] = (jitter_p50_us, jitter_p99_us, jitter_max_us, compute_p50_us,
-                                                     compute_p99_us, compute_max_us, int(cycle_slips))
-
     # -------------------------------------------------------------- the tick
     def tick(self, sensors=None, deadline_ns: int | None = None) -> None:
-        """Call from RG2: receive and answer (bounded), then send what is due.
-        ``sensors``: the latest SENSORS record (for "firing" from the chamber pressures).
-        ``deadline_ns`` (time.monotonic_ns): the cycle's deadline. Receiving then also stops
-        where the time left would no longer cover this tick's sending (the longest send
-        recently, plus SEND_MARGIN_NS): whatever ran late before the link in this cycle, the
-        ground's datagrams wait in the socket rather than push the cycle past its deadline.
-        A tick whose slack is already gone receives nothing (counted: rx_deferred)."""
-        t0 = time.perf_counter_ns()
+        """Call from RG2: receive and answer, then send what is due, within the tick's budget
+        (schedule.py). ``sensors``: the latest SENSORS record (for "firing" from the chamber
+        pressures). ``deadline_ns`` (time.monotonic_ns): the cycle's deadline; the budget
+        then also ends SEND_MARGIN_NS before it: whatever ran late before the link in this
+        cycle, the ground's datagrams wait in the socket rather than push the cycle past its
+        deadline. A tick left no time to receive reads nothing (counted: rx_deferred)."""
+        b = self.budget
+        b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
+        self.in_tick = True
         try:
-            budget = None
-            if deadline_ns is not None:
-                budget = deadline_ns - time.monotonic_ns() - self.send_ns_peak - self.SEND_MARGIN_NS
-            if budget is None or budget > 0:
-                self.poll(budget)
+            rx_ns = b.receive_ns(self.send_ns_peak)
+            if rx_ns > 0:
+                self.poll(rx_ns)
             else:
                 self.stats["rx_deferred"] += 1
             self.streams.sample_allocator()
-            t_send = time.perf_counter_ns()
+            t_send = b.elapsed_ns()
             self.send_due(sensors)
-            sent_ns = time.perf_counter_ns() - t_send
-            # a peak that decays (x0.9 a tick: one outlier is forgotten within seconds), so
-            # one slow send cannot keep the receive side shut
-            self.send_ns_peak = max(sent_ns, int(self.send_ns_peak * 0.9))
+            # what receiving leaves the send side: what it wanted (sent, and what the budget
+            # deferred), a peak decaying x0.9 a tick (one outlier is forgotten within seconds)
+            wanted_ns = b.elapsed_ns() - t_send + self.streams.deferred_ns
+            self.send_ns_peak = max(wanted_ns, int(self.send_ns_peak * 0.9))
         except Exception:                       # the link must never take the FSW down
             log.exception("ground link tick failed")
-        self.tick_ns_max = max(self.tick_ns_max, time.perf_counter_ns() - t0)
+        finally:
+            self.in_tick = False
+        self.tick_ns_max = max(self.tick_ns_max, b.finish())
 
     def warm_up(self, spare_fsw, sensors=None) -> None:
         """Encode (pack) every telemetry message once from ``spare_fsw`` — a throwaway
         FlightSoftware that has flown a cycle — and send nothing: the first encode of each
         message type costs milliseconds, which would otherwise land in the first real-time
         cycles. Schedules, counters and the link's sequence numbers are left as they were."""
-        saved = (self.fsw, dict(self._next_due), self._event_index, self.link.signer.seq, self.streams.origin,
+        saved = (self.fsw, dict(self.schedule.next_due), self._event_index, self.link.signer.seq, self.streams.origin,
                  self.streams.mode_sent)
         self.fsw = spare_fsw
         self._pack_only = True
@@ -265,7 +259,7 @@ class GroundLink:
         except Exception:                       # a warm-up failure must not stop the FSW
             log.exception("ground link warm-up failed")
         finally:
-            (self.fsw, self._next_due, self._event_index, self.link.signer.seq, self.streams.origin,
+            (self.fsw, self.schedule.next_due, self._event_index, self.link.signer.seq, self.streams.origin,
              self.streams.mode_sent) = saved
             self._pack_only = False
 
@@ -439,11 +433,11 @@ class GroundLink:
     def _send_param_lists(self) -> None:
         for addr in list(self._param_lists):
             names, signed = self._param_lists[addr]
-            while names and self._reply_budget > 0 and (signed or self._take_read(addr)):
+            while names and self._reply_budget > 0 and self._time_left() and (signed or self._take_read(addr)):
                 self._reply(self.params_in.value_msg(names.popleft()), addr)
             if not names:
                 del self._param_lists[addr]
-            if self._reply_budget <= 0:
+            if self._reply_budget <= 0 or not self._time_left():
                 return
 
     def _add_peer(self, addr) -> None:
@@ -532,20 +526,13 @@ class GroundLink:
             except OSError:
                 self.stats["tx_errors"] += 1
 
-    def _due(self, name: str, now: float) -> bool:
-        hz = self.rates_hz[name]
-        if hz <= 0.0:
-            return False
-        period = 1.0 / hz
-        if now < self._next_due[name] - DUE_SLACK * period:     # slack: tick jitter must not skip a period
-            return False
-        nxt = self._next_due[name] + period
-        self._next_due[name] = nxt if nxt > now else now + period
-        return True
-
     def schedule_now(self, name: str) -> None:
         """Stream ``name`` is due at the next tick (its rate was just changed)."""
-        self._next_due[name] = 0.0
+        self.schedule.now(name)
+
+    def _time_left(self) -> bool:
+        """Inside a tick: its budget is not spent (outside one, e.g. a warm-up: always)."""
+        return not self.in_tick or self.budget.left_ns() > 0
 
     def system_status(self) -> int:
         return tm.system_status(self.fsw)
@@ -555,32 +542,21 @@ class GroundLink:
         return self.streams.messages(name)
 
     def send_due(self, sensors=None) -> None:
-        """Send every telemetry stream that is due, queued parameters and new events."""
+        """Events (their share), the telemetry streams that are due (the longest-waiting
+        first, while the tick's budget lasts: the rest stay due, counted), queued parameters
+        and further events from what answers left (schedule.py)."""
         now = self.clock()
         fsw = self.fsw
         self.streams.sensors = sensors
         self._ftp_budget = FTP_REPLIES_PER_TICK
         ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
+        self.fsw.events.release_held(fsw.t_s)
+        self._send_events(EVENT_SHARE)
         if fsw.modes.mode != self.streams.mode_sent and self.rates_hz["CURRENT_MODE"] > 0.0:
             self.schedule_now("CURRENT_MODE")                 # a mode change is told at once
-        for name in SINGLE_STREAMS:
-            if self._due(name, now):
-                for msg in self.streams.single(name, ms):
-                    self._send(msg)
-        if tm.nav_valid(fsw):
-            want_att = tuple(self._due(n, now) for n in ATTITUDE_GROUP)
-            want_pos = tuple(self._due(n, now) for n in POSITION_GROUP)
-            if any(want_att) or any(want_pos):
-                C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
-                if any(want_att):
-                    for msg in tm.attitude(fsw, ms, C_LN, want_att):
-                        self._send(msg)
-                if any(want_pos):
-                    for msg in tm.position(fsw, ms, C_LN, want_pos):
-                        self._send(msg)
+        self.streams.send_due(now, ms)
         self._send_param_lists()
-        self.fsw.events.release_held(fsw.t_s)
-        self._send_events(EVENT_SHARE + self._reply_budget)      # their share, and what answers left
+        self._send_events(self._reply_budget if self._time_left() else 0)   # what answers left
         self._reply_budget = self.max_tx_per_tick - EVENT_SHARE
 
     def flush_events(self, max_frames: int = 256) -> None:

@@ -1,6 +1,6 @@
-"""The ground link's telemetry streams: their names and default rates, and what each one
-says now (telemetry.py builds the messages; when a stream is due and where it goes is
-link.py's)."""
+"""The ground link's telemetry streams: their names and default rates, what each one says
+now, and which go out in a tick (telemetry.py builds the messages; when a stream is due and
+the tick's budget are schedule.py's; where a frame goes is link.py's)."""
 from __future__ import annotations
 
 import math
@@ -40,6 +40,10 @@ SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STA
                   "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS",
                   "LOCAL_POSITION_NED", "CURRENT_MODE")
 MAX_RATE_HZ = 100.0
+# What a tick sends as one unit: each single stream, and the attitude and position groups
+# (one frame conversion each); the groups only once navigation is valid.
+SINGLE_UNITS = tuple((name,) for name in SINGLE_STREAMS)
+ALL_UNITS = SINGLE_UNITS + (ATTITUDE_GROUP, POSITION_GROUP)
 
 
 def check_rates(rates: Mapping[str, float] | None) -> dict[str, float]:
@@ -69,12 +73,63 @@ class TelemetryStreams:
         self.sensors = None                            # latest sensor frame given to tick()
         self.origin = None                             # LOCAL_POSITION_NED's, at the first navigation fix
         self.mode_sent = None                          # the Mode CURRENT_MODE last told
+        self.unit_ns: dict[tuple[str, ...], int] = {}  # what each unit cost recently [ns], its peak
+        self.cut = False                               # the last tick's budget deferred a stream
+        self.deferred_ns = 0                           # ... and what those would have cost [ns]
+
+    def set_loop_timing(self, rate_group: int, *, jitter_p50_us: float, jitter_p99_us: float,
+                        jitter_max_us: float, compute_p50_us: float, compute_p99_us: float,
+                        compute_max_us: float, cycle_slips: int) -> None:
+        """Latest timing statistics of one rate group (from the executive), sent as
+        ELLIPSLED_LOOP_TIMING (one message per rate group at that stream's rate)."""
+        self.loop_timing[int(rate_group)] = (jitter_p50_us, jitter_p99_us, jitter_max_us, compute_p50_us,
+                                             compute_p99_us, compute_max_us, int(cycle_slips))
 
     def sample_allocator(self) -> None:
         fsw = self.link.fsw
         self.alloc_ns.append(int(getattr(fsw, "alloc_ns", 0)))
         if fsw.allocator.degraded:
             self.alloc_degraded += 1
+
+    def send_due(self, now: float, ms: int) -> None:
+        """The streams due at ``now``, the longest-waiting first, while the link's tick has
+        time for each (as long as it took recently); the longest-waiting one that does not
+        fit ends the tick's streams (a later, smaller one must not overtake it for good),
+        unless it is a period overdue: then it goes while any time is left (no stream waits
+        longer, however short the budget). What is left stays due, counted."""
+        link = self.link
+        fsw, sched = link.fsw, link.schedule
+        C_LN = None
+        self.cut, self.deferred_ns = False, 0
+        for unit in sched.longest_waiting(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now):
+            # its cost, a peak decaying x0.9 each tick it is due: a noisy unit is met, one slow
+            # send forgotten whether it is sent or deferred
+            self.unit_ns[unit] = int(self.unit_ns.get(unit, 0) * 0.9)
+            self.cut = self.cut or not self._fits(unit, sched.overdue(unit, now))
+            if self.cut:
+                link.stats["tx_deferred"] += sum(sched.waiting(n, now) for n in unit)
+                self.deferred_ns += self.unit_ns[unit]
+                continue
+            t0 = link.budget.elapsed_ns()
+            if len(unit) == 1:
+                sched.take(unit[0], now)
+                msgs = self.single(unit[0], ms)
+            else:
+                if C_LN is None:
+                    C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
+                want = tuple(sched.take(n, now) for n in unit)
+                msgs = (tm.attitude if unit is ATTITUDE_GROUP else tm.position)(fsw, ms, C_LN, want)
+            for msg in msgs:
+                link._send(msg)
+            self.unit_ns[unit] = max(link.budget.elapsed_ns() - t0, self.unit_ns.get(unit, 0))
+
+    def _fits(self, unit: tuple[str, ...], overdue: bool) -> bool:
+        """Inside a tick: time is left for ``unit`` as long as it took recently (overdue:
+        any time left). Outside one (a warm-up): always."""
+        if not self.link.in_tick:
+            return True
+        left = self.link.budget.left_ns()
+        return left > 0 and (overdue or left >= self.unit_ns.get(unit, 0))
 
     def messages(self, name: str) -> list:
         """The messages of stream ``name`` now, outside its schedule (a one-shot request);

@@ -1,0 +1,115 @@
+"""When the ground link works: its time budget per tick and the telemetry streams' schedule.
+
+The link's tick is one task of a control cycle (RG2), so its cost comes out of that cycle's
+period. ``TickBudget`` bounds it: ``tick_budget_frac`` of the control period (0.15: 0.75 ms at
+200 Hz, 3 ms at 50 Hz). Within it, receiving (and answering what arrived) may take all but
+the send side's recent cost, and never more than half the budget when sending wants more
+(so a flood cannot starve the telemetry, nor heavy telemetry the commands); sending takes
+what receiving left, in this order:
+
+1. events, their share of frames (``EVENT_SHARE``) whatever the budget: what the flight
+   software reports reaches the ground even in a tick whose budget a flood used up;
+2. the telemetry streams that are due, the longest-waiting first, while budget is left; a
+   stream not sent stays due and goes out at a later tick (counted: ``tx_deferred``), so
+   under a short budget every stream still gets its turn and none is dropped;
+3. answers to requests (parameter lists) and further events, from the reply budget.
+
+``StreamSchedule`` keeps when each stream is next due; a stream may go out up to
+``DUE_SLACK`` of its period early (tick jitter must not skip a period).
+"""
+from __future__ import annotations
+
+import math
+import time
+from array import array
+from collections.abc import Callable, Iterable
+
+DUE_SLACK = 0.05                 # a stream may go out up to 5 % of its period early
+TICK_BUDGET_FRAC = 0.15          # the link's share of a control period
+COST_RING = 1024                 # ticks whose cost is kept for the percentiles
+
+
+class TickBudget:
+    """Time left in one tick of the link, on ``clock_ns`` (tests inject one)."""
+
+    def __init__(self, budget_ns: int, clock_ns: Callable[[], int] = time.perf_counter_ns) -> None:
+        if not budget_ns > 0:
+            raise ValueError(f"the ground link's tick budget must be > 0 ns, got {budget_ns}")
+        self.budget_ns = int(budget_ns)
+        self.clock_ns = clock_ns
+        self.t0_ns = 0
+        self.limit_ns = self.budget_ns
+        self.costs = array("q", bytes(8 * COST_RING))    # the last ticks' costs [ns], a ring
+        self.ticks = 0
+        self.over = 0                                    # ticks that cost more than the budget
+
+    def start(self, cap_ns: int | None = None) -> None:
+        """A tick begins; ``cap_ns``: less time than the budget is left (the cycle's deadline)."""
+        self.t0_ns = self.clock_ns()
+        self.limit_ns = self.budget_ns if cap_ns is None else max(0, min(self.budget_ns, int(cap_ns)))
+
+    def finish(self) -> int:
+        """The tick ends: its cost [ns], kept."""
+        cost = self.elapsed_ns()
+        self.costs[self.ticks % COST_RING] = cost
+        self.ticks += 1
+        self.over += cost > self.budget_ns
+        return cost
+
+    def report(self) -> dict:
+        """Budget and the kept ticks' cost percentiles [us] (not for the cycle: it sorts)."""
+        kept = sorted(self.costs[:min(self.ticks, COST_RING)])
+        def pct(q: float) -> float:
+            return kept[min(len(kept) - 1, int(q * len(kept)))] * 1e-3 if kept else 0.0
+        return {"budget_us": self.budget_ns * 1e-3, "ticks": self.ticks, "over_budget": self.over,
+                "p50_us": pct(0.50), "p99_us": pct(0.99), "max_us": max(kept, default=0) * 1e-3}
+
+    def elapsed_ns(self) -> int:
+        return self.clock_ns() - self.t0_ns
+
+    def left_ns(self) -> int:
+        return self.limit_ns - self.elapsed_ns()
+
+    def receive_ns(self, send_ns_recent: int) -> int:
+        """What receiving may take: all but the send side's recent cost, at least half."""
+        return self.limit_ns - min(int(send_ns_recent), self.limit_ns // 2)
+
+
+class StreamSchedule:
+    """Next due time [s] of each telemetry stream at ``rates_hz`` (a stream at 0 Hz is off)."""
+
+    def __init__(self, rates_hz: dict[str, float]) -> None:
+        self.rates_hz = rates_hz
+        self.next_due = {name: 0.0 for name in rates_hz}
+
+    def waiting(self, name: str, now: float) -> bool:
+        """``name`` is due at ``now`` (nothing changes)."""
+        hz = self.rates_hz[name]
+        return hz > 0.0 and now >= self.next_due[name] - DUE_SLACK / hz
+
+    def take(self, name: str, now: float) -> bool:
+        """``name`` is due: True, and it is next due one period later (or a period from now
+        when it has fallen behind by more than a period)."""
+        if not self.waiting(name, now):
+            return False
+        period = 1.0 / self.rates_hz[name]
+        nxt = self.next_due[name] + period
+        self.next_due[name] = nxt if nxt > now else now + period
+        return True
+
+    def now(self, name: str) -> None:
+        """``name`` is due at the next tick, ahead of every stream waiting (its rate was just
+        changed, or it has news to tell)."""
+        self.next_due[name] = -math.inf
+
+    def overdue(self, unit: tuple[str, ...], now: float) -> bool:
+        """A stream of ``unit`` has waited a whole period past its due time (or was asked
+        for at once: ``now``)."""
+        return any(self.rates_hz[n] > 0.0 and now >= self.next_due[n] + 1.0 / self.rates_hz[n] for n in unit)
+
+    def longest_waiting(self, units: Iterable[tuple[str, ...]], now: float) -> list[tuple[str, ...]]:
+        """The units (a stream, or streams sent together) with a stream due, the one due
+        earliest first."""
+        due = [(min(self.next_due[n] for n in u if self.waiting(n, now)), i, u)
+               for i, u in enumerate(units) if any(self.waiting(n, now) for n in u)]
+        return [u for _, _, u in sorted(due)]

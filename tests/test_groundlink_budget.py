@@ -1,0 +1,170 @@
+"""The ground link's time budget per tick (fsw/groundlink/schedule.py), on an injected clock:
+each packed frame costs a known time, so what a tick sends, defers and spends is exact on any
+host. Proven: a tick stops sending once its budget is spent, over by at most the unit it was
+sending; what it did not send stays due and is counted; under a short budget every stream
+still gets its turn (the longest-waiting first), events and a mode change go out first; with
+time to spare nothing is deferred; receiving leaves the send side its recent cost, at most
+half the budget; the cycle's deadline shortens the budget."""
+from __future__ import annotations
+
+from collections import Counter
+
+import pytest
+
+from fsw.groundlink.schedule import DUE_SLACK, StreamSchedule, TickBudget
+from fsw.groundlink.streams import ATTITUDE_GROUP
+from interfaces.event_catalogue import EV
+from tests.rig import flown
+
+FRAME_NS = 250_000                 # what one frame costs on the injected clock
+
+
+class FrameClock:
+    """A ns clock that moves only when the link packs a frame."""
+
+    def __init__(self) -> None:
+        self.t = 0
+
+    def __call__(self) -> int:
+        return self.t
+
+
+@pytest.fixture
+def priced(tmp_path):
+    """A flown rig whose link runs on FrameClock, every stream due every tick: (rig, clock,
+    turns per stream); ``rig.log`` lists each stream's turn and each frame, in order."""
+    with flown(tmp_path) as rig:
+        gl = rig.gl
+        clock = FrameClock()
+        gl.budget.clock_ns = clock
+        for name in gl.rates_hz:
+            gl.rates_hz[name] = gl.max_rate_hz
+            gl.schedule.next_due[name] = 0.0                 # all due now
+        pack = gl.link.pack
+
+        rig.log = []
+
+        def priced_pack(msg):
+            clock.t += FRAME_NS
+            rig.log.append("frame")
+            return pack(msg)
+        gl.link.pack = priced_pack
+        turns: Counter = Counter()
+        take = gl.schedule.take
+
+        def counted(name, now):
+            due = take(name, now)
+            turns[name] += due
+            rig.log.append("turn")
+            return due
+        gl.schedule.take = counted
+        yield rig, clock, turns
+
+
+def _ticks(rig, n: int) -> list[int]:
+    """n link ticks, one RG2 period apart on the scheduling clock; each tick's cost [ns].
+    ``rig.waiting``: the streams due at the start of each tick, summed."""
+    costs = []
+    rig.waiting = 0
+    for _ in range(n):
+        rig.clock.t += 1.0 / rig.gl.max_rate_hz
+        rig.waiting += sum(rig.gl.schedule.waiting(name, rig.clock.t) for name in rig.gl.rates_hz)
+        before = rig.gl.budget.ticks
+        rig.gl.tick(rig.frame)
+        assert rig.gl.budget.ticks == before + 1
+        costs.append(rig.gl.budget.costs[before % len(rig.gl.budget.costs)])
+        rig.gcs.poll(0.0)
+    return costs
+
+
+def test_a_short_budget_stops_the_tick_defers_the_rest_and_every_stream_gets_its_turn(priced):
+    rig, clock, turns = priced
+    gl = rig.gl
+    budget = gl.budget.budget_ns
+    wanted = len(gl.rates_hz)
+    assert budget == round(0.15 * rig.scn.dt_control_s * 1e9)
+    n = 60
+    deferred0 = gl.stats["tx_deferred"]
+    costs = _ticks(rig, n)
+    # the most frames one unit sent (a stream, or a group: its turns, then its frames)
+    runs = "".join("t" if e == "turn" else "f" for e in rig.log).split("t")
+    largest_unit = max(len(r) for r in runs[1:]) * FRAME_NS
+    assert largest_unit >= len(ATTITUDE_GROUP) * FRAME_NS
+    assert max(costs) > budget                           # the clock did price the frames
+    assert max(costs) <= budget + largest_unit           # over only by the unit under way
+    assert gl.stats["tx_deferred"] > deferred0           # it could not send everything ...
+    sent = sum(turns.values())
+    assert sent < wanted * n                             # ... and did not
+    # ... yet every stream had its turns, the longest-waiting first: none starves
+    assert set(turns) == set(gl.rates_hz)
+    assert min(turns.values()) >= 0.5 * sent / wanted
+    # each stream due at a tick went out or was counted as deferred: none is lost
+    assert sent + gl.stats["tx_deferred"] - deferred0 == rig.waiting
+
+
+def test_with_time_to_spare_every_stream_goes_every_tick_and_nothing_waits(priced):
+    rig, clock, turns = priced
+    rig.gl.budget.budget_ns = 10**12
+    deferred0 = rig.gl.stats["tx_deferred"]
+    _ticks(rig, 20)
+    assert rig.gl.stats["tx_deferred"] == deferred0
+    assert all(turns[name] >= 19 for name in rig.gl.rates_hz)
+
+
+def test_events_go_out_in_a_tick_with_no_budget_left(priced):
+    rig, clock, turns = priced
+    gl = rig.gl
+    gl.budget.budget_ns = 1                             # spent by the first frame
+    _ticks(rig, 3)
+    n0 = len(rig.gcs.state.events)
+    for i in range(3):
+        rig.fsw.events.emit(rig.fsw.t_s, EV.REVERSAL_WAY, miss_km=float(i))   # not throttled
+    turns.clear()
+    _ticks(rig, 1)
+    rig.gcs.poll(0.05)
+    assert len(rig.gcs.state.events) == n0 + 3          # every event of the tick, over the budget
+    assert sum(turns.values()) == 0                     # and no stream: the budget is spent
+
+
+def test_a_mode_change_is_the_first_stream_a_short_tick_sends(priced):
+    rig, clock, turns = priced
+    gl = rig.gl
+    gl.budget.budget_ns = 1                             # one unit a tick
+    _ticks(rig, 3)
+    gl.schedule_now("CURRENT_MODE")                     # as a mode change does
+    turns.clear()
+    _ticks(rig, 1)
+    assert turns == Counter({"CURRENT_MODE": 1})
+
+
+def test_receiving_leaves_the_send_side_its_recent_cost_at_most_half_the_budget():
+    t = [0]
+    b = TickBudget(1000, lambda: t[0])
+    b.start()
+    assert b.receive_ns(300) == 700 and b.receive_ns(0) == 1000
+    assert b.receive_ns(900) == 500                      # a heavy send side: half the budget
+    b.start(cap_ns=400)                                  # the cycle's deadline is nearer
+    assert b.limit_ns == 400 and b.receive_ns(300) == 200
+    b.start(cap_ns=-5)                                   # the deadline is past: nothing
+    assert b.left_ns() == 0 and b.receive_ns(0) == 0
+    t[0] += 1500
+    assert b.finish() == 1500 and b.over == 1 and b.report()["max_us"] == 1.5
+
+
+def test_a_stream_is_due_once_a_period_and_may_go_a_little_early():
+    s = StreamSchedule({"A": 10.0, "B": 0.0})
+    assert s.take("A", 5.0) and not s.take("A", 5.0)    # due at once, then a period later
+    assert not s.waiting("A", 5.1 - 0.1 * DUE_SLACK - 1e-9)
+    assert s.take("A", 5.1 - 0.1 * DUE_SLACK)
+    assert not s.waiting("B", 1e9)                       # 0 Hz: off
+    s.take("A", 100.0)                                   # fell behind: a period from now
+    assert s.next_due["A"] == pytest.approx(100.1)
+    assert s.longest_waiting([("A",), ("B",)], 100.1) == [("A",)]
+
+
+def test_a_budget_that_is_no_share_of_the_period_is_refused(tmp_path):
+    from fsw.groundlink import GroundLink
+    with flown(tmp_path, cycles=1) as rig:
+        for frac in (0.0, -0.1, 1.5, float("nan")):
+            with pytest.raises(ValueError, match="tick_budget_frac"):
+                GroundLink(rig.fsw, rig.key, bind="udp:127.0.0.1:0", tick_budget_frac=frac)

@@ -383,6 +383,8 @@ class FswNode:
                            "text": e.text} for e in self.events.history],
             "rt": self.rt_report,
             "ground_link": (dict(self.link.stats) if self.link is not None and hasattr(self.link, "stats") else None),
+            "ground_link_tick": (self.link.budget.report() if self.link is not None and hasattr(self.link, "budget")
+                                 else None),
         })
         (out / "fsw.json").write_text(json.dumps(rep, indent=2, default=str) + "\n")
 

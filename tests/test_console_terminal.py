@@ -35,7 +35,7 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         console.wait_for(lambda s: "ENTRY" in s and "ARMED" in s, 120, "the vehicle on the console")
         console.keys(":")
         time.sleep(0.5)               # as a person would: the command line takes focus first
-        console.keys("inject 17 off", literal=True)
+        console.keys("inject 17 failed_off", literal=True)
         console.keys("Enter")
         console.wait_for(lambda s: "inject jet 17 off: ACCEPTED" in s, 20, "the ACK on the screen")
         console.keys("Escape")

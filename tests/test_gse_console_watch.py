@@ -39,7 +39,7 @@ def test_view_only_console_shows_the_vehicle_and_sends_nothing(tmp_path):
                 assert "VIEW ONLY" in top and "ENTRY" in top and "ARMED" in top, top
                 assert "ELLIPSLED_ENTRY_STATE" in viewer.state.latest
                 rx_before = rig.gl.stats["rx_datagrams"]
-                await _type(pilot, "inject 17 off")
+                await _type(pilot, "inject 17 failed_off")
                 await pilot.press("3")                 # SAFE by key (and Enter): refused too
                 await pilot.press("enter")
                 for _ in range(4):
@@ -60,7 +60,7 @@ def test_replay_of_a_recorded_session_shows_its_final_state_and_events(tmp_path)
     rig = Rig(tmp_path, tlog=str(tlog))
     try:
         rig.fly(50)
-        assert rig.command("inject", "17", "off") == 0
+        assert rig.command("inject", "17", "failed_off") == 0
         assert rig.command("mode", "safe") == 0
         rig.fly(200)
         rig.exchange(lambda: False, 0.2)

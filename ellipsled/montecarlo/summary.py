@@ -187,7 +187,7 @@ def write_summary(out: str | Path, camp: Campaign, table: pa.Table, runs: int | 
                          + f" | {_fmt(f['max'])} |")
     lines += ["", "(none: the figure is undefined for the run, e.g. never settled, or no fault within the run)",
               "", f"## Worst {N_WORST} runs by max |bank error| after the fault", "",
-              "| run | seed | max err [deg] | vs schedule [deg] | fault t [s] | off | stuck | degraded | FDIR delay [s] "
+              "| run | seed | max err [deg] | vs schedule [deg] | fault t [s] | failed_off | stuck_on | degraded | FDIR delay [s] "
               "| success | diagnosis |",
               "|---|---|---|---|---|---|---|---|---|---|---|"]
     err = _col(ok, "bank_err_max_after_fault_deg")

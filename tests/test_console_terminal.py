@@ -37,7 +37,7 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         time.sleep(0.5)               # as a person would: the command line takes focus first
         console.keys("inject 17 failed_off", literal=True)
         console.keys("Enter")
-        console.wait_for(lambda s: "inject jet 17 off: ACCEPTED" in s, 20, "the ACK on the screen")
+        console.wait_for(lambda s: "inject jet 17 failed_off: ACCEPTED" in s, 20, "the ACK on the screen")
         console.keys("Escape")
         assert run.wait(120) == 0, sil.log()
         time.sleep(1.0)                               # the last telemetry in
@@ -48,7 +48,7 @@ def test_console_in_a_terminal_commands_a_run_and_its_replay_shows_the_runs_end(
         fsw = json.loads((out / "fsw.json").read_text())
         h = History.load(out / "history.npz")
         run_events = [e["text"][:STATUSTEXT_LEN] for e in fsw["event_log"]]
-        assert "GND INJECT JET 17 OFF" in run_events
+        assert "GND INJECT JET 17 FAILED_OFF" in run_events
 
         r = TlogReplay(tlog)
         r.play_all()

@@ -62,7 +62,7 @@ def test_the_check_finds_a_broken_catalogue():
     (EV.FDIR_OVERRIDE, dict(jet=4, health=DEGRADED, eta=0.5), "GND MARK JET 4 DEGRADED ETA 0.50"),
     (EV.FDIR_CLEAR, dict(jets=0), "GND CLEAR ALL JETS"),
     (EV.UNEXPLAINED_TORQUE, dict(torque_Nm=221.7), "UNEXPLAINED TORQUE 222 NM"),
-    (EV.INJECT, dict(jets=17, kind=1), "GND INJECT JET 17 OFF"),
+    (EV.INJECT, dict(jets=17, kind=1), "GND INJECT JET 17 FAILED_OFF"),
     (EV.INJECT, dict(jets=3, kind=4, eta=0.4), "GND INJECT JET 3 DEGRADED ETA 0.40"),
     (EV.TASK_ERROR, dict(task="control", error="ZeroDivisionError"), "task control: ZeroDivisionError"),
     (EV.CYCLE_SLIP, dict(tick=752, took_ms=28.81, deadline_ms=20.0, task="control", task_ms=28.79),

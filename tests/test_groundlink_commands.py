@@ -183,7 +183,7 @@ def test_heartbeat_system_status_follows_mode_and_fdir(rig):
 
 
 def test_fdir_detection_of_an_injected_failure_reaches_the_ground(rig):
-    """End to end in one process: inject jet 17 off from the ground, fly, FDIR declares it,
+    """End to end in one process: inject jet 17 failed_off from the ground, fly, FDIR declares it,
     its STATUSTEXT and the CRITICAL heartbeat come down."""
     assert rig.command("inject", "17", "failed_off") == ACCEPTED
     rig.fly(150)

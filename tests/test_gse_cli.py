@@ -65,7 +65,7 @@ def run_cli(r, keyfile, *args, tlog=None):
 def test_inject_accepted_exits_0_and_reaches_the_plant(live, capsys):
     r, key = live
     assert run_cli(r, key, "inject", "--jet", "17", "--kind", "failed_off") == 0
-    assert "inject jet 17 off: ACCEPTED" in capsys.readouterr().out
+    assert "inject jet 17 failed_off: ACCEPTED" in capsys.readouterr().out
     assert r.plant.fault_state[16] == 1
 
 

@@ -38,14 +38,14 @@ def test_console_shows_state_and_injects_with_ack(rig):
             assert entry is not None and "ELLIPSLED_ENTRY_STATE" in rig.gcs.state.latest
             jets_txt = app._jet_table()
             assert jets_txt.row_count == 3
-            # command line: inject jet 17 off
+            # command line: inject jet 17 failed_off
             await pilot.press(":")
             for ch in "inject 17 failed_off":
                 await pilot.press("space" if ch == " " else ch)
             await pilot.press("enter")
             await pump()
             assert rig.injected and rig.injected[-1] == (17, "failed_off", 1.0), app.ack_lines
-            assert "inject jet 17 off: ACCEPTED" in app.ack_lines
+            assert "inject jet 17 failed_off: ACCEPTED" in app.ack_lines
             # keys: Escape leaves the command line; "1" writes the STANDBY request on it, sent
             # by Enter only
             await pilot.press("escape")
@@ -66,7 +66,7 @@ def test_console_shows_state_and_injects_with_ack(rig):
             rig.fly(150)
             await pump()
             texts = [e.text for e in rig.gcs.state.events]
-            assert "GND INJECT JET 17 OFF" in texts
+            assert "GND INJECT JET 17 FAILED_OFF" in texts
             assert app._events_shown == rig.gcs.state.events_total
             status = rig.gcs.state.latest["HEARTBEAT"].system_status
             assert status in (mav.MAV_STATE_STANDBY, mav.MAV_STATE_CRITICAL)

@@ -45,7 +45,7 @@ def test_view_only_console_shows_the_vehicle_and_sends_nothing(tmp_path):
                 for _ in range(4):
                     rig.fly(5)
                     await pilot.pause(0.06)
-                assert "inject jet 17 off: not sent (view only: no signing key)" in app.ack_lines, app.ack_lines
+                assert "inject jet 17 failed_off: not sent (view only: no signing key)" in app.ack_lines, app.ack_lines
                 assert any(line.startswith("mode safe: not sent") for line in app.ack_lines)
                 assert rig.gl.stats["rx_datagrams"] == rx_before and viewer.stats["tx_frames"] == 0
                 assert rig.injected == [] and int(rig.fsw.modes.mode) == 1
@@ -69,7 +69,7 @@ def test_replay_of_a_recorded_session_shows_its_final_state_and_events(tmp_path)
         live_bank = live.latest["ELLIPSLED_ENTRY_STATE"].bank
     finally:
         rig.close()
-    assert "GND INJECT JET 17 OFF" in live_events
+    assert "GND INJECT JET 17 FAILED_OFF" in live_events
 
     replay = TlogReplay(tlog, speed=1e6)
 

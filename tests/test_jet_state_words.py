@@ -26,8 +26,8 @@ from interfaces import records
 from interfaces import vocabulary as voc
 
 ROOT = Path(__file__).resolve().parents[1]
-STATE_WORDS = ("nominal", "failed_off", "stuck_on", "degraded", "inhibited")
-RETIRED = {"off": "failed_off", "stuck": "stuck_on", "clear": "nominal", "healthy": "nominal"}
+STATE_WORDS = tuple(voc.HEALTH_NAMES.values())   # pinned by the test of the state words below
+RETIRED = {"off", "stuck", "clear", "healthy"}
 ALWAYS = {"stuck", "healthy"}                     # no other meaning as a word of their own here
 CODE_TREES = ("fsw", "sim", "gse", "common", "interfaces", "ellipsled", "tests")
 SELF = Path(__file__).resolve()
@@ -46,7 +46,7 @@ TEXT_PATTERNS = [
     re.compile(rf"(?<!`)`({_W})`(?!`)", re.I),                              # code-formatted (not an RST ``name``)
     re.compile(rf"\bkind\s*=\s*[\"']({_W})[\"']", re.I),                    # a TOML fault entry
     re.compile(rf"--kind[ =]+({_W})\b", re.I),                              # the gse command line
-    re.compile(rf"\b(inject|mark)\s+(\d+|JET)\s+({_W})\b", re.I),            # the console
+    re.compile(rf"\b(inject|mark)\s+(JET\s+)?(\d+|JET|ALL JETS)\s+({_W})\b", re.I),  # console, STATUSTEXT
     re.compile(rf"(?<![\w-])(?<!failed )({_W})\s*\\?[|/]\s*({_ANY})\b|\b({_ANY})\s*\\?[|/]\s*({_W})\b", re.I),  # "off | stuck"
     re.compile(rf"(?<![\w-])(?<!failed )({_W}),\s*({_ANY})\b|\b({_ANY}),\s*({_W})(?![\w-]| on)", re.I),   # "off, stuck, degraded"
 ]
@@ -179,7 +179,7 @@ def test_the_scan_finds_retired_jet_state_words_and_spares_switches_and_the_clea
         'kind = "stuck"   # off | stuck | degraded\n'
         'ellipsled gse mark --jet 17 --kind healthy\n'
         '| fault_kind_t | uint8_t | 0 `CLEAR`, 1 `OFF` |\n'
-        'inject 17 off\n'
+        'inject 17 off; GND INJECT JET 17 OFF\n'
         '| on_off_t | uint8_t | 0 `OFF`, 1 `ON` |\n'           # below: none of these is a jet state
         'arm on|off, ft on|off; the jet fails off and stays stuck on; switch the jets off.\n')
     bad = scan(tmp_path)
@@ -192,7 +192,7 @@ def test_code_telemetry_tables_scenarios_and_docs_use_one_word_per_jet_state():
 
 
 def test_the_state_words_are_the_dialects_and_labels_and_fault_kinds_use_them():
-    assert tuple(voc.HEALTH_NAMES.values()) == STATE_WORDS
+    assert STATE_WORDS == ("nominal", "failed_off", "stuck_on", "degraded", "inhibited")
     assert set(voc.FAULT_KINDS) == set(STATE_WORDS) - {"inhibited"} == set(voc.FAULT_HEALTH)
     assert set(voc.MARK_KINDS) == set(STATE_WORDS)
     assert set(records.FAULT_NAMES.values()) == set(voc.FAULT_KINDS)
@@ -212,7 +212,7 @@ def test_a_retired_word_in_a_scenario_file_is_refused_naming_its_replacement(tmp
     src = (ROOT / "data" / "scenarios" / "case1.toml").read_text()
     path = tmp_path / "s.toml"
     path.write_text(src.replace('kind = "failed_off"', f'kind = "{old}"'))
-    new = RETIRED[old]
+    new = voc.RETIRED_STATE_WORDS[old]
     with pytest.raises(ConfigError) as e:
         load_scenario(path)
     assert e.value.field == "faults[0].kind" and f"got {old!r} (renamed {new!r})" in e.value.reason
@@ -221,7 +221,7 @@ def test_a_retired_word_in_a_scenario_file_is_refused_naming_its_replacement(tmp
 @pytest.mark.parametrize("old", ["off", "clear", "healthy"])
 def test_a_retired_word_on_the_console_is_refused_naming_its_replacement(old):
     verb = "mark" if old == "healthy" else "inject"
-    with pytest.raises(ValueError, match=rf"got '{old}' \(renamed '{RETIRED[old]}'\)"):
+    with pytest.raises(ValueError, match=rf"got '{old}' \(renamed '{voc.RETIRED_STATE_WORDS[old]}'\)"):
         make_request(verb, "3", old)
 
 
@@ -231,4 +231,4 @@ def test_the_plant_and_the_ground_link_refuse_a_retired_fault_kind_naming_its_re
 
 
 def test_the_vocabulary_names_the_replacement_of_each_retired_word():
-    assert voc.RETIRED_STATE_WORDS == RETIRED
+    assert voc.RETIRED_STATE_WORDS == {"off": "failed_off", "stuck": "stuck_on", "clear": "nominal", "healthy": "nominal"}

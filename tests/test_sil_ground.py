@@ -61,7 +61,7 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
                 app.submit(f"inject {jet} off")
                 await until(lambda: f"inject jet {jet} off: ACCEPTED" in app.ack_lines, 10, f"ACK jet {jet}")
             await type_line("inject 1 failed_off")
-            await until(lambda: "inject jet 1 off: ACCEPTED" in app.ack_lines, 10, "ACK jet 1")
+            await until(lambda: "inject jet 1 failed_off: ACCEPTED" in app.ack_lines, 10, "ACK jet 1")
             cli = await cli_task
             assert cli.returncode == 0 and "ACCEPTED" in cli.stdout, cli.stdout + cli.stderr
             # an invalid request is refused, never silently accepted

@@ -185,7 +185,7 @@ class GroundConsole(App):
             with Vertical(id="right"):
                 yield Static(id="guidance", classes="panel")
                 yield RichLog(id="events", max_lines=500, markup=False)
-                yield RichLog(id="acks", max_lines=100, markup=False)
+                yield RichLog(id="acks", max_lines=100, markup=False, wrap=True, min_width=20)   # whole, wrapped
         yield Input(placeholder="command (e.g. inject 17 failed_off) - Enter to send, Esc to leave", id="cmdline")
         yield Footer()
 

@@ -50,7 +50,7 @@ class JetHealth:
         return ((self.state == NOMINAL) | (self.state == DEGRADED)) & ~self.inhibited
 
     def effective_eta(self) -> np.ndarray:
-        """Thrust factor per jet as the allocator models it (0 for failed, 1 for stuck)."""
+        """Thrust factor per jet as the allocator models it (0 for failed_off, 1 for stuck_on)."""
         e = np.where(self.state == DEGRADED, self.eta, 1.0)
         return np.where(self.state == FAILED_OFF, 0.0, e)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from interfaces.mavlink import dialect as mav
-from interfaces.vocabulary import FAULT_KINDS, MARK_KINDS, N_JETS, RETIRED_STATE_WORDS, Mode
+from interfaces.vocabulary import FAULT_KINDS, MARK_KINDS, N_JETS, Mode, renamed
 
 MODES = {m.name.lower(): int(m) for m in Mode}
 ON_OFF = {"on": 1, "off": 0}
@@ -62,9 +62,7 @@ def _choice(word: str, table: dict, what: str):
     w = str(word).lower()
     hits = [w] if w in table else [k for k in table if k.startswith(w)] if w else []
     if len(hits) != 1:
-        new = RETIRED_STATE_WORDS.get(w)
-        renamed = f" (renamed {new!r})" if new in table else ""
-        raise ValueError(f"{what}: expected one of {'|'.join(table)}, got {word!r}{renamed}")
+        raise ValueError(f"{what}: expected one of {'|'.join(table)}, got {word!r}{renamed(w, table)}")
     return hits[0], table[hits[0]]
 
 

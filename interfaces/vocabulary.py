@@ -65,13 +65,18 @@ RETIRED_STATE_WORDS: dict[str, str] = {"off": HEALTH_NAMES[FAILED_OFF], "stuck":
                                        "clear": HEALTH_NAMES[NOMINAL], "healthy": HEALTH_NAMES[NOMINAL]}
 
 
+def renamed(word, valid) -> str:
+    """" (renamed 'failed_off')" when ``word`` is a retired jet-state word whose replacement is
+    one of ``valid``; "" otherwise."""
+    new = RETIRED_STATE_WORDS.get(str(word).lower())
+    return f" (renamed {new!r})" if new in valid else ""
+
+
 def refuse_state_word(word, valid) -> str:
     """Why ``word`` is refused where one of the jet-state words ``valid`` was expected: the
     valid words, and for a retired word the one that replaced it."""
     valid = list(valid)
-    new = RETIRED_STATE_WORDS.get(str(word).lower())
-    renamed = f" (renamed {new!r})" if new in valid else ""
-    return f"must be one of {', '.join(valid)}; got {word!r}{renamed}"
+    return f"must be one of {', '.join(valid)}; got {word!r}{renamed(word, valid)}"
 
 
 # ---- flight-software modes (ELLIPSLED_MODE; HEARTBEAT.custom_mode)
@@ -123,5 +128,5 @@ def parse_udp(spec: str, what: str) -> tuple[str, int]:
 
 
 __all__ = ["N_JETS", "JetState", "NOMINAL", "FAILED_OFF", "STUCK_ON", "DEGRADED", "INHIBITED", "HEALTH_NAMES",
-           "MARK_KINDS", "FAULT_KINDS", "FAULT_HEALTH", "RETIRED_STATE_WORDS", "refuse_state_word", "Mode", "Severity",
+           "MARK_KINDS", "FAULT_KINDS", "FAULT_HEALTH", "RETIRED_STATE_WORDS", "renamed", "refuse_state_word", "Mode", "Severity",
            "CommandResult", "DEFAULT_GCS", "DEFAULT_VEHICLE", "parse_udp"]

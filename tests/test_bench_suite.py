@@ -134,7 +134,8 @@ def test_bench_parser_wiring(tmp_path):
 def test_reconfig_fault_sets_cover_every_single_jet_and_the_paper_cases():
     from ellipsled.bench import reconfig
     single = reconfig.single_fault_sets()
-    assert len(single) == 3 * 18 and {s["failed_off"][0][0] for n, s in single if "failed_off" in s} == set(range(1, 19))
+    assert len(single) == 3 * 18
+    assert {s["failed_off"][0][0] for n, s in single if "failed_off" in s} == set(range(1, 19))
     paper = {name: s for n, s in reconfig.paper_fault_sets() for name in n.split("+")}
     assert len(reconfig.paper_fault_sets()) == 3    # cases 1, 4 and 1 with fault tolerance off: one set
     assert paper["case4"] == paper["case1-ft-off"] == paper["case1"]

@@ -185,7 +185,8 @@ def test_the_truth_label_uses_the_faults_the_plant_applied_with_their_thrust_fac
     from ellipsled.controllable import truth_controllability, truth_health
     from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
     scn = load_scenario("nominal").with_(faults=(
-        FaultEvent(10.0, (3, 4), "failed_off"), FaultEvent(10.0, (15,), "stuck_on"), FaultEvent(10.0, (7,), "degraded", 0.4),
+        FaultEvent(10.0, (3, 4), "failed_off"), FaultEvent(10.0, (15,), "stuck_on"),
+        FaultEvent(10.0, (7,), "degraded", 0.4),
         FaultEvent(900.0, (9,), "failed_off")))               # after the end: never applied
     applied = [(10.0, 3, "failed_off"), (10.0, 4, "failed_off"), (10.0, 15, "stuck_on"), (10.0, 7, "degraded")]
     h = truth_health(scn, applied)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from interfaces.vocabulary import FAULT_KINDS, N_JETS
+from interfaces.vocabulary import FAULT_KINDS, N_JETS, refuse_state_word
 
 from .config import FSW_DEFAULTS_FILE, Table, load_toml, resolve
 
@@ -81,7 +81,7 @@ class Vehicle:
 class FaultEvent:
     t_s: float
     jets: tuple[int, ...]   # 1-based jet numbers
-    kind: str               # off | stuck | degraded | clear
+    kind: str               # failed_off | stuck_on | degraded | nominal (interfaces/vocabulary.py FAULT_KINDS)
     eta: float = 1.0
 
 
@@ -365,7 +365,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     )
     faults = []
     for f in root.tables("faults"):
-        kind = f.str("kind", choices=tuple(FAULT_KINDS))
+        kind = f.str("kind")
+        if kind not in FAULT_KINDS:
+            raise f.error("kind", refuse_state_word(kind, FAULT_KINDS))
         jets = f.raw("jets")
         if (not isinstance(jets, list) or not jets
                 or not all(isinstance(j, int) and not isinstance(j, bool) and 1 <= j <= N_JETS for j in jets)):

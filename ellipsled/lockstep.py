@@ -16,7 +16,6 @@ from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
 from fsw.topology import Topology
 from interfaces import records
-from interfaces.vocabulary import FAULT_HEALTH, MARK_NAMES, NOMINAL
 from sim.plant import Plant
 
 from .sil.fsw_report import alloc_sample
@@ -43,7 +42,7 @@ def tell_faults(fsw: FlightSoftware, fault_log: list, start: int, eta_of) -> int
     ``start`` on, each at the time the plant applied it; returns the new count told.
     ``eta_of[jet - 1]``: the thrust factor the plant gave a degraded jet."""
     for t, jet, kind in fault_log[start:]:
-        fsw.fdir.identified(float(t), int(jet), MARK_NAMES[FAULT_HEALTH.get(kind, NOMINAL)], float(eta_of[jet - 1]))
+        fsw.fdir.identified(float(t), int(jet), kind, float(eta_of[jet - 1]))     # a fault kind is a health word
     return len(fault_log)
 
 

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from common.model import Scenario, inertia_vector
-from interfaces.vocabulary import FAULT_HEALTH, HEALTH_NAMES
+from interfaces.vocabulary import FAULT_HEALTH, NOMINAL
 
 from .metrics import deploy_figures, summarize, wrap_deg
 from .sil.history import History
@@ -68,9 +68,9 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
         injected.setdefault(jet, (t, kind))
     dets = rep["detections"]
     false_alarms = sum(1 for d in dets
-                       if d["jet"] not in injected or HEALTH_NAMES.get(FAULT_HEALTH[injected[d["jet"]][1]]) != d["kind"])
+                       if d["jet"] not in injected or injected[d["jet"]][1] != d["kind"])     # kinds are health words
     missed = sorted(j for j, (t, kind) in injected.items()
-                    if kind != "clear" and not any(d["jet"] == j for d in dets))
+                    if FAULT_HEALTH[kind] != NOMINAL and not any(d["jet"] == j for d in dets))
     cu, au = h["compute_us"], h["alloc_us"]
 
     def pct(x, q):

@@ -34,10 +34,10 @@ delay in force when it was declared; ``set_delay`` affects later detections).
 Events (source "fdir"), texts <= 50 characters:
 | code                | severity | example text                       |
 |---------------------|----------|------------------------------------|
-| jet_failed_off      | ERROR    | JET 17 FAILED OFF                  |
-| jet_stuck_on        | ERROR    | JET 5 STUCK ON                     |
+| jet_failed_off      | ERROR    | JET 17 FAILED_OFF                  |
+| jet_stuck_on        | ERROR    | JET 5 STUCK_ON                     |
 | jet_degraded        | WARNING  | JET 3 DEGRADED ETA 0.50            |
-| fdir_reconfig       | NOTICE   | RECONFIG JET 17 FAILED OFF         |
+| fdir_reconfig       | NOTICE   | RECONFIG JET 17 FAILED_OFF         |
 | fdir_override       | NOTICE   | GND MARK JET 3 DEGRADED ETA 0.50   |
 | fdir_clear          | NOTICE   | GND CLEAR JET 17 / GND CLEAR ALL JETS |
 | fdir_delay          | NOTICE   | FDIR DELAY 1.50 S                  |
@@ -53,7 +53,8 @@ from numba import njit
 
 from common.events import EventLog
 from interfaces.event_catalogue import EV
-from interfaces.vocabulary import DEGRADED, FAILED_OFF, HEALTH_NAMES, INHIBITED, MARK_KINDS, N_JETS, NOMINAL, STUCK_ON
+from interfaces.vocabulary import (DEGRADED, FAILED_OFF, HEALTH_NAMES, INHIBITED, MARK_KINDS, N_JETS, NOMINAL, STUCK_ON,
+                                   refuse_state_word)
 
 from .health import JetHealth
 from .params import Param
@@ -314,7 +315,7 @@ class Fdir:
     def identified(self, t_s: float, jet: int, kind: str, eta: float = 1.0) -> None:
         """Oracle mode (a test mode): the fault of ``jet`` is known as of ``t_s`` (the time the
         plant applied it), declared as the jet monitor would and applied ``delay_s`` later.
-        kind: failed_off | stuck_on | degraded (0 < eta < 1) | healthy (a cleared fault)."""
+        kind: failed_off | stuck_on | degraded (0 < eta < 1) | nominal (a removed fault)."""
         if not self.oracle:
             raise ValueError("fdir.identified: only in fdir.mode = oracle")
         jet = self._check_jet(jet)
@@ -325,7 +326,7 @@ class Fdir:
             self._next_apply = min(self._next_apply, t_s + self.delay_s)
             return
         if state == INHIBITED:
-            raise ValueError(f"kind: must be one of failed_off, stuck_on, degraded, healthy; got {kind!r}")
+            raise ValueError(f"kind: {refuse_state_word(kind, (k for k, c in MARK_KINDS.items() if c != INHIBITED))}")
         self._new_kind[:] = 0
         self._new_kind[jet - 1] = state
         self._eta_new[jet - 1] = float(eta) if kind == "degraded" else (0.0 if kind == "failed_off" else 1.0)
@@ -398,13 +399,12 @@ class Fdir:
 
     def override(self, t_s: float, jet: int, kind: str, eta: float = 1.0) -> None:
         """Operator marking, applied to health_active immediately and held until ``clear``:
-        'failed_off' | 'stuck_on' | 'degraded' (0 < eta < 1) | 'healthy' (use the jet as
+        'failed_off' | 'stuck_on' | 'degraded' (0 < eta < 1) | 'nominal' (use the jet as
         nominal whatever FDIR concludes; FDIR keeps monitoring and reporting)."""
         jet = self._check_jet(jet)
         state = MARK_KINDS.get(kind, INHIBITED)
         if state == INHIBITED:          # the inhibit mask is set_inhibit's, not a health state
-            raise ValueError(f"kind: must be one of {', '.join(k for k, c in MARK_KINDS.items() if c != INHIBITED)};"
-                             f" got {kind!r}")
+            raise ValueError(f"kind: {refuse_state_word(kind, (k for k, c in MARK_KINDS.items() if c != INHIBITED))}")
         if state == DEGRADED:
             if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating)) \
                     or not math.isfinite(eta) or not 0.0 < eta < 1.0:

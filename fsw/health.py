@@ -18,12 +18,12 @@ class JetHealth:
         self.inhibited = np.zeros(n, dtype=bool)
 
     @classmethod
-    def of(cls, failed=(), stuck=(), degraded=(), inhibited=()) -> "JetHealth":
+    def of(cls, failed_off=(), stuck_on=(), degraded=(), inhibited=()) -> "JetHealth":
         """A configuration from 1-based jet lists; ``degraded`` holds (jet, eta) pairs."""
         h = cls()
-        for j in failed:
+        for j in failed_off:
             h.set(j, FAILED_OFF)
-        for j in stuck:
+        for j in stuck_on:
             h.set(j, STUCK_ON)
         for j, eta in degraded:
             h.set(j, DEGRADED, eta)
@@ -50,7 +50,7 @@ class JetHealth:
         return ((self.state == NOMINAL) | (self.state == DEGRADED)) & ~self.inhibited
 
     def effective_eta(self) -> np.ndarray:
-        """Thrust factor per jet as the allocator models it (0 for failed, 1 for stuck)."""
+        """Thrust factor per jet as the allocator models it (0 for failed_off, 1 for stuck_on)."""
         e = np.where(self.state == DEGRADED, self.eta, 1.0)
         return np.where(self.state == FAILED_OFF, 0.0, e)
 

@@ -60,12 +60,12 @@ def add_gse_parser(subparsers) -> argparse.ArgumentParser:
 
     p = sub.add_parser("inject", help="inject a jet fault in the plant (MAV_CMD_INJECT_FAILURE)")
     p.add_argument("--jet", required=True, help=f"1..{N_JETS}, 0 = all")
-    p.add_argument("--kind", required=True, help="|".join(FAULT_KINDS))
+    p.add_argument("--kind", required=True, help="|".join(FAULT_KINDS) + " (or a unique prefix)")
     p.add_argument("--eta", default=None, help="thrust factor in (0, 1) for degraded")
     _common(p, 0)
     p.set_defaults(func=lambda a: _run_words(a, "inject", a.jet, a.kind, *([a.eta] if a.eta is not None else [])))
 
-    p = sub.add_parser("mark", help="FDIR override: mark a jet failed/stuck/degraded/healthy/inhibited")
+    p = sub.add_parser("mark", help="FDIR override: mark a jet's health (or inhibit it)")
     p.add_argument("--jet", required=True, help=f"1..{N_JETS}")
     p.add_argument("--kind", required=True, help="|".join(MARK_KINDS) + " (or a unique prefix)")
     p.add_argument("--eta", default=None, help="thrust factor in (0, 1) for degraded")

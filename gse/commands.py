@@ -1,23 +1,26 @@
 """The operator's command language, shared by the console's command line and the scripted
-``ellipsled gse`` commands: words ("inject 17 off", "param set C_D_MIN 0.4") -> a Request
+``ellipsled gse`` commands: words ("inject 17 failed_off", "param set C_D_MIN 0.4") -> a Request
 (a COMMAND_LONG or a parameter action) that gse/client.py sends. The kind and mode words
 are the vocabulary's (interfaces/vocabulary.py); any unambiguous prefix is accepted
-("mark 7 failed" = failed_off). Bad words raise ValueError naming the word.
+("mark 7 failed" = failed_off). Bad words raise ValueError naming the word (and, for a
+retired jet-state word such as "off", the word that replaced it).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from interfaces.mavlink import dialect as mav
-from interfaces.vocabulary import FAULT_KINDS, MARK_KINDS, N_JETS, Mode
+from interfaces.vocabulary import FAULT_KINDS, MARK_KINDS, N_JETS, Mode, renamed
 
 MODES = {m.name.lower(): int(m) for m in Mode}
 ON_OFF = {"on": 1, "off": 0}
 
 USAGE = f"""commands:
-  inject JET {'|'.join(k for k in FAULT_KINDS if k != 'degraded')}        inject JET degraded ETA     (JET 1..{N_JETS}, 0 = all)
+  inject JET {'|'.join(k for k in FAULT_KINDS if k != 'degraded')}    (JET 1..{N_JETS}, 0 = all)
+  inject JET degraded ETA
   clear JET                          (FDIR latch, override, inhibit; 0 = all)
-  mark JET {'|'.join(k for k in MARK_KINDS if k != 'degraded')}      mark JET degraded ETA
+  mark JET {'|'.join(k for k in MARK_KINDS if k != 'degraded')}
+  mark JET degraded ETA
   mode {'|'.join(MODES)}            arm on|off            ft on|off
   delay SECONDS                      (FDIR reconfiguration delay)
   param list | param get ID | param set ID VALUE"""
@@ -59,12 +62,12 @@ def _choice(word: str, table: dict, what: str):
     w = str(word).lower()
     hits = [w] if w in table else [k for k in table if k.startswith(w)] if w else []
     if len(hits) != 1:
-        raise ValueError(f"{what}: expected one of {'|'.join(table)}, got {word!r}")
+        raise ValueError(f"{what}: expected one of {'|'.join(table)}, got {word!r}{renamed(w, table)}")
     return hits[0], table[hits[0]]
 
 
 def make_request(verb: str, *args: str) -> Request:
-    """A Request from words, e.g. ("inject", "17", "off"), ("param", "set", "C_D_MIN", "0.4").
+    """A Request from words, e.g. ("inject", "17", "failed_off"), ("param", "set", "C_D_MIN", "0.4").
     ValueError with a message naming the bad word."""
     verb = verb.lower()
     a = list(args)
@@ -129,7 +132,7 @@ def make_request(verb: str, *args: str) -> Request:
 
 
 def parse_line(text: str) -> Request:
-    """A Request from one command line ("inject 17 off")."""
+    """A Request from one command line ("inject 17 failed_off")."""
     words = str(text).split()
     if not words:
         raise ValueError(USAGE)

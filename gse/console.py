@@ -10,7 +10,7 @@ loop timing and allocator figures, the events (STATUSTEXT with severity) and the
 acknowledgements.
 
 Commands from the command line at the bottom (the language of gse/commands.py USAGE, e.g.
-"inject 17 off", "mark 3 degraded 0.5", "param set C_LAMBDA_RADPS 1.2") or keys, when
+"inject 17 failed_off", "mark 3 degraded 0.5", "param set C_LAMBDA_RADPS 1.2") or keys, when
 the command line is not focused (Escape leaves it, ":" enters it):
   i inject...  c clear...  k mark...  p param set...   (prefill the command line)
   a arm/disarm toggle   f fault tolerance toggle   1 STANDBY  2 ENTRY  3 SAFE   q quit
@@ -185,8 +185,8 @@ class GroundConsole(App):
             with Vertical(id="right"):
                 yield Static(id="guidance", classes="panel")
                 yield RichLog(id="events", max_lines=500, markup=False)
-                yield RichLog(id="acks", max_lines=100, markup=False)
-        yield Input(placeholder="command (e.g. inject 17 off) - Enter to send, Esc to leave", id="cmdline")
+                yield RichLog(id="acks", max_lines=100, markup=False, wrap=True, min_width=20)   # whole, wrapped
+        yield Input(placeholder="command (e.g. inject 17 failed_off) - Enter to send, Esc to leave", id="cmdline")
         yield Footer()
 
     def on_mount(self) -> None:

@@ -27,7 +27,7 @@ from typing import Mapping
 
 from interfaces.codec import REJECT_REASONS
 from interfaces.vocabulary import _enum as dialect_enum
-from interfaces.vocabulary import FAULT_KINDS, N_JETS, NOMINAL, JetState, Mode, Severity
+from interfaces.vocabulary import FAULT_KINDS, HEALTH_NAMES, N_JETS, Mode, Severity
 
 STATUSTEXT_LEN = 50          # characters of one MAVLink STATUSTEXT: a rendered message's limit
 ARGS_LEN = 40                # bytes of EVENT.arguments
@@ -91,11 +91,11 @@ def enum_type(name: str, labels: Mapping[int, str], description: str) -> ArgType
 
 
 MODE = enum_type("mode_t", {int(m): m.name for m in Mode}, "Flight-software mode")
-HEALTH = enum_type("jet_health_t", {int(s): "HEALTHY" if s == NOMINAL else s.name.replace("_", " ") for s in JetState},
-                   "Health of one jet (ELLIPSLED_JET_HEALTH); nominal reads HEALTHY")
+HEALTH = enum_type("jet_health_t", {c: n.upper() for c, n in HEALTH_NAMES.items()},
+                   "Health of one jet (ELLIPSLED_JET_HEALTH): its state word")
 JETS = enum_type("jets_t", {0: "ALL JETS", **{j: f"JET {j}" for j in range(1, N_JETS + 1)}}, "A jet, or 0: all jets")
 FAULT = enum_type("fault_kind_t", {code: kind.upper() for kind, code in FAULT_KINDS.items()},
-                  "Kind of a fault injected into the plant (MAVLink FAILURE_TYPE)")
+                  "Kind of a fault injected into the plant (MAVLink FAILURE_TYPE): the state word it sets")
 REVERSAL_RULE = enum_type("reversal_rule_t", {v: k for k, v in dialect_enum("ELLIPSLED_REVERSAL_RULE").items()
                                               if v}, "Rule of the lateral logic that made a bank reversal")
 # the SENSORS record's five vectors, in its order (fsw/monitors.py checks them in that order)
@@ -220,9 +220,9 @@ class EV:
     FDIR_CHAMBER_SKIP = _ev(403, "fdir", WARNING, "FDIR SKIPS NON-FINITE CHAMBER JET {jet} (x{count})",
                             "The jet monitor skipped non-finite chamber samples (first jet, how many).", 1.0,
                             jet=U8, count=U32)
-    JET_FAILED_OFF = _ev(404, "fdir", ERROR, "JET {jet} FAILED OFF", "The jet monitor isolated a jet that does not fire.",
+    JET_FAILED_OFF = _ev(404, "fdir", ERROR, "JET {jet} FAILED_OFF", "The jet monitor isolated a jet that does not fire.",
                          jet=U8)
-    JET_STUCK_ON = _ev(405, "fdir", ERROR, "JET {jet} STUCK ON", "The jet monitor isolated a jet that fires uncommanded.",
+    JET_STUCK_ON = _ev(405, "fdir", ERROR, "JET {jet} STUCK_ON", "The jet monitor isolated a jet that fires uncommanded.",
                        jet=U8)
     JET_DEGRADED = _ev(406, "fdir", WARNING, "JET {jet} DEGRADED ETA {eta:.2f}",
                        "The jet monitor isolated a jet giving less thrust (its estimated factor).", jet=U8, eta=F32)

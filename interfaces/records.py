@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .vocabulary import FAULT_KINDS, N_JETS
+from .vocabulary import FAULT_KINDS, N_JETS, refuse_state_word
 
 # sim -> fsw, once per control period: the sensor frame for step k (time t_k).
 SENSORS = np.dtype([
@@ -39,21 +39,21 @@ def new(dtype: np.dtype) -> np.ndarray:
     return np.zeros((), dtype=dtype)
 
 
-# fsw or test harness -> sim: inject or clear a jet fault (docs/interfaces/index.md, MAVLink
+# fsw or test harness -> sim: inject or remove a jet fault (docs/interfaces/index.md, MAVLink
 # MAV_CMD_INJECT_FAILURE mapping; kinds and codes: interfaces/vocabulary.py FAULT_KINDS).
 # Jet numbering follows the command: 1..N_JETS, 0 = all jets.
 FAULT_NAMES = {code: kind for kind, code in FAULT_KINDS.items()}     # wire code -> kind
 
 
 def check_fault_request(jet, kind: str, eta) -> None:
-    """What the plant can apply: jet 0..N_JETS (0 = all), kind clear|off|stuck|degraded, eta
+    """What the plant can apply: jet 0..N_JETS (0 = all), kind nominal|failed_off|stuck_on|degraded, eta
     in (0, 1) for degraded and 1 otherwise. ValueError with the reason if not. The plant
     and the FSW's ground link both judge requests with this one rule."""
     import math
     if isinstance(jet, bool) or not isinstance(jet, (int, np.integer)) or not 0 <= jet <= N_JETS:
         raise ValueError(f"jet must be an integer 0..{N_JETS} (0 = all), got {jet!r}")
     if kind not in FAULT_KINDS:
-        raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {kind!r}")
+        raise ValueError(f"fault kind {refuse_state_word(kind, FAULT_KINDS)}")
     if isinstance(eta, bool) or not isinstance(eta, (int, float, np.floating, np.integer)) or not math.isfinite(eta):
         raise ValueError(f"eta must be a finite number, got {eta!r}")
     if kind == "degraded":

@@ -40,6 +40,8 @@ N_JETS: int = _array_len("ELLIPSLED_JET_STATUS", "health")
 
 # ---- jet health (ELLIPSLED_JET_HEALTH): the FSW's belief, the plant's fault state and the
 # wire share these codes. INHIBITED is the ground's inhibit mask, shown on the wire only.
+# A state has one word everywhere (code, scenario files, commands, telemetry labels, docs):
+# its dialect name in lower case, e.g. "failed_off"; tests/test_jet_state_words.py keeps it so.
 JetState = IntEnum("JetState", _enum("ELLIPSLED_JET_HEALTH"), module=__name__)
 NOMINAL: int = int(JetState.NOMINAL)
 FAILED_OFF: int = int(JetState.FAILED_OFF)
@@ -49,14 +51,33 @@ INHIBITED: int = int(JetState.INHIBITED)
 HEALTH_NAMES: dict[int, str] = {int(s): s.name.lower() for s in JetState}     # 1 -> "failed_off"
 
 # What an operator may mark a jet as (ELLIPSLED_CMD_FDIR_MARK_JET): a health state by its
-# name; marking a jet "healthy" makes FDIR's allocator view treat it as nominal.
-MARK_KINDS: dict[str, int] = {("healthy" if c == NOMINAL else n): c for c, n in HEALTH_NAMES.items()}
-MARK_NAMES: dict[int, str] = {c: k for k, c in MARK_KINDS.items()}                # 0 -> "healthy"
+# word; marking a jet "nominal" makes FDIR's allocator view use it as nominal.
+MARK_KINDS: dict[str, int] = {n: c for c, n in HEALTH_NAMES.items()}           # "failed_off" -> 1
 
-# ---- fault injection into the plant (MAV_CMD_INJECT_FAILURE): kind -> MAVLink FAILURE_TYPE
-FAULT_KINDS: dict[str, int] = {"clear": 0, "off": 1, "stuck": 2, "degraded": 4}   # OK, OFF, STUCK, WRONG
-# the health state each injected kind puts the jet in
-FAULT_HEALTH: dict[str, int] = {"clear": NOMINAL, "off": FAILED_OFF, "stuck": STUCK_ON, "degraded": DEGRADED}
+# ---- fault injection into the plant (MAV_CMD_INJECT_FAILURE): the health state a fault puts
+# the jet in -> MAVLink FAILURE_TYPE (OK, OFF, STUCK, WRONG); "nominal" removes a fault.
+_FAILURE_TYPE: dict[int, int] = {NOMINAL: 0, FAILED_OFF: 1, STUCK_ON: 2, DEGRADED: 4}
+FAULT_KINDS: dict[str, int] = {HEALTH_NAMES[h]: ft for h, ft in _FAILURE_TYPE.items()}    # kind -> FAILURE_TYPE
+FAULT_HEALTH: dict[str, int] = {HEALTH_NAMES[h]: h for h in _FAILURE_TYPE}               # kind -> health code
+
+# Jet-state words retired for the one word above: refused on input, naming the new word.
+RETIRED_STATE_WORDS: dict[str, str] = {"off": HEALTH_NAMES[FAILED_OFF], "stuck": HEALTH_NAMES[STUCK_ON],
+                                       "clear": HEALTH_NAMES[NOMINAL], "healthy": HEALTH_NAMES[NOMINAL]}
+
+
+def renamed(word, valid) -> str:
+    """" (renamed 'failed_off')" when ``word`` is a retired jet-state word whose replacement is
+    one of ``valid``; "" otherwise."""
+    new = RETIRED_STATE_WORDS.get(str(word).lower())
+    return f" (renamed {new!r})" if new in valid else ""
+
+
+def refuse_state_word(word, valid) -> str:
+    """Why ``word`` is refused where one of the jet-state words ``valid`` was expected: the
+    valid words, and for a retired word the one that replaced it."""
+    valid = list(valid)
+    return f"must be one of {', '.join(valid)}; got {word!r}{renamed(word, valid)}"
+
 
 # ---- flight-software modes (ELLIPSLED_MODE; HEARTBEAT.custom_mode)
 Mode = IntEnum("Mode", _enum("ELLIPSLED_MODE"), module=__name__)
@@ -107,6 +128,5 @@ def parse_udp(spec: str, what: str) -> tuple[str, int]:
 
 
 __all__ = ["N_JETS", "JetState", "NOMINAL", "FAILED_OFF", "STUCK_ON", "DEGRADED", "INHIBITED", "HEALTH_NAMES",
-           "MARK_KINDS", "MARK_NAMES", "FAULT_KINDS", "FAULT_HEALTH", "Mode", "Severity", "CommandResult", "DEFAULT_GCS",
-           "DEFAULT_VEHICLE",
-           "parse_udp"]
+           "MARK_KINDS", "FAULT_KINDS", "FAULT_HEALTH", "RETIRED_STATE_WORDS", "renamed", "refuse_state_word", "Mode", "Severity",
+           "CommandResult", "DEFAULT_GCS", "DEFAULT_VEHICLE", "parse_udp"]

@@ -20,7 +20,7 @@ from common import mrp
 from common.frames import R1, R2, v_rel_N, wind_dcm
 from common.model import Scenario
 from interfaces import records
-from interfaces.vocabulary import DEGRADED, FAILED_OFF, N_JETS, NOMINAL, STUCK_ON
+from interfaces.vocabulary import DEGRADED, FAILED_OFF, FAULT_HEALTH, N_JETS, NOMINAL, STUCK_ON
 from sim.dynamics import (A_ACC_B, A_ALPHA, A_BANK, A_BETA, A_F_AERO_N, A_H, A_MACH, A_OMEGA_W_N, A_QBAR,
                           A_RHO, A_TAU_AERO_B, A_V, N_AUX, P_I, deriv, initial_translation, params_vector,
                           rk4, state_derivative)
@@ -389,17 +389,18 @@ class Plant:
 
     # ---- faults ----
     def set_fault(self, jet: int, kind: str, eta: float = 1.0) -> None:
-        """Inject or clear a fault now (docs/plant.md, jet faults). jet 1..18, 0 = all;
-        kind 'off' | 'stuck' | 'degraded' (0 < eta < 1) | 'clear'."""
+        """Inject or remove a fault now (docs/plant.md, jet faults). jet 1..18, 0 = all;
+        kind 'failed_off' | 'stuck_on' | 'degraded' (0 < eta < 1) | 'nominal' (no fault)."""
         _check_fault(jet, kind, eta)
+        state = FAULT_HEALTH[kind]
         idx = range(N_JETS) if jet == 0 else (int(jet) - 1,)
         self.fault_log.extend((self.t_s, j + 1, kind) for j in idx)
         for j in idx:
-            if kind == "off":
+            if state == FAILED_OFF:
                 self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = FAILED_OFF, 1.0, 0.0, 0.0
-            elif kind == "stuck":
+            elif state == STUCK_ON:
                 self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = STUCK_ON, 1.0, 0.0, 1.0
-            elif kind == "degraded":
+            elif state == DEGRADED:
                 self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = DEGRADED, eta, eta, 0.0
             else:
                 self.fault_state[j], self.fault_eta[j], self._gain[j], self._bias[j] = NOMINAL, 1.0, 1.0, 0.0

@@ -16,7 +16,7 @@ from common.model import load_vehicle
 from fsw.allocation import Allocator
 from fsw.allocation.dutycycle import DutyCycleRealiser
 from fsw.controllability import jet_columns, velocity_dir_B
-from fsw.health import DEGRADED, FAILED_OFF, STUCK_ON, JetHealth
+from fsw.health import JetHealth
 from fsw.params import load_params
 
 VEH = load_vehicle("ellipsled")
@@ -25,21 +25,10 @@ AXIS = velocity_dir_B(VEH.aero.alpha_trim_rad)
 PARAMS = load_params(Allocator.PARAMS)
 
 
-def _health(off=(), stuck=(), degraded=()):
-    h = JetHealth()
-    for j in off:
-        h.set(j, FAILED_OFF)
-    for j in stuck:
-        h.set(j, STUCK_ON)
-    for j, eta in degraded:
-        h.set(j, DEGRADED, eta)
-    return h
-
-
-RUN82 = _health(off=(1, 7, 8), stuck=(14, 15))
-RUN190 = _health(off=(4, 10, 18), stuck=(2, 7), degraded=((9, 0.8381), (13, 0.3271)))
+RUN82 = JetHealth.of(failed_off=(1, 7, 8), stuck_on=(14, 15))
+RUN190 = JetHealth.of(failed_off=(4, 10, 18), stuck_on=(2, 7), degraded=((9, 0.8381), (13, 0.3271)))
 # a small health (6 usable jets) whose 2^6 patterns are enumerated below
-SMALL = _health(off=(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12), stuck=(14,), degraded=((16, 0.6),))
+SMALL = JetHealth.of(failed_off=(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12), stuck_on=(14,), degraded=((16, 0.6),))
 
 
 def _objective(w, c, u, tau, d):

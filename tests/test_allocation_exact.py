@@ -34,7 +34,7 @@ def _obj_equal(a, b, rel):
 def test_there_are_at_least_20_configurations_including_the_paper_cases():
     names = [c.name for c in CASES]
     assert len(CASES) >= 20
-    assert {"nominal", "case1-failed-1-2-17-18", "case2-stuck-2-3-4-5-8-9-10",
+    assert {"nominal", "case1-failed_off-1-2-17-18", "case2-stuck_on-2-3-4-5-8-9-10",
             "case3-degraded-3-7-14-15"} <= set(names)
 
 
@@ -136,7 +136,7 @@ def test_the_spill_box_delivers_roll_the_sign_box_cannot_once_the_cancelling_pai
     # jets 7, 16, 18 off and 1, 3, 8 degraded (a campaign fault set): every jet left that rolls
     # the vehicle negatively also pitches or yaws, so the sign box gives almost nothing of a
     # negative-roll demand with a small pitch/yaw demand; one jet's allowance per axis does
-    h = JetHealth.of(failed=(7, 16, 18), degraded=((1, 0.5), (3, 0.6), (8, 0.8)))
+    h = JetHealth.of(failed_off=(7, 16, 18), degraded=((1, 0.5), (3, 0.6), (8, 0.8)))
     w = np.array([3.0, 1.0, 1.0])
     d = np.array([-500.0, -20.0, 10.0])
     u0, _, deg0 = solve_enumeration(T, THRUST, h, w, 0.01, d)

@@ -77,12 +77,12 @@ def test_default_is_synchronous_and_two_runs_are_identical():
 
 
 TRANSITIONS = [
-    ("failed-off", JetHealth(), JetHealth.of(failed=(1, 2, 17, 18))),
+    ("failed-off", JetHealth(), JetHealth.of(failed_off=(1, 2, 17, 18))),
     ("inhibited", JetHealth(), JetHealth.of(inhibited=(4, 10))),
     ("degraded", JetHealth(), JetHealth.of(degraded=((3, .5), (7, .5), (14, .5), (15, .5)))),
-    ("stuck-on", JetHealth(), JetHealth.of(stuck=(2, 3, 4, 5, 8, 9, 10))),
-    ("degraded-escalates-to-stuck", JetHealth.of(degraded=((13, .6),)), JetHealth.of(stuck=(13,))),
-    ("stuck-cleared", JetHealth.of(stuck=(5,), failed=(11,)), JetHealth.of(failed=(11,))),
+    ("stuck-on", JetHealth(), JetHealth.of(stuck_on=(2, 3, 4, 5, 8, 9, 10))),
+    ("degraded-escalates-to-stuck", JetHealth.of(degraded=((13, .6),)), JetHealth.of(stuck_on=(13,))),
+    ("stuck-cleared", JetHealth.of(stuck_on=(5,), failed_off=(11,)), JetHealth.of(failed_off=(11,))),
 ]
 
 
@@ -255,7 +255,7 @@ def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():
         assert al.wait_idle(20.0)
         assert al.tables_nbytes["prebuilt"] > 0
         for jet in (1, 9, 18):
-            al.set_health(JetHealth.of(failed=(jet,)))
+            al.set_health(JetHealth.of(failed_off=(jet,)))
             assert not al.reconfig_pending and al.tables_from_cache
             assert not al.solve(np.array([300.0, -200.0, 100.0]))[jet - 1]
         mb = al.tables_nbytes["prebuilt"] / 2**20
@@ -272,10 +272,10 @@ def test_prebuilt_single_faults_switch_at_once_and_params_rebuild_them():
         al._rebuilder.job.resume()
         assert al.wait_idle(20.0)
         sync = Allocator(T, THRUST, new)
-        sync.set_health(JetHealth.of(failed=(18,)))
+        sync.set_health(JetHealth.of(failed_off=(18,)))
         d = np.array([-250.0, 40.0, 333.0])
         assert np.array_equal(al.solve(d), sync.solve(d)) and al.objective == sync.objective
-        al.set_health(JetHealth.of(failed=(2,)))          # pre-built again with the new parameters
+        al.set_health(JetHealth.of(failed_off=(2,)))          # pre-built again with the new parameters
         assert not al.reconfig_pending and al.tables_from_cache
     finally:
         al.close()
@@ -287,7 +287,7 @@ def test_builder_thread_ends_on_close_and_on_garbage_collection():
     n0 = len(builders())
     al = Allocator(T, THRUST, PARAMS, async_rebuild=True, prebuild_single_faults=False)
     assert al.builder_alive and len(builders()) == n0 + 1
-    al.set_health(JetHealth.of(failed=(3, 4)))
+    al.set_health(JetHealth.of(failed_off=(3, 4)))
     al.close()                                       # a pending reconfiguration completes
     assert not al.builder_alive and not al.reconfig_pending
     assert not al.solve(np.array([50.0, 50.0, 50.0]))[[2, 3]].any()

@@ -145,7 +145,7 @@ def _measure_the_loop_beside_the_lp(hold_s: float) -> int:
     fl = _Flight("nominal")
     f = fl.fsw
     f.authority.lp.fn = threadtime.holding_the_gil_first(f.authority.lp.fn, hold_s)
-    f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
+    f.fdir.health_active = JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10])
     f.health_changed()
     assert f.allocator.wait_idle(SANITY_S)               # the tables are not what is measured
     _until(lambda: f.authority.lp.ready)
@@ -193,9 +193,9 @@ def _longest_c_call_of_the_lp(burn=None) -> LongestCCall:
         return solve(*args)
     f.authority.lp.fn = meter.wrap(job)
     try:
-        for h in (JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]),
-                  JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)]),
-                  JetHealth.of(failed=[1, 2, 10, 16], stuck=[6, 12])):
+        for h in (JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10]),
+                  JetHealth.of(failed_off=[6, 16], stuck_on=[15], degraded=[(7, .5), (13, .5)]),
+                  JetHealth.of(failed_off=[1, 2, 10, 16], stuck_on=[6, 12])):
             before = f.controllability
             f.fdir.health_active = h
             f.health_changed()
@@ -231,7 +231,7 @@ def test_the_fsw_flies_on_while_the_lp_is_held_and_applies_its_answer_at_the_nex
         return solve(*args)
     f.authority.lp.fn = held
     try:
-        f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
+        f.fdir.health_active = JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10])
         f.health_changed()
         cycles = f.cycles
         for _ in range(100):                             # two seconds of flight with no answer
@@ -283,7 +283,7 @@ class _TaggedJobs:
 def test_batch_and_lockstep_solve_the_lp_in_place_without_a_thread():
     f = FlightSoftware(load_scenario("nominal"))
     try:
-        f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
+        f.fdir.health_active = JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10])
         f.health_changed()
         assert f.controllability is not None
         assert f.authority.lp.mode == IN_PLACE and not f.authority.lp.alive

@@ -134,12 +134,13 @@ def test_bench_parser_wiring(tmp_path):
 def test_reconfig_fault_sets_cover_every_single_jet_and_the_paper_cases():
     from ellipsled.bench import reconfig
     single = reconfig.single_fault_sets()
-    assert len(single) == 3 * 18 and {s["off"][0][0] for n, s in single if "off" in s} == set(range(1, 19))
+    assert len(single) == 3 * 18
+    assert {s["failed_off"][0][0] for n, s in single if "failed_off" in s} == set(range(1, 19))
     paper = {name: s for n, s in reconfig.paper_fault_sets() for name in n.split("+")}
     assert len(reconfig.paper_fault_sets()) == 3    # cases 1, 4 and 1 with fault tolerance off: one set
     assert paper["case4"] == paper["case1-ft-off"] == paper["case1"]
-    assert paper["case1"] == {"off": [(1, 1.0), (2, 1.0), (17, 1.0), (18, 1.0)], "stuck": [], "degraded": []}
-    assert [j for j, _ in paper["case2"]["stuck"]] == [2, 3, 4, 5, 8, 9, 10]
+    assert paper["case1"] == {"failed_off": [(1, 1.0), (2, 1.0), (17, 1.0), (18, 1.0)], "stuck_on": [], "degraded": []}
+    assert [j for j, _ in paper["case2"]["stuck_on"]] == [2, 3, 4, 5, 8, 9, 10]
     assert paper["case3"]["degraded"] == [(3, 0.5), (7, 0.5), (14, 0.5), (15, 0.5)]
 
 
@@ -149,7 +150,7 @@ def test_first_reconfiguration_after_start_sanity_bound():
     20-ms target is the benchmark's; the bound catches kernels compiled or caches built at
     the first request, which cost hundreds of ms)."""
     from ellipsled.bench import reconfig
-    spec = {"stuck": [(j, 1.0) for j in (2, 3, 4, 5, 8, 9, 10)]}          # paper case 2
+    spec = {"stuck_on": [(j, 1.0) for j in (2, 3, 4, 5, 8, 9, 10)]}       # paper case 2
     r = reconfig._first_in_subprocess(spec)
     assert not r["from_cache"]
     assert 0.0 < r["reconfig_ms"] < 200.0, r

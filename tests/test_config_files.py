@@ -127,16 +127,16 @@ def test_bad_scenario_file_is_rejected_naming_file_and_field(tmp_path, old, new,
 
 
 FAULT_CASES = [
-    ("jets = [19]\nkind = \"off\"", "faults[0].jets", "jet numbers 1..18"),
-    ("jets = []\nkind = \"off\"", "faults[0].jets", "non-empty"),
-    ("jets = [1, 1]\nkind = \"off\"", "faults[0].jets", "more than once"),
-    ("jets = [true]\nkind = \"off\"", "faults[0].jets", "jet numbers"),
+    ("jets = [19]\nkind = \"failed_off\"", "faults[0].jets", "jet numbers 1..18"),
+    ("jets = []\nkind = \"failed_off\"", "faults[0].jets", "non-empty"),
+    ("jets = [1, 1]\nkind = \"failed_off\"", "faults[0].jets", "more than once"),
+    ("jets = [true]\nkind = \"failed_off\"", "faults[0].jets", "jet numbers"),
     ("jets = [1]\nkind = \"broken\"", "faults[0].kind", "must be one of"),
     ("jets = [1]\nkind = \"degraded\"", "faults[0].eta", "required"),
     ("jets = [1]\nkind = \"degraded\"\neta = 1.0", "faults[0].eta", "< 1"),
     ("jets = [1]\nkind = \"degraded\"\neta = 0.0", "faults[0].eta", "> 0"),
-    ("jets = [1]\nkind = \"off\"\neta = 0.5", "faults[0].eta", "degraded\" only"),
-    ("jets = [1]\nkind = \"off\"\nwhen = 3.0", "faults[0].when", "unknown key"),
+    ("jets = [1]\nkind = \"failed_off\"\neta = 0.5", "faults[0].eta", "degraded\" only"),
+    ("jets = [1]\nkind = \"failed_off\"\nwhen = 3.0", "faults[0].when", "unknown key"),
 ]
 
 
@@ -182,7 +182,7 @@ def test_bad_fault_entries_are_rejected(tmp_path, body, field, reason):
 
 def test_negative_fault_time_rejected(tmp_path):
     path = tmp_path / "f.toml"
-    path.write_text(SCENARIO.read_text() + '\n[[faults]]\nt_s = -1.0\njets = [2]\nkind = "stuck"\n')
+    path.write_text(SCENARIO.read_text() + '\n[[faults]]\nt_s = -1.0\njets = [2]\nkind = "stuck_on"\n')
     expect(load_scenario, path, "faults[0].t_s", ">= 0")
 
 

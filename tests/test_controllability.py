@@ -26,11 +26,11 @@ NO_AERO = np.zeros((3, 2))
 
 CONFIGS = {
     "nominal": JetHealth(),
-    "case1 (1 2 17 18 off)": JetHealth.of(failed=[1, 2, 17, 18]),
-    "case2 (7 stuck on)": JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]),
+    "case1 (1 2 17 18 off)": JetHealth.of(failed_off=[1, 2, 17, 18]),
+    "case2 (7 stuck on)": JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10]),
     "case3 (4 at 50 %)": JetHealth.of(degraded=[(3, .5), (7, .5), (14, .5), (15, .5)]),
-    "mixed, inhibited": JetHealth.of(failed=[7, 16, 18], degraded=[(1, .4), (3, .8), (8, .6)], inhibited=[12]),
-    "stuck 95 N cancelled": JetHealth.of(failed=[2], stuck=[4, 12], degraded=[(13, .7), (18, .3)]),
+    "mixed, inhibited": JetHealth.of(failed_off=[7, 16, 18], degraded=[(1, .4), (3, .8), (8, .6)], inhibited=[12]),
+    "stuck 95 N cancelled": JetHealth.of(failed_off=[2], stuck_on=[4, 12], degraded=[(13, .7), (18, .3)]),
 }
 
 
@@ -102,7 +102,7 @@ def test_nominal_jets_turn_about_the_velocity_vector_by_a_few_deg_per_s2_each_wa
 
 
 def test_a_bias_the_jets_cannot_cancel_needs_the_smallest_trim_a_grid_finds():
-    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    h = JetHealth.of(failed_off=[6, 16], stuck_on=[15], degraded=[(7, .5), (13, .5)])
     hull, b = _hull(h)
     assert not _inside(hull, -b)
     A = aero_moment_per_rad(800.0, VEH.S_ref_m2, VEH.l_ref_m, VEH.aero.C_lbeta, VEH.aero.C_malpha, VEH.aero.C_nbeta)
@@ -129,7 +129,7 @@ def test_a_bias_the_jets_cannot_cancel_needs_the_smallest_trim_a_grid_finds():
 
 
 def test_without_dynamic_pressure_an_uncancelled_bias_has_no_trim_and_is_reported():
-    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    h = JetHealth.of(failed_off=[6, 16], stuck_on=[15], degraded=[(7, .5), (13, .5)])
     r = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 0.0, qbar_pa=0.0)
     assert math.isinf(r.trim_needed_deg) and not r.controllable
     assert "beyond what the jets and the aerodynamics can cancel" in r.reason
@@ -139,7 +139,7 @@ def test_without_dynamic_pressure_an_uncancelled_bias_has_no_trim_and_is_reporte
 def test_near_zero_dynamic_pressure_reports_no_physical_trim_instead_of_a_huge_angle():
     """The linear trim answer grows as 1/qbar: at 0.01 Pa it is thousands of degrees. The reason
     says no trim within a right angle absorbs the residual (with the qbar), the event text '>90'."""
-    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    h = JetHealth.of(failed_off=[6, 16], stuck_on=[15], degraded=[(7, .5), (13, .5)])
     A1 = aero_moment_per_rad(800.0, VEH.S_ref_m2, VEH.l_ref_m, VEH.aero.C_lbeta, VEH.aero.C_malpha, VEH.aero.C_nbeta)
     r800 = controllability(T, h, I_NOM, V_B, A1, 5.0, 0.0, qbar_pa=800.0)
     q = 0.01
@@ -156,7 +156,7 @@ def test_near_zero_dynamic_pressure_reports_no_physical_trim_instead_of_a_huge_a
 
 
 def test_authority_below_what_the_schedule_needs_is_not_controllable():
-    h = JetHealth.of(failed=[1, 13, 16], degraded=[(6, .3), (7, .3)])
+    h = JetHealth.of(failed_off=[1, 13, 16], degraded=[(6, .3), (7, .3)])
     r = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 0.0)
     weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
     r2 = controllability(T, h, I_NOM, V_B, NO_AERO, 5.0, 1.01 * weak)
@@ -173,7 +173,7 @@ def test_schedule_need_is_the_quintic_peak_acceleration_of_the_hardest_step_left
 
 
 def test_the_lp_is_cheap_enough_for_every_reconfiguration():
-    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])
+    h = JetHealth.of(failed_off=[6, 16], stuck_on=[15], degraded=[(7, .5), (13, .5)])
     A = aero_moment_per_rad(800.0, VEH.S_ref_m2, VEH.l_ref_m, VEH.aero.C_lbeta, VEH.aero.C_malpha, VEH.aero.C_nbeta)
     controllability(T, h, I_NOM, V_B, A, 5.0, 0.0)
     times = [controllability(T, h, I_NOM, V_B, A, 5.0, 0.0).solve_s for _ in range(5)]
@@ -185,9 +185,10 @@ def test_the_truth_label_uses_the_faults_the_plant_applied_with_their_thrust_fac
     from ellipsled.controllable import truth_controllability, truth_health
     from fsw.health import DEGRADED, FAILED_OFF, NOMINAL, STUCK_ON
     scn = load_scenario("nominal").with_(faults=(
-        FaultEvent(10.0, (3, 4), "off"), FaultEvent(10.0, (15,), "stuck"), FaultEvent(10.0, (7,), "degraded", 0.4),
-        FaultEvent(900.0, (9,), "off")))                      # after the end: never applied
-    applied = [(10.0, 3, "off"), (10.0, 4, "off"), (10.0, 15, "stuck"), (10.0, 7, "degraded")]
+        FaultEvent(10.0, (3, 4), "failed_off"), FaultEvent(10.0, (15,), "stuck_on"),
+        FaultEvent(10.0, (7,), "degraded", 0.4),
+        FaultEvent(900.0, (9,), "failed_off")))               # after the end: never applied
+    applied = [(10.0, 3, "failed_off"), (10.0, 4, "failed_off"), (10.0, 15, "stuck_on"), (10.0, 7, "degraded")]
     h = truth_health(scn, applied)
     assert [int(h.state[j - 1]) for j in (3, 4, 15, 7, 9)] == [FAILED_OFF, FAILED_OFF, STUCK_ON, DEGRADED, NOMINAL]
     assert h.eta[6] == 0.4

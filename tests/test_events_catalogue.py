@@ -54,15 +54,15 @@ def test_the_check_finds_a_broken_catalogue():
     (EV.JET_INHIBIT, dict(jets=0, inhibit=True), "ALL JETS INHIBITED"),
     (EV.JET_INHIBIT, dict(jets=7, inhibit=False), "JET 7 INHIBIT CLEARED"),
     (EV.FDIR_CHAMBER_SKIP, dict(jet=4, count=2), "FDIR SKIPS NON-FINITE CHAMBER JET 4 (x2)"),
-    (EV.JET_STUCK_ON, dict(jet=6), "JET 6 STUCK ON"),
-    (EV.FDIR_RECONFIG, dict(jet=2, health=STUCK_ON, override=False), "RECONFIG JET 2 STUCK ON"),
+    (EV.JET_STUCK_ON, dict(jet=6), "JET 6 STUCK_ON"),
+    (EV.FDIR_RECONFIG, dict(jet=2, health=STUCK_ON, override=False), "RECONFIG JET 2 STUCK_ON"),
     (EV.FDIR_RECONFIG, dict(jet=11, health=DEGRADED, eta=0.5123, override=True),
      "RECONFIG JET 11 DEGRADED ETA 0.51 (GND OVERRIDE HO"),                       # cut at 50, as STATUSTEXT did
-    (EV.FDIR_OVERRIDE, dict(jet=4, health=NOMINAL), "GND MARK JET 4 HEALTHY"),
+    (EV.FDIR_OVERRIDE, dict(jet=4, health=NOMINAL), "GND MARK JET 4 NOMINAL"),
     (EV.FDIR_OVERRIDE, dict(jet=4, health=DEGRADED, eta=0.5), "GND MARK JET 4 DEGRADED ETA 0.50"),
     (EV.FDIR_CLEAR, dict(jets=0), "GND CLEAR ALL JETS"),
     (EV.UNEXPLAINED_TORQUE, dict(torque_Nm=221.7), "UNEXPLAINED TORQUE 222 NM"),
-    (EV.INJECT, dict(jets=17, kind=1), "GND INJECT JET 17 OFF"),
+    (EV.INJECT, dict(jets=17, kind=1), "GND INJECT JET 17 FAILED_OFF"),
     (EV.INJECT, dict(jets=3, kind=4, eta=0.4), "GND INJECT JET 3 DEGRADED ETA 0.40"),
     (EV.TASK_ERROR, dict(task="control", error="ZeroDivisionError"), "task control: ZeroDivisionError"),
     (EV.CYCLE_SLIP, dict(tick=752, took_ms=28.81, deadline_ms=20.0, task="control", task_ms=28.79),
@@ -194,7 +194,7 @@ def test_a_statustext_is_read_back_to_its_entry():
             _, text = e.render(args)
             assert cat.identify(text) is e, (e.name, text)
             assert cat.identify((text + " (+3 suppressed)")[:50]) is e, (e.name, text)    # a summary, cut
-    assert cat.identify("JET 3 FAILED OFF (+2 suppressed)") is EV.JET_FAILED_OFF
+    assert cat.identify("JET 3 FAILED_OFF (+2 suppressed)") is EV.JET_FAILED_OFF
     assert cat.identify("NOT CONTROLLABLE: stuck-on bias 900 N m beyond what t") is EV.NOT_CONTROLLABLE
     assert cat.identify("anything at all") is None
 

@@ -55,7 +55,7 @@ def test_late_answers_raise_no_false_alarm_when_the_plant_reports_the_command_he
 
 def test_the_same_flight_judged_by_the_last_command_sent_does_raise_false_alarms():
     """The check above can fail: judged by the newest command, the same late deliveries
-    make FDIR declare healthy jets failed."""
+    make FDIR declare nominal jets failed."""
     det, late, _ = fly(0.03, honest=False)
     assert late > 200 and det > 0
 

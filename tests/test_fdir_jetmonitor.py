@@ -106,8 +106,8 @@ def test_detection_events_have_severity_and_short_text():
     run(CASES["mixed"], events=ev)
     det = [e for e in ev.history if e.code.startswith("jet_")]
     texts = {e.text: e.severity for e in det}
-    assert texts["JET 1 FAILED OFF"] == Severity.ERROR
-    assert texts["JET 6 STUCK ON"] == Severity.ERROR
+    assert texts["JET 1 FAILED_OFF"] == Severity.ERROR
+    assert texts["JET 6 STUCK_ON"] == Severity.ERROR
     assert any(re.fullmatch(r"JET 11 DEGRADED ETA 0\.(4[5-9]|5[0-5])", t) and s == Severity.WARNING
                for t, s in texts.items())
     reconf = [e for e in ev.history if e.code == "fdir_reconfig"]
@@ -249,8 +249,8 @@ def test_override_applies_immediately_and_wins_until_cleared():
     fdir.override(1.0, 6, "stuck_on")
     fdir.override(1.0, 7, "failed_off")
     assert fdir.health_active.state[5] == STUCK_ON and fdir.health_active.state[6] == FAILED_OFF
-    # 'healthy' masks a real detection: FDIR still reports it, the allocator keeps the jet
-    fdir.override(1.0, 1, "healthy")
+    # 'nominal' masks a real detection: FDIR still reports it, the allocator keeps the jet
+    fdir.override(1.0, 1, "nominal")
     u = np.ones(N_JETS, dtype=np.uint8)
     p = np.ones(N_JETS)
     p[0] = 0.0

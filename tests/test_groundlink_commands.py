@@ -22,10 +22,10 @@ from tests.rig import ACCEPTED, DENIED, UNSUPPORTED, Rig, rig  # noqa: F401  (th
 # --------------------------------------------------------------------------- injection
 
 @pytest.mark.parametrize("words, expect", [
-    (("inject", "17", "off"), (17, "off", 1.0)),
-    (("inject", "5", "stuck"), (5, "stuck", 1.0)),
+    (("inject", "17", "failed_off"), (17, "failed_off", 1.0)),
+    (("inject", "5", "stuck_on"), (5, "stuck_on", 1.0)),
     (("inject", "3", "degraded", "0.4"), (3, "degraded", 0.4)),
-    (("inject", "0", "clear"), (0, "clear", 1.0)),
+    (("inject", "0", "nominal"), (0, "nominal", 1.0)),
 ])
 def test_valid_injection_is_forwarded_to_the_plant_and_accepted(rig, words, expect):
     assert rig.command(*words) == ACCEPTED
@@ -38,7 +38,7 @@ def test_valid_injection_is_forwarded_to_the_plant_and_accepted(rig, words, expe
 
 
 def test_injection_of_all_jets_reaches_every_jet(rig):
-    assert rig.command("inject", "0", "off") == ACCEPTED
+    assert rig.command("inject", "0", "failed_off") == ACCEPTED
     assert (rig.plant.fault_state == FAILED_OFF).all()
 
 
@@ -81,13 +81,13 @@ def test_plant_unavailable_gives_temporarily_rejected_and_errors_are_mapped(tmp_
     try:
         r.fly(2)
         r.inject_answer = False
-        assert r.command("inject", "17", "off") == mav.MAV_RESULT_TEMPORARILY_REJECTED
+        assert r.command("inject", "17", "failed_off") == mav.MAV_RESULT_TEMPORARILY_REJECTED
         r.gl.inject = refusing
-        assert r.command("inject", "17", "off") == DENIED
+        assert r.command("inject", "17", "failed_off") == DENIED
         r.gl.inject = broken
-        assert r.command("inject", "17", "off") == mav.MAV_RESULT_FAILED
+        assert r.command("inject", "17", "failed_off") == mav.MAV_RESULT_FAILED
         r.gl.inject = None
-        assert r.command("inject", "17", "off") == UNSUPPORTED
+        assert r.command("inject", "17", "failed_off") == UNSUPPORTED
         assert (r.plant.fault_state == NOMINAL).all()
         assert any("PLANT UNAVAILABLE" in t for t in r.texts())
     finally:
@@ -130,10 +130,10 @@ def test_fdir_mark_clear_and_delay(rig):
     assert fsw.fdir.health_active.state[2] == DEGRADED and math.isclose(fsw.fdir.health_active.eta[2], 0.5)
     assert fsw.allocator._health.state[2] == DEGRADED            # the allocator adopted it at once
     assert rig.command("mark", "7", "failed") == ACCEPTED and fsw.fdir.health_active.state[6] == FAILED_OFF
-    assert rig.command("mark", "8", "stuck") == ACCEPTED and fsw.fdir.health_active.state[7] == STUCK_ON
+    assert rig.command("mark", "8", "stuck_on") == ACCEPTED and fsw.fdir.health_active.state[7] == STUCK_ON
     assert rig.command("mark", "9", "inhibited") == ACCEPTED
     assert fsw.driver.inhibit[8] and fsw.fdir.health_active.inhibited[8]
-    assert rig.command("mark", "3", "healthy") == ACCEPTED and fsw.fdir.health_active.state[2] == NOMINAL
+    assert rig.command("mark", "3", "nominal") == ACCEPTED and fsw.fdir.health_active.state[2] == NOMINAL
     assert rig.command("clear", "0") == ACCEPTED
     assert (fsw.fdir.health_active.state == NOMINAL).all() and not fsw.driver.inhibit.any()
     assert (fsw.allocator._health.state == NOMINAL).all()
@@ -183,13 +183,13 @@ def test_heartbeat_system_status_follows_mode_and_fdir(rig):
 
 
 def test_fdir_detection_of_an_injected_failure_reaches_the_ground(rig):
-    """End to end in one process: inject jet 17 off from the ground, fly, FDIR declares it,
+    """End to end in one process: inject jet 17 failed_off from the ground, fly, FDIR declares it,
     its STATUSTEXT and the CRITICAL heartbeat come down."""
-    assert rig.command("inject", "17", "off") == ACCEPTED
+    assert rig.command("inject", "17", "failed_off") == ACCEPTED
     rig.fly(150)
     assert any(d["jet"] == 17 and d["kind"] == "failed_off" for d in rig.fsw.fdir.detections)
     texts = rig.texts()
-    assert "JET 17 FAILED OFF" in texts
+    assert "JET 17 FAILED_OFF" in texts
     js = rig.gcs.state.latest["ELLIPSLED_JET_STATUS"]
     assert js.health[16] == mav.ELLIPSLED_JET_HEALTH_FAILED_OFF
     assert np.count_nonzero(np.array(js.health)) == 1

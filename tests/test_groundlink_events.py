@@ -56,14 +56,14 @@ def test_each_event_goes_down_as_an_event_numbered_without_gaps(rig):
     log = rig.fsw.events
     log.emit(rig.fsw.t_s, EV.JET_DEGRADED, jet=11, eta=0.5)
     log.emit(rig.fsw.t_s, EV.FDIR_RECONFIG, jet=11, health=DEGRADED, eta=0.5, override=True)
-    log.emit(rig.fsw.t_s, Severity.ERROR, "fdir", "jet_failed_off", "JET 2 FAILED OFF")   # text form: no values
+    log.emit(rig.fsw.t_s, Severity.ERROR, "fdir", "jet_failed_off", "JET 2 FAILED_OFF")   # text form: no values
     log.emit(rig.fsw.t_s, Severity.WARNING, "allocator", "alloc_degraded", "ALLOCATION DEGRADED (infeasible)")
     log.emit(rig.fsw.t_s, Severity.INFO, "test", "not_catalogued", "SOMETHING")
     rig.sent.clear()
     rig.gl.tick(rig.frame)
     events, texts = _of(rig.sent, "EVENT"), [m.text for m in _of(rig.sent, "STATUSTEXT")]
     assert texts[-5:] == ["JET 11 DEGRADED ETA 0.50", "RECONFIG JET 11 DEGRADED ETA 0.50 (GND OVERRIDE HO",
-                          "JET 2 FAILED OFF", "ALLOCATION DEGRADED (infeasible)", "SOMETHING"]
+                          "JET 2 FAILED_OFF", "ALLOCATION DEGRADED (infeasible)", "SOMETHING"]
     assert [e.sequence for e in events] == [first, first + 1, first + 2]
     meta, enums = _metadata(rig)
     shown = []

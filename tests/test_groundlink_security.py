@@ -262,7 +262,7 @@ def test_a_command_captured_in_one_run_is_refused_in_the_next_with_the_same_key(
         a.fly(3)
         send_raw(a, captured)
         assert a.exchange(lambda: len(a.gcs.state.acks) == 1)
-        assert a.injected == [(18, "off", 1.0)]
+        assert a.injected == [(18, "failed_off", 1.0)]
     finally:
         a.close()
     b = Rig(tmp_path, key=a.key)
@@ -346,10 +346,10 @@ def test_the_bench_flood_mix_changes_nothing_and_events_still_go_out_each_tick(r
                 except BlockingIOError:
                     break
             sent.clear()
-            rig.fsw.events.emit(rig.fsw.t_s, mav.MAV_SEVERITY_ERROR, "fdir", "jet_failed_off", f"JET {burst + 1} FAILED OFF")
+            rig.fsw.events.emit(rig.fsw.t_s, mav.MAV_SEVERITY_ERROR, "fdir", "jet_failed_off", f"JET {burst + 1} FAILED_OFF")
             rig.fly(5)                                   # one RG2 tick
             texts = [m.text for m in sent if m.get_type() == "STATUSTEXT"]
-            assert f"JET {burst + 1} FAILED OFF" in texts, texts
+            assert f"JET {burst + 1} FAILED_OFF" in texts, texts
         settle(rig, 0.3)
     finally:
         evil.close()

@@ -64,8 +64,8 @@ def run_cli(r, keyfile, *args, tlog=None):
 
 def test_inject_accepted_exits_0_and_reaches_the_plant(live, capsys):
     r, key = live
-    assert run_cli(r, key, "inject", "--jet", "17", "--kind", "off") == 0
-    assert "inject jet 17 off: ACCEPTED" in capsys.readouterr().out
+    assert run_cli(r, key, "inject", "--jet", "17", "--kind", "failed_off") == 0
+    assert "inject jet 17 failed_off: ACCEPTED" in capsys.readouterr().out
     assert r.plant.fault_state[16] == 1
 
 
@@ -76,7 +76,7 @@ def test_refusals_exit_nonzero_with_the_result_name_and_the_reason(live, capsys)
     err = capsys.readouterr().err
     assert "TEMPORARILY_REJECTED" in err and "PLANT UNAVAILABLE" in err
     # caught before sending: jet 19, eta missing
-    assert run_cli(r, key, "inject", "--jet", "19", "--kind", "off") == 2
+    assert run_cli(r, key, "inject", "--jet", "19", "--kind", "failed_off") == 2
     assert run_cli(r, key, "inject", "--jet", "3", "--kind", "degraded") == 2
     # vehicle-side denial: STANDBY -> SAFE is not an allowed transition
     assert run_cli(r, key, "mode", "standby") == 0
@@ -127,7 +127,7 @@ def test_no_answer_is_a_timeout_and_a_missing_key_a_usage_error(tmp_path, capsys
 def test_tlog_has_both_directions_and_is_read_by_pymavlink(live, tmp_path):
     r, key = live
     tlog = tmp_path / "cmd.tlog"
-    assert run_cli(r, key, "inject", "--jet", "2", "--kind", "stuck", tlog=tlog) == 0
+    assert run_cli(r, key, "inject", "--jet", "2", "--kind", "stuck_on", tlog=tlog) == 0
     recs = list(read_records(tlog))
     assert recs and all(1.5e15 < t < 4e15 for t, _ in recs)            # plausible Unix µs
     assert [t for t, _ in recs] == sorted(t for t, _ in recs)

@@ -38,14 +38,14 @@ def test_console_shows_state_and_injects_with_ack(rig):
             assert entry is not None and "ELLIPSLED_ENTRY_STATE" in rig.gcs.state.latest
             jets_txt = app._jet_table()
             assert jets_txt.row_count == 3
-            # command line: inject jet 17 off
+            # command line: inject jet 17 failed_off
             await pilot.press(":")
-            for ch in "inject 17 off":
+            for ch in "inject 17 failed_off":
                 await pilot.press("space" if ch == " " else ch)
             await pilot.press("enter")
             await pump()
-            assert rig.injected and rig.injected[-1] == (17, "off", 1.0), app.ack_lines
-            assert "inject jet 17 off: ACCEPTED" in app.ack_lines
+            assert rig.injected and rig.injected[-1] == (17, "failed_off", 1.0), app.ack_lines
+            assert "inject jet 17 failed_off: ACCEPTED" in app.ack_lines
             # keys: Escape leaves the command line; "1" writes the STANDBY request on it, sent
             # by Enter only
             await pilot.press("escape")
@@ -58,7 +58,7 @@ def test_console_shows_state_and_injects_with_ack(rig):
             assert "mode standby: ACCEPTED" in app.ack_lines and int(rig.fsw.modes.mode) == 0
             # a bad line is explained, not sent
             n_acks = len(rig.gcs.state.acks)
-            app.submit("inject 19 off")
+            app.submit("inject 19 failed_off")
             assert any("jet: must be in 0..18" in a for a in app.ack_lines)
             await pump(2)
             assert len(rig.gcs.state.acks) == n_acks
@@ -66,7 +66,7 @@ def test_console_shows_state_and_injects_with_ack(rig):
             rig.fly(150)
             await pump()
             texts = [e.text for e in rig.gcs.state.events]
-            assert "GND INJECT JET 17 OFF" in texts
+            assert "GND INJECT JET 17 FAILED_OFF" in texts
             assert app._events_shown == rig.gcs.state.events_total
             status = rig.gcs.state.latest["HEARTBEAT"].system_status
             assert status in (mav.MAV_STATE_STANDBY, mav.MAV_STATE_CRITICAL)
@@ -132,10 +132,10 @@ def test_the_events_panel_filters_by_the_catalogues_severities_sources_and_names
 
             def shown():
                 return [" ".join(seg.text for seg in line).strip() for line in app.query_one("#events").lines]
-            assert any("fdir" in s and "JET 3 FAILED OFF" in s for s in shown())
+            assert any("fdir" in s and "JET 3 FAILED_OFF" in s for s in shown())
             app.submit("events fdir")
             await pilot.pause(0.05)
-            assert [s.split(None, 3)[-1] for s in shown()] == ["JET 3 FAILED OFF", "FDIR DELAY 2.00 S"]
+            assert [s.split(None, 3)[-1] for s in shown()] == ["JET 3 FAILED_OFF", "FDIR DELAY 2.00 S"]
             app.submit("events err driver")                              # ERROR and worse, of the driver
             await pilot.pause(0.05)
             assert shown() == []

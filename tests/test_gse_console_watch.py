@@ -39,13 +39,13 @@ def test_view_only_console_shows_the_vehicle_and_sends_nothing(tmp_path):
                 assert "VIEW ONLY" in top and "ENTRY" in top and "ARMED" in top, top
                 assert "ELLIPSLED_ENTRY_STATE" in viewer.state.latest
                 rx_before = rig.gl.stats["rx_datagrams"]
-                await _type(pilot, "inject 17 off")
+                await _type(pilot, "inject 17 failed_off")
                 await pilot.press("3")                 # SAFE by key (and Enter): refused too
                 await pilot.press("enter")
                 for _ in range(4):
                     rig.fly(5)
                     await pilot.pause(0.06)
-                assert "inject jet 17 off: not sent (view only: no signing key)" in app.ack_lines, app.ack_lines
+                assert "inject jet 17 failed_off: not sent (view only: no signing key)" in app.ack_lines, app.ack_lines
                 assert any(line.startswith("mode safe: not sent") for line in app.ack_lines)
                 assert rig.gl.stats["rx_datagrams"] == rx_before and viewer.stats["tx_frames"] == 0
                 assert rig.injected == [] and int(rig.fsw.modes.mode) == 1
@@ -60,7 +60,7 @@ def test_replay_of_a_recorded_session_shows_its_final_state_and_events(tmp_path)
     rig = Rig(tmp_path, tlog=str(tlog))
     try:
         rig.fly(50)
-        assert rig.command("inject", "17", "off") == 0
+        assert rig.command("inject", "17", "failed_off") == 0
         assert rig.command("mode", "safe") == 0
         rig.fly(200)
         rig.exchange(lambda: False, 0.2)
@@ -69,7 +69,7 @@ def test_replay_of_a_recorded_session_shows_its_final_state_and_events(tmp_path)
         live_bank = live.latest["ELLIPSLED_ENTRY_STATE"].bank
     finally:
         rig.close()
-    assert "GND INJECT JET 17 OFF" in live_events
+    assert "GND INJECT JET 17 FAILED_OFF" in live_events
 
     replay = TlogReplay(tlog, speed=1e6)
 

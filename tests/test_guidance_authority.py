@@ -184,7 +184,7 @@ def _fsw(health, **over):
 
 def test_reconfiguration_reports_the_lp_and_reshapes_to_its_weaker_way():
     from fsw.controllability import controllability, velocity_dir_B
-    h2 = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])       # case 2
+    h2 = JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10])       # case 2
     f2 = _fsw(h2)
     r = f2.controllability
     assert r is not None and r.controllable
@@ -199,7 +199,7 @@ def test_reconfiguration_reports_the_lp_and_reshapes_to_its_weaker_way():
     texts = [e.text for e in f2.events.history if e.code == "controllability"]
     assert texts and texts[-1].startswith("AUTH +") and len(texts[-1]) <= 50
     assert any(e.code == "reference_reshaped" for e in f2.events.history)
-    f1 = _fsw(JetHealth.of(failed=[1, 2, 17, 18]))         # case 1: half its weaker way is above 1 deg/s^2
+    f1 = _fsw(JetHealth.of(failed_off=[1, 2, 17, 18]))         # case 1: half its weaker way is above 1 deg/s^2
     assert f1.guidance.profile.accel_limit_radps2 == SC.bank_accel_limit_radps2
     assert not any(e.code == "reference_reshaped" for e in f1.events.history)
 
@@ -208,7 +208,7 @@ def test_an_answer_equal_to_the_event_precision_does_not_reshape_the_reference_a
     """Equal LPs answer in their last bits differently; a re-plan to a limit that reads the same
     (0.01 deg/s^2, the event's precision) is no new reference and is not announced again."""
     import dataclasses
-    f = _fsw(JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]))       # case 2: reshaped once
+    f = _fsw(JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10]))       # case 2: reshaped once
     r = f.controllability
     limit = f.guidance.profile.accel_limit_radps2
     n = sum(e.code == "reference_reshaped" for e in f.events.history)
@@ -225,7 +225,7 @@ def test_an_answer_equal_to_the_event_precision_does_not_reshape_the_reference_a
 
 def test_no_authority_one_way_keeps_the_schedule_pace_and_says_so():
     from fsw.controllability import schedule_accel_need_radps2
-    h = JetHealth.of(failed=[6, 16], stuck=[15], degraded=[(7, .5), (13, .5)])   # no trim at qbar 0
+    h = JetHealth.of(failed_off=[6, 16], stuck_on=[15], degraded=[(7, .5), (13, .5)])   # no trim at qbar 0
     f = _fsw(h)
     assert not f.controllability.controllable
     codes = [e.code for e in f.events.history]
@@ -238,7 +238,7 @@ def test_no_authority_one_way_keeps_the_schedule_pace_and_says_so():
 def test_the_lp_runs_off_the_loop_in_real_time_and_is_applied_when_ready():
     f = FlightSoftware(SC, realtime=True)
     try:
-        f.fdir.health_active = JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10])
+        f.fdir.health_active = JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10])
         f.t_s = 3.0
         f.health_changed()
         assert f.authority.lp.alive and f.authority.lp.wait_idle(10.0)
@@ -263,7 +263,7 @@ def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows(
     again (its answer does not depend on qbar)."""
     from fsw.controllability import controllability as lp
     sc = load_scenario("mc/default-20110808-run054")
-    h = JetHealth.of(failed=[1, 2, 10, 16], stuck=[6, 12], degraded=[(4, 0.5838198113373984), (7, 0.3871118055537681)])
+    h = JetHealth.of(failed_off=[1, 2, 10, 16], stuck_on=[6, 12], degraded=[(4, 0.5838198113373984), (7, 0.3871118055537681)])
     f = FlightSoftware(sc)
     try:
         f.fdir.health_active = h
@@ -319,7 +319,7 @@ def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows(
         assert len(f.events.history) == n
     finally:
         f.close()
-    g = _fsw(JetHealth.of(stuck=[2, 3, 4, 5, 8, 9, 10]))   # case 2: the jets cancel its bias alone
+    g = _fsw(JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10]))   # case 2: the jets cancel its bias alone
     r = g.controllability
     assert r.bias_Nm > 0.0 and r.trim_needed_deg == 0.0
     g.nav.state.qbar_pa = 3000.0

@@ -140,8 +140,8 @@ def test_applied_dispersion_sets_truth_initial_state_faults_and_delay(camp, base
         assert f.t_s == disp["fault_t_s"]
         for j in f.jets:
             by_kind.setdefault(f.kind, []).append((j, f.eta))
-    assert sorted(j for j, _ in by_kind.get("off", [])) == list(disp["jets_failed_off"])
-    assert sorted(j for j, _ in by_kind.get("stuck", [])) == list(disp["jets_stuck_on"])
+    assert sorted(j for j, _ in by_kind.get("failed_off", [])) == list(disp["jets_failed_off"])
+    assert sorted(j for j, _ in by_kind.get("stuck_on", [])) == list(disp["jets_stuck_on"])
     assert sorted(by_kind.get("degraded", [])) == sorted(zip(disp["jets_degraded"], disp["degraded_eta"]))
     # the truth inertia the plant will use stays positive definite
     from common.model import inertia_matrix

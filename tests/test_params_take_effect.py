@@ -215,7 +215,7 @@ def stuck_pair_controllable(fl: Flight) -> bool:
     jets cannot cancel their 284 N m; an alpha/beta trim offset of 1.8 deg can, if the
     parameter allows it. What the controllability LP concludes after FDIR isolates them."""
     for jet in (14, 18):
-        fl.command("inject", str(jet), "stuck")
+        fl.command("inject", str(jet), "stuck_on")
     fl.fly(50)
     return bool(fl.fsw.controllability.controllable)
 
@@ -363,14 +363,14 @@ CASES = [
     Case("allocator.fault_tolerance", 0.0, jet_pulses_after(JET), ">",
          setup=ground(("mark", str(JET), "failed_off"))),
     # FDIR jet monitor (faults injected in the plant from the ground, or a transducer offset)
-    Case("fdir.persist_n", 200, detection_of(JET, "stuck", n=150), "==", ("none", "stuck_on")),
+    Case("fdir.persist_n", 200, detection_of(JET, "stuck_on", n=150), "==", ("none", "stuck_on")),
     Case("fdir.on_threshold", 0.25, detection_of(JET), "==", ("stuck_on", "none"),
          setup=offset_chamber(JET, 0.3)),
     Case("fdir.off_threshold", 0.1, detection_of(JET, "degraded", "0.15"), "==", ("none", "failed_off")),
     Case("fdir.degraded_lo", 0.5, detection_of(JET, "degraded", "0.4"), "==", ("none", "degraded")),
     Case("fdir.degraded_hi", 0.85, detection_of(JET, "degraded", "0.9"), "==", ("none", "degraded")),
     Case("fdir.delay_s", 3.0,
-         lambda fl: [fl.command("inject", str(JET), "off"), fl.fly(200),
+         lambda fl: [fl.command("inject", str(JET), "failed_off"), fl.fly(200),
                      round(fl.fsw.fdir.detections[0]["t_apply_s"] - fl.fsw.fdir.detections[0]["t_s"], 6)][2],
          "==", (3.0, 0.0)),
     # analytic-redundancy residual (later in the entry, where it is small against its threshold)
@@ -404,7 +404,7 @@ CASES = [
          setup=ground(("mode", "standby"), ("arm", "off"))),
     # guidance (read at a reconfiguration: FDIR isolating a fault injected from the ground)
     Case("guidance.authority_use", 0.05,
-         lambda fl: [fl.command("inject", str(JET), "off"), fl.fly(100), fl.fsw.guidance.profile.accel_limit_radps2][2],
+         lambda fl: [fl.command("inject", str(JET), "failed_off"), fl.fly(100), fl.fsw.guidance.profile.accel_limit_radps2][2],
          "<"),
     Case("guidance.trim_max_deg", 0.0, stuck_pair_controllable, "==", (False, True), at=3000),
     # predictor-corrector (mode npc): the corrector's answer phi_0. A higher final bank flies

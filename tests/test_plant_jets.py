@@ -80,9 +80,9 @@ def test_fault_kinds_change_produced_torque_and_chamber_pressure_and_clear_resto
     plant = Plant(quiet(SC))
     j = 13                               # jet 14
     one, zero = unit(j), np.zeros(18, np.uint8)
-    cases = [("off", 1.0, one, 0.0, FAILED_OFF), ("stuck", 1.0, zero, 1.0, STUCK_ON),
+    cases = [("failed_off", 1.0, one, 0.0, FAILED_OFF), ("stuck_on", 1.0, zero, 1.0, STUCK_ON),
              ("degraded", 0.3, one, 0.3, DEGRADED), ("degraded", 0.3, zero, 0.0, DEGRADED),
-             ("clear", 1.0, one, 1.0, NOMINAL), ("clear", 1.0, zero, 0.0, NOMINAL)]
+             ("nominal", 1.0, one, 1.0, NOMINAL), ("nominal", 1.0, zero, 0.0, NOMINAL)]
     for kind, eta, u, produced, state in cases:
         plant.set_fault(j + 1, kind, eta)
         s = plant.step(u)
@@ -96,18 +96,19 @@ def test_fault_kinds_change_produced_torque_and_chamber_pressure_and_clear_resto
 
 def test_stuck_jets_fire_whatever_the_command_and_jet_zero_means_all():
     plant = Plant(quiet(SC))
-    plant.set_fault(0, "stuck")
+    plant.set_fault(0, "stuck_on")
     plant.step(np.zeros(18, np.uint8))
     assert np.allclose(plant.truth()["tau_jets_B"], T.sum(axis=1))
-    plant.set_fault(0, "clear")
-    plant.set_fault(5, "off")
+    plant.set_fault(0, "nominal")
+    plant.set_fault(5, "failed_off")
     plant.step(np.ones(18, np.uint8))
     assert np.allclose(plant.truth()["tau_jets_B"], T.sum(axis=1) - T[:, 4])
 
 
-@pytest.mark.parametrize("jet,kind,eta", [(19, "off", 1.0), (-1, "off", 1.0), (1.5, "off", 1.0), (True, "off", 1.0),
+@pytest.mark.parametrize("jet,kind,eta", [(19, "failed_off", 1.0), (-1, "failed_off", 1.0), (1.5, "failed_off", 1.0),
+                                          (True, "failed_off", 1.0),
                                           (1, "broken", 1.0), (1, "degraded", 1.0), (1, "degraded", 0.0),
-                                          (1, "degraded", float("nan")), (1, "off", 0.5), (1, "degraded", "0.5")])
+                                          (1, "degraded", float("nan")), (1, "failed_off", 0.5), (1, "degraded", "0.5")])
 def test_bad_fault_requests_raise_value_error(jet, kind, eta):
     plant = Plant(quiet(SC))
     with pytest.raises(ValueError):
@@ -116,13 +117,13 @@ def test_bad_fault_requests_raise_value_error(jet, kind, eta):
 
 
 # (case, its faulted jets, their fault kind, the fraction of its thrust a faulted jet delivers)
-@pytest.mark.parametrize("case,jets,kind,thrust_frac", [("case1", [1, 2, 17, 18], "off", 0.0),
-                                                        ("case2", [2, 3, 4, 5, 8, 9, 10], "stuck", 1.0),
+@pytest.mark.parametrize("case,jets,kind,thrust_frac", [("case1", [1, 2, 17, 18], "failed_off", 0.0),
+                                                        ("case2", [2, 3, 4, 5, 8, 9, 10], "stuck_on", 1.0),
                                                         ("case3", [3, 7, 14, 15], "degraded", 0.5)])
 def test_scheduled_faults_apply_at_the_first_step_boundary_at_or_after_t_s(case, jets, kind, thrust_frac):
     sc = quiet(load_scenario(case))
     plant = Plant(sc)
-    u = np.ones(18, np.uint8) if kind != "stuck" else np.zeros(18, np.uint8)
+    u = np.ones(18, np.uint8) if kind != "stuck_on" else np.zeros(18, np.uint8)
     k_fault = round(2.5 / DT)
     idx = np.array(jets) - 1
     for _ in range(k_fault):
@@ -226,10 +227,10 @@ def test_jets_by_geometry_reproduce_r_cross_F_and_add_their_force(tmp_path):
 
 def test_faults_scheduled_by_call_apply_at_their_time_in_order_and_bad_ones_are_refused():
     plant = Plant(quiet(SC))
-    plant.schedule_fault(0.1, 3, "stuck")
+    plant.schedule_fault(0.1, 3, "stuck_on")
     plant.schedule_fault(0.1, 3, "degraded", 0.4)       # same boundary: applied after, wins
-    plant.schedule_fault(0.05, 0, "off")                  # 0.05 s -> boundary k = 3 (t = 0.06)
-    for bad in [(float("nan"), 3, "off", 1.0), (1.0, 30, "off", 1.0), (1.0, 3, "degraded", 1.5)]:
+    plant.schedule_fault(0.05, 0, "failed_off")         # 0.05 s -> boundary k = 3 (t = 0.06)
+    for bad in [(float("nan"), 3, "failed_off", 1.0), (1.0, 30, "failed_off", 1.0), (1.0, 3, "degraded", 1.5)]:
         with pytest.raises(ValueError):
             plant.schedule_fault(*bad)
     zero = np.zeros(18, np.uint8)
@@ -242,7 +243,7 @@ def test_faults_scheduled_by_call_apply_at_their_time_in_order_and_bad_ones_are_
     assert states[4] == (5, DEGRADED, 0.4, FAILED_OFF)
     plant.step(zero)
     assert plant.truth()["tau_jets_B"] == pytest.approx(np.zeros(3))
-    plant.schedule_fault(0.0, 0, "clear")                 # in the past: next boundary
+    plant.schedule_fault(0.0, 0, "nominal")               # in the past: next boundary
     plant.step(np.ones(18, np.uint8))
     assert np.all(plant.fault_state == NOMINAL)
     plant.step(np.ones(18, np.uint8))

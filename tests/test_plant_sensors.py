@@ -20,7 +20,7 @@ def run(plant, n, seed=5):
     frames = []
     for k in range(n):
         if k == 40:
-            plant.set_fault(9, "stuck")
+            plant.set_fault(9, "stuck_on")
         frames.append(plant.step(rng.integers(0, 2, 18).astype(np.uint8)).tobytes())
     return frames
 

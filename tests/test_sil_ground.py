@@ -53,15 +53,15 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
             assert "ENTRY" in top and "ARMED" in top, top
             # jet 18 through the scripted CLI (its own port and link), at the same moment ...
             cli_task = asyncio.create_task(asyncio.to_thread(subprocess.run, ELLIPSLED + [
-                "gse", "inject", "--jet", "18", "--kind", "off", "--vehicle", f"udp:127.0.0.1:{vehicle}",
+                "gse", "inject", "--jet", "18", "--kind", "failed_off", "--vehicle", f"udp:127.0.0.1:{vehicle}",
                 "--signing-key", str(key_file)], capture_output=True, text=True, timeout=60))
             # ... and jets 2, 17, 1 from the console: two by its command handler (what Enter
             # runs), the last typed key by key on its command line
             for jet in (2, 17):
                 app.submit(f"inject {jet} off")
                 await until(lambda: f"inject jet {jet} off: ACCEPTED" in app.ack_lines, 10, f"ACK jet {jet}")
-            await type_line("inject 1 off")
-            await until(lambda: "inject jet 1 off: ACCEPTED" in app.ack_lines, 10, "ACK jet 1")
+            await type_line("inject 1 failed_off")
+            await until(lambda: "inject jet 1 failed_off: ACCEPTED" in app.ack_lines, 10, "ACK jet 1")
             cli = await cli_task
             assert cli.returncode == 0 and "ACCEPTED" in cli.stdout, cli.stdout + cli.stderr
             # an invalid request is refused, never silently accepted
@@ -72,7 +72,7 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
             # ... and the vehicle denies it when a station sends it anyway (MAV_RESULT_DENIED = 2)
             assert client.command(420, 101, 4, 5, 1.5, timeout_s=1.0, retries=2) == 2
             # FDIR reports each jet (a failed-off jet shows once it is commanded on)
-            want = {f"JET {j} FAILED OFF" for j in (1, 2, 17, 18)}
+            want = {f"JET {j} FAILED_OFF" for j in (1, 2, 17, 18)}
             await until(lambda: want <= {e.text for e in client.state.events}, 30, "FDIR STATUSTEXTs")
             await until(lambda: run.poll() is not None, 120, "end")
 

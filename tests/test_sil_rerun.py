@@ -39,7 +39,7 @@ def test_sil_recording_matches_the_run(tmp_path):
     np.testing.assert_allclose([x[0] for x in ref], np.degrees(h["bank_ref_rad"][steps]), rtol=0, atol=1e-9)
     # the FDIR events reached the recording as text-log entries
     _, _, texts = column(ents["/events"], "TextLog:text")
-    assert any("JET 17 FAILED OFF" in str(t) for t in texts), texts[:10]
+    assert any("JET 17 FAILED_OFF" in str(t) for t in texts), texts[:10]
 
 
 def test_sil_guided_map_shows_each_guidance_answer_once_with_the_fsws_predicted_point(tmp_path):

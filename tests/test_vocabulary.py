@@ -132,7 +132,7 @@ def literal_findings(path: Path, expectations: bool = False) -> list[str]:
 def test_the_literal_scan_finds_a_second_definition(tmp_path):
     p = tmp_path / "m.py"
     p.write_text('N_JETS = 18\nK = {"failed": 1, "stuck_on": 2}\nM = {0: "STANDBY", 1: "ENTRY"}\nG = "udp:h:14550"\n'
-                 'def test_x():\n    assert f() == {"off": 1, "stuck": 2}\n')
+                 'def test_x():\n    assert f() == {"failed_off": 1, "stuck_on": 2}\n')
     assert len(literal_findings(p)) == 5
     assert len(literal_findings(p, expectations=True)) == 4     # the assert's table is the test's truth
 
@@ -149,7 +149,7 @@ def test_vocabulary_is_read_from_the_dialect():
     enums = {e.get("name"): {x.get("name"): int(x.get("value")) for x in e.iter("entry")} for e in root.iter("enum")}
     assert {f"ELLIPSLED_JET_HEALTH_{s.name}": int(s) for s in voc.JetState} == enums["ELLIPSLED_JET_HEALTH"]
     assert {f"ELLIPSLED_MODE_{m.name}": int(m) for m in voc.Mode} == enums["ELLIPSLED_MODE"]
-    assert voc.HEALTH_NAMES[voc.FAILED_OFF] == "failed_off" and voc.MARK_KINDS["healthy"] == voc.NOMINAL
+    assert voc.HEALTH_NAMES[voc.FAILED_OFF] == "failed_off" and voc.MARK_KINDS["nominal"] == voc.NOMINAL
     # the generated bindings agree, and so do MAVLink's own numbers written in the vocabulary
     assert len(mav.MAVLink_ellipsled_jet_status_message(0, 0, 0, *([[0] * voc.N_JETS] + [[0.0] * voc.N_JETS]
                                                                   + [[0] * voc.N_JETS, [0.0] * voc.N_JETS])).health) \
@@ -157,8 +157,8 @@ def test_vocabulary_is_read_from_the_dialect():
     assert {s.name: int(s) for s in voc.Severity} == {
         k.removeprefix("MAV_SEVERITY_"): v for k, v in ((e.name, c) for c, e in mav.enums["MAV_SEVERITY"].items())
         if k.startswith("MAV_SEVERITY_") and not k.endswith("ENUM_END")}
-    assert voc.FAULT_KINDS == {"clear": mav.FAILURE_TYPE_OK, "off": mav.FAILURE_TYPE_OFF,
-                               "stuck": mav.FAILURE_TYPE_STUCK, "degraded": mav.FAILURE_TYPE_WRONG}
+    assert voc.FAULT_KINDS == {"nominal": mav.FAILURE_TYPE_OK, "failed_off": mav.FAILURE_TYPE_OFF,
+                               "stuck_on": mav.FAILURE_TYPE_STUCK, "degraded": mav.FAILURE_TYPE_WRONG}
 
 
 def test_parse_udp_accepts_the_default_endpoints_and_names_a_bad_one():

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from interfaces.vocabulary import FAULT_HEALTH, FAULT_KINDS
+from interfaces.vocabulary import DEGRADED, FAILED_OFF, FAULT_HEALTH, FAULT_KINDS, HEALTH_NAMES, NOMINAL, STUCK_ON
 
 from .rows import NO_TARGET, Row, fmt, ratio, row, speed
 
@@ -36,9 +36,9 @@ TIMEOUT_S = 30.0
 
 
 def paper_fault_sets() -> list[tuple[str, dict]]:
-    """(name, {"failed"|"stuck"|"degraded": ...}) of the paper's scenarios
+    """(name, {"failed_off"|"stuck_on"|"degraded": ...}) of the paper's scenarios
     (data/scenarios/case*.toml), each distinct set once: the health after all of a scenario's faults (a later fault
-    of a jet replaces an earlier one; "clear" makes it nominal again)."""
+    of a jet replaces an earlier one; "nominal" removes it)."""
     from common.config import DATA_DIR
     from common.model import load_scenario
     out = []
@@ -47,9 +47,9 @@ def paper_fault_sets() -> list[tuple[str, dict]]:
         for f in load_scenario(path).faults:
             for j in f.jets:
                 last[j] = (f.kind, f.eta)
-        spec: dict = {kind: [] for kind in FAULT_KINDS if kind != "clear"}
+        spec: dict = {kind: [] for kind in FAULT_KINDS if FAULT_HEALTH[kind] != NOMINAL}
         for j, (kind, eta) in sorted(last.items()):
-            if kind != "clear":
+            if FAULT_HEALTH[kind] != NOMINAL:
                 spec[kind].append((j, float(eta)))
         if any(spec.values()):
             same = next((i for i, (_, s) in enumerate(out) if s == spec), None)
@@ -73,8 +73,8 @@ def _health(spec: dict):
 def single_fault_sets(n_jets: int = 18) -> list[tuple[str, dict]]:
     out = []
     for j in range(1, n_jets + 1):
-        out += [(f"failed-{j}", {"off": [(j, 1.0)]}), (f"stuck-{j}", {"stuck": [(j, 1.0)]}),
-                (f"degraded-{j}", {"degraded": [(j, DEGRADED_ETA)]})]
+        out += [(f"{HEALTH_NAMES[s]}-{j}", {HEALTH_NAMES[s]: [(j, 1.0 if s != DEGRADED else DEGRADED_ETA)]})
+                for s in (FAILED_OFF, STUCK_ON, DEGRADED)]
     return out
 
 

@@ -246,9 +246,9 @@ def apply_dispersion(base: Scenario, disp: dict, seed: int, name: str) -> Scenar
         raise ValueError("dispersion record holds a non-finite value")
     faults = []
     if off:
-        faults.append(FaultEvent(t_s=t_f, jets=off, kind="off"))
+        faults.append(FaultEvent(t_s=t_f, jets=off, kind="failed_off"))
     if stuck:
-        faults.append(FaultEvent(t_s=t_f, jets=stuck, kind="stuck"))
+        faults.append(FaultEvent(t_s=t_f, jets=stuck, kind="stuck_on"))
     faults += [FaultEvent(t_s=t_f, jets=(j,), kind="degraded", eta=e) for j, e in zip(deg, eta)]
     fsw = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.fsw.items()}
     fsw.setdefault("fdir", {})["delay_s"] = delay
@@ -357,7 +357,7 @@ def pinned_scenario_toml(camp: Campaign, base_file: str | Path, run_id: int, mas
         raw["truth"]["density_waves"] = [list(w[i:i + 3]) for i in range(0, len(w) - 2, 3)]
     raw.setdefault("fsw", {}).setdefault("fdir", {})["delay_s"] = d["fdir_delay_s"]
     faults = []
-    for kind, key in (("off", "jets_failed_off"), ("stuck", "jets_stuck_on")):
+    for kind, key in (("failed_off", "jets_failed_off"), ("stuck_on", "jets_stuck_on")):
         if d[key]:
             faults.append({"t_s": d["fault_t_s"], "jets": list(d[key]), "kind": kind})
     faults += [{"t_s": d["fault_t_s"], "jets": [j], "kind": "degraded", "eta": e}

@@ -137,7 +137,8 @@ def _plots(out: Path, ok: list[dict]) -> list[str]:
     stuck = _col(ok, "disp.n_stuck_on")
     jitter = np.random.default_rng(0).uniform(-0.15, 0.15, n_jets.size)
     for fname, x, xlabel in (("scatter_err_vs_fault_time.png", t_f, "fault time [s]"),
-                             ("scatter_err_vs_failed_jets.png", n_jets + jitter, "faulty jets (off + stuck + degraded)")):
+                             ("scatter_err_vs_failed_jets.png", n_jets + jitter,
+                              "faulty jets (failed_off + stuck_on + degraded)")):
         fig, ax = plt.subplots(figsize=(6, 3.5))
         sc = ax.scatter(x, err, c=stuck, s=12, cmap="viridis", vmin=0, vmax=max(1.0, np.nanmax(stuck) if stuck.size else 1))
         fig.colorbar(sc, ax=ax, label="jets stuck on")
@@ -187,8 +188,8 @@ def write_summary(out: str | Path, camp: Campaign, table: pa.Table, runs: int | 
                          + f" | {_fmt(f['max'])} |")
     lines += ["", "(none: the figure is undefined for the run, e.g. never settled, or no fault within the run)",
               "", f"## Worst {N_WORST} runs by max |bank error| after the fault", "",
-              "| run | seed | max err [deg] | vs schedule [deg] | fault t [s] | off | stuck | degraded | FDIR delay [s] "
-              "| success | diagnosis |",
+              "| run | seed | max err [deg] | vs schedule [deg] | fault t [s] | failed_off | stuck_on | degraded "
+              "| FDIR delay [s] | success | diagnosis |",
               "|---|---|---|---|---|---|---|---|---|---|---|"]
     err = _col(ok, "bank_err_max_after_fault_deg")
     order = [i for i in np.argsort(-np.nan_to_num(err, nan=-1.0)) if np.isfinite(err[i])][:N_WORST]

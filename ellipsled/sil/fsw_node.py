@@ -27,8 +27,7 @@ from fsw.flightsoftware import FlightSoftware  # noqa: E402
 from fsw.topology import Topology  # noqa: E402
 from interfaces import records, transport  # noqa: E402
 from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
-from interfaces.vocabulary import (DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_HEALTH, FAULT_KINDS, MARK_NAMES,  # noqa: E402
-                                   NOMINAL)
+from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_KINDS, HEALTH_NAMES, NOMINAL  # noqa: E402
 
 from . import argtypes  # noqa: E402
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
@@ -155,7 +154,7 @@ class FswNode:
             rec = self.dec_fault_log.decode(s.payload.to_bytes())
             if rec is None:
                 continue
-            kind = MARK_NAMES[FAULT_HEALTH.get(records.FAULT_NAMES.get(int(rec["kind"]), ""), NOMINAL)]
+            kind = records.FAULT_NAMES.get(int(rec["kind"]), HEALTH_NAMES[NOMINAL])     # a fault kind is a health word
             try:
                 self.fsw.fdir.identified(int(rec["t_ns"]) * 1e-9, int(rec["jet"]), kind, float(rec["eta"]))
             except ValueError as e:      # a bad record is refused, never passed on

@@ -77,8 +77,8 @@ class Allocator:
       returns at once. Until the first ``solve`` after the build completes
       (``reconfig_pending`` is True, ``interim`` True for the answers meanwhile), ``solve``
       answers with the previous tables under a SAFE interim model: every jet whose treatment
-      changed (newly failed, inhibited, stuck, degraded with another eta, or back from
-      stuck) is kept off, and the stuck-on bias is the new one (``solve_scan_kernel``
+      changed (newly failed_off, inhibited, stuck_on, degraded with another eta, or back from
+      stuck_on) is kept off, and the stuck-on bias is the new one (``solve_scan_kernel``
       when it differs; the spill box's tree search takes both). The interim answer never fires a jet the new health forbids, its
       tau_B and objective are those of the new model for the returned u, and it is the
       exact optimum (tie-break of model.py, sign box, degraded answer) over the previous

@@ -370,7 +370,7 @@ enums["ELLIPSLED_JET_HEALTH"][2] = EnumEntry("ELLIPSLED_JET_HEALTH_STUCK_ON", ""
 ELLIPSLED_JET_HEALTH_DEGRADED = 3
 enums["ELLIPSLED_JET_HEALTH"][3] = EnumEntry("ELLIPSLED_JET_HEALTH_DEGRADED", """Jet usable at reduced thrust (factor eta in (0,1)).""")
 ELLIPSLED_JET_HEALTH_INHIBITED = 4
-enums["ELLIPSLED_JET_HEALTH"][4] = EnumEntry("ELLIPSLED_JET_HEALTH_INHIBITED", """Jet healthy but inhibited by the ground; the allocator does not use it.""")
+enums["ELLIPSLED_JET_HEALTH"][4] = EnumEntry("ELLIPSLED_JET_HEALTH_INHIBITED", """Jet nominal but inhibited by the ground; the allocator does not use it.""")
 ELLIPSLED_JET_HEALTH_ENUM_END = 5
 enums["ELLIPSLED_JET_HEALTH"][5] = EnumEntry("ELLIPSLED_JET_HEALTH_ENUM_END", """""")
 

@@ -1,8 +1,9 @@
 """``ellipsled report``: fly every paper case in both identification modes, with and without
 the initial bank error, and write a Markdown report that puts each claim of the paper
-(docs/scenarios.md) beside the product's measured figure, with a verdict and a figure
-per paper figure (4-14). The README's "Results against the paper" is this report's
-``readme_section.md``.
+(docs/scenarios.md) beside the product's measured figure, with a verdict taken at the
+paper's scale (ellipsled/verdicts.py, docs/results.md) and a figure per paper figure (4-14).
+Also writes ``claims.json``, the figures the verdicts are taken from, which
+``python -m ellipsled.docsgen --claims`` publishes as docs/reference/paper-claims.md.
 
 Set-ups: "paper" = the paper's 5 deg initial bank error; "no initial error" = the bank
 starts on the reference. Identification: "oracle" (TEST MODE: the plant's fault log reaches
@@ -297,8 +298,8 @@ def write_report(out: Path, R: Runs) -> Path:
     path.write_text("\n".join(lines) + "\n")
     readme = ["## Results against the paper", "",
               "`ellipsled report --out runs/report` flies every case in both identification modes, with and "
-              "without the initial bank error (24 runs and their fault-free twins: about 15 minutes on a shared 2-core "
-              "machine; `--reuse` rewrites the report from the runs already flown), and writes `report.md` with a "
+              "without the initial bank error (24 runs and their fault-free twins, a few minutes; `--reuse` "
+              "rewrites the report from the runs already flown), and writes `report.md` with a "
               "figure per paper figure (4–14). Latest:", ""] + head
     (out / "readme_section.md").write_text("\n".join(readme) + "\n")
     (out / "claims.json").write_text(json.dumps(fig, indent=1) + "\n")

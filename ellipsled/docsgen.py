@@ -16,6 +16,7 @@ documentation site, written from the code (never edited by hand).
     DIR/reference/bench-table.md  the benchmark table of one ``ellipsled bench`` run
                                   (docs/data/bench.json), rendered by ellipsled/bench/suite.py
 
+``--figures RUN_DIR`` draws the dashboards page's figures from a run (ellipsled/docfigures.py).
 ``--claims FILE`` / ``--bench FILE`` first take a new report's claims.json / a new bench
 JSON into docs/data/ (``--bench-context TEXT``: what the machine was doing, said on the page).
 
@@ -409,7 +410,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--claims", type=Path, help="an `ellipsled report`'s claims.json to publish")
     ap.add_argument("--bench", type=Path, help="an `ellipsled bench` JSON to publish")
     ap.add_argument("--bench-context", help="with --bench: what the machine was doing (shown on the page)")
+    ap.add_argument("--figures", type=Path, metavar="RUN_DIR",
+                    help="draw the dashboards page's figures (docs/img/dashboards/) from a run's output folder")
     a = ap.parse_args(argv)
+    if a.figures:
+        from ellipsled import docfigures
+        try:
+            for path in docfigures.render(a.figures, a.out / "img" / "dashboards"):
+                print(f"wrote {path}")
+        except docfigures.FigureInputError as e:
+            print(f"python -m ellipsled.docsgen: {e}", file=sys.stderr)
+            return 2
     if a.claims:
         take(a.claims, CLAIMS_JSON)
     if a.bench:

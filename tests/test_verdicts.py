@@ -182,3 +182,33 @@ def test_claims_page_shows_each_verdict_and_its_fine_figures():
         assert f"**{r['verdict']}**" in line and r["fine"].replace("|", "/") in line
     for line in verdicts.scales():
         assert line in page
+
+
+# --------------------------------------------------------------- dashboards page figures
+def test_dashboard_figures_are_drawn_from_a_run_and_refuse_a_folder_without_one(tmp_path):
+    from ellipsled import docfigures
+    from ellipsled.sil.history import History
+
+    run = tmp_path / "run"
+    run.mkdir()
+    with pytest.raises(docfigures.FigureInputError, match="history.npz"):
+        docfigures.render(run, tmp_path / "img")
+    h = History(500)
+    for i in range(500):
+        h.row()
+    h.a["t_s"][:] = np.arange(500) * DT
+    h.a["bank_ref_rad"][:] = np.radians(85.0)
+    h.a["bank_rad"][:] = np.radians(85.0 + 5.0 * np.exp(-np.arange(500) * DT))
+    h.a["jets_cmd"][100:120, 3] = 1
+    h.a["health"][200:, 0] = 1
+    h.save(run / "history.npz")
+    (run / "summary.json").write_text(json.dumps({"scenario": "synthetic", "fault_t_s": 2.5, "reconfig_t_s": 4.0,
+                                                  "fdir": {"detections": [{"jet": 1, "kind": "failed_off",
+                                                                           "t_s": 4.0}]}}))
+    files = docfigures.render(run, tmp_path / "img")
+    assert [p.name for p in files] == list(docfigures.FILES)
+    for p in files:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (run / "summary.json").write_text("[1, 2]")
+    with pytest.raises(docfigures.FigureInputError, match="not a run summary"):
+        docfigures.render(run, tmp_path / "img")

@@ -107,7 +107,8 @@ def figures(R, trans: dict) -> dict:
                        "undeliverable": s[(c,) + P]["control_effort_undeliverable_share"]}
                    for c in FAULT_CASES + ("case1-ft-off",)}
     f["effort"]["ft_off_vs_case1"] = {
-        "applied_x": _r(s[("case1-ft-off",) + P]["control_effort_applied"], s[("case1",) + P]["control_effort_applied"]),
+        "applied_x": _r(s[("case1-ft-off",) + P]["control_effort_applied"],
+                        s[("case1",) + P]["control_effort_applied"]),
         "propellant_x": _r(s[("case1-ft-off",) + P]["propellant_kg"], s[("case1",) + P]["propellant_kg"])}
     f["reversals_deg"] = {c: [r["bank_err_max_deg"] for r in s[(c,) + P]["reversals"]] for c in ALL_CASES}
     f["adaptive"] = {c: {"drift": s[(c,) + P]["adaptive"]["drift_last20pct"],
@@ -171,7 +172,8 @@ def _recovery(f):
                     "not back within the scale: " + ", ".join(f"{c} {_n(o[c]['recover_s'], '{:.1f}')} s"
                                                              for c in late) + " (n/a: never).", fine)
     never_left = [c for c, x in o.items() if x["peak_deg"] is not None and x["peak_deg"] <= RESOLVE_DEG]
-    why = f"every case is within {RESOLVE_DEG}° of its fault-free twin by {_n(max(x['recover_s'] for x in o.values()))} s"
+    slowest = max(x["recover_s"] for x in o.values())
+    why = f"every case is within {RESOLVE_DEG}° of its fault-free twin by {_n(slowest)} s"
     why += (f"; in {', '.join(never_left)} the faults never move the bank {RESOLVE_DEG}° off its twin "
             "(the fine figures show the small transients)." if never_left else ".")
     return _row("recovery after failure", paper, scale, HOLDS, why, fine)
@@ -313,7 +315,8 @@ def _translational(f):
                 HOLDS if ok else VIOLATED,
                 ("identical at the figure's scale; the product couples attitude and trajectory, so not bit for bit."
                  if ok else "nominal and case 1 differ visibly in V or γ."), fine)
-    fine2 = (f"γ changes sign {tr['gamma_sign_changes']} times, first positive at {_n(tr['gamma_pos_t_s'], '{:.0f}')} s, "
+    fine2 = (f"γ changes sign {tr['gamma_sign_changes']} times, first positive at "
+             f"{_n(tr['gamma_pos_t_s'], '{:.0f}')} s, "
              f"climb to {tr['climb_km']:.0f} km; q̄ peak {tr['qbar_peak_t_s']:.0f} s; Mach 2 at {tr['t_end_s']:.0f} s")
     scale2 = f"one sign change within ±{GAMMA_SIGN_TOL_S:.0f} s of {GAMMA_SIGN_T_S:.0f} s"
     same = (tr["gamma_sign_changes"] == 1 and tr["gamma_pos_t_s"] is not None

@@ -5,7 +5,7 @@ results with these helpers, against the targets it declares next to its measurem
 target is written once. A figure that is missing shows "n/m" (its reason is in the JSON).
 
 An absolute target (microseconds, a real-time factor) is judged twice: on the figure as
-measured, and on the figure scaled to the speed of the machine of the README's table by
+measured, and on the figure scaled to the speed of the reference machine (docs/benchmarks.md) by
 the same run's machine-speed baseline (``machine.speed_factor``: bytes() of a SENSORS
 record, see ellipsled/bench/suite.py). The verdict names which failed: on a slow or busy
 machine "FAIL (absolute)" alone is the machine; "machine-scaled" too is the code.
@@ -65,7 +65,7 @@ def all_(*xs):
 
 
 def speed(res: dict):
-    """This run's machine-speed factor (> 1: slower than the README table's machine)."""
+    """This run's machine-speed factor (> 1: slower than the reference machine)."""
     return g(res, "machine", "speed_factor")
 
 

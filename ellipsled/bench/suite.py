@@ -64,7 +64,7 @@ ORDER = ("machine", "codec", "allocator", "reconfig", "plant", "cycle", "batch",
 # --------------------------------------------------------------------------- sections
 # Machine speed: bytes() of a SENSORS record -- a copy behind one Python call, so it tracks
 # what the FSW's Python hot paths get from this CPU now, contention included. Its p50 on the
-# machine of the README's table (the codec row's baseline) is the reference; speed_factor =
+# reference machine (docs/benchmarks.md; its codec baseline) is the reference; speed_factor =
 # this run's p50 / that. Absolute targets are also judged on figures scaled by it (rows.py).
 REFERENCE_BYTES_P50_US = 2.05
 
@@ -107,7 +107,7 @@ def machine(quick: bool) -> dict:
     speed_us = machine_speed_us(2_000 if quick else 20_000)
     return {"speed_bytes_p50_us": speed_us, "speed_factor": speed_us / REFERENCE_BYTES_P50_US,
             "speed_reference": f"bytes() of a SENSORS record, p50 {REFERENCE_BYTES_P50_US} us on the machine "
-                               "of the README's table (its codec baseline)",
+                               "of reference (docs/benchmarks.md)",
             "nproc": os.cpu_count(), "affinity": affinity, "load": list(os.getloadavg()),
             "python": sys.version.split()[0], "implementation": platform.python_implementation(),
             "kernel": platform.release(), "cpu": cpu, "versions": versions,
@@ -286,7 +286,7 @@ def table(res: dict) -> str:
             f"({m.get('cpu')}), load {', '.join(f'{x:.2f}' for x in (m.get('load') or []))}, "
             f"Python {m.get('python')}, {m.get('time_utc')}; total {fmt(res.get('wall_s'))} s. "
             f"Machine speed: bytes() of a SENSORS record p50 {fmt(m.get('speed_bytes_p50_us'))} us, "
-            f"x{fmt(m.get('speed_factor'))} the README table's machine ({REFERENCE_BYTES_P50_US} us); absolute "
+            f"x{fmt(m.get('speed_factor'))} the reference machine's ({REFERENCE_BYTES_P50_US} us); absolute "
             "targets are judged as measured and at that machine's speed, the verdict names which failed. "
             "n/m = not measured (reason in the JSON).")
     lines = [head, "", "| figure | measured | baseline (same run) | ratio | target | verdict |",

@@ -336,7 +336,7 @@ def _density_waves(tr: Table) -> tuple[tuple[float, float, float], ...]:
     return tuple(waves)
 
 
-def _fsw_overrides(root: Table) -> dict:
+def fsw_overrides(root: Table) -> dict:
     """[fsw.<section>] overrides of the flight software's parameters: every section and key
     one of the defaults file's (data/fsw/default.toml), so that a misspelt override is
     refused with the nearest name instead of flown silently. Values are checked against
@@ -424,7 +424,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     end_speed = end.num("speed_mps", default=None, lo=0, lo_open=True)
     if end_speed is not None and end.has("mach"):
         raise end.error("speed_mps", "give the deploy condition as mach or as speed_mps, not both")
-    fsw = _fsw_overrides(root)
+    fsw = fsw_overrides(root)
     deploy_by = end.str("deploy", default="fsw" if mode == "npc" else "plant", choices=("fsw", "plant"))
     if deploy_by == "fsw" and vehicle.deploy_box is None:
         raise end.error("deploy", f"deploy = \"fsw\" needs a [deploy] box in vehicle {vehicle.name!r}")

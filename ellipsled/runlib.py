@@ -139,10 +139,7 @@ def deploy_summary(h: History, scn: Scenario, end_reason: str, plant: dict | Non
     return {"rule": DEPLOY_RULES.get(code), "ok": end_reason == "deploy", "by": plant.get("by"),
             "edge": plant.get("edge"), "refused_outside_box": plant.get("refused_outside_box", 0),
             "mach": float(h["mach"][-1]) if n else None, "qbar_pa": float(h["qbar_pa"][-1]) if n else None,
-            "alt_km": float(h["h_m"][-1]) / 1e3 if n else None,
-            "box": {"mach": [scn.vehicle.deploy_box.mach_min, scn.vehicle.deploy_box.mach_max],
-                    "qbar_pa": [scn.vehicle.deploy_box.qbar_min_pa, scn.vehicle.deploy_box.qbar_max_pa],
-                    "alt_min_km": scn.vehicle.deploy_box.h_min_m / 1e3}}
+            "alt_km": float(h["h_m"][-1]) / 1e3 if n else None}
 
 
 def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> float | None:

@@ -27,7 +27,9 @@ def ellipse_99(down_km: np.ndarray, cross_km: np.ndarray) -> tuple[float, float,
     return major, minor, math.degrees(math.atan2(v[1, 1], v[0, 1]))
 
 
-DEPLOY_REASONS = ("mach", "speed")        # end reasons that are the deploy condition (sim/plant.py done())
+# end reasons with a deploy point (sim/plant.py done()): the plant's own end condition, the FSW's
+# command, or the box's edge (deployed, but a failure of the run)
+DEPLOY_REASONS = ("mach", "speed", "deploy", "box_edge")
 
 
 def deploy_stats(rows: dict) -> dict:

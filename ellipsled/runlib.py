@@ -156,15 +156,15 @@ def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> f
     return float(np.max(np.abs(wrap_deg(np.degrees(h["bank_rad"][m] - ref)))))
 
 
-# End reasons of a run that completed: the deploy conditions (Mach, speed, altitude) or the
-# requested duration. Any other (timeout, non_finite, fsw_timeout, no_fsw, stopped) did not.
+# End reasons of a run that completed: the deploy conditions (Mach, speed, the FSW's deploy
+# command, the deploy box's edge, altitude) or the requested duration. Any other (timeout, non_finite, fsw_timeout, no_fsw, stopped) did not.
 COMPLETED_END_REASONS = ("mach", "speed", "deploy", "box_edge", "altitude", "duration")
 EXIT_COMPLETED, EXIT_NOT_COMPLETED = 0, 1
 
 EXIT_CODES_HELP = f"""\
 exit codes (batch and run alike, for the same request):
-  {EXIT_COMPLETED}    the run completed: it reached deployment (end reason mach, speed or
-       altitude) or the requested --duration (end reason duration)
+  {EXIT_COMPLETED}    the run completed: it reached deployment (end reason mach, speed,
+       deploy, box_edge or altitude) or the requested --duration (end reason duration)
   {EXIT_NOT_COMPLETED}    the run did not complete: the scenario's time cap reached first
        (timeout), a non-finite state (non_finite), the flight software silent
        (fsw_timeout, no_fsw), stopped, or no complete records to judge

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from common.model import Scenario, inertia_vector
-from interfaces.records import DEPLOY_EDGE, DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY
+from interfaces.records import DEPLOY_EDGE, DEPLOY_FLOOR, DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY
 from interfaces.vocabulary import FAULT_HEALTH, HEALTH_NAMES
 
 from .metrics import deploy_figures, summarize, wrap_deg
@@ -126,7 +126,8 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
                      theta_truth=adaptive_truth(scn))
 
 
-DEPLOY_RULES = {DEPLOY_NONE: None, DEPLOY_RANGE: "range", DEPLOY_VELOCITY: "velocity", DEPLOY_EDGE: "fsw_box_edge"}
+DEPLOY_RULES = {DEPLOY_NONE: None, DEPLOY_RANGE: "range", DEPLOY_VELOCITY: "velocity", DEPLOY_EDGE: "fsw_box_edge",
+                DEPLOY_FLOOR: "altitude_floor"}
 
 
 def deploy_summary(h: History, scn: Scenario, end_reason: str, plant: dict | None) -> dict:

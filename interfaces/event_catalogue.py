@@ -107,7 +107,8 @@ ON_OFF = enum_type("on_off_t", {0: "OFF", 1: "ON"}, "Off or on")
 OVERRUN = enum_type("overrun_t", {0: "SKIPPED: PREVIOUS STILL RUNNING", 1: "OVERRUN: COMMAND KEPT"},
                     "What a late guidance cycle did")
 # interfaces/records.py DEPLOY_* codes (FSW_STATE.deploy)
-DEPLOY_RULE = enum_type("deploy_rule_t", {1: "RANGE TO GO USED UP", 2: "AT MACH", 3: "AT BOX EDGE"},
+DEPLOY_RULE = enum_type("deploy_rule_t", {1: "RANGE TO GO USED UP", 2: "AT MACH", 3: "AT BOX EDGE",
+                                           4: "AT ALTITUDE FLOOR"},
                         "Rule of the deploy trigger that commanded the parachute")
 ENUMS = (MODE, HEALTH, JETS, FAULT, REVERSAL_RULE, SENSOR_VECTOR, INHIBIT, OVERRIDE, ON_OFF, OVERRUN, DEPLOY_RULE)
 
@@ -290,7 +291,8 @@ class EV:
                                 "The controllability LP raised; the last answer stays.", 1.0, error=TEXT)
     DEPLOY_COMMAND = _ev(714, "guidance", NOTICE, "DEPLOY {rule} M{mach:.2f} H{h_km:.1f} RTG{rtg_km:+.1f}",
                          "The deploy trigger commanded the parachute (its rule; Mach, altitude and range to go "
-                         "then). AT BOX EDGE: the trigger's rule did not fire inside the deploy box.",
+                         "then). AT BOX EDGE: the trigger's rule did not fire inside the deploy box; AT ALTITUDE FLOOR: "
+                         "range to go traded for the deploy altitude.",
                          rule=DEPLOY_RULE, mach=F32, h_km=F32, rtg_km=F32)
     # ground commands (fsw/commands.py, fsw/groundlink/commands.py)
     FAULT_TOLERANCE = _ev(801, "ground", NOTICE, "GND FAULT TOLERANCE {state}",

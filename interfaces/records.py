@@ -169,7 +169,7 @@ FSW_STATE = np.dtype([
     ("deploy", "u1"),                      # a DEPLOY_* code: the deploy command and its rule
 ])
 # deploy codes of FSW_STATE (JETS.deploy is 1 for any of the commanded ones)
-DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY, DEPLOY_EDGE = 0, 1, 2, 3
+DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY, DEPLOY_EDGE, DEPLOY_FLOOR = 0, 1, 2, 3, 4
 # guid_flags bits of FSW_STATE
 GUID_TARGET, GUID_PREDICTION, GUID_NPC = 1, 2, 4
 # FSW_STATE fields the rate-group driver stamps (its loop timing); FlightSoftware fills the rest.

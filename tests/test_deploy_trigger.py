@@ -14,7 +14,7 @@ from common.events import EventLog
 from common.model import load_scenario
 from ellipsled.montecarlo.campaign import Criteria
 from interfaces.event_catalogue import EV
-from interfaces.records import DEPLOY_EDGE, DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY
+from interfaces.records import DEPLOY_EDGE, DEPLOY_FLOOR, DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY
 from fsw.flightsoftware import FlightSoftware
 from fsw.guidance.trigger import DeployTrigger
 from sim.dynamics import A_H, A_MACH, A_QBAR
@@ -38,9 +38,9 @@ def _nav(lon_rad: float, mach: float, h_m: float = 9000.0, qbar_pa: float = 700.
     return SimpleNamespace(r_N=r_N, v_N=v_N, mach=mach, h_m=h_m, qbar_pa=qbar_pa)
 
 
-def _trigger(rule: str) -> tuple[DeployTrigger, EventLog]:
+def _trigger(rule: str, **over) -> tuple[DeployTrigger, EventLog]:
     ev = EventLog()
-    fsw = FlightSoftware(GUIDED, EventLog(), param_overrides={"deploy": {"trigger": rule}})
+    fsw = FlightSoftware(GUIDED, EventLog(), param_overrides={"deploy": {"trigger": rule, **over}})
     fsw.close()
     return DeployTrigger(GUIDED, fsw.params, ev), ev
 
@@ -73,11 +73,23 @@ def test_range_trigger_short_of_the_target_fires_at_the_box_edge_margin():
     assert trig.update(_nav(short, mach=BOX.mach_min + margin + 0.01), 0.0) == 0
     assert trig.update(_nav(short, mach=BOX.mach_min + margin), 0.0) == 1
     assert trig.code == DEPLOY_EDGE
-    trig, _ = _trigger("range")                      # the altitude edge likewise
+    trig, _ = _trigger("range", h_floor_m=0.0)       # the altitude edge likewise (the floor off)
     h_edge = BOX.h_min_m + trig.params["deploy.h_margin_m"]
     assert trig.update(_nav(short, mach=2.0, h_m=h_edge + 1.0), 0.0) == 0
     assert trig.update(_nav(short, mach=2.0, h_m=h_edge - 1.0), 0.0) == 1
     assert trig.code == DEPLOY_EDGE
+
+
+@pytest.mark.parametrize("rule", ["range", "velocity"])
+def test_inside_the_box_the_altitude_floor_trades_the_range_to_go(rule):
+    trig, ev = _trigger(rule)
+    floor = trig.params["deploy.h_floor_m"]
+    short = TLON - 0.01
+    assert trig.update(_nav(short, mach=2.2, h_m=floor + 1.0), 0.0) == 0
+    assert trig.update(_nav(short, mach=2.2, h_m=floor - 1.0), 0.0) == 1
+    assert trig.code == DEPLOY_FLOOR
+    trig, _ = _trigger(rule)                           # above the box's Mach: no deploy at the floor
+    assert trig.update(_nav(short, mach=BOX.mach_max + 0.1, h_m=floor - 1.0), 0.0) == 0
 
 
 def test_velocity_trigger_fires_at_its_mach_wherever_the_target_is():
@@ -160,3 +172,25 @@ def test_paper_cases_deploy_at_their_end_condition():
         assert load_scenario(name).deploy_by == "plant"
     assert GUIDED.deploy_by == "fsw"
     assert DEPLOY_NONE == 0
+
+
+def test_floor_margin_is_k_times_the_measured_prediction_change_grown_over_the_cycles_to_go():
+    fsw = FlightSoftware(GUIDED, EventLog())
+    try:
+        g = fsw.entry
+        p = g.params
+        assert g.floor_margin_m == p["npc.floor_margin_min_m"]      # nothing measured yet
+        # predictions changing by +-100 m every cycle, 1 s apart, 400 s to go: RMS 100 m,
+        # 400 cycles to go -> k * 100 * 20 = 4000 m with k = 2 (within the bounds given)
+        g._period_s = 1.0
+        p["npc.floor_margin_max_m"] = 10_000.0
+        for i in range(60):
+            g._measure_prediction(8000.0 + (100.0 if i % 2 else 0.0), 400.0)
+        assert g.floor_margin_m == pytest.approx(p["npc.floor_margin_k"] * 100.0 * 20.0, rel=1e-9)
+        g._measure_prediction(8000.0 + (100.0 if 60 % 2 else 0.0), 4.0)      # near the deploy: the minimum
+        assert g.floor_margin_m == p["npc.floor_margin_min_m"]
+        p["npc.floor_margin_max_m"] = 1500.0
+        g._measure_prediction(8100.0, 400.0)
+        assert g.floor_margin_m == 1500.0                                      # clamped
+    finally:
+        fsw.close()

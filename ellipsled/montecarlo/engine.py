@@ -116,7 +116,7 @@ RECORD_SCHEMA = pa.schema(
             "guidance.held_cycles", "guidance.overruns", "guidance.faults")
     + _cols(_F, "guidance.compute_p50_us", "guidance.compute_p99_us", "guidance.compute_max_us",
             "guidance.predictions_per_cycle_mean", "guidance.k_rho_final", "guidance.k_ld_final",
-            "guidance.bank0_final_deg")
+            "guidance.bank0_final_deg", "guidance.floor_margin_final_m")
     + _cols(_S, "guidance.reversal_times_s", "guidance.reversal_rules")
     # the parachute deploy of a run whose FSW deploys (runlib.deploy_summary)
     + [("deploy.rule", _S), ("deploy.ok", _B), ("deploy.by", _S), ("deploy.edge", _S),

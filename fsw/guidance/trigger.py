@@ -6,7 +6,10 @@ Two rules, chosen by ``deploy.trigger``:
   i.e. the along-track range to go <= 0, which is also where the distance to the target (the
   deploy miss) stops improving — provided the vehicle is inside the deploy box;
 - ``velocity`` (MSL): deploy at ``deploy.mach`` inside the box.
-Whichever rule, the trigger fires before the vehicle leaves the box at its slow or low edge
+Whichever rule, inside the box the trigger fires at the deploy-altitude floor
+(``deploy.h_floor_m``) with range still to go: the range is traded for the altitude, the
+corrector having failed to keep both (fsw/guidance/npc.py keeps the predicted deploy altitude
+above that floor). And it fires before the vehicle leaves the box at its slow or low edge
 (a margin above the box's Mach and altitude minima): a deploy at the box's edge by the
 plant is a failure. The box is the vehicle file's [deploy] (common/model.py DeployBox), judged
 on the FSW's own navigation (its Mach, its altitude, its dynamic pressure scaled by the
@@ -18,7 +21,7 @@ import math
 
 from common.events import EventLog
 from interfaces.event_catalogue import EV
-from interfaces.records import DEPLOY_EDGE, DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY
+from interfaces.records import DEPLOY_EDGE, DEPLOY_FLOOR, DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY
 
 from ..params import Param
 from .geometry import heading_error, planet_fixed, unit_from_latlon
@@ -27,6 +30,7 @@ PARAMS = [
     Param("deploy.trigger", 0, 0, "", "deploy rule: range (range to go used up) or velocity (at deploy.mach)",
           choices=("range", "velocity"), ground_settable=False),
     Param("deploy.mach", 0.5, 5.0, "", "Mach of the velocity trigger"),
+    Param("deploy.h_floor_m", 0.0, 5e4, "m", "inside the box, deploy at this altitude even with range to go (0: off)"),
     Param("deploy.mach_margin", 0.0, 1.0, "", "the trigger fires this far above the box's Mach minimum at the latest"),
     Param("deploy.h_margin_m", 0.0, 1e4, "m", "... and this far above the box's altitude minimum"),
 ]
@@ -84,6 +88,8 @@ class DeployTrigger:
                     code = DEPLOY_VELOCITY
             elif self.range_to_go_m <= 0.0:
                 code = DEPLOY_RANGE
+            if code == DEPLOY_NONE and h <= p["deploy.h_floor_m"]:
+                code = DEPLOY_FLOOR
         if code == DEPLOY_NONE and (mach <= box.mach_min + p["deploy.mach_margin"]
                                     or h <= box.h_min_m + p["deploy.h_margin_m"]):
             code = DEPLOY_EDGE            # the last moment inside the box: the rule did not fire

@@ -106,7 +106,6 @@ class FlightSoftware(GroundCommands):
         reg.bind("Failsafes", self.failsafes.set_param)
         reg.bind("JetDriver", self.driver.set_param)
         reg.bind("EntryGuidance", self.entry.set_param if self.entry is not None else self._npc_not_flown)
-        reg.bind("DeployTrigger", self.deploy.set_param if self.deploy is not None else self._deploy_not_flown)
         reg.check_bound()
 
         if start_mode != Mode.STANDBY:
@@ -339,10 +338,6 @@ class FlightSoftware(GroundCommands):
     def _npc_not_flown(self, name: str, value: float) -> None:
         """npc.* in a profile-mode flight: refused, so no value is acknowledged and ignored."""
         raise ValueError(f"{name}: not flown in mode {self.scenario.guidance_mode}")
-
-    def _deploy_not_flown(self, name: str, value: float) -> None:
-        """Owner's hook of the deploy.* parameters when this FSW does not deploy (the plant does)."""
-        raise ValueError(f"{name}: this scenario's plant deploys at its end condition, not on command")
 
     def _set_allocator_param(self, name: str, value: float) -> None:
         if name == "allocator.fault_tolerance":

@@ -50,9 +50,11 @@ PARAMS = [
     Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
     Param("npc.h_floor_m", 0.0, 5e4, "m", "deploy altitude floor: the predicted deploy altitude is kept above it "
           "plus the margin, range traded (0: off)"),
-    Param("npc.floor_margin_k", 0.0, 10.0, "", "floor margin: this many times the measured prediction error"),
-    Param("npc.floor_margin_min_m", 0.0, 2e4, "m", "floor margin at least"),
-    Param("npc.floor_margin_max_m", 0.0, 2e4, "m", "floor margin at most"),
+    # design bounds of the floor's margin (the unit tests show the rule; the guided campaign sized them)
+    Param("npc.floor_margin_k", 0.0, 10.0, "", "floor margin: this many times the measured prediction error",
+          ground_settable=False),
+    Param("npc.floor_margin_min_m", 0.0, 2e4, "m", "floor margin at least", ground_settable=False),
+    Param("npc.floor_margin_max_m", 0.0, 2e4, "m", "floor margin at most", ground_settable=False),
     # a design bound of the floor's trade (the unit tests show it); no take-effect case from
     # the guided-nominal start, where no trade within any bound reaches a floor
     Param("npc.floor_miss_max_m", 0.0, 1e5, "m", "predicted deploy miss the altitude floor may trade up to",

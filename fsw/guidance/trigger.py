@@ -27,12 +27,17 @@ from ..params import Param
 from .geometry import heading_error, planet_fixed, unit_from_latlon
 
 PARAMS = [
+    # design values of the mission, set before flight (a scenario's or campaign's [fsw.deploy]):
+    # the trigger acts only in the deploy box, at the end of the entry
     Param("deploy.trigger", 0, 0, "", "deploy rule: range (range to go used up) or velocity (at deploy.mach)",
           choices=("range", "velocity"), ground_settable=False),
-    Param("deploy.mach", 0.5, 5.0, "", "Mach of the velocity trigger"),
-    Param("deploy.h_floor_m", 0.0, 5e4, "m", "inside the box, deploy at this altitude even with range to go (0: off)"),
-    Param("deploy.mach_margin", 0.0, 1.0, "", "the trigger fires this far above the box's Mach minimum at the latest"),
-    Param("deploy.h_margin_m", 0.0, 1e4, "m", "... and this far above the box's altitude minimum"),
+    Param("deploy.mach", 0.5, 5.0, "", "Mach of the velocity trigger", ground_settable=False),
+    Param("deploy.h_floor_m", 0.0, 5e4, "m", "inside the box, deploy at this altitude even with range to go (0: off)",
+          ground_settable=False),
+    Param("deploy.mach_margin", 0.0, 1.0, "", "the trigger fires this far above the box's Mach minimum at the latest",
+          ground_settable=False),
+    Param("deploy.h_margin_m", 0.0, 1e4, "m", "... and this far above the box's altitude minimum",
+          ground_settable=False),
 ]
 
 
@@ -59,9 +64,6 @@ class DeployTrigger:
     @property
     def command(self) -> int:
         return int(self.code != DEPLOY_NONE)
-
-    def set_param(self, name: str, value: float) -> None:
-        """Owner's hook (fsw/params.py): nothing to do, the trigger reads its parameters every period."""
 
     def along_track_m(self, nav, t_s: float) -> float:
         """Range to go along the track: the distance to the target times the cosine of the

@@ -60,6 +60,29 @@ class Aero:
 
 
 @dataclass(frozen=True)
+class DeployBox:
+    """The safe parachute-deploy box (docs/fsw/entry-guidance.md, deploy trigger): the plant
+    opens the parachute when commanded inside it, or at its edge when left without a command."""
+    mach_min: float
+    mach_max: float
+    qbar_min_pa: float
+    qbar_max_pa: float
+    h_min_m: float
+
+    def inside(self, mach: float, qbar_pa: float, h_m: float) -> bool:
+        return (self.mach_min <= mach <= self.mach_max and self.qbar_min_pa <= qbar_pa <= self.qbar_max_pa
+                and h_m >= self.h_min_m)
+
+    def passed(self, mach: float, h_m: float) -> str:
+        """The edge a vehicle going slower and lower has passed ('mach_min', 'h_min'), or ''."""
+        if mach < self.mach_min:
+            return "mach_min"
+        if h_m < self.h_min_m:
+            return "h_min"
+        return ""
+
+
+@dataclass(frozen=True)
 class Vehicle:
     name: str
     mass_kg: float
@@ -75,6 +98,7 @@ class Vehicle:
     max_load_g: float = 15.0                 # structural limit of the aerodynamic load factor [g0]
     max_heat_rate_wcm2: float = 100.0        # stagnation-point heat-rate limit [W/cm^2]
     inertia_uncertainty_frac: float = 0.0    # each inertia element known to within this fraction
+    deploy_box: "DeployBox | None" = None    # where the parachute may open (vehicle file [deploy])
 
 
 @dataclass(frozen=True)
@@ -146,6 +170,9 @@ class Scenario:
     end_speed_mps: float | None = None
     target_lat_rad: float | None = None      # deploy target (required by mode "npc")
     target_lon_rad: float | None = None
+    # who deploys: "fsw" (the flight software's deploy command; the plant at the vehicle's box
+    # edge otherwise) or "plant" (the plant at the end condition above, the paper's cases)
+    deploy_by: str = "plant"
 
     @property
     def substeps(self) -> int:
@@ -244,6 +271,15 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
                   max_heat_rate_wcm2=lim.num("heat_rate_wcm2", default=100.0, lo=0, lo_open=True),
                   inertia_uncertainty_frac=v.num("inertia_uncertainty_frac", default=0.0, lo=0, hi=0.9))
     lim.reject_unknown()
+    dep = root.table("deploy", default={})
+    if dep.data:
+        box = DeployBox(mach_min=dep.num("mach_min", lo=0), mach_max=dep.num("mach_max", lo=0, lo_open=True),
+                        qbar_min_pa=dep.num("qbar_min_pa", lo=0), qbar_max_pa=dep.num("qbar_max_pa", lo=0, lo_open=True),
+                        h_min_m=dep.num("altitude_min_m", lo=0))
+        if not (box.mach_min < box.mach_max and box.qbar_min_pa < box.qbar_max_pa):
+            raise dep.error("mach_min", "the deploy box needs mach_min < mach_max and qbar_min_pa < qbar_max_pa")
+        out = replace(out, deploy_box=box)
+    dep.reject_unknown()
     for t in (v, a, root):
         t.reject_unknown()
     return out
@@ -300,7 +336,7 @@ def _density_waves(tr: Table) -> tuple[tuple[float, float, float], ...]:
     return tuple(waves)
 
 
-def _fsw_overrides(root: Table) -> dict:
+def fsw_overrides(root: Table) -> dict:
     """[fsw.<section>] overrides of the flight software's parameters: every section and key
     one of the defaults file's (data/fsw/default.toml), so that a misspelt override is
     refused with the nearest name instead of flown silently. Values are checked against
@@ -390,7 +426,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     end_speed = end.num("speed_mps", default=None, lo=0, lo_open=True)
     if end_speed is not None and end.has("mach"):
         raise end.error("speed_mps", "give the deploy condition as mach or as speed_mps, not both")
-    fsw = _fsw_overrides(root)
+    fsw = fsw_overrides(root)
+    deploy_by = end.str("deploy", default="fsw" if mode == "npc" else "plant", choices=("fsw", "plant"))
+    if deploy_by == "fsw" and vehicle.deploy_box is None:
+        raise end.error("deploy", f"deploy = \"fsw\" needs a [deploy] box in vehicle {vehicle.name!r}")
 
     out = Scenario(
         name=s.str("name"), description=s.str("description", default=""), file=str(path),
@@ -406,7 +445,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         longitude_rad=_angle(ini, "longitude", 360.0),
         bank0_rad=bank0_rad,
         end_mach=end.num("mach", default=2.0, lo=0) if end_speed is None else 0.0,
-        end_speed_mps=end_speed, guidance_mode=mode,
+        end_speed_mps=end_speed, guidance_mode=mode, deploy_by=deploy_by,
         target_lat_rad=target[0] if target else None, target_lon_rad=target[1] if target else None,
         end_altitude_m=end.num("altitude_m", default=6000.0, lo=0),
         bank_schedule=tuple(sched),

@@ -32,7 +32,8 @@ def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False,
     h, fsw, wall = f.history, f.fsw, f.wall_s
     rep = fsw_report(fsw, f.slips, f.alloc_samples)
     ref = fault_free_reference(h, scn, seed, f.fault_log, reference_cache) if reference else None
-    summary = judge(h, scn, seed, end_reason_of(f.end_reason, duration_s), rep, f.fault_log, fsw.params, ref)
+    summary = judge(h, scn, seed, end_reason_of(f.end_reason, duration_s), rep, f.fault_log, fsw.params, ref,
+                    deploy=f.deploy)
     summary["wall_s"] = wall
     summary["realtime_factor"] = (float(h["t_s"][-1]) / wall) if wall > 0 else None
     return summary, h, fsw

@@ -32,6 +32,7 @@ class Flight:
     fsw: FlightSoftware
     fault_log: list
     end_reason: str           # the plant's (sil.variant.end_reason_of gives the run's)
+    deploy: dict              # the plant's deploy record (Plant.deploy_report)
     slips: int
     alloc_samples: list
     wall_s: float
@@ -72,10 +73,13 @@ def fly(scn: Scenario, seed: int, verify_every: int = 1000, on_progress=None) ->
         i = h.row()
         record_truth(h, i, plant.fill_truth(trec))
         record_fsw(h, i, fsw.output)
+        if fsw.deploy is not None:
+            plant.command_deploy(fsw.deploy.command)
         done, reason = plant.done()
         if done:
             break
         frame = plant.step(u)
     wall = time.perf_counter() - wall0
     fsw.close()
-    return Flight(h, fsw, plant.fault_log, reason, topo.executive.slips, samples, wall)
+    return Flight(h, fsw, plant.fault_log, reason, plant.deploy_report(), topo.executive.slips, samples, wall)
+

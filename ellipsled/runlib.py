@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from common.model import Scenario, inertia_vector
+from interfaces.records import DEPLOY_EDGE, DEPLOY_FLOOR, DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY
 from interfaces.vocabulary import FAULT_HEALTH, NOMINAL
 
 from .metrics import deploy_figures, summarize, wrap_deg
@@ -58,10 +59,11 @@ def adaptive_truth(scn: Scenario) -> np.ndarray:
 
 
 def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faults_applied: list,
-          params: dict, ref: History | None = None) -> dict:
+          params: dict, ref: History | None = None, deploy: dict | None = None) -> dict:
     """summary.json: figures of merit from the history, FDIR judged against the faults the
     plant actually applied (its ``fault_log``). The same function serves batch and SIL.
-    ``ref``: the fault-free twin (reference.fault_free_history) for the fault-attributable figures."""
+    ``ref``: the fault-free twin (reference.fault_free_history) for the fault-attributable figures.
+    ``deploy``: the plant's deploy report (sim/plant.py Plant.deploy_report), when the FSW deploys."""
     from .controllable import truth_controllability     # the FSW's LP: not in the plant process
     injected = {}
     for t, jet, kind in faults_applied:
@@ -111,6 +113,8 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
                                     radius_m=scn.planet.radius_m, nose_radius_m=scn.vehicle.nose_radius_m,
                                     entry_altitude_m=scn.altitude_m))
         extra["guidance_mode"] = scn.guidance_mode
+    if scn.deploy_by == "fsw":
+        extra["deploy"] = deploy_summary(h, scn, end_reason, deploy)
         extra["reversal_count"] = len(g.get("reversal_times_s", []))
         extra["guidance"] = g
         extra["limits"] = {"load_g": scn.vehicle.max_load_g, "heat_rate_wcm2": scn.vehicle.max_heat_rate_wcm2}
@@ -120,6 +124,23 @@ def judge(h: History, scn: Scenario, seed: int, end_reason: str, rep: dict, faul
                      alpha_trim_rad=scn.vehicle.aero.alpha_trim_rad,
                      schedule_t=[t for t, _ in scn.bank_schedule], extra=extra, ref=ref,
                      theta_truth=adaptive_truth(scn))
+
+
+DEPLOY_RULES = {DEPLOY_NONE: None, DEPLOY_RANGE: "range", DEPLOY_VELOCITY: "velocity", DEPLOY_EDGE: "fsw_box_edge",
+                DEPLOY_FLOOR: "altitude_floor"}
+
+
+def deploy_summary(h: History, scn: Scenario, end_reason: str, plant: dict | None) -> dict:
+    """The parachute deploy of a run whose FSW deploys: the FSW's rule (range, velocity, or its
+    own box-edge backstop), whether the plant deployed on the command inside the box ('ok')
+    or at the box's edge without one (a failure: 'edge' says which), and where."""
+    n = len(h["t_s"])
+    code = int(h["deploy"][-1]) if n else DEPLOY_NONE
+    plant = plant or {}
+    return {"rule": DEPLOY_RULES.get(code), "ok": end_reason == "deploy", "by": plant.get("by"),
+            "edge": plant.get("edge"), "refused_outside_box": plant.get("refused_outside_box", 0),
+            "mach": float(h["mach"][-1]) if n else None, "qbar_pa": float(h["qbar_pa"][-1]) if n else None,
+            "alt_km": float(h["h_m"][-1]) / 1e3 if n else None}
 
 
 def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> float | None:
@@ -136,15 +157,15 @@ def schedule_error_max_deg(h: History, scn: Scenario, faults_applied: list) -> f
     return float(np.max(np.abs(wrap_deg(np.degrees(h["bank_rad"][m] - ref)))))
 
 
-# End reasons of a run that completed: the deploy conditions (Mach, speed, altitude) or the
-# requested duration. Any other (timeout, non_finite, fsw_timeout, no_fsw, stopped) did not.
-COMPLETED_END_REASONS = ("mach", "speed", "altitude", "duration")
+# End reasons of a run that completed: the deploy conditions (Mach, speed, the FSW's deploy
+# command, the deploy box's edge, altitude) or the requested duration. Any other (timeout, non_finite, fsw_timeout, no_fsw, stopped) did not.
+COMPLETED_END_REASONS = ("mach", "speed", "deploy", "box_edge", "altitude", "duration")
 EXIT_COMPLETED, EXIT_NOT_COMPLETED = 0, 1
 
 EXIT_CODES_HELP = f"""\
 exit codes (batch and run alike, for the same request):
-  {EXIT_COMPLETED}    the run completed: it reached deployment (end reason mach, speed or
-       altitude) or the requested --duration (end reason duration)
+  {EXIT_COMPLETED}    the run completed: it reached deployment (end reason mach, speed,
+       deploy, box_edge or altitude) or the requested --duration (end reason duration)
   {EXIT_NOT_COMPLETED}    the run did not complete: the scenario's time cap reached first
        (timeout), a non-finite state (non_finite), the flight software silent
        (fsw_timeout, no_fsw), stopped, or no complete records to judge

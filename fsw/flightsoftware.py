@@ -34,6 +34,7 @@ from .monitors import SensorMonitor
 from .navigation import Navigation
 from .output import OutputFiller
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
+from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
 from .params import Param, ParamRegistry
 from . import executive
 
@@ -43,7 +44,7 @@ COMMAND_RING = 64      # answers kept for FDIR (1.28 s at 50 Hz): a command held
 def declarations() -> tuple[tuple[str, list[Param]], ...]:
     """Every FSW parameter, by the owner that declares it and applies a new value."""
     return (("AuthoritySupervisor", AuthoritySupervisor.PARAMS), ("SamiController", SamiController.PARAMS),
-            ("EntryGuidance", NPC_PARAMS), ("Allocator", Allocator.PARAMS), ("Fdir", Fdir.PARAMS),
+            ("EntryGuidance", NPC_PARAMS), ("DeployTrigger", DEPLOY_PARAMS), ("Allocator", Allocator.PARAMS), ("Fdir", Fdir.PARAMS),
             ("SensorMonitor", SensorMonitor.PARAMS),
             ("Failsafes", Failsafes.PARAMS), ("JetDriver", JetDriver.PARAMS), ("Executive", executive.PARAMS))
 
@@ -83,6 +84,8 @@ class FlightSoftware(GroundCommands):
             profile = BankProfile(scenario.bank_schedule, scenario.bank_rate_limit_radps,
                                   scenario.bank_accel_limit_radps2)
         self.guidance = Guidance(profile, veh.aero.alpha_trim_rad, planet.omega_radps)
+        # the parachute deploy trigger, when this FSW deploys (scenario.deploy_by "fsw")
+        self.deploy = DeployTrigger(scenario, self.params, self.events) if scenario.deploy_by == "fsw" else None
         self.control = SamiController(self.params, veh, self.dt_s)
         self.allocator = Allocator(veh.torque_matrix_Nm, veh.thrust_N, self.params, async_rebuild=realtime)
         self.fdir = Fdir(self.params, self.dt_s, self.events)
@@ -185,6 +188,8 @@ class FlightSoftware(GroundCommands):
         self.authority.step(t_s, reconfigured)          # assessed with this cycle's navigation
         if self.entry is not None:
             self.entry.steer(nav)
+        if self.deploy is not None:
+            self.deploy.update(nav, t_s, self.entry.estimator.k_rho if self.entry is not None else 1.0)
         self.authority.hold_trim(nav.qbar_pa)
         self.guidance.update(nav)
         self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)

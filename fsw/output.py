@@ -49,6 +49,7 @@ class OutputFiller:
         v["mode"][()] = int(fsw.modes.mode)
         v["alloc_degraded"][()] = fsw.allocator.degraded
         v["alloc_short"][()] = fsw.alloc_short
+        v["deploy"][()] = fsw.deploy.code if fsw.deploy is not None else 0
         self._fill_guidance(fsw.entry)
 
     def _fill_guidance(self, e) -> None:

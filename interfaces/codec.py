@@ -102,11 +102,11 @@ def schema_by_id(schema_id: int) -> Schema | None:
 
 # One line per payload type.
 register("SENSORS", 1, records.SENSORS, 2, keys.SENSORS)
-register("JETS", 2, records.JETS, 1, keys.JETS)
+register("JETS", 2, records.JETS, 2, keys.JETS)
 register("FAULT", 3, records.FAULT, 1, keys.FAULTS)
 register("EVENT", 4, records.EVENT, 1, keys.EVENTS)
 register("TRUTH", 5, records.TRUTH, 1, keys.TRUTH)
-register("FSW_STATE", 6, records.FSW_STATE, 3, keys.STATE)
+register("FSW_STATE", 6, records.FSW_STATE, 4, keys.STATE)
 register("FAULT_APPLIED", 7, records.FAULT_APPLIED, 1, keys.FAULT_LOG)
 
 

@@ -106,7 +106,11 @@ OVERRIDE = enum_type("override_t", {0: "", 1: " (GND OVERRIDE HOLDS)"}, "Whether
 ON_OFF = enum_type("on_off_t", {0: "OFF", 1: "ON"}, "Off or on")
 OVERRUN = enum_type("overrun_t", {0: "SKIPPED: PREVIOUS STILL RUNNING", 1: "OVERRUN: COMMAND KEPT"},
                     "What a late guidance cycle did")
-ENUMS = (MODE, HEALTH, JETS, FAULT, REVERSAL_RULE, SENSOR_VECTOR, INHIBIT, OVERRIDE, ON_OFF, OVERRUN)
+# interfaces/records.py DEPLOY_* codes (FSW_STATE.deploy)
+DEPLOY_RULE = enum_type("deploy_rule_t", {1: "RANGE TO GO USED UP", 2: "AT MACH", 3: "AT BOX EDGE",
+                                           4: "AT ALTITUDE FLOOR"},
+                        "Rule of the deploy trigger that commanded the parachute")
+ENUMS = (MODE, HEALTH, JETS, FAULT, REVERSAL_RULE, SENSOR_VECTOR, INHIBIT, OVERRIDE, ON_OFF, OVERRUN, DEPLOY_RULE)
 
 
 # --------------------------------------------------------------------------- entries
@@ -285,6 +289,11 @@ class EV:
                                   what=OVERRUN)
     CONTROLLABILITY_FAULT = _ev(713, "guidance", WARNING, "CONTROLLABILITY FAULT: {error}",
                                 "The controllability LP raised; the last answer stays.", 1.0, error=TEXT)
+    DEPLOY_COMMAND = _ev(714, "guidance", NOTICE, "DEPLOY {rule} M{mach:.2f} H{h_km:.1f} RTG{rtg_km:+.1f}",
+                         "The deploy trigger commanded the parachute (its rule; Mach, altitude and range to go "
+                         "then). AT BOX EDGE: the trigger's rule did not fire inside the deploy box; AT ALTITUDE FLOOR: "
+                         "range to go traded for the deploy altitude.",
+                         rule=DEPLOY_RULE, mach=F32, h_km=F32, rtg_km=F32)
     # ground commands (fsw/commands.py, fsw/groundlink/commands.py)
     FAULT_TOLERANCE = _ev(801, "ground", NOTICE, "GND FAULT TOLERANCE {state}",
                           "The ground switched the allocator's fault tolerance.", state=ON_OFF)

@@ -25,12 +25,15 @@ SENSORS = np.dtype([
     ("chamber", "<f8", (N_JETS,)), # normalised chamber pressure per jet [-]
 ])
 
-# fsw -> sim: the jet command answering sensor frame k, held for [t_k, t_k+1).
+# fsw -> sim: the jet command answering sensor frame k, held for [t_k, t_k+1), and the
+# parachute deploy command (the FSW's deploy trigger; the plant deploys inside its box).
 JETS = np.dtype([
     ("k", "<i8"),                  # step index of the sensor frame this answers
     ("t_release_ns", "<i8"),       # FSW cycle release (monotonic clock of the FSW) [ns]
     ("t_publish_ns", "<i8"),       # FSW publication time [ns]
     ("u", "u1", (N_JETS,)),        # 1 = open valve, 0 = closed
+    ("deploy", "u1"),              # 1 = deploy the parachute (latched by the FSW), 0 = not yet
+    ("_pad", "u1", (5,)),          # keeps the record a multiple of 8 bytes
 ])
 
 
@@ -163,7 +166,10 @@ FSW_STATE = np.dtype([
     ("alloc_degraded", "u1"),              # 1 = allocation infeasible, degraded solution
     ("alloc_short", "u1"),                 # 1 = the allocated torque falls short on the bank axis
     ("guid_flags", "u1"),                  # GUID_TARGET | GUID_PREDICTION | GUID_NPC
+    ("deploy", "u1"),                      # a DEPLOY_* code: the deploy command and its rule
 ])
+# deploy codes of FSW_STATE (JETS.deploy is 1 for any of the commanded ones)
+DEPLOY_NONE, DEPLOY_RANGE, DEPLOY_VELOCITY, DEPLOY_EDGE, DEPLOY_FLOOR = 0, 1, 2, 3, 4
 # guid_flags bits of FSW_STATE
 GUID_TARGET, GUID_PREDICTION, GUID_NPC = 1, 2, 4
 # FSW_STATE fields the rate-group driver stamps (its loop timing); FlightSoftware fills the rest.

@@ -301,6 +301,13 @@ class Plant:
         self.x[6:9] = mrp.from_dcm(C_BN)
         _, aux = state_derivative(self.x, self.p)
         self.x[9:12] = C_BN @ aux[A_OMEGA_W_N:A_OMEGA_W_N + 3]
+        # the parachute (scenario.deploy_by "fsw"): opened by the FSW's command inside the
+        # vehicle's deploy box, else at the box's edge (docs/plant.md, deploy)
+        self.deploy_box = veh.deploy_box if scenario.deploy_by == "fsw" else None
+        self.deploy_commanded = False       # a deploy command held (the FSW's, latched)
+        self.deploy_refused = 0             # checks with a command held outside the box
+        self.deploy_edge = ""               # the box edge the plant deployed at, '' if none
+        self._was_in_box = False
         self.k = 0
         self._apply_scheduled()
         self._refresh_aux()
@@ -426,15 +433,61 @@ class Plant:
             self.set_fault(jet, kind, eta)
             self._next_fault += 1
 
+    # ---- the parachute ----
+    def command_deploy(self, deploy) -> None:
+        """The FSW's deploy command (JETS.deploy): 1 deploys at the next done() check inside
+        the box (held until then), 0 is no command. ValueError for any other value (the
+        SIL refuses such a command before it gets here)."""
+        if isinstance(deploy, bool):
+            deploy = int(deploy)
+        if not isinstance(deploy, (int, np.integer)) or deploy not in (0, 1):
+            raise ValueError(f"deploy must be 0 or 1, got {deploy!r}")
+        if self.deploy_box is None and deploy:
+            raise ValueError("this scenario's plant deploys at its end condition, not on command")
+        self.deploy_commanded = self.deploy_commanded or bool(deploy)
+
+    def _deploy_check(self) -> str:
+        """'deploy' (commanded, inside the box), 'box_edge' (the box left or passed without a
+        command), or ''."""
+        a, box = self.aux, self.deploy_box
+        inside = box.inside(a[A_MACH], a[A_QBAR], a[A_H])
+        if self.deploy_commanded:
+            if inside:
+                return "deploy"
+            self.deploy_refused += 1
+        edge = box.passed(a[A_MACH], a[A_H])
+        if not edge and self._was_in_box and not inside:
+            edge = "qbar_max" if a[A_QBAR] > box.qbar_max_pa else "qbar_min" if a[A_QBAR] < box.qbar_min_pa \
+                else "mach_max"
+        self._was_in_box = inside
+        if edge:
+            self.deploy_edge = edge
+            return "box_edge"
+        return ""
+
+    def deploy_report(self) -> dict:
+        """How the parachute opened, for the run's summary: 'by' the FSW's command or at the
+        box's 'edge' (which), and 'refused_outside_box', checks with a command held outside the
+        box (held until inside). None values when this plant deploys at its end condition."""
+        if self.deploy_box is None:
+            return {"by": None, "edge": None, "refused_outside_box": 0}
+        by = "box_edge" if self.deploy_edge else "command" if self.deploy_commanded else None
+        return {"by": by, "edge": self.deploy_edge or None, "refused_outside_box": self.deploy_refused}
+
     # ---- outputs ----
     def done(self) -> tuple[bool, str]:
-        """(finished, reason): 'mach' | 'altitude' | 'timeout' | 'non_finite' | ''."""
+        """(finished, reason): 'mach' | 'speed' | 'deploy' | 'box_edge' | 'altitude' |
+        'timeout' | 'non_finite' | ''."""
         if self._status == STEP_NON_FINITE:
             return True, "non_finite"
         a = self.aux
-        if a[A_MACH] <= self.scenario.end_mach:
+        if self.deploy_box is not None:
+            why = self._deploy_check()
+            if why:
+                return True, why
+        elif a[A_MACH] <= self.scenario.end_mach:
             return True, "mach"
-        if self.scenario.end_speed_mps is not None and a[A_V] <= self.scenario.end_speed_mps:
+        elif self.scenario.end_speed_mps is not None and a[A_V] <= self.scenario.end_speed_mps:
             return True, "speed"
         if a[A_H] <= self.scenario.end_altitude_m:
             return True, "altitude"

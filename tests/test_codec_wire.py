@@ -62,7 +62,7 @@ def test_header_matches_the_documented_layout_byte_for_byte():
     buf = enc.encode(rec, 0x1122334455667788, -5)
     payload = rec.tobytes()
     # independent construction from the table in the module docstring
-    head = (b"EL" + (2).to_bytes(2, "little") + (1).to_bytes(2, "little") + b"\0\0"
+    head = (b"EL" + (2).to_bytes(2, "little") + (2).to_bytes(2, "little") + b"\0\0"
             + (0x01020304).to_bytes(4, "little") + len(payload).to_bytes(4, "little")
             + (0x1122334455667788).to_bytes(8, "little") + (-5).to_bytes(8, "little", signed=True)
             + C.layout_id(records.JETS).to_bytes(4, "little"))

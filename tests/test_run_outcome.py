@@ -53,8 +53,8 @@ def sil(tmp_path_factory):
 
 
 def test_one_function_maps_end_reasons_to_exit_codes():
-    assert COMPLETED_END_REASONS == ("mach", "speed", "altitude", "duration")
-    assert [exit_code(r) for r in COMPLETED_END_REASONS] == [0, 0, 0, 0]
+    assert COMPLETED_END_REASONS == ("mach", "speed", "deploy", "box_edge", "altitude", "duration")
+    assert [exit_code(r) for r in COMPLETED_END_REASONS] == [0] * 6
     assert [exit_code(r) for r in ("timeout", "non_finite", "fsw_timeout", "no_fsw", "stopped")] == [1] * 5
 
 

@@ -41,8 +41,8 @@ class FakeFsw:
         self.rec = records.new(records.JETS)
         self.seq = 0
 
-    def send(self, k: int, u) -> None:
-        self.rec["k"], self.rec["u"] = k, u
+    def send(self, k: int, u, deploy: int = 0) -> None:
+        self.rec["k"], self.rec["u"], self.rec["deploy"] = k, u, deploy
         self.pub.put(self.enc.encode(self.rec, self.seq, time.monotonic_ns()))
         self.seq += 1
 
@@ -97,19 +97,21 @@ def _fly(tmp_path, mode: str, duration_s: float, script) -> dict:
 OFF = np.zeros(records.N_JETS, dtype=np.uint8)
 
 
-def test_lockstep_plant_refuses_u_outside_0_1_a_future_and_a_negative_step(tmp_path):
+def test_lockstep_plant_refuses_u_outside_0_1_a_deploy_code_a_future_and_a_negative_step(tmp_path):
     def script(fsw, k, first):
         if first:
             bad_u = OFF.copy()
             bad_u[4] = 2
             fsw.send(k, bad_u)            # the valve state 2 does not exist
+            fsw.send(k, OFF, deploy=7)    # nor the deploy command 7
             fsw.send(k + 1, OFF)          # an answer to a frame not yet published
             fsw.send(-1, OFF)             # a step that never was
         fsw.send(k, OFF)
     info = _fly(tmp_path, "lockstep", 0.2, script)
     assert info["end_reason"] == "duration", info
     assert info["rejects"].get("u_range") == 1 and info["rejects"].get("future_step") == 1, info
-    assert info["rejects"].get("negative_step") == 1, info["rejects"]
+    assert info["rejects"].get("negative_step") == 1 and info["rejects"].get("deploy_range") == 1, info["rejects"]
+    assert info["end_reason"] == "duration" and info["deploy"]["by"] is None, info
     assert info["steps"] >= 10
 
 

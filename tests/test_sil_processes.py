@@ -128,6 +128,24 @@ def test_guided_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
     assert s_sil["guidance"]["cycles"] == s_bat["guidance"]["cycles"] == 30
 
 
+def test_guided_lockstep_sil_deploys_where_batch_deploys(tmp_path):
+    """The whole guided entry: the FSW's deploy command crosses the process boundary with the
+    jet command, and the plant deploys at the same step as in batch, bit for bit."""
+    out = tmp_path / "sil"
+    r = subprocess.run(ELLIPSLED + ["run", "guided-nominal", "--lockstep", "--out", str(out),
+                                    "--rerun", "none", "--no-plots"], capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout + r.stderr
+    s_bat, h_bat, _ = batch.run("guided-nominal")
+    s_sil = _json(out / "summary.json")
+    assert s_sil["end_reason"] == s_bat["end_reason"] == "deploy"
+    assert s_sil["deploy"] == s_bat["deploy"] and s_bat["deploy"]["ok"]
+    h_sil = np.load(out / "history.npz")
+    assert h_sil["k"].shape == h_bat["k"].shape
+    for name in h_sil.files:
+        if name not in ("compute_us", "alloc_us"):
+            assert np.array_equal(h_sil[name], h_bat[name]), name
+
+
 def _hogs(n: int) -> list[subprocess.Popen]:
     """n CPU hogs: stress-ng when installed, else plain Python busy loops."""
     import shutil

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from common.config import ConfigError, Table, load_toml, resolve
-from common.model import INERTIA_KEYS, FaultEvent, Scenario, Truth, inertia_matrix, inertia_vector
+from common.model import INERTIA_KEYS, FaultEvent, fsw_overrides, Scenario, Truth, inertia_matrix, inertia_vector
 from interfaces.vocabulary import N_JETS
 
 AERO_KEYS = ("C_lbeta", "C_malpha", "C_nbeta")
@@ -56,6 +56,8 @@ class Criteria:
     finite: bool
     bank_err_max_after_fault_deg: float
     deploy_miss_km: float | None = None       # guided campaigns: deploy within this of the target
+    deploy_alt_min_km: float | None = None    # ... at or above this altitude
+    deploy_in_box: bool = False               # ... on the FSW's command inside the deploy box
 
     def failures(self, summary: dict) -> list[str]:
         """The criteria this run's summary.json breaks (empty: success)."""
@@ -73,6 +75,12 @@ class Criteria:
             m = summary.get("deploy_miss_km")
             if m is None or not m <= self.deploy_miss_km:
                 out.append("deploy_miss_km")
+        if self.deploy_alt_min_km is not None:
+            a = summary.get("deploy_alt_km")
+            if a is None or not a >= self.deploy_alt_min_km:
+                out.append("deploy_alt_min_km")
+        if self.deploy_in_box and not (summary.get("deploy") or {}).get("ok"):
+            out.append("deploy_in_box")
         return out
 
 
@@ -88,6 +96,7 @@ class Campaign:
     dispersions: Dispersions
     success: Criteria
     break_runs: tuple[int, ...] = ()   # [testing]: runs given an invalid FDIR delay (run() raises)
+    fsw: dict = field(default_factory=dict)   # FSW parameter overrides of every run ([fsw], e.g. deploy.trigger)
 
     def record(self) -> dict:
         """Plain JSON of everything that decides the draws and the verdicts (campaign.json)."""
@@ -143,7 +152,10 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
         finite=s.bool("finite", default=True),
         bank_err_max_after_fault_deg=s.num("bank_err_max_after_fault_deg", lo=0, lo_open=True),
         deploy_miss_km=s.num("deploy_miss_km", default=None, lo=0, lo_open=True),
+        deploy_alt_min_km=s.num("deploy_alt_min_km", default=None, lo=0),
+        deploy_in_box=s.bool("deploy_in_box", default=False),
     )
+    fsw = dict(fsw_overrides(root))
     tst = root.table("testing", default={})
     br = tst.raw("break_runs", default=[])
     if not isinstance(br, list) or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in br):
@@ -154,17 +166,38 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
         max_duration_s=c.num("max_duration_s", default=None, lo=0, lo_open=True),
         runs=c.num("runs", lo=1, hi=MAX_RUNS, integer=True),
         master_seed=c.num("master_seed", lo=0, hi=2**63 - 1, integer=True),
-        dispersions=disp, success=crit, break_runs=tuple(sorted(set(br))),
+        dispersions=disp, success=crit, break_runs=tuple(sorted(set(br))), fsw=fsw,
     )
     for t in (c, f, d, s, tst, root):
         t.reject_unknown()
     return camp
 
 
+DEPLOY_TRIGGERS = ("range", "velocity")
+
+
+def with_deploy_trigger(camp: Campaign, trigger: str) -> Campaign:
+    """The campaign with every run's FSW deploying by ``trigger`` (FSW parameter deploy.trigger)."""
+    if trigger not in DEPLOY_TRIGGERS:
+        raise ValueError(f"deploy trigger must be one of {', '.join(DEPLOY_TRIGGERS)}, got {trigger!r}")
+    return replace(camp, fsw=merge_fsw(camp.fsw, {"deploy": {"trigger": trigger}}))
+
+
+def merge_fsw(base: dict, over: dict) -> dict:
+    """FSW overrides ``base`` ({section: {key: value}}) with ``over``'s on top."""
+    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}
+    for sec, vals in over.items():
+        out.setdefault(sec, {}).update(vals)
+    return out
+
+
 def campaign_base(camp_record: dict, snapshot: Scenario) -> Scenario:
-    """The base scenario every run starts from: the snapshot with the campaign's time cap."""
+    """The base scenario every run starts from: the snapshot with the campaign's time cap and
+    its FSW overrides."""
     cap = camp_record.get("max_duration_s")
-    return snapshot if cap is None else snapshot.with_(max_duration_s=float(cap))
+    scn = snapshot if cap is None else snapshot.with_(max_duration_s=float(cap))
+    over = camp_record.get("fsw") or {}
+    return scn.with_(fsw=merge_fsw(scn.fsw, over)) if over else scn
 
 
 def run_rng(master_seed: int, run_id: int) -> tuple[int, np.random.Generator]:
@@ -355,7 +388,8 @@ def pinned_scenario_toml(camp: Campaign, base_file: str | Path, run_id: int, mas
     if d.get("density_waves"):
         w = d["density_waves"]
         raw["truth"]["density_waves"] = [list(w[i:i + 3]) for i in range(0, len(w) - 2, 3)]
-    raw.setdefault("fsw", {}).setdefault("fdir", {})["delay_s"] = d["fdir_delay_s"]
+    raw["fsw"] = merge_fsw(raw.get("fsw", {}), camp.fsw)
+    raw["fsw"].setdefault("fdir", {})["delay_s"] = d["fdir_delay_s"]
     faults = []
     for kind, key in (("failed_off", "jets_failed_off"), ("stuck_on", "jets_stuck_on")):
         if d[key]:

@@ -39,6 +39,9 @@ def add_montecarlo_parser(subparsers) -> argparse.ArgumentParser:
                    help="worker processes of the embedded cluster (default: one per core)")
     p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop every run after S s of flight")
     p.add_argument("--seed", type=argtypes.seed, default=None, help="master seed (default: the campaign's)")
+    p.add_argument("--deploy-trigger", choices=("range", "velocity"), default=None,
+                   help="every run's flight software deploys the parachute by this rule: range (range to go used "
+                        "up, Mars 2020) or velocity (at a Mach, MSL); default: the campaign's [fsw.deploy]")
     p.add_argument("--flush-s", type=argtypes.timeout_s, default=5.0, help="write finished rows at least this often")
     p.add_argument("--dashboard", action="store_true", help="embedded cluster: Dask dashboard on 127.0.0.1")
     p.add_argument("--no-progress", action="store_true")
@@ -51,7 +54,11 @@ def main(args) -> int:
     from .engine import run_campaign
     if args.pin:
         from .campaign import load_campaign, pin_runs
-        for f in pin_runs(load_campaign(args.campaign), args.pin, args.out, args.seed):
+        from .campaign import with_deploy_trigger
+        camp = load_campaign(args.campaign)
+        if args.deploy_trigger:
+            camp = with_deploy_trigger(camp, args.deploy_trigger)
+        for f in pin_runs(camp, args.pin, args.out, args.seed):
             print(f"wrote {f}")
         return 0
     if args.scheduler and args.workers:
@@ -62,7 +69,8 @@ def main(args) -> int:
         security = tls_security(args)
         res = run_campaign(args.campaign, args.out, runs=args.runs, master_seed=args.seed, duration_s=args.duration,
                            scheduler=args.scheduler, workers=args.workers, dashboard=args.dashboard,
-                           progress=not args.no_progress, flush_s=args.flush_s, security=security)
+                           progress=not args.no_progress, flush_s=args.flush_s, security=security,
+                           deploy_trigger=args.deploy_trigger)
     except ConfigError:
         raise
     except (ValueError, OSError) as e:   # a campaign folder of another campaign, an unreachable scheduler...

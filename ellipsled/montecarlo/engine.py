@@ -38,7 +38,7 @@ from common.model import INERTIA_KEYS, Scenario, load_scenario
 from ellipsled.sil.history import budget_refusal
 
 from .campaign import (AERO_KEYS, Campaign, Criteria, apply_dispersion, campaign_base, dispersion_columns, draw_run,
-                       load_campaign)
+                       load_campaign, with_deploy_trigger)
 from .store import ResultStore, flatten
 
 META_FILE = "campaign.json"
@@ -116,8 +116,12 @@ RECORD_SCHEMA = pa.schema(
             "guidance.held_cycles", "guidance.overruns", "guidance.faults")
     + _cols(_F, "guidance.compute_p50_us", "guidance.compute_p99_us", "guidance.compute_max_us",
             "guidance.predictions_per_cycle_mean", "guidance.k_rho_final", "guidance.k_ld_final",
-            "guidance.bank0_final_deg")
-    + _cols(_S, "guidance.reversal_times_s", "guidance.reversal_rules"))
+            "guidance.bank0_final_deg", "guidance.floor_margin_final_m")
+    + _cols(_S, "guidance.reversal_times_s", "guidance.reversal_rules")
+    # the parachute deploy of a run whose FSW deploys (runlib.deploy_summary)
+    + [("deploy.rule", _S), ("deploy.ok", _B), ("deploy.by", _S), ("deploy.edge", _S),
+       ("deploy.refused_outside_box", _I)]
+    + _cols(_F, "deploy.mach", "deploy.qbar_pa", "deploy.alt_km"))
 
 
 @dataclass(frozen=True)
@@ -323,10 +327,15 @@ def run_campaign(campaign: Campaign | str | Path, out: str | Path, *, runs: int 
                  master_seed: int | None = None, duration_s: float | None = None, scheduler: str | None = None,
                  workers: int | None = None, dashboard: bool = False, progress: bool = True,
                  flush_rows: int = 50, flush_s: float = 5.0, summary: bool = True,
-                 on_result: Callable[[dict, object], None] | None = None, security=None) -> CampaignResult:
+                 on_result: Callable[[dict, object], None] | None = None, security=None,
+                 deploy_trigger: str | None = None) -> CampaignResult:
     """Run (or resume) a campaign into ``out``. ``on_result(row, client)`` is called in
-    the client after each finished run (tests use it to kill a worker or interrupt)."""
+    the client after each finished run (tests use it to kill a worker or interrupt).
+    ``deploy_trigger``: every run's FSW deploys by this rule (range | velocity), recorded with
+    the campaign (default: the campaign's, else the FSW's)."""
     camp = campaign if isinstance(campaign, Campaign) else load_campaign(campaign)
+    if deploy_trigger is not None:
+        camp = with_deploy_trigger(camp, deploy_trigger)
     runs = camp.runs if runs is None else runs
     master_seed = camp.master_seed if master_seed is None else master_seed
     for name, v, lo in (("runs", runs, 1), ("master_seed", master_seed, 0), ("workers", workers, 1),

@@ -164,7 +164,11 @@ def write_summary(out: str | Path, camp: Campaign, table: pa.Table, runs: int | 
              f"- runs recorded: {st['runs_recorded']}" + (f" of {runs}" if runs else "")
              + f"; raised: {st['raised']}; duplicates: {st['duplicates']}",
              f"- criteria: completed, finite, max |e_phi| after the fault <= "
-             f"{camp.success.bank_err_max_after_fault_deg} deg (cycle slips are a host figure, not a criterion)",
+             f"{camp.success.bank_err_max_after_fault_deg} deg"
+             + (f", deploy within {camp.success.deploy_miss_km:g} km" if camp.success.deploy_miss_km else "")
+             + (f", deploy at >= {camp.success.deploy_alt_min_km:g} km" if camp.success.deploy_alt_min_km else "")
+             + (", deployed by the FSW inside the deploy box" if camp.success.deploy_in_box else "")
+             + " (cycle slips are a host figure, not a criterion)",
              f"- success over all runs: {st['success']} / {st['runs_recorded']} ({pct(st['success_rate_all'])} %)",
              f"- success over controllable runs: {st['success_controllable']} / {st['runs_controllable']}"
              f" ({pct(st['success_rate_controllable'])} %)",
@@ -207,6 +211,12 @@ def write_summary(out: str | Path, camp: Campaign, table: pa.Table, runs: int | 
         for r in failed[:50]:
             e = (r.get("error") or "").splitlines()[0][:200].replace("|", "\\|")
             lines.append(f"| {r['run_id']} | {r['seed']} | {e} |")
+    if any(r.get("deploy_miss_km") is not None for r in ok):
+        from .deploy import campaign_rows, deploy_stats, table, trigger_of
+        sts = [deploy_stats(campaign_rows(out, c)) for c in (False, True)]
+        trig = trigger_of(out) or "the FSW's default"
+        lines += ["", f"## Deploy (trigger: {trig})", "",
+                  table(sts, ["all runs", "controllable runs"])]
     lines += ["", f"Reproduce any run: `ellipsled batch --from-campaign {out} --run ID --out DIR`.", ""]
     if plots and ok:
         files = _plots(out, ok)

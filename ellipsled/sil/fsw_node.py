@@ -204,6 +204,7 @@ class FswNode:
         j["k"] = fsw.k
         j["t_release_ns"] = cyc.t_release_ns
         j["u"] = topo.u
+        j["deploy"] = fsw.deploy.command if fsw.deploy is not None else 0
         t = now_ns()
         j["t_publish_ns"] = t
         self.pub_jets.put(self.enc_jets.encode(j, self.jets_seq, t))

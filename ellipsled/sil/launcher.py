@@ -272,7 +272,8 @@ class Launcher:
         faults = [tuple(x) for x in sim_info["faults_applied"]]
         from ellipsled.reference import fault_free_reference    # it flies twins: the FSW loads after the run
         ref = fault_free_reference(h, scn, seed, faults)
-        summary = judge(h, scn, seed, sim_info["end_reason"], fsw_info, faults, fsw_info["params"], ref)
+        summary = judge(h, scn, seed, sim_info["end_reason"], fsw_info, faults, fsw_info["params"], ref,
+                        deploy=sim_info.get("deploy"))
         summary["mode"] = f"sil-{a.mode}"
         summary["wall_s"] = sim_info["wall_s"]
         summary["realtime_factor"] = sim_info["realtime_factor"]

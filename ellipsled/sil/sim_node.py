@@ -59,6 +59,8 @@ def command_refusal(rec, k: int) -> str | None:
         return "negative_step"
     if int(rec["u"].max()) > 1:
         return "u_range"
+    if int(rec["deploy"]) > 1:
+        return "deploy_range"
     return None
 
 
@@ -189,6 +191,8 @@ class SimNode:
     def _take_command(self, rec) -> int:
         self.u[:] = rec["u"]
         self.u_k = int(rec["k"])
+        if self.plant.deploy_box is not None:
+            self.plant.command_deploy(int(rec["deploy"]))
         return self.u_k
 
     # ------------------------------------------------------------------ lockstep
@@ -321,7 +325,7 @@ class SimNode:
             say(ROLE, self.message)
         self.write()
         say(ROLE, f"end: {end_reason_of(self.end_reason, self.args.duration)} at t={self.plant.t_s:.2f} s")
-        return 0 if self.end_reason in ("mach", "speed", "altitude", "timeout") else 3
+        return 0 if self.end_reason in ("mach", "speed", "deploy", "box_edge", "altitude", "timeout") else 3
 
     def write(self) -> None:
         if not self.args.out:
@@ -336,7 +340,7 @@ class SimNode:
             "scenario": self.scn.name, "seed": self.seed, "mode": self.args.mode,
             "end_reason": end_reason_of(self.end_reason, self.args.duration), "message": self.message,
             "t_end_s": self.plant.t_s, "steps": self.history.n, "wall_s": getattr(self, "wall_s", None),
-            "faults_applied": self.plant.fault_log, "counts": self.counts, "rejects": self.rejects,
+            "faults_applied": self.plant.fault_log, "deploy": self.plant.deploy_report(), "counts": self.counts, "rejects": self.rejects,
         }
         (out / "sim.json").write_text(json.dumps(info, indent=2) + "\n")
 

@@ -123,6 +123,8 @@ def attitude(fsw, ms: int, C_LN: np.ndarray, want: tuple[bool, bool, bool, bool,
                     miss = _angle(_unit(float(out["pred_lat_rad"]), float(out["pred_lon_rad"])),
                                   _unit(*tgt)) * fsw.scenario.planet.radius_m
                     yield mav.MAVLink_named_value_float_message(ms, b"miss_km", miss * 1e-3)
+        if fsw.deploy is not None:         # the deploy command: 0 none, else its rule (records.DEPLOY_*)
+            yield mav.MAVLink_named_value_float_message(ms, b"deploy", float(out["deploy"]))
     if want[4]:
         yield entry_state(fsw, ms, C_LN)
 

@@ -261,12 +261,13 @@ class Corrector:
                           int(self.params["npc.max_iter"]), self.params["npc.floor_miss_max_m"])
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
-              shp: np.ndarray | None = None) -> Correction:
+              shp: np.ndarray | None = None, h_floor_m: float | None = None) -> Correction:
         """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
         t_flip given, one more prediction: the same phi_0 with a reversal taking effect
         t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
         sign kept and reversed). shp: the reference shaper's state at x (shaped_transition),
-        None: the bank follows the law at once."""
+        None: the bank follows the law at once. h_floor_m: the predicted deploy altitude to keep
+        (range traded for it), None: npc.h_floor_m."""
         t0 = time.perf_counter_ns()
         self._shp = shp
         c = self.constants
@@ -305,7 +306,7 @@ class Corrector:
         # the prediction of the answer (the root-finder's last call may have been another)
         self._predict(x, b0, bf, e0, sign, self._out)
         floor = False
-        h_floor = self.params["npc.h_floor_m"]
+        h_floor = self.params["npc.h_floor_m"] if h_floor_m is None else h_floor_m
         if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H] < h_floor and p > lo:
             # the range solution deploys too low: trade range for altitude (more lift up, so
             # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the

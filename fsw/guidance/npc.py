@@ -48,7 +48,13 @@ PARAMS = [
     Param("npc.hdot_tau_s", 0.5, 200.0, "s", "altitude-rate feedback: time to close on the limit altitude"),
     Param("npc.hdot_gain", 0.0, 1.0, "s/m", "altitude-rate feedback: change of cos(bank) per m/s"),
     Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
-    Param("npc.h_floor_m", 0.0, 5e4, "m", "predicted deploy altitude kept above this, range traded (0: off)"),
+    Param("npc.h_floor_m", 0.0, 5e4, "m", "deploy altitude floor: the predicted deploy altitude is kept above it "
+          "plus the margin, range traded (0: off)"),
+    # design bounds of the floor's margin (the unit tests show the rule; the guided campaign sized them)
+    Param("npc.floor_margin_k", 0.0, 10.0, "", "floor margin: this many times the measured prediction error",
+          ground_settable=False),
+    Param("npc.floor_margin_min_m", 0.0, 2e4, "m", "floor margin at least", ground_settable=False),
+    Param("npc.floor_margin_max_m", 0.0, 2e4, "m", "floor margin at most", ground_settable=False),
     # a design bound of the floor's trade (the unit tests show it); no take-effect case from
     # the guided-nominal start, where no trade within any bound reaches a floor
     Param("npc.floor_miss_max_m", 0.0, 1e5, "m", "predicted deploy miss the altitude floor may trade up to",
@@ -99,6 +105,13 @@ class EntryGuidance(Corrector):
         self._line = (math.nan, abs(bank0), abs(bank0))   # the answer's profile flown: (e0, phi_0 of the
                                          # line, phi_f), clipped to the phi_0 bounds as predicted
         self.floor_cycles = 0            # cycles whose answer traded range for the deploy-altitude floor
+        # the floor's margin, sized by the predictor's own measured error: the change of the
+        # predicted deploy altitude from one answer to the next (what the prediction did not
+        # foresee: density, L/D, the state), a random walk over the cycles still to fly
+        self._h_pred_prev = math.nan
+        self._dh_var = math.nan          # low-passed square of that change [m^2]
+        self._period_s = 1.0             # guidance cycle period
+        self.floor_margin_m = params["npc.floor_margin_min_m"]
         self.held_cycles = 0             # cycles whose range solution holds a phi_0 bound (bank_profile)
         self.bank_cmd = abs(bank0)       # magnitude commanded now [rad] (after the path limits)
         self.miss_m = math.nan           # predicted range miss z of the last solution
@@ -161,6 +174,7 @@ class EntryGuidance(Corrector):
             self.events.emit(t_s, EV.BANK_REVERSAL, rule=REVERSAL_RULE.code_of(self.lateral.rules[-1].upper()),
                              dpsi_deg=math.degrees(dpsi))
         period = t_s - self._t_cycle if math.isfinite(self._t_cycle) else 1.0
+        self._period_s = period
         self._t_cycle = t_s
         if self._frozen:
             return
@@ -169,8 +183,9 @@ class EntryGuidance(Corrector):
         # mid-point (half-way the lateral lift has turned over)
         t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
         shp = self.shaper.state(self.bank_cmd)
+        base = self.params["npc.h_floor_m"]
         self.job.submit(x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp,
-                        tag=sign, t_s=t_s, due_t=t_s + self.apply_delay_s - 1e-9)
+                        base + self.floor_margin_m if base > 0.0 else 0.0, tag=sign, t_s=t_s, due_t=t_s + self.apply_delay_s - 1e-9)
 
     def _apply(self, res: Correction) -> None:
         i = self.cycles % self.STATS
@@ -188,6 +203,7 @@ class EntryGuidance(Corrector):
         self.held_cycles += bool(res["held"])
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat_rad"], res["lon_rad"])
+        self._measure_prediction(res["h_final_m"], res["t_go_s"])
         self.pred_h_m = res["h_final_m"]
         self.t_go_s, self._t_answer = res["t_go_s"], res["t_s"]
         if self.shaper.turn_round(res["turn_rad"], res["sign"]):
@@ -200,6 +216,23 @@ class EntryGuidance(Corrector):
             self.events.emit(res["t_s"], EV.GUIDANCE_NO_ROOT, miss_km=res["miss_m"] / 1e3)
         if res["t_go_s"] < self.params["npc.tgo_freeze_s"]:
             self._frozen = True         # too close to the deploy for the range to respond
+
+    DH_WEIGHT = 0.2                      # low-pass weight of one new change of the prediction
+
+    def _measure_prediction(self, h_m: float, t_go_s: float) -> None:
+        """The floor's margin: npc.floor_margin_k times the measured change per cycle of the
+        predicted deploy altitude (low-passed RMS), grown as a random walk over the cycles to
+        the deploy (sqrt of their number), within [floor_margin_min_m, floor_margin_max_m]."""
+        p = self.params
+        if math.isfinite(h_m) and math.isfinite(self._h_pred_prev):
+            d2 = (h_m - self._h_pred_prev) ** 2
+            self._dh_var = d2 if not math.isfinite(self._dh_var) else \
+                (1.0 - self.DH_WEIGHT) * self._dh_var + self.DH_WEIGHT * d2
+        self._h_pred_prev = h_m
+        if math.isfinite(self._dh_var) and math.isfinite(t_go_s):
+            n = max(1.0, t_go_s / max(self._period_s, 1e-3))
+            m = p["npc.floor_margin_k"] * math.sqrt(self._dh_var * n)
+            self.floor_margin_m = min(p["npc.floor_margin_max_m"], max(p["npc.floor_margin_min_m"], m))
 
     def steer(self, nav) -> None:
         """Every control period: the density estimate, the last answer's bank profile at today's
@@ -288,7 +321,8 @@ class EntryGuidance(Corrector):
                 "compute_p99_us": pct(us, 99), "compute_max_us": float(us.max()) if n else None,
                 "predictions_per_cycle_mean": float(calls.mean()) if n else None,
                 "predictions_per_cycle_max": int(calls.max()) if n else None,
-                "no_root": self.no_root, "floor_cycles": self.floor_cycles, "held_cycles": self.held_cycles,
+                "no_root": self.no_root, "floor_cycles": self.floor_cycles,
+                "floor_margin_final_m": self.floor_margin_m, "held_cycles": self.held_cycles,
                 "overruns": self.overruns, "faults": self.faults,
                 "reversal_times_s": list(self.lateral.reversals), "reversal_rules": list(self.lateral.rules),
                 "k_rho_final": self.estimator.k_rho, "k_ld_final": self.estimator.k_ld,

@@ -98,9 +98,26 @@ def test_sil_absent_gives_null_and_reason():
     r = sil.lockstep(True, available=(False, "`ellipsled run` not available"))
     assert r["realtime_factor"] is None and "not available" in r["realtime_factor_reason"]
     rt = sil.realtime(True, available=(False, "nope"))
-    for regime in ("idle", "load"):
+    for regime in ("idle", "load", "footprint"):
         for k in suite.REQUIRED["sil_realtime." + regime]:
             assert rt[regime][k] is None and rt[regime][f"{k}_reason"] == "nope"
+
+
+def test_footprint_sets_the_locked_run_beside_the_unlocked_one():
+    def run(rss_fsw, rss_sim, mode):
+        return {"extra": {"memory": {"fsw": {"vm_rss_kb": rss_fsw, "locked_kb": rss_fsw if mode else 0,
+                                             "mlock_mode": mode},
+                                     "sim": {"vm_rss_kb": rss_sim, "locked_kb": rss_sim if mode else 0,
+                                             "mlock_mode": mode}}}}
+    f = sil.footprint(run(400 * 1024, 300 * 1024, "onfault"), run(380 * 1024, 200 * 1024, None))
+    assert f["fsw_rss_mb"] == 400 and f["fsw_unlocked_rss_mb"] == 380 and f["fsw_locked_mb"] == 400
+    assert f["fsw_ratio"] == pytest.approx(400 / 380) and f["sim_ratio"] == pytest.approx(1.5)
+    rows = sil.footprint_rows({"sil_realtime": {"footprint": f}})
+    assert [r[-1] for r in rows] == ["pass", "**FAIL**"]            # 1.05x and 1.5x against 1.2x
+    assert rows[0][0].startswith("real-time SIL flight software") and "onfault" in rows[0][0]
+    broken = sil.footprint(run(1, 1, "onfault"), {"latency_p50_us": None, "latency_p50_us_reason": "timed out"})
+    assert broken["fsw_unlocked_rss_mb"] is None and broken["fsw_unlocked_rss_mb_reason"] == "timed out"
+    assert [r[-1] for r in sil.footprint_rows({"sil_realtime": {"footprint": broken}})] == ["n/m", "n/m"]
 
 
 @pytest.mark.realtime

@@ -174,7 +174,7 @@ def test_unknown_and_not_settable_ids_get_no_value_but_a_statustext(rig):
     texts = [t for t in rig.texts() if "UNKNOWN" in t]
     assert "PARAM X_RG2_DIVISOR UNKNOWN" in texts and "PARAM NO_SUCH_PARAM UNKNOWN" in texts
     assert "PARAM_VALUE" not in rig.gcs.state.latest
-    assert rig.fsw.params["executive.rg2_divisor"] == 5
+    assert rig.fsw.params["executive.rg2_period_s"] == 0.1
 
 
 def test_unsigned_param_set_is_rejected_but_unsigned_reads_are_answered(rig):

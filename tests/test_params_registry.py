@@ -33,7 +33,7 @@ def test_a_refused_set_changes_neither_the_value_nor_the_owner():
         assert fsw.params["fdir.degraded_hi"] == fsw.fdir.p["fdir.degraded_hi"] == 0.93
         with pytest.raises(ValueError, match="not settable in flight"):
             fsw.set_param("executive.rg2_period_s", 0.2)
-        assert fsw.set_param("fdir.stale_n", 9) == 9 and fsw.monitor.stale_n == 9
+        assert fsw.set_param("fdir.stale_s", 0.18) == 0.18 and fsw.monitor.stale_n == 9
     finally:
         fsw.close()
 

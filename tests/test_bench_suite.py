@@ -236,3 +236,17 @@ def test_shared_memory_variant_sends_every_frame_through_shared_memory_and_the_d
     assert shm["n"] == n and plain["n"] == n
     assert shm["shm_rx_client"] >= n and shm["shm_rx_echo"] >= n
     assert plain["shm_rx_client"] == 0 and plain["shm_rx_echo"] == 0
+
+
+def test_rate_rows_set_200_hz_beside_50_hz():
+    def run(slips, missed, n, p99):
+        return {"slips": slips, "jitter_p50_us": 1.0, "jitter_p99_us": p99, "jitter_max_us": 50.0,
+                "extra": {"sim_counts": {"missed_commands": missed}, "latency_samples": n,
+                          "fsw_control_us": {"p50": 80.0, "p99": 160.0}}}
+    res = {"sil_realtime": {"idle": run(0, 0, 500, 3.0), "idle_200hz": run(0, 0, 2000, 6.0)}}
+    rows = sil.rate_rows(res)
+    assert rows[0][1] == "0; 0 of 2000" and rows[0][2] == "50 Hz 0; 0 of 500" and rows[0][-1] == "pass"
+    assert rows[1][3].startswith("2.00x")
+    res["sil_realtime"]["idle_200hz"] = run(0, 3, 1997, 6.0)         # three commands missed: fails
+    assert sil.rate_rows(res)[0][-1] == "**FAIL**"
+    assert sil.rate_rows({"sil_realtime": {"idle": run(0, 0, 1, 1.0)}}) == []

@@ -6,7 +6,10 @@
   release jitter p50/p99/max, cycle slips (``sil.json``);
 - footprint: each real-time process's resident memory with its memory locked (the idle run)
   beside the same run with ``--no-rt`` (nothing locked), from ``sil.json``'s ``memory``
-  (target: locked resident <= 1.2x unlocked).
+  (target: locked resident <= 1.2x unlocked);
+- rate headroom: the idle run again at a 5-ms control period (``--dt-control 0.005``, 200 Hz)
+  beside the 50-Hz one: cycle slips, release jitter, commands the plant missed, the control
+  task (target: 0 slips, every command answered).
 
 ``ellipsled run <scenario> --lockstep|--realtime --duration S --out DIR --rerun none`` is
 called as a subprocess with a timeout. When the command is absent or fails, every figure
@@ -131,7 +134,9 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
            # the standard transport instead of the default low-latency one
            "idle_standard_transport": one(("--no-zenoh-lowlatency",)),
            # the footprint's baseline: the same run with nothing locked (nor SCHED_FIFO)
-           "idle_unlocked": one(("--no-rt",))}
+           "idle_unlocked": one(("--no-rt",)),
+           # rate headroom: the same run at 200 Hz
+           "idle_200hz": one(("--dt-control", "0.005"))}
     res["footprint"] = footprint(res["idle"], res["idle_unlocked"])
     tools_ok, tools_why = ensure_tools()
     if not tools_ok:
@@ -168,6 +173,39 @@ def footprint(locked: dict, unlocked: dict) -> dict:
                                           "no memory figures in sil.json")
     out["targets"] = dict(FOOTPRINT_TARGETS)
     return out
+
+
+RATE_TARGETS = {"slips": 0, "missed_commands": 0}
+
+
+def rate_rows(res: dict) -> list[Row]:
+    """The idle run at 200 Hz beside the same run at 50 Hz."""
+    fast, base = g(res, "sil_realtime", "idle_200hz") or {}, g(res, "sil_realtime", "idle") or {}
+    if not fast:
+        return []
+
+    def missed(s):
+        return g(s, "extra", "sim_counts", "missed_commands")
+
+    def ctl(s, q):
+        return g(s, "extra", "fsw_control_us", q)
+
+    def answered(s):
+        n, m = g(s, "extra", "latency_samples"), missed(s)
+        return None if n is None or m is None else f"{m} of {n + m}"
+    return [
+        row("real-time SIL at 200 Hz: cycle slips; commands missed", f"{fmt(fast.get('slips'))}; {answered(fast) or 'n/m'}",
+            f"50 Hz {fmt(base.get('slips'))}; {answered(base) or 'n/m'}", "", "0; 0",
+            None if fast.get("slips") is None or missed(fast) is None
+            else fast["slips"] == RATE_TARGETS["slips"] and missed(fast) == RATE_TARGETS["missed_commands"]),
+        row("real-time SIL at 200 Hz: release jitter p50 / p99 / max [us]",
+            f"{fmt(fast.get('jitter_p50_us'))} / {fmt(fast.get('jitter_p99_us'))} / {fmt(fast.get('jitter_max_us'))}",
+            f"50 Hz {fmt(base.get('jitter_p50_us'))} / {fmt(base.get('jitter_p99_us'))} / {fmt(base.get('jitter_max_us'))}",
+            f"{fmt(ratio(fast.get('jitter_p99_us'), base.get('jitter_p99_us')))}x (p99)", "", NO_TARGET),
+        row("real-time SIL at 200 Hz: control task p50 / p99 [us]", f"{fmt(ctl(fast, 'p50'))} / {fmt(ctl(fast, 'p99'))}",
+            f"50 Hz {fmt(ctl(base, 'p50'))} / {fmt(ctl(base, 'p99'))}",
+            f"{fmt(ratio(ctl(fast, 'p99'), ctl(base, 'p99')))}x (p99)", "", NO_TARGET),
+    ]
 
 
 def footprint_rows(res: dict) -> list[Row]:
@@ -237,7 +275,7 @@ def realtime_rows(res: dict) -> list[Row]:
                      f"{slips}", None if s.get("slips") is None else s.get("slips") == slips))
         R += latency_rows(res, regime, s)
         if regime == "idle":
-            R += footprint_rows(res)
+            R += footprint_rows(res) + rate_rows(res)
     s = g(res, "sil_realtime", "idle_standard_transport") or {}
     if s:
         low = g(res, "sil_realtime", "idle", "latency_p99_us")

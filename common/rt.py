@@ -19,6 +19,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import gc
+import mmap
 import os
 import sys
 import threading
@@ -28,7 +29,7 @@ from typing import Callable
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
               "VECLIB_MAXIMUM_THREADS", "BLIS_NUM_THREADS", "NUMBA_NUM_THREADS")
 
-MCL_CURRENT, MCL_FUTURE = 1, 2          # Linux <sys/mman.h>
+MCL_CURRENT, MCL_FUTURE, MCL_ONFAULT = 1, 2, 4      # Linux <sys/mman.h> (MCL_ONFAULT: Linux >= 4.4)
 PR_SET_TIMERSLACK, PR_GET_TIMERSLACK = 29, 30
 
 
@@ -78,6 +79,85 @@ def _mlockall(flags: int) -> tuple[bool, str]:
         err = ctypes.get_errno()
         return False, f"mlockall: {os.strerror(err)} (errno {err})"
     return True, ""
+
+
+def lock_touched() -> tuple[str | None, list[str]]:
+    """Lock the pages this process touches, now and from now on: (mode, messages).
+
+    mode "onfault": mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT) -- resident pages are
+    locked now and every page later when first touched, so mappings the loop never uses
+    (thread stacks beyond their depth, malloc arenas' reserves, JIT and runtime
+    reservations) stay unallocated: the process is as large as it would be unlocked. The
+    pages the loop writes for the first time in flight are prefaulted (``prefault``).
+    "all": kernels without MCL_ONFAULT (EINVAL): every mapping is populated and locked
+    whole. None: not permitted (nothing locked; the message says why)."""
+    ok, why = _mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)
+    if ok:
+        return "onfault", []
+    if "errno 22" not in why:           # EINVAL: the kernel does not know MCL_ONFAULT
+        return None, [f"memory not locked: {why}"]
+    ok, why2 = _mlockall(MCL_CURRENT | MCL_FUTURE)
+    if ok:
+        return "all", [f"on-fault locking refused ({why}): the whole address space is locked"]
+    return None, [f"memory not locked: {why2}"]
+
+
+def prefault(*arrays) -> int:
+    """Touch every page of each NumPy array (write one byte a page, its value unchanged), so a
+    loop that fills them in flight takes no page fault (under ``lock_touched``'s on-fault
+    mode the pages are locked from here on). Returns the bytes touched."""
+    import numpy as np          # (not at the top: single_threaded_numerics runs before NumPy loads)
+    page = mmap.PAGESIZE
+    n = 0
+    for a in arrays:
+        if a is None or a.nbytes == 0:
+            continue
+        b = np.ascontiguousarray(a).reshape(-1).view(np.uint8)
+        if not np.shares_memory(b, a):
+            raise ValueError("prefault: the array is not contiguous (a copy would be touched)")
+        touch = b[::page]
+        touch |= 0          # a write (NumPy skips an assignment of a view to itself)
+        n += b.nbytes
+    return n
+
+
+MEMORY_FIELDS = ("VmRSS", "VmHWM", "VmLck", "VmSize", "Threads")
+
+
+def memory_status(pid: int | str = "self") -> dict:
+    """A process's memory [kB] from /proc/<pid>/status and smaps_rollup: vm_rss_kb (resident),
+    vm_hwm_kb (peak resident), vm_lck_kb (size of the locked mappings: under on-fault locking
+    it counts pages never touched, so it is not memory in use), locked_kb (resident pages of
+    the locked mappings: what locking holds in RAM), vm_size_kb, threads. {} when unreadable;
+    locked_kb None when /proc/<pid>/smaps is (reading it walks the page tables: not for a cycle)."""
+    out = {}
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                name, _, value = line.partition(":")
+                if name in MEMORY_FIELDS:
+                    key = "threads" if name == "Threads" else "vm_" + name[2:].lower() + "_kb"
+                    out[key] = int(value.split()[0])
+    except (OSError, ValueError):
+        return {}
+    out["locked_kb"] = _locked_resident_kb(pid)
+    return out
+
+
+def _locked_resident_kb(pid: int | str) -> int | None:
+    """Resident kB of the mappings flagged locked ("lo" in VmFlags) in /proc/<pid>/smaps."""
+    total, rss = 0, 0
+    try:
+        with open(f"/proc/{pid}/smaps") as f:
+            for line in f:
+                if line.startswith("Rss:"):
+                    rss = int(line.split()[1])
+                elif line.startswith("VmFlags:"):
+                    if "lo" in line.split()[1:]:
+                        total += rss
+    except (OSError, ValueError, IndexError):
+        return None
+    return total
 
 
 def single_threaded_numerics() -> dict:
@@ -155,9 +235,10 @@ def apply(cpus: list[int] | None = None, priority: int | None = None,
     """Apply what is permitted; report what is in force (read back from the kernel).
 
     cpus: CPU set for this process (None: leave). priority: SCHED_FIFO priority 1..99
-    (None: stay SCHED_OTHER). lock_memory: mlockall(MCL_CURRENT | MCL_FUTURE).
+    (None: stay SCHED_OTHER). lock_memory: lock the pages touched (``lock_touched``).
     Under SCHED_FIFO the GIL switch interval becomes GIL_SWITCH_S (see run_below_loop).
-    Returns {affinity, sched_fifo, priority, mlockall, timer_slack_ns (read back: 0 for a
+    Returns {affinity, sched_fifo, priority, mlockall, mlock_mode ("onfault", "all" or None),
+    memory (``memory_status`` right after locking), timer_slack_ns (read back: 0 for a
     SCHED_FIFO thread), gil_switch_us, messages}; every
     refused step leaves the process as it was and adds a message (the warning to log).
     """
@@ -178,11 +259,10 @@ def apply(cpus: list[int] | None = None, priority: int | None = None,
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
         except (OSError, ValueError, AttributeError) as e:
             messages.append(f"SCHED_FIFO not set, staying SCHED_OTHER: {type(e).__name__}: {e}")
-    mlocked = False
+    mode = None
     if lock_memory:
-        mlocked, why = _mlockall(MCL_CURRENT | MCL_FUTURE)
-        if not mlocked:
-            messages.append(f"memory not locked: {why}")
+        mode, why = lock_touched()
+        messages += why
     try:
         affinity = sorted(os.sched_getaffinity(0))
     except OSError:
@@ -194,8 +274,8 @@ def apply(cpus: list[int] | None = None, priority: int | None = None,
         fifo, prio = False, None
     if fifo:            # background threads (run_below_loop) hand the GIL back this soon
         sys.setswitchinterval(GIL_SWITCH_S)
-    return {"affinity": affinity, "sched_fifo": fifo, "priority": prio, "mlockall": mlocked,
-            "timer_slack_ns": get_timer_slack_ns(), "gil_switch_us": sys.getswitchinterval() * 1e6,
+    return {"affinity": affinity, "sched_fifo": fifo, "priority": prio, "mlockall": mode is not None,
+            "mlock_mode": mode, "memory": memory_status(), "timer_slack_ns": get_timer_slack_ns(), "gil_switch_us": sys.getswitchinterval() * 1e6,
             "messages": messages}
 
 

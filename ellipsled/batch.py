@@ -21,12 +21,12 @@ from .terminal import RunProgress, files_written
 def run(scenario: Scenario | str, seed: int | None = None, ft_off: bool = False, duration_s: float | None = None,
         verify_every: int = 1000, reference: bool = True, reference_cache: str | Path | None = None,
         identification: str | None = None, initial_error: bool = True,
-        on_progress=None) -> tuple[dict, History, FlightSoftware]:
+        on_progress=None, dt_control_s: float | None = None) -> tuple[dict, History, FlightSoftware]:
     """Fly one scenario; returns (summary, history, fsw). ``reference``: also fly (or take
     from ``reference_cache``, default the user cache) the fault-free twin for the
-    fault-attributable figures. ``identification`` and ``initial_error``: see prepare().
+    fault-attributable figures. ``identification``, ``initial_error`` and ``dt_control_s``: see prepare().
     ``on_progress(t_s)`` is called every lockstep.PROGRESS_EVERY steps with the simulated time reached."""
-    scn = prepare(scenario, ft_off, duration_s, identification, initial_error)
+    scn = prepare(scenario, ft_off, duration_s, identification, initial_error, dt_control_s)
     seed = scn.seed if seed is None else seed
     f = fly(scn, seed, verify_every, on_progress)
     h, fsw, wall = f.history, f.fsw, f.wall_s

@@ -66,6 +66,8 @@ def _add_report(sub):
     p.add_argument("--duration", type=argtypes.duration_s, default=None, help="stop after S seconds of simulated time")
     p.add_argument("--reuse", action="store_true",
                    help="write the report from the runs a previous report left in OUT/runs (nothing flown)")
+    p.add_argument("--dt-control", type=argtypes.float_range(1e-3, 0.1), default=None, metavar="S",
+                   help="control period [s] instead of the scenarios' (e.g. 0.005: 200 Hz)")
 
     def run(a):
         from ellipsled.report import main as report_main

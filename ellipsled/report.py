@@ -51,8 +51,10 @@ def _commit() -> str:
 class Runs:
     """Every (case, set-up, mode) flown once: summaries and the kept history fields."""
 
-    def __init__(self, out: Path, seed: int | None, duration_s: float | None, quiet: bool = False):
+    def __init__(self, out: Path, seed: int | None, duration_s: float | None, quiet: bool = False,
+                 dt_control_s: float | None = None):
         self.out, self.seed, self.duration_s, self.quiet = out, seed, duration_s, quiet
+        self.dt_control_s = dt_control_s
         self.cache = out / "fault-free-cache"
         self.s: dict[tuple, dict] = {}
         self.h: dict[tuple, dict] = {}
@@ -80,10 +82,12 @@ class Runs:
     def _fly(self, case: str, setup: str, init_err: bool, mode: str) -> None:
         base, ft_off = ("case1", True) if case == "case1-ft-off" else (case, False)
         s, h, fsw = batch.run(base, seed=self.seed, ft_off=ft_off, duration_s=self.duration_s,
-                              identification=mode, initial_error=init_err, reference_cache=self.cache)
+                              identification=mode, initial_error=init_err, reference_cache=self.cache,
+                              dt_control_s=self.dt_control_s)
         fsw.close()
         if case == "nominal":        # its own twin: store it for the faulted cases that share it
-            scn = prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err)
+            scn = prepare(base, duration_s=self.duration_s, identification=mode, initial_error=init_err,
+                          dt_control_s=self.dt_control_s)
             reference.store_twin(scn, s["seed"], h, self.cache)
         key = (case, setup, mode)
         self.s[key] = s
@@ -310,7 +314,7 @@ def write_report(out: Path, R: Runs) -> Path:
 def main(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    R = Runs(out, args.seed, args.duration)
+    R = Runs(out, args.seed, args.duration, dt_control_s=getattr(args, "dt_control", None))
     R.load() if getattr(args, "reuse", False) else R.fly()
     path = write_report(out, R)
     print(f"wrote {path}, {out / 'readme_section.md'} and {out / 'claims.json'} (for the documentation: "

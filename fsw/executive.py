@@ -1,8 +1,9 @@
 """The executive: rate groups driven by one base tick (docs/fsw/index.md, Executive).
 
 After F Prime's ActiveRateGroup: each rate group is an integer divisor of the base tick
-(RG1 every tick = control, RG2 every 5 = 10 Hz, RG3 every 50 = 1 Hz at a 50 Hz base) and
-calls its tasks in registration order. Two clock sources behind one interface,
+(RG1 every tick = control, RG2 every 0.1 s = 10 Hz, RG3 every 1 s = 1 Hz: divisors 5 and 50
+at a 50 Hz base, 20 and 200 at 200 Hz; their periods are parameters in seconds, so a
+faster control rate keeps their rates) and calls its tasks in registration order. Two clock sources behind one interface,
 ``release(k_hint) -> (k, t_release_ns)``:
 
 - ``LockstepClock``: the tick is the arrival of sensor frame k — the caller hands it in;
@@ -29,13 +30,31 @@ from interfaces.event_catalogue import EV
 from .params import Param
 
 PARAMS = [
-    Param("executive.rg2_divisor", 1, 50, "", "RG2 runs every N control ticks", integer=True, ground_settable=False),
-    Param("executive.rg3_divisor", 1, 500, "", "RG3 runs every N control ticks", integer=True, ground_settable=False),
+    Param("executive.rg2_period_s", 1e-3, 10.0, "s", "RG2 period, a whole number of control periods",
+          ground_settable=False),
+    Param("executive.rg3_period_s", 1e-3, 100.0, "s", "RG3 period, a whole number of control periods",
+          ground_settable=False),
     Param("executive.deadline_frac", 0.05, 1.0, "", "deadline as a fraction of the control period",
           ground_settable=False),
     Param("executive.spin_us", 0.0, 5000.0, "us", "real-time clock: final busy-wait before each release",
           ground_settable=False),
 ]
+
+
+def rate_divisor(period_s: float, dt_s: float, name: str = "period") -> int:
+    """Control ticks per ``period_s`` at control period ``dt_s``; ValueError unless it is a
+    whole number (>= 1) of them."""
+    n = period_s / dt_s
+    d = int(round(n))
+    if d < 1 or abs(n - d) > 1e-6 * max(1.0, n):
+        raise ValueError(f"{name} = {period_s:g} s is not a whole number of control periods ({dt_s:g} s)")
+    return d
+
+
+def divisors(params: dict, dt_s: float) -> tuple[int, int, int]:
+    """The rate groups' divisors of the base tick (RG1, RG2, RG3) from their periods."""
+    return (1, rate_divisor(params["executive.rg2_period_s"], dt_s, "executive.rg2_period_s"),
+            rate_divisor(params["executive.rg3_period_s"], dt_s, "executive.rg3_period_s"))
 
 
 # --------------------------------------------------------------------------- clocks
@@ -222,8 +241,7 @@ class Executive:
     @classmethod
     def from_params(cls, params: dict, period_ns: int, clock, **kw) -> "Executive":
         """From validated parameters (fsw/params.py load_params(PARAMS))."""
-        return cls(period_ns, clock, (1, int(params["executive.rg2_divisor"]),
-                                      int(params["executive.rg3_divisor"])),
+        return cls(period_ns, clock, divisors(params, period_ns * 1e-9),
                    deadline_ns=int(round(params["executive.deadline_frac"] * period_ns)), **kw)
 
     def add(self, group: int, name: str, fn: Callable[[Cycle], object]) -> None:

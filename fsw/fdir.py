@@ -15,16 +15,17 @@ sigma = 0.02, docs/plant.md):
 | off       | p < off_threshold               | working (resets the stuck-on count) |
 
 Any other sample (the gaps between the bands) is neutral: it neither counts nor resets.
-A fault is declared after ``persist_n`` consecutive samples of evidence; a commanded-off
+A fault is declared after ``persist_n`` consecutive samples of evidence (``fdir.persist_s``
+in control periods: 5 at 50 Hz, 20 at 200 Hz); a commanded-off
 sample is neutral for failed-off/degraded (those faults show only when the jet fires) and
 a commanded-on sample is neutral for stuck-on. eta_hat of a degraded jet is the mean of
 its ``persist_n`` degraded samples. Declarations latch until ground clears them.
 A jet latched DEGRADED keeps being watched for failed-off and stuck-on (escalation);
 a jet latched FAILED_OFF or STUCK_ON is no longer watched.
 
-False-alarm budget at the defaults (persist_n 5, degraded_hi 0.93, sigma 0.02): a nominal
-firing reads below 0.93 with probability Phi(-3.5) = 2.3e-4, five in a row 6.9e-19 per
-window; failed-off and stuck-on thresholds are 40 and 25 sigma from the nominal levels.
+False-alarm budget at the defaults (persist_s 0.1 = 5 samples at 50 Hz, degraded_hi 0.93,
+sigma 0.02): a nominal firing reads below 0.93 with probability Phi(-3.5) = 2.3e-4, five in
+a row 6.9e-19 per window (at 200 Hz twenty in a row: far less); failed-off and stuck-on thresholds are 40 and 25 sigma from the nominal levels.
 
 Health seen by the allocator (``health_active``): an operator override wins immediately;
 otherwise a detection is applied ``delay_s`` after it was declared (each detection keeps the
@@ -57,7 +58,7 @@ from interfaces.vocabulary import (DEGRADED, FAILED_OFF, HEALTH_NAMES, INHIBITED
                                    refuse_state_word)
 
 from .health import JetHealth
-from .params import Param
+from .params import Param, periods
 
 _ISOLATED = {FAILED_OFF: EV.JET_FAILED_OFF, STUCK_ON: EV.JET_STUCK_ON}     # a jet isolated: its event
 _T_EPS_S = 1e-9          # time comparison slack for "delay elapsed" (float step times)
@@ -66,7 +67,8 @@ _T_EPS_S = 1e-9          # time comparison slack for "delay elapsed" (float step
 _C_FO, _C_ST, _C_DG = 0, 1, 2
 
 JET_MONITOR_PARAMS = [
-    Param("fdir.persist_n", 1, 200, "samples", "consecutive evidence samples to declare a jet fault", integer=True),
+    Param("fdir.persist_s", 1e-3, 4.0, "s", "evidence this long (in consecutive per-period samples, at least one) "
+          "declares a jet fault"),
     Param("fdir.on_threshold", 0.05, 0.95, "-", "commanded off: chamber above this = flow (stuck-on evidence)"),
     Param("fdir.off_threshold", 0.01, 0.9, "-", "below this = no flow (failed-off evidence when commanded on)"),
     Param("fdir.degraded_lo", 0.01, 0.99, "-", "commanded on: lower edge of the partial-pressure band"),
@@ -256,7 +258,7 @@ class Fdir:
         p = self.p
         self._thr = np.array([p["fdir.off_threshold"], p["fdir.on_threshold"],
                               p["fdir.degraded_lo"], p["fdir.degraded_hi"]])
-        self._persist_n = int(p["fdir.persist_n"])
+        self._persist_n = periods(p["fdir.persist_s"], self.dt_s)
         self.delay_s = p["fdir.delay_s"]
 
     def set_param(self, name: str, value: float) -> float:

@@ -35,10 +35,10 @@ from .navigation import Navigation
 from .output import OutputFiller
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
-from .params import Param, ParamRegistry
+from .params import Param, ParamRegistry, periods
 from . import executive
 
-COMMAND_RING = 64      # answers kept for FDIR (1.28 s at 50 Hz): a command held longer is not judged
+COMMAND_RING_S = 1.28   # answers kept for FDIR (64 at 50 Hz, 256 at 200 Hz): a command held longer is not judged
 
 
 def declarations() -> tuple[tuple[str, list[Param]], ...]:
@@ -149,8 +149,9 @@ class FlightSoftware(GroundCommands):
         # the commands this FSW answered frames with, by frame index: FDIR judges each jet by
         # the command the plant reports it held (SENSORS.u_k), which in real time can be an
         # older one than the last sent (a late answer: the plant held the one before)
-        self._sent = np.zeros((COMMAND_RING, self.driver.n), dtype=np.uint8)
-        self._sent_k = np.full(COMMAND_RING, -2, dtype=np.int64)
+        self._ring = periods(COMMAND_RING_S, self.dt_s)
+        self._sent = np.zeros((self._ring, self.driver.n), dtype=np.uint8)
+        self._sent_k = np.full(self._ring, -2, dtype=np.int64)
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self.realtime = realtime
@@ -225,7 +226,7 @@ class FlightSoftware(GroundCommands):
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k); returns u."""
-        i = self.k % COMMAND_RING
+        i = self.k % self._ring
         self._sent[i] = u
         self._sent_k[i] = self.k
         return u
@@ -236,7 +237,7 @@ class FlightSoftware(GroundCommands):
         period as no evidence)."""
         if u_k == -1:
             return self._zero_u
-        i = u_k % COMMAND_RING
+        i = u_k % self._ring
         return self._sent[i] if self._sent_k[i] == u_k else None
 
     def _check_bank_shortfall(self, t_s: float) -> None:

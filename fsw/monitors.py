@@ -5,7 +5,7 @@ How to call it, per control period of the executive:
 - ``tick(t_s, got_frame=False)`` for a period in which no frame arrived at all (the real-
   time executive; in lockstep every tick is a frame and ``tick`` is not needed).
 Each rejected frame and each frameless ``tick`` is a period without fresh data; after
-``fdir.stale_n`` of them in a row the monitor is STALE (``stale`` and
+``fdir.stale_s`` of them in a row (in control periods, at least one) the monitor is STALE (``stale`` and
 ``jets_must_hold_off`` True, ERROR event); the next accepted frame recovers it (NOTICE).
 
 Rejections (the whole frame; counted in ``counts`` under the reason):
@@ -31,7 +31,7 @@ from common.events import EventLog
 from interfaces.event_catalogue import EV, EventDef
 from interfaces.records import SENSORS
 
-from .params import Param, load_params
+from .params import Param, load_params, periods
 
 MARS_RADIUS_M = 3396.2e3   # default only; pass the planet's radius from data/planets
 
@@ -88,7 +88,8 @@ def _frame_kernel(x, lims, n_vec, out):
 
 class SensorMonitor:
     PARAMS = [
-        Param("fdir.stale_n", 1, 1000, "periods", "periods without a fresh frame before STALE", integer=True),
+        Param("fdir.stale_s", 1e-3, 20.0, "s", "no fresh frame this long (whole control periods, at least one) "
+              "-> STALE"),
         Param("fdir.omega_max_radps", 0.01, 100.0, "rad/s", "largest credible |omega|"),
         Param("fdir.sigma_tol", 0.0, 1.0, "-", "|sigma| may exceed 1 by this much"),
         Param("fdir.r_below_m", 0.0, 1e6, "m", "reject |r| this far below the surface"),
@@ -129,7 +130,7 @@ class SensorMonitor:
     def _apply(self) -> None:
         """Limits of the frame checks from the parameters (in place: the kernel reads them)."""
         p, R = self.p, self.radius_m
-        self.stale_n = int(p["fdir.stale_n"])
+        self.stale_n = periods(p["fdir.stale_s"], self.dt_s)
         self._lims[:] = [[0.0, p["fdir.omega_max_radps"]], [0.0, 1.0 + p["fdir.sigma_tol"]],
                          [max(0.0, R - p["fdir.r_below_m"]), R + p["fdir.alt_max_m"]],
                          [0.0, p["fdir.v_max_mps"]], [0.0, p["fdir.accel_max_mps2"]],

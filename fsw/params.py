@@ -21,6 +21,12 @@ from pathlib import Path
 from common.config import FSW_DEFAULTS_FILE, ConfigError, load_toml, unknown_key
 
 
+def periods(duration_s: float, dt_s: float) -> int:
+    """Control periods (at least 1) nearest ``duration_s`` at control period ``dt_s``: how a
+    persistence given in seconds becomes a count of per-period samples at any control rate."""
+    return max(1, int(round(duration_s / dt_s)))
+
+
 @dataclass(frozen=True)
 class Param:
     name: str               # "section.key", e.g. "control.lambda_radps"; <= 16 chars after the dot is MAVLink-friendly

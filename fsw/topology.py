@@ -1,9 +1,10 @@
 """The FSW topology: which function runs in which rate group (docs/fsw/index.md, Executive).
 
-  RG1 (every tick, 50 Hz)  control: frame -> monitors -> FDIR -> nav -> guidance -> SAMI
+  RG1 (every tick: 50 Hz, or the scenario's control rate)
+                           control: frame -> monitors -> FDIR -> nav -> guidance -> SAMI
                                      -> allocator -> jet driver
-  RG2 (every 5th, 10 Hz)   fdir_slow: analytic-redundancy residual
-  RG3 (every 50th, 1 Hz)   entry guidance (mode "npc": predictor-corrector)
+  RG2 (10 Hz: every 5th tick at 50 Hz)   fdir_slow: analytic-redundancy residual
+  RG3 (1 Hz: every 50th tick at 50 Hz)   entry guidance (mode "npc": predictor-corrector)
 Process shells append their own tasks (publish the jet command, ground link) with add().
 The batch runner and the SIL FSW process both fly through this object. It stamps the loop
 timing fields (records.FSW_STATE_SHELL) of the FSW's output record: release, jitter and

@@ -205,7 +205,7 @@ class EV:
     FRAME_OUT_OF_ORDER = _ev(205, "monitor", WARNING, "SENSOR FRAME K {k} OUT OF ORDER",
                              "A sensor frame older than the last accepted was rejected.", 1.0, k=I64)
     SENSORS_STALE = _ev(206, "monitor", ERROR, "SENSORS STALE ({periods} PERIODS): JETS HELD OFF",
-                        "No fresh sensor frame for fdir.stale_n periods: the jets are held off.", periods=U32)
+                        "No fresh sensor frame for fdir.stale_s: the jets are held off.", periods=U32)
     SENSORS_RECOVERED = _ev(207, "monitor", NOTICE, "SENSORS RECOVERED", "Fresh sensor frames again after staleness.")
     CHAMBER_NONFINITE = _ev(208, "monitor", WARNING, "CHAMBER NON-FINITE JET {jet}",
                             "A chamber-pressure sample was not finite; FDIR ignores it.", 1.0, jet=U8)

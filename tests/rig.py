@@ -13,6 +13,7 @@ from contextlib import contextmanager
 import pytest
 
 from common.model import load_scenario
+from fsw.executive import divisors
 from fsw.flightsoftware import FlightSoftware
 from fsw.groundlink import GroundLink
 from gse.client import GroundClient
@@ -71,7 +72,7 @@ class Rig:
     def fly(self, n: int, tick_every: int = 5) -> None:
         """n control cycles; the link ticks every ``tick_every`` (RG2), the fake clock
         advancing by the time that elapsed in simulation."""
-        rg3 = int(self.fsw.params["executive.rg3_divisor"])
+        rg3 = divisors(self.fsw.params, self.fsw.dt_s)[2]
         for _ in range(n):
             u = self.fsw.control_step(self.frame)
             if self.k % rg3 == 0:

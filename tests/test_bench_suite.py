@@ -98,9 +98,26 @@ def test_sil_absent_gives_null_and_reason():
     r = sil.lockstep(True, available=(False, "`ellipsled run` not available"))
     assert r["realtime_factor"] is None and "not available" in r["realtime_factor_reason"]
     rt = sil.realtime(True, available=(False, "nope"))
-    for regime in ("idle", "load"):
+    for regime in ("idle", "load", "footprint"):
         for k in suite.REQUIRED["sil_realtime." + regime]:
             assert rt[regime][k] is None and rt[regime][f"{k}_reason"] == "nope"
+
+
+def test_footprint_sets_the_locked_run_beside_the_unlocked_one():
+    def run(rss_fsw, rss_sim, mode):
+        return {"extra": {"memory": {"fsw": {"vm_rss_kb": rss_fsw, "locked_kb": rss_fsw if mode else 0,
+                                             "mlock_mode": mode},
+                                     "sim": {"vm_rss_kb": rss_sim, "locked_kb": rss_sim if mode else 0,
+                                             "mlock_mode": mode}}}}
+    f = sil.footprint(run(400 * 1024, 300 * 1024, "onfault"), run(380 * 1024, 200 * 1024, None))
+    assert f["fsw_rss_mb"] == 400 and f["fsw_unlocked_rss_mb"] == 380 and f["fsw_locked_mb"] == 400
+    assert f["fsw_ratio"] == pytest.approx(400 / 380) and f["sim_ratio"] == pytest.approx(1.5)
+    rows = sil.footprint_rows({"sil_realtime": {"footprint": f}})
+    assert [r[-1] for r in rows] == ["pass", "**FAIL**"]            # 1.05x and 1.5x against 1.2x
+    assert rows[0][0].startswith("real-time SIL flight software") and "onfault" in rows[0][0]
+    broken = sil.footprint(run(1, 1, "onfault"), {"latency_p50_us": None, "latency_p50_us_reason": "timed out"})
+    assert broken["fsw_unlocked_rss_mb"] is None and broken["fsw_unlocked_rss_mb_reason"] == "timed out"
+    assert [r[-1] for r in sil.footprint_rows({"sil_realtime": {"footprint": broken}})] == ["n/m", "n/m"]
 
 
 @pytest.mark.realtime
@@ -220,3 +237,17 @@ def test_shared_memory_variant_sends_every_frame_through_shared_memory_and_the_d
     assert shm["n"] == n and plain["n"] == n
     assert shm["shm_rx_client"] >= n and shm["shm_rx_echo"] >= n
     assert plain["shm_rx_client"] == 0 and plain["shm_rx_echo"] == 0
+
+
+def test_rate_rows_set_200_hz_beside_50_hz():
+    def run(slips, missed, n, p99):
+        return {"slips": slips, "jitter_p50_us": 1.0, "jitter_p99_us": p99, "jitter_max_us": 50.0,
+                "extra": {"sim_counts": {"missed_commands": missed}, "latency_samples": n,
+                          "fsw_control_us": {"p50": 80.0, "p99": 160.0}}}
+    res = {"sil_realtime": {"idle": run(0, 0, 500, 3.0), "idle_200hz": run(0, 0, 2000, 6.0)}}
+    rows = sil.rate_rows(res)
+    assert rows[0][1] == "0; 0 of 2000" and rows[0][2] == "50 Hz 0; 0 of 500" and rows[0][-1] == "pass"
+    assert rows[1][3].startswith("2.00x")
+    res["sil_realtime"]["idle_200hz"] = run(0, 3, 1997, 6.0)         # three commands missed: fails
+    assert sil.rate_rows(res)[0][-1] == "**FAIL**"
+    assert sil.rate_rows({"sil_realtime": {"idle": run(0, 0, 1, 1.0)}}) == []

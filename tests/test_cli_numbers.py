@@ -41,6 +41,9 @@ BAD = [
     (["fsw", "--frame-wait-us", "-5"], "--frame-wait-us"),
     (["fsw", "--wait-peers", "inf"], "--wait-peers"),
     (["router", "--rt-priority", "0"], "--rt-priority"),
+    *[(["batch", "nominal", "--out", "x", "--dt-control", v], "--dt-control") for v in ("0", "nan", "-0.005", "1")],
+    (["run", "--dt-control", "0"], "--dt-control"),
+    (["report", "--out", "x", "--dt-control", "inf"], "--dt-control"),
     (["pki", "init", "/nonexistent", "--days", "0"], "--days"),
 ]
 
@@ -62,6 +65,24 @@ def test_a_number_outside_its_range_is_a_usage_error_naming_the_option(argv, opt
 ])
 def test_values_within_range_pass(argv):
     cli.build_parser(argv).parse_args(argv)
+
+
+def test_a_control_period_option_flies_the_scenario_at_that_rate_and_is_passed_to_the_nodes():
+    from ellipsled.sil.variant import variant_argv
+    base = prepare("case1")
+    scn = prepare("case1", dt_control_s=0.005)
+    assert scn.dt_control_s == 0.005 and scn.name == "case1-200hz" and scn.substeps == 1
+    assert scn.faults == base.faults and scn.max_duration_s == base.max_duration_s
+    same = prepare("case1", dt_control_s=0.02)                     # the scenario's own period: unchanged
+    assert same.name == base.name and same.dt_control_s == base.dt_control_s
+    with pytest.raises(ConfigError, match="integrator steps"):
+        prepare("case1", dt_control_s=0.0075)                       # not a whole number of 5-ms steps
+    argv = ["run", "case1", "--dt-control", "0.005"]
+    a = cli.build_parser(argv).parse_args(argv)
+    assert variant_argv(a) == ["--dt-control", "0.005"]
+    node = ["fsw", "case1", *variant_argv(a)]
+    n = cli.build_parser(node).parse_args(node)
+    assert prepare(n.scenario, dt_control_s=n.dt_control).dt_control_s == 0.005
 
 
 def test_a_huge_duration_ends_with_a_usage_error_not_a_traceback(tmp_path):

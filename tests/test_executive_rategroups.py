@@ -292,3 +292,17 @@ def test_own_slips_keeps_overruns_and_heavy_late_releases_up_to_the_plants_last_
             {"k": 3015, "cause": "overrun", "tasks_us": {"groundlink": 16700.0}}]    # the plant had gone
     assert [r["k"] for r in own_slips(recs, 20000.0)] == [10, 12, 3015]
     assert [r["k"] for r in own_slips(recs, 20000.0, last_k=3000)] == [10, 12]
+
+
+def test_rate_group_periods_are_seconds_whatever_the_control_rate():
+    from fsw.executive import divisors, rate_divisor
+    p = load_params(PARAMS)
+    assert divisors(p, 0.02) == (1, 5, 50)              # 10 Hz and 1 Hz at 50 Hz ...
+    assert divisors(p, 0.005) == (1, 20, 200)           # ... and at 200 Hz
+    assert divisors(p, 0.01) == (1, 10, 100)
+    with pytest.raises(ValueError, match="rg2_period_s = 0.1 s is not a whole number"):
+        divisors(p, 0.03)
+    with pytest.raises(ValueError, match="not a whole number"):
+        rate_divisor(0.001, 0.005)                       # shorter than a control period
+    ex = Executive.from_params(p, 5_000_000, LockstepClock())
+    assert ex.divisors == (1, 20, 200)

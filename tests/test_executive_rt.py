@@ -46,10 +46,80 @@ def test_apply_report_matches_what_the_kernel_says():
     assert rep["sched_fifo"] is True and r["policy"] == 1
     assert rep["priority"] == 10 == r["rt_priority"]
     assert rep["affinity"] == [0] and r["cpus_allowed"] == "0"
-    assert rep["mlockall"] is True and r["vmlck_kb"] > 1000      # the whole image is locked
+    # on-fault locking: the pages in use are locked (resident and flagged locked)
+    assert rep["mlockall"] is True and rep["mlock_mode"] == "onfault" and r["vmlck_kb"] > 1000
+    assert rep["memory"]["locked_kb"] > 1000
     assert rep["timer_slack_ns"] in (0, 1) and rep["messages"] == []     # 0: FIFO threads have none
     assert r["env"]["numpy_was_imported"] is False and r["omp"] == "1" and r["numba_threads"] == 1
     assert r["gc"]["enabled"] is False and r["gc"]["frozen"] > 0
+
+
+FOOTPRINT_CHILD = r"""
+import json
+from common import rt
+rt.single_threaded_numerics()
+import numpy as np
+rep = rt.apply(lock_memory=True, timer_slack_ns=None)
+m0 = rt.memory_status()
+a = np.zeros(200 << 17)                  # 200 MiB, never touched
+m1 = rt.memory_status()
+touched = rt.prefault(a)
+m2 = rt.memory_status()
+a[:] = 1.0
+print(json.dumps({"mode": rep["mlock_mode"], "m0": m0, "m1": m1, "m2": m2, "touched": touched,
+                  "sum": float(a[::4096].sum())}))
+"""
+
+
+@pytest.mark.skipif(not _can_rt(), reason="needs root (CAP_IPC_LOCK)")
+def test_memory_is_locked_as_it_is_touched_not_as_it_is_mapped():
+    """A mapping the process never touches costs no RAM under its locking (a whole-image
+    lock would populate these 200 MiB at once); prefault makes the array resident and locked."""
+    out = subprocess.run([sys.executable, "-c", FOOTPRINT_CHILD], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    mib = 1024
+    assert r["mode"] == "onfault"
+    assert r["m1"]["vm_lck_kb"] - r["m0"]["vm_lck_kb"] >= 200 * mib          # mapped and flagged locked
+    assert r["m1"]["vm_rss_kb"] - r["m0"]["vm_rss_kb"] < 20 * mib             # but not resident
+    assert r["m2"]["vm_rss_kb"] - r["m1"]["vm_rss_kb"] >= 195 * mib           # prefault: resident
+    assert r["m2"]["locked_kb"] - r["m1"]["locked_kb"] >= 195 * mib           # and locked
+    assert r["touched"] == 200 << 20
+
+
+def test_prefault_keeps_the_values_and_refuses_a_strided_view():
+    import numpy as np
+    a = np.arange(3 * 5000, dtype=np.float64).reshape(3, 5000)
+    before = a.copy()
+    assert rt.prefault(a, np.zeros(0), None) == a.nbytes
+    assert np.array_equal(a, before)
+    with pytest.raises(ValueError, match="not contiguous"):
+        rt.prefault(a[:, ::2])
+
+
+def test_without_on_fault_locking_the_whole_image_is_locked_and_said(monkeypatch):
+    calls = []
+
+    def old_kernel(flags):
+        calls.append(flags)
+        if flags & rt.MCL_ONFAULT:
+            return False, "mlockall: Invalid argument (errno 22)"
+        return True, ""
+    monkeypatch.setattr(rt, "_mlockall", old_kernel)
+    mode, msgs = rt.lock_touched()
+    assert mode == "all" and calls == [rt.MCL_CURRENT | rt.MCL_FUTURE | rt.MCL_ONFAULT,
+                                       rt.MCL_CURRENT | rt.MCL_FUTURE]
+    assert len(msgs) == 1 and "whole address space" in msgs[0]
+    monkeypatch.setattr(rt, "_mlockall", lambda flags: (False, "mlockall: Operation not permitted (errno 1)"))
+    assert rt.lock_touched() == (None, ["memory not locked: mlockall: Operation not permitted (errno 1)"])
+
+
+def test_memory_status_reads_this_process():
+    m = rt.memory_status()
+    assert m["vm_rss_kb"] > 1000 and m["vm_hwm_kb"] >= m["vm_rss_kb"] and m["threads"] >= 1
+    assert m["locked_kb"] is not None and m["locked_kb"] <= m["vm_rss_kb"]
+    assert rt.memory_status(pid=2**22 + 1) == {}          # beyond pid_max: no such process
 
 
 def test_refused_steps_fall_back_and_say_so(monkeypatch):

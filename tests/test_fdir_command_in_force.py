@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from common.model import load_scenario
-from fsw.flightsoftware import COMMAND_RING, FlightSoftware
+from fsw.flightsoftware import COMMAND_RING_S, FlightSoftware
 from sim.plant import Plant
 
 STEPS = 1500           # 30 s at 50 Hz, the first minute's firing from the initial transient
@@ -60,12 +60,15 @@ def test_the_same_flight_judged_by_the_last_command_sent_does_raise_false_alarms
     assert late > 200 and det > 0
 
 
-def test_a_command_older_than_the_ring_is_no_evidence():
-    scn = load_scenario("nominal")
+@pytest.mark.parametrize("dt_s, ring", [(0.02, 64), (0.005, 256)])
+def test_a_command_older_than_the_ring_is_no_evidence(dt_s, ring):
+    """The ring keeps the same time of answers at any control rate."""
+    scn = load_scenario("nominal").with_(dt_control_s=dt_s)
     plant, fsw = Plant(scn, seed=1), FlightSoftware(scn)
     try:
+        assert round(COMMAND_RING_S / dt_s) == ring == len(fsw._sent_k)
         frame = plant.sensors
-        for k in range(COMMAND_RING + 5):
+        for k in range(ring + 5):
             u = fsw.control_step(frame).copy()
             frame = plant.step(u, u_k=k)
         frame["u_k"] = 0                     # the answer to frame 0: overwritten in the ring

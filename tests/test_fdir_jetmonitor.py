@@ -26,7 +26,7 @@ def params(**over):
     return p
 
 
-PERSIST = int(params()["fdir.persist_n"])
+PERSIST = int(round(params()["fdir.persist_s"] / DT))
 
 
 def plant_chamber(u, kind, eta, active, rng):
@@ -351,14 +351,14 @@ def test_bad_shapes_and_params_raise():
         fdir.update(0.0, np.zeros(18, dtype=np.uint8), np.zeros((18, 1)))
     with pytest.raises(ValueError, match="degraded_lo"):
         Fdir(params(off_threshold=0.3, degraded_lo=0.2), DT, EventLog())
-    with pytest.raises(ValueError, match="persist_n"):
-        Fdir(params(persist_n=2.5), DT, EventLog())
+    with pytest.raises(ValueError, match="persist_s"):
+        Fdir(params(persist_s=0.0), DT, EventLog())
     with pytest.raises(ValueError, match="dt_s"):
         Fdir(params(), 0.0, EventLog())
     with pytest.raises(ValueError):
         fdir.set_param("fdir.degraded_hi", 0.1)             # below degraded_lo
     assert fdir.p["fdir.degraded_hi"] == params()["fdir.degraded_hi"]
-    assert fdir.set_param("fdir.persist_n", 8) == 8
+    assert fdir.set_param("fdir.persist_s", 0.16) == 0.16 and fdir._persist_n == round(0.16 / DT)
     with pytest.raises(ValueError):
         fdir.set_param("fdir.nope", 1.0)
 
@@ -407,3 +407,9 @@ def test_every_key_in_the_defaults_file_is_declared_by_one_owner():
     assert len(declared) == len(set(declared))
     in_file = {f"{section}.{key}" for section, tbl in load_toml(DEFAULT_FILE).items() for key in tbl}
     assert in_file == set(declared)
+
+
+def test_persistence_is_a_time_whatever_the_control_rate():
+    assert Fdir(params(), 0.02, EventLog())._persist_n == 5          # 0.1 s at 50 Hz
+    assert Fdir(params(), 0.005, EventLog())._persist_n == 20        # ... and at 200 Hz
+    assert Fdir(params(persist_s=0.001), 0.005, EventLog())._persist_n == 1     # never below one sample

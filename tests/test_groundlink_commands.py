@@ -210,10 +210,10 @@ def test_a_command_whose_handler_raises_is_answered_failed_with_a_statustext(rig
 def test_a_parameter_whose_owner_fails_keeps_its_value_and_says_so(rig, monkeypatch):
     def broken(name, value):
         raise RuntimeError("owner fault")
-    monkeypatch.setitem(rig.fsw.registry._hooks, "fdir.stale_n", broken)
-    before = rig.fsw.params["fdir.stale_n"]
-    rig.gcs.start(make_request("param", "set", "F_STALE_N", "7"))
-    assert rig.exchange(lambda: "F_STALE_N" in rig.gcs.state.params)
-    assert rig.gcs.state.params["F_STALE_N"] == before                # echo: the unchanged value
-    assert rig.fsw.params["fdir.stale_n"] == before
-    assert any("F_STALE_N FAILED: RuntimeError" in t for t in rig.texts())
+    monkeypatch.setitem(rig.fsw.registry._hooks, "fdir.stale_s", broken)
+    before = rig.fsw.params["fdir.stale_s"]
+    rig.gcs.start(make_request("param", "set", "F_STALE_S", "0.14"))
+    assert rig.exchange(lambda: "F_STALE_S" in rig.gcs.state.params)
+    assert rig.gcs.state.params["F_STALE_S"] == pytest.approx(before)  # echo (float32): the unchanged value
+    assert rig.fsw.params["fdir.stale_s"] == before
+    assert any("F_STALE_S FAILED: RuntimeError" in t for t in rig.texts())

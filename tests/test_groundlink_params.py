@@ -48,10 +48,10 @@ STABLE_IDS = {
     "fdir.accel_max_mps2": "F_ACCEL_MAX_MPS2", "fdir.alt_max_m": "F_ALT_MAX_M", "fdir.chamber_hi": "F_CHAMBER_HI",
     "fdir.chamber_lo": "F_CHAMBER_LO", "fdir.degraded_hi": "F_DEGRADED_HI", "fdir.degraded_lo": "F_DEGRADED_LO",
     "fdir.delay_s": "F_DELAY_S", "fdir.off_threshold": "F_OFF_THRESHOLD", "fdir.omega_max_radps": "F_OMEGA_MAX_RADP",
-    "fdir.on_threshold": "F_ON_THRESHOLD", "fdir.persist_n": "F_PERSIST_N", "fdir.r_below_m": "F_R_BELOW_M",
+    "fdir.on_threshold": "F_ON_THRESHOLD", "fdir.persist_s": "F_PERSIST_S", "fdir.r_below_m": "F_R_BELOW_M",
     "fdir.res_persist_s": "F_RES_PERSIST_S", "fdir.res_rel": "F_RES_REL", "fdir.res_tau_s": "F_RES_TAU_S",
     "fdir.res_thr_Nm": "F_RES_THR_NM", "fdir.safe_track_deg": "F_SAFE_TRACK_DEG",
-    "fdir.safe_track_s": "F_SAFE_TRACK_S", "fdir.sigma_tol": "F_SIGMA_TOL", "fdir.stale_n": "F_STALE_N",
+    "fdir.safe_track_s": "F_SAFE_TRACK_S", "fdir.sigma_tol": "F_SIGMA_TOL", "fdir.stale_s": "F_STALE_S",
     "fdir.v_max_mps": "F_V_MAX_MPS", "guidance.authority_use": "G_AUTHORITY_USE",
     "guidance.trim_max_deg": "G_TRIM_MAX_DEG",
     "npc.bank_final_deg": "N_BANK_FINAL_DEG", "npc.bank_max_deg": "N_BANK_MAX_DEG",
@@ -99,7 +99,7 @@ def test_param_list_returns_every_ground_settable_parameter_with_its_value(rig):
     assert rig.gcs.state.param_count == n
     for name, pid in ids.items():
         assert got[pid] == f32(rig.fsw.params[name]), name
-    assert "X_RG2_DIVISOR" not in got                 # not ground-settable: not listed
+    assert "X_RG2_PERIOD_S" not in got                 # not ground-settable: not listed
 
 
 def test_param_read_by_id_and_by_index(rig):
@@ -117,8 +117,8 @@ def test_param_read_by_id_and_by_index(rig):
 def test_param_set_within_bounds_changes_the_fsw(rig):
     v = _set_and_wait(rig, "C_LAMBDA_RADPS", 1.25)
     assert v == 1.25 and rig.fsw.params["control.lambda_radps"] == 1.25
-    v = _set_and_wait(rig, "F_PERSIST_N", 7)
-    assert v == 7 and rig.fsw.fdir._persist_n == 7
+    v = _set_and_wait(rig, "F_PERSIST_S", 0.14)
+    assert v == pytest.approx(0.14) and rig.fsw.fdir._persist_n == 7      # 0.14 s at 50 Hz
     v = _set_and_wait(rig, "A_FAULT_TOLERANC", 0)
     assert v == 0 and rig.fsw.allocator.fault_tolerance is False
 
@@ -135,7 +135,7 @@ def _set_and_wait(rig, pid, value):
     ("C_LAMBDA_RADPS", "control.lambda_radps", 0.0, "outside"),           # lo 0.05
     ("C_LAMBDA_RADPS", "control.lambda_radps", float("nan"), "finite"),
     ("C_LAMBDA_RADPS", "control.lambda_radps", float("inf"), "finite"),
-    ("F_PERSIST_N", "fdir.persist_n", 2.5, "integer"),
+    ("D_ARM_ON_ENTRY", "driver.arm_on_entry", 0.5, "integer"),
     ("F_DEGRADED_HI", "fdir.degraded_hi", 0.1, "degraded_lo"),            # consistency with degraded_lo
     ("N_BANK_MAX_DEG", "npc.bank_max_deg", 100.0, "not flown in mode profile"),   # case1: no npc
     ("N_K_MAX", "npc.k_max", 0.5, "outside"),                                 # bounds hold in any mode
@@ -169,12 +169,12 @@ def test_npc_bounds_must_stay_ordered_and_a_set_applies_at_the_next_guidance_cyc
 
 
 def test_unknown_and_not_settable_ids_get_no_value_but_a_statustext(rig):
-    rig.gcs.send(mav.MAVLink_param_set_message(1, 1, b"X_RG2_DIVISOR", 3, mav.MAV_PARAM_TYPE_REAL32))
+    rig.gcs.send(mav.MAVLink_param_set_message(1, 1, b"X_RG2_PERIOD_S", 3, mav.MAV_PARAM_TYPE_REAL32))
     rig.gcs.send(mav.MAVLink_param_set_message(1, 1, b"NO_SUCH_PARAM", 3, mav.MAV_PARAM_TYPE_REAL32))
     texts = [t for t in rig.texts() if "UNKNOWN" in t]
-    assert "PARAM X_RG2_DIVISOR UNKNOWN" in texts and "PARAM NO_SUCH_PARAM UNKNOWN" in texts
+    assert "PARAM X_RG2_PERIOD_S UNKNOWN" in texts and "PARAM NO_SUCH_PARAM UNKNOWN" in texts
     assert "PARAM_VALUE" not in rig.gcs.state.latest
-    assert rig.fsw.params["executive.rg2_divisor"] == 5
+    assert rig.fsw.params["executive.rg2_period_s"] == 0.1
 
 
 def test_unsigned_param_set_is_rejected_but_unsigned_reads_are_answered(rig):

@@ -133,8 +133,8 @@ def test_params_loaded_by_default_and_validated():
     assert m.stale_n == 3
     from fsw.params import load_params
     p = load_params(SensorMonitor.PARAMS)
-    p["fdir.stale_n"] = 0
-    with pytest.raises(ValueError, match="stale_n"):
+    p["fdir.stale_s"] = 0
+    with pytest.raises(ValueError, match="stale_s"):
         SensorMonitor(EventLog(), DT, p)
     with pytest.raises(ValueError, match="dt_s"):
         SensorMonitor(EventLog(), -1.0)
@@ -179,3 +179,8 @@ def test_a_record_made_read_only_or_reshaped_is_rejected_untouched():
     fill(f, 2)
     f.shape = (1,)
     assert not m.check(2 * DT, f) and m.counts["format"] == 2
+
+
+def test_stale_after_the_same_time_at_any_control_rate():
+    assert SensorMonitor(EventLog(), 0.02).stale_n == 3              # 0.06 s at 50 Hz
+    assert SensorMonitor(EventLog(), 0.005).stale_n == 12            # ... and at 200 Hz

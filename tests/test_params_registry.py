@@ -32,8 +32,8 @@ def test_a_refused_set_changes_neither_the_value_nor_the_owner():
             fsw.set_param("fdir.degraded_hi", lo)                  # in bounds, inconsistent with its sibling
         assert fsw.params["fdir.degraded_hi"] == fsw.fdir.p["fdir.degraded_hi"] == 0.93
         with pytest.raises(ValueError, match="not settable in flight"):
-            fsw.set_param("executive.rg2_divisor", 2)
-        assert fsw.set_param("fdir.stale_n", 9) == 9 and fsw.monitor.stale_n == 9
+            fsw.set_param("executive.rg2_period_s", 0.2)
+        assert fsw.set_param("fdir.stale_s", 0.18) == 0.18 and fsw.monitor.stale_n == 9
     finally:
         fsw.close()
 
@@ -45,5 +45,5 @@ def test_every_parameter_is_described_for_a_ground_station():
         "name": "fdir.omega_max_radps", "param_id": "F_OMEGA_MAX_RADP", "owner": "SensorMonitor", "unit": "rad/s",
         "min": 0.01, "max": 100.0, "choices": None, "integer": False, "ground_settable": True, "default": 2.0,
         "description": "largest credible |omega|"}
-    assert by_name["executive.rg2_divisor"]["param_id"] is None
+    assert by_name["executive.rg2_period_s"]["param_id"] is None
     assert all(r["description"] for r in rows)

@@ -363,7 +363,7 @@ CASES = [
     Case("allocator.fault_tolerance", 0.0, jet_pulses_after(JET), ">",
          setup=ground(("mark", str(JET), "failed_off"))),
     # FDIR jet monitor (faults injected in the plant from the ground, or a transducer offset)
-    Case("fdir.persist_n", 200, detection_of(JET, "stuck_on", n=150), "==", ("none", "stuck_on")),
+    Case("fdir.persist_s", 4.0, detection_of(JET, "stuck_on", n=150), "==", ("none", "stuck_on")),
     Case("fdir.on_threshold", 0.25, detection_of(JET), "==", ("stuck_on", "none"),
          setup=offset_chamber(JET, 0.3)),
     Case("fdir.off_threshold", 0.1, detection_of(JET, "degraded", "0.15"), "==", ("none", "failed_off")),
@@ -383,7 +383,7 @@ CASES = [
          setup=ground(("param", "fdir.res_thr_Nm", 0.0))),
     Case("fdir.res_tau_s", 0.0, residual_variation, ">"),
     # sensor-frame monitor
-    Case("fdir.stale_n", 10, withhold(5), "==", (False, True)),
+    Case("fdir.stale_s", 0.2, withhold(5), "==", (False, True)),
     Case("fdir.omega_max_radps", 0.02, rejected("range"), "==", (True, False)),
     Case("fdir.sigma_tol", 0.1, rejected("range"), "==", (False, True),
          setup=corrupt_once("sigma_BN", lambda s: s / np.linalg.norm(s) * 1.05)),

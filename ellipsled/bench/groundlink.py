@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from common.model import load_scenario
+from fsw.executive import divisors
 from fsw.flightsoftware import FlightSoftware
 from fsw.groundlink import GroundLink
 from interfaces.mavlink import dialect as mav
@@ -79,7 +80,7 @@ def _at_rate(hz: int, quick: bool) -> dict:
     clock = _Clock()
     gl = GroundLink(fsw, SigningKey.generate(), gcs=f"udp:127.0.0.1:{sink.getsockname()[1]}",
                     bind="udp:127.0.0.1:0", clock=clock)
-    divisor = int(fsw.params["executive.rg2_divisor"])
+    divisor = divisors(fsw.params, scn.dt_control_s)[1]
     tick_s = divisor * scn.dt_control_s
     per_tick = _flood_datagrams(max(1, round(FLOOD_PER_S * tick_s)))
     frame = plant.sensors

@@ -3,7 +3,13 @@
 - lockstep, multi-process over Zenoh, a full nominal entry: simulated time / wall time
   (``summary.json`` and ``sil.json`` realtime_factor; target ≥ 20×);
 - real time at 50 Hz, idle and with ``stress-ng --cpu 2``: sensor-to-actuator latency and
-  release jitter p50/p99/max, cycle slips (``sil.json``).
+  release jitter p50/p99/max, cycle slips (``sil.json``);
+- footprint: each real-time process's resident memory with its memory locked (the idle run)
+  beside the same run with ``--no-rt`` (nothing locked), from ``sil.json``'s ``memory``
+  (target: locked resident <= 1.2x unlocked);
+- rate headroom: the idle run again at a 5-ms control period (``--dt-control 0.005``, 200 Hz)
+  beside the 50-Hz one: cycle slips, release jitter, commands the plant missed, the control
+  task (target: 0 slips, every command answered).
 
 ``ellipsled run <scenario> --lockstep|--realtime --duration S --out DIR --rerun none`` is
 called as a subprocess with a timeout. When the command is absent or fails, every figure
@@ -26,6 +32,9 @@ from .rows import NO_TARGET, Row, fmt, g, ratio, row, speed
 
 LOCKSTEP_TARGETS = {"realtime_factor_min": 20.0}
 REALTIME_TARGETS = {"latency_p99_us_max": 1000.0, "latency_over_udp_p99_max": 3.0, "slips": 0}   # jitter: as the in-process loop (jitter.py)
+FOOTPRINT_TARGETS = {"locked_over_unlocked_rss_max": 1.2}
+FOOTPRINT_KEYS = ("fsw_rss_mb", "fsw_unlocked_rss_mb", "fsw_locked_mb", "sim_rss_mb", "sim_unlocked_rss_mb",
+                  "sim_locked_mb")
 SIL_KEYS = ("realtime_factor", "latency_p50_us", "latency_p99_us", "jitter_p50_us", "jitter_p99_us",
             "jitter_max_us", "slips")
 
@@ -100,7 +109,8 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
     from .jitter import background_load, ensure_tools
     ok, why = available or run_command_available()
     if not ok:
-        return {"idle": _nulls(SIL_KEYS[1:], why), "load": _nulls(SIL_KEYS[1:], why)}
+        return {"idle": _nulls(SIL_KEYS[1:], why), "load": _nulls(SIL_KEYS[1:], why),
+                "footprint": _nulls(FOOTPRINT_KEYS, why)}
     dur = 10.0 if quick else 60.0
 
     def one(extra=()) -> dict:
@@ -122,7 +132,12 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
     res = {"figure": "real-time SIL at 50 Hz: sensor-to-actuator latency and release jitter [us]",
            "idle": one(),
            # the standard transport instead of the default low-latency one
-           "idle_standard_transport": one(("--no-zenoh-lowlatency",))}
+           "idle_standard_transport": one(("--no-zenoh-lowlatency",)),
+           # the footprint's baseline: the same run with nothing locked (nor SCHED_FIFO)
+           "idle_unlocked": one(("--no-rt",)),
+           # rate headroom: the same run at 200 Hz
+           "idle_200hz": one(("--dt-control", "0.005"))}
+    res["footprint"] = footprint(res["idle"], res["idle_unlocked"])
     tools_ok, tools_why = ensure_tools()
     if not tools_ok:
         res["load"] = _nulls(SIL_KEYS[1:], f"no background load: {tools_why}")
@@ -135,6 +150,77 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
             res["load"] = _nulls(SIL_KEYS[1:], f"background load failed: {type(e).__name__}: {e}")
     res["targets"] = dict(REALTIME_TARGETS)
     return res
+
+
+def footprint(locked: dict, unlocked: dict) -> dict:
+    """Each process's resident memory at the end of the locked run beside the unlocked one's
+    [MB]: {role}_rss_mb, {role}_unlocked_rss_mb, {role}_locked_mb (resident and locked),
+    {role}_ratio, {role}_mlock_mode; null with a reason where a run wrote no figure."""
+    out = {"figure": "real-time SIL resident memory at the end of the run, memory locked (--rt) and "
+                     "not (--no-rt) [MB]"}
+    for role in ("fsw", "sim"):
+        m = g(locked, "extra", "memory", role) or {}
+        u = g(unlocked, "extra", "memory", role) or {}
+        mb = lambda kb: None if kb is None else kb / 1024       # noqa: E731
+        out[f"{role}_rss_mb"] = mb(m.get("vm_rss_kb"))
+        out[f"{role}_locked_mb"] = mb(m.get("locked_kb"))
+        out[f"{role}_unlocked_rss_mb"] = mb(u.get("vm_rss_kb"))
+        out[f"{role}_mlock_mode"] = m.get("mlock_mode")
+        out[f"{role}_ratio"] = ratio(out[f"{role}_rss_mb"], out[f"{role}_unlocked_rss_mb"])
+        for k, run in ((f"{role}_rss_mb", locked), (f"{role}_locked_mb", locked), (f"{role}_unlocked_rss_mb", unlocked)):
+            if out[k] is None:
+                out[f"{k}_reason"] = next((v for kk, v in run.items() if kk.endswith("_reason")),
+                                          "no memory figures in sil.json")
+    out["targets"] = dict(FOOTPRINT_TARGETS)
+    return out
+
+
+RATE_TARGETS = {"slips": 0, "missed_commands": 0}
+
+
+def rate_rows(res: dict) -> list[Row]:
+    """The idle run at 200 Hz beside the same run at 50 Hz."""
+    fast, base = g(res, "sil_realtime", "idle_200hz") or {}, g(res, "sil_realtime", "idle") or {}
+    if not fast:
+        return []
+
+    def missed(s):
+        return g(s, "extra", "sim_counts", "missed_commands")
+
+    def ctl(s, q):
+        return g(s, "extra", "fsw_control_us", q)
+
+    def answered(s):
+        n, m = g(s, "extra", "latency_samples"), missed(s)
+        return None if n is None or m is None else f"{m} of {n + m}"
+    return [
+        row("real-time SIL at 200 Hz: cycle slips; commands missed", f"{fmt(fast.get('slips'))}; {answered(fast) or 'n/m'}",
+            f"50 Hz {fmt(base.get('slips'))}; {answered(base) or 'n/m'}", "", "0; 0",
+            None if fast.get("slips") is None or missed(fast) is None
+            else fast["slips"] == RATE_TARGETS["slips"] and missed(fast) == RATE_TARGETS["missed_commands"]),
+        row("real-time SIL at 200 Hz: release jitter p50 / p99 / max [us]",
+            f"{fmt(fast.get('jitter_p50_us'))} / {fmt(fast.get('jitter_p99_us'))} / {fmt(fast.get('jitter_max_us'))}",
+            f"50 Hz {fmt(base.get('jitter_p50_us'))} / {fmt(base.get('jitter_p99_us'))} / {fmt(base.get('jitter_max_us'))}",
+            f"{fmt(ratio(fast.get('jitter_p99_us'), base.get('jitter_p99_us')))}x (p99)", "", NO_TARGET),
+        row("real-time SIL at 200 Hz: control task p50 / p99 [us]", f"{fmt(ctl(fast, 'p50'))} / {fmt(ctl(fast, 'p99'))}",
+            f"50 Hz {fmt(ctl(base, 'p50'))} / {fmt(ctl(base, 'p99'))}",
+            f"{fmt(ratio(ctl(fast, 'p99'), ctl(base, 'p99')))}x (p99)", "", NO_TARGET),
+    ]
+
+
+def footprint_rows(res: dict) -> list[Row]:
+    f = g(res, "sil_realtime", "footprint") or {}
+    if not f:
+        return []
+    k = FOOTPRINT_TARGETS["locked_over_unlocked_rss_max"]
+    R = []
+    for role, name in (("fsw", "flight software"), ("sim", "plant")):
+        r = f.get(f"{role}_ratio")
+        R.append(row(f"real-time SIL {name} resident / locked [MB] ({f.get(f'{role}_mlock_mode') or 'not locked'})",
+                     f"{fmt(f.get(f'{role}_rss_mb'))} / {fmt(f.get(f'{role}_locked_mb'))}",
+                     f"unlocked (--no-rt) {fmt(f.get(f'{role}_unlocked_rss_mb'))}", f"{fmt(r)}x",
+                     f"<= {k:g}x unlocked", None if r is None else r <= k))
+    return R
 
 
 def lockstep_rows(res: dict) -> list[Row]:
@@ -188,6 +274,8 @@ def realtime_rows(res: dict) -> list[Row]:
         R.append(row(f"real-time SIL cycle slips {regime} ({fmt(s.get('duration_s'))} s)", fmt(s.get("slips")), "", "",
                      f"{slips}", None if s.get("slips") is None else s.get("slips") == slips))
         R += latency_rows(res, regime, s)
+        if regime == "idle":
+            R += footprint_rows(res) + rate_rows(res)
     s = g(res, "sil_realtime", "idle_standard_transport") or {}
     if s:
         low = g(res, "sil_realtime", "idle", "latency_p99_us")

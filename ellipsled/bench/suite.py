@@ -49,6 +49,8 @@ REQUIRED: dict[str, tuple[str, ...]] = {
                           "jitter_max_us", "slips"),
     "sil_realtime.load": ("latency_p50_us", "latency_p99_us", "jitter_p50_us", "jitter_p99_us",
                           "jitter_max_us", "slips"),
+    "sil_realtime.footprint": ("fsw_rss_mb", "fsw_unlocked_rss_mb", "fsw_locked_mb", "sim_rss_mb",
+                               "sim_unlocked_rss_mb", "sim_locked_mb"),
     "sil_router": ("p50_us", "p99_us", "baseline_p50_us", "baseline_p99_us"),
     "flood": ("flood_compute_p99_us", "flood_compute_max_us", "flood_groundlink_p99_us", "flood_groundlink_max_us",
               "flood_slips", "flood_state_changes", "flood_peers_added", "flood_fdir_latency_max_s",

@@ -351,6 +351,8 @@ class FswNode:
 
     def run(self) -> int:
         a = self.args
+        if a.mode == "realtime":    # the arrays the loop fills: no first-touch page fault in flight
+            rt.prefault(self.history.truth_rows, self.history.fsw_rows, self.jitter_ns, self.frame_age_ns)
         rt.gc_out_of_cycle()
         say(ROLE, f"{self.scn.name}, {a.mode}; waiting for the plant")
         if not transport.wait_for_alive(self.session, self.K.alive_sim, a.wait_peers):
@@ -361,6 +363,7 @@ class FswNode:
         elif not transport.wait_for_subscriber(self.pub_jets, a.wait_peers):
             say(ROLE, f"the plant has not subscribed to the jet commands within {a.wait_peers:g} s")
         (self.run_realtime if a.mode == "realtime" else self.run_lockstep)()
+        self.memory = rt.memory_status()        # at the end of the flight, before writing the records
         self.write()
         return 0
 
@@ -381,7 +384,7 @@ class FswNode:
             "monitor_counts": dict(self.fsw.monitor.counts), "answers_repeated": self.answers_repeated,
             "event_log": [{"t_s": e.t_s, "severity": e.severity.name, "source": e.source, "code": e.code,
                            "text": e.text} for e in self.events.history],
-            "rt": self.rt_report,
+            "rt": self.rt_report, "memory": getattr(self, "memory", None),
             "ground_link": (dict(self.link.stats) if self.link is not None and hasattr(self.link, "stats") else None),
             "ground_link_tick": (self.link.budget.report() if self.link is not None and hasattr(self.link, "budget")
                                  else None),

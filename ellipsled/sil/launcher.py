@@ -289,7 +289,10 @@ class Launcher:
                "jitter_max_us": fsw_info["jitter_max_us"], "slips": fsw_info["cycle_slips"],
                "sim_counts": sim_info["counts"], "sim_rejects": sim_info["rejects"],
                "fsw_sensor_rejects": fsw_info["sensor_rejects"], "end_reason": sim_info["end_reason"],
-               "message": sim_info["message"], "rt": fsw_info.get("rt")}
+               "message": sim_info["message"], "rt": fsw_info.get("rt"), "sim_rt": sim_info.get("rt"),
+               # each process's memory at the end of its flight (VmRSS resident, VmLck locked, VmHWM
+               # peak), with how it was locked: compare with the same run under --no-rt (unlocked)
+               "memory": {"fsw": _memory(fsw_info), "sim": _memory(sim_info)}}
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         (self.out / "sil.json").write_text(json.dumps(sil, indent=2) + "\n")
         h.save(self.out / "history.npz")
@@ -302,9 +305,22 @@ class Launcher:
             print(f"  real time: latency p50 {f(sil['latency_p50_us'])} us p99 {f(sil['latency_p99_us'])} us;"
                   f" release jitter p50 {f(sil['jitter_p50_us'])} us p99 {f(sil['jitter_p99_us'])} us"
                   f" max {f(sil['jitter_max_us'])} us; slips {sil['slips']}")
+            mem = sil["memory"]
+            print("  memory: " + "; ".join(
+                f"{role} resident {m['vm_rss_kb'] / 1024:.0f} MB (peak {m['vm_hwm_kb'] / 1024:.0f}), "
+                f"locked {(m['locked_kb'] or 0) / 1024:.0f} MB ({m['mlock_mode'] or 'not locked'})"
+                for role, m in mem.items() if m))
         print(files_written(self.out))
         return exit_code(summary["end_reason"])
 
+
+def _memory(info: dict) -> dict | None:
+    """A node report's memory figures (rt.memory_status) with its locking mode."""
+    mem = info.get("memory")
+    if mem is None:
+        return None
+    rt_rep = info.get("rt") or {}
+    return {**mem, "mlock_mode": rt_rep.get("mlock_mode")}
 
 
 def main(args) -> int:

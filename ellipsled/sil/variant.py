@@ -10,6 +10,7 @@ from pathlib import Path
 from common.config import ConfigError
 from common.model import Scenario, load_scenario
 
+from . import argtypes
 from .history import budget_refusal
 
 IDENTIFICATION = ("detect", "oracle")     # fdir.mode: the product's FDIR, or the test mode's fault log
@@ -22,11 +23,22 @@ def _with_fsw(scn: Scenario, section: str, key: str, value, suffix: str) -> Scen
 
 
 def prepare(scenario: Scenario | str, ft_off: bool = False, duration_s: float | None = None,
-            identification: str | None = None, initial_error: bool = True) -> Scenario:
+            identification: str | None = None, initial_error: bool = True,
+            dt_control_s: float | None = None) -> Scenario:
     """The scenario with the run's command-line changes applied: fault tolerance off,
-    duration, identification mode (None: the scenario's), and ``initial_error=False``: the
-    bank starts on the reference (no initial bank error)."""
+    duration, identification mode (None: the scenario's), ``initial_error=False``: the
+    bank starts on the reference (no initial bank error), and ``dt_control_s``: the control
+    period (None: the scenario's; the plant's integrator step must divide it)."""
     scn = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
+    if dt_control_s is not None and dt_control_s != scn.dt_control_s:
+        n_sub = dt_control_s / scn.dt_integrator_s
+        if not (dt_control_s > 0 and abs(n_sub - round(n_sub)) <= 1e-9 and round(n_sub) >= 1):
+            raise ConfigError(scn.file, "--dt-control",
+                              f"{dt_control_s:g} s is not a whole number of the plant's integrator steps "
+                              f"(scenario.dt_integrator_s = {scn.dt_integrator_s:g} s)")
+        suffix = f"-{1.0 / dt_control_s:g}hz"
+        scn = scn.with_(dt_control_s=float(dt_control_s),
+                        name=scn.name if scn.name.endswith(suffix) else f"{scn.name}{suffix}")
     if ft_off:
         scn = _with_fsw(scn, "allocator", "fault_tolerance", 0, "-ft-off")
     if identification is not None:
@@ -52,16 +64,21 @@ def add_variant_arguments(p) -> None:
                         "reaches FDIR at the fault time (the paper's assumption)")
     p.add_argument("--no-initial-error", action="store_true",
                    help="the bank starts on the reference (the paper's set-up has a 5 deg initial error)")
+    p.add_argument("--dt-control", type=argtypes.float_range(1e-3, 0.1), default=None, metavar="S",
+                   help="control period [s] instead of the scenario's (e.g. 0.005: 200 Hz); a whole number "
+                        "of the plant's integrator steps")
 
 
 def variant_argv(a) -> list[str]:
     return ((["--identification", a.identification] if a.identification else [])
-            + (["--no-initial-error"] if a.no_initial_error else []))
+            + (["--no-initial-error"] if a.no_initial_error else [])
+            + (["--dt-control", repr(a.dt_control)] if a.dt_control is not None else []))
 
 
 def prepare_args(a) -> Scenario:
     """prepare() from parsed command-line arguments."""
-    return prepare(a.scenario, a.ft_off, a.duration, a.identification, not a.no_initial_error)
+    return prepare(a.scenario, a.ft_off, a.duration, a.identification, not a.no_initial_error,
+                   getattr(a, "dt_control", None))
 
 
 def end_reason_of(reason: str, duration_s: float | None) -> str:

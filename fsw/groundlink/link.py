@@ -48,6 +48,7 @@ import time
 from collections import OrderedDict, deque
 from collections.abc import Callable, Mapping
 
+from fsw.executive import divisors
 from interfaces.event_catalogue import EV
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.intake import DatagramIntake
@@ -138,7 +139,7 @@ class GroundLink:
         self.in_tick = False
         # no stream can go out more often than the link ticks (RG2): the fastest rate a
         # ground station may ask for
-        self.max_rate_hz = min(MAX_RATE_HZ, 1.0 / (fsw.dt_s * fsw.params["executive.rg2_divisor"]))
+        self.max_rate_hz = min(MAX_RATE_HZ, 1.0 / (fsw.dt_s * divisors(fsw.params, fsw.dt_s)[1]))
         self.gcs = parse_udp(gcs, "gcs")
         bind_addr = parse_udp(bind, "bind")
         self.commands_in = CommandTranslator(fsw, inject)

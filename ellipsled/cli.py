@@ -10,8 +10,8 @@ from common import rt
 # two processes on two cores): pinned before NumPy or numba load their thread pools.
 rt.single_threaded_numerics()
 
+from common import argtypes  # noqa: E402
 from common.config import ConfigError  # noqa: E402
-from ellipsled.sil import argtypes  # noqa: E402
 
 
 def _add_plant(sub):

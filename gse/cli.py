@@ -19,6 +19,7 @@ import argparse
 import os
 import sys
 
+from common import argtypes
 from interfaces.mavlink.signing.keys import SigningKeyError
 from interfaces.vocabulary import DEFAULT_GCS, FAULT_KINDS, MARK_KINDS, N_JETS, Mode, parse_udp
 
@@ -27,10 +28,11 @@ from .commands import Request, make_request
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_TIMEOUT = 0, 1, 2, 3
 REASON_WAIT_S = 0.5         # after a refusal, how long to wait for the vehicle's STATUSTEXT
+REPLAY_SPEED = argtypes.float_range(0.01, 1000.0)      # times the recorded pace
 
 
 def _common(p: argparse.ArgumentParser, gcs_port_default: int) -> None:
-    p.add_argument("--gcs-port", type=int, default=gcs_port_default,
+    p.add_argument("--gcs-port", type=argtypes.udp_port, default=gcs_port_default,
                    help=f"UDP port to listen on at 127.0.0.1 (default {gcs_port_default}; 0 = ephemeral)")
     p.add_argument("--gcs-host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     p.add_argument("--vehicle", default=None,
@@ -39,8 +41,8 @@ def _common(p: argparse.ArgumentParser, gcs_port_default: int) -> None:
     p.add_argument("--signing-key", default=None, metavar="FILE",
                    help="signing key file (64 hex chars), else $ELLIPSLED_SIGNING_KEY_FILE")
     p.add_argument("--tlog", default=None, metavar="PATH", help="record every frame sent and received")
-    p.add_argument("--timeout", type=float, default=1.0, help="seconds to wait for each answer (default 1)")
-    p.add_argument("--retries", type=int, default=3, help="resends after a timeout (default 3)")
+    p.add_argument("--timeout", type=argtypes.timeout_s, default=1.0, help="seconds to wait for each answer (default 1)")
+    p.add_argument("--retries", type=argtypes.retries, default=3, help="resends after a timeout (default 3)")
 
 
 def add_gse_parser(subparsers) -> argparse.ArgumentParser:
@@ -55,7 +57,7 @@ def add_gse_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--view-only", action="store_true",
                    help="watch without the signing key: nothing is sent, telemetry is shown unverified")
     p.add_argument("--replay", default=None, metavar="FILE.tlog", help="play a recorded .tlog on the same screens")
-    p.add_argument("--speed", type=float, default=1.0, help="replay pace, times the recorded one (default 1)")
+    p.add_argument("--speed", type=REPLAY_SPEED, default=1.0, help="replay pace, times the recorded one (default 1)")
     p.set_defaults(func=_run_console)
 
     p = sub.add_parser("inject", help="inject a jet fault in the plant (MAV_CMD_INJECT_FAILURE)")
@@ -119,9 +121,6 @@ def _run_words(a, verb: str, *words) -> int:
         req = make_request(verb, *[str(w) for w in words])
     except ValueError as e:
         print(f"gse {verb}: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    if a.timeout <= 0 or a.retries < 0:
-        print("gse: --timeout must be > 0 and --retries >= 0", file=sys.stderr)
         return EXIT_USAGE
     try:
         client = _client(a, _script_link_id())

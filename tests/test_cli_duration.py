@@ -8,7 +8,7 @@ import math
 import pytest
 
 from ellipsled import cli
-from ellipsled.sil.argtypes import positive_float
+from common.argtypes import positive_float
 
 COMMANDS = [["run", "nominal"], ["sim", "nominal"], ["fsw", "nominal"], ["batch", "nominal", "--out", "/nonexistent"],
             ["report", "--out", "/nonexistent"]]

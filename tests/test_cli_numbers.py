@@ -45,6 +45,14 @@ BAD = [
     (["run", "--dt-control", "0"], "--dt-control"),
     (["report", "--out", "x", "--dt-control", "inf"], "--dt-control"),
     (["pki", "init", "/nonexistent", "--days", "0"], "--days"),
+    *[(["gse", "arm", "on", "--timeout", v], "--timeout") for v in ("nan", "-1", "0", "inf", "1e300")],
+    (["gse", "inject", "--jet", "1", "--kind", "off", "--retries", "-1"], "--retries"),
+    (["gse", "mode", "safe", "--gcs-port", "70000"], "--gcs-port"),
+    (["gse", "console", "--gcs-port", "-1"], "--gcs-port"),
+    *[(["gse", "console", "--replay", "x.tlog", "--speed", v], "--speed") for v in ("0", "nan", "-1", "inf")],
+    (["viz", "--flush-rows", "0"], "--flush-rows"),
+    (["viz", "--flush-s", "nan"], "--flush-s"),
+    *[(["viz", opt, v], opt) for opt in ("--max-seconds", "--idle-exit-s") for v in ("nan", "-1", "0", "1e300")],
 ]
 
 
@@ -57,7 +65,41 @@ def test_a_number_outside_its_range_is_a_usage_error_naming_the_option(argv, opt
     assert f"argument {option}" in err and "must be" in err, err
 
 
+@pytest.mark.parametrize("module,argv,option", [
+    ("ellipsled.bench.flood", ["--target", "udp:127.0.0.1:9", "--rate", "nan"], "--rate"),
+    ("ellipsled.bench.flood", ["--target", "udp:127.0.0.1:9", "--rate", "-5"], "--rate"),
+    ("ellipsled.bench.flood", ["--target", "udp:127.0.0.1:9", "--seconds", "1e300"], "--seconds"),
+    ("ellipsled.bench.flood", ["--target", "udp:127.0.0.1:9", "--seed", "-1"], "--seed"),
+    ("ellipsled.bench.jitter", ["--child", "--seconds", "inf"], "--seconds"),
+    ("ellipsled.bench.jitter", ["--child", "--priority", "100"], "--priority"),
+    ("ellipsled.bench.jitter", ["--child", "--cpu", "100000"], "--cpu"),
+    ("ellipsled.bench.latency", ["--echo", "udp", "--port", "70000"], "--port"),
+    ("ellipsled.bench.latency", ["--variants", "--n", "0"], "--n"),
+    ("ellipsled.bench.latency", ["--variants", "--rate", "nan"], "--rate"),
+], ids=lambda x: " ".join(x) if isinstance(x, list) else x)
+def test_a_bench_tools_number_outside_its_range_is_a_usage_error(module, argv, option, capsys, monkeypatch):
+    """The benchmark's own tools (python -m ellipsled.bench.<tool>) check their numbers too,
+    before they flood, spin or echo anything (what they would do is replaced here, so a
+    value let through fails at once instead of running the tool)."""
+    import importlib
+    mod = importlib.import_module(module)
+
+    def ran(*args, **kwargs):
+        raise AssertionError(f"{module} ran with {argv}")
+    for work in ("send", "child", "run", "_echo_udp", "_echo_zenoh", "variants", "_both"):
+        if hasattr(mod, work):
+            monkeypatch.setattr(mod, work, ran)
+    with pytest.raises(SystemExit) as e:
+        mod.main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}" in err and "must be" in err, err
+
+
 @pytest.mark.parametrize("argv", [
+    ["gse", "arm", "on", "--timeout", "2.5", "--retries", "0", "--gcs-port", "0"],
+    ["gse", "console", "--replay", "x.tlog", "--speed", "20"],
+    ["viz", "--flush-rows", "1", "--flush-s", "0.5", "--max-seconds", "60", "--idle-exit-s", "5"],
     ["run", "--realtime", "--speed", "1", "--fsw-timeout", "10", "--rt-offset-us", "-100", "--seed", "0"],
     ["batch", "nominal", "--out", "x", "--seed", "123456789", "--duration", "700"],
     ["montecarlo", "default", "--out", "x", "--runs", "1000", "--workers", "1"],

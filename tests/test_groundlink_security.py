@@ -390,3 +390,57 @@ def test_an_unsigned_parameter_list_goes_to_the_requester_at_the_read_pace(rig, 
         assert sorted(m.param_index for m in to_requester) == list(range(n_params))
     finally:
         evil.close()
+
+
+def test_unsigned_reads_beyond_a_senders_budget_are_refused_counted_and_told_once(rig, monkeypatch):
+    """Each keyless sender has its own read budget: what one sender asks beyond it is not
+    answered, counted per sender and told in the one throttled refusal event; another
+    sender is still answered (no refill here: the counts are exact)."""
+    from fsw.groundlink import senders
+    monkeypatch.setattr(senders, "READ_BURST", 10.0)
+    monkeypatch.setattr(senders, "READ_RATE_HZ", 0.0)
+    evil, other = attacker_socket(), attacker_socket()
+    answers = {}
+    send = rig.gl._send
+    rig.gl._send = lambda msg, *a, only=None, **kw: (
+        answers.__setitem__(only, answers.get(only, 0) + 1) if msg.get_type() == "PARAM_VALUE" else None,
+        send(msg, *a, only=only, **kw))
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    try:
+        for i in range(40):
+            evil.sendto(mav.MAVLink_param_request_read_message(1, 1, b"", i % 8).pack(unsigned), rig.gl.address)
+        other.sendto(mav.MAVLink_param_request_read_message(1, 1, b"", 0).pack(unsigned), rig.gl.address)
+        assert rig.exchange(lambda: rig.gl.stats["rx_datagrams"] >= 41)
+        assert answers.get(evil.getsockname()) == 10 and answers.get(other.getsockname()) == 1, answers
+        assert rig.gl.stats["reads_limited"] == 30
+        assert rig.gl.refused_by_sender[evil.getsockname()] == 30
+        assert other.getsockname() not in rig.gl.refused_by_sender
+        assert len(link_events(rig)) == 1, [e.text for e in link_events(rig)]
+    finally:
+        evil.close()
+        other.close()
+
+
+def test_answers_to_single_reads_leave_the_events_their_share_of_a_tick(rig):
+    """More read requests in one tick than the tick may answer: the answers stop at what the
+    events' share leaves (the rest counted), and the events still get their share."""
+    from fsw.groundlink.link import EVENT_SHARE
+    rig.gl.tick(rig.frame)
+    rig.gl.intake.budget_ns = 10**9              # one tick reads them all: the send side is judged
+    n = rig.gl.max_tx_per_tick
+    sent = []
+    send = rig.gl._send
+    rig.gl._send = lambda msg, *a, **kw: (sent.append(msg.get_type()), send(msg, *a, **kw))
+    evil = attacker_socket()
+    unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    try:
+        for i in range(n):
+            evil.sendto(mav.MAVLink_param_request_read_message(1, 1, b"", i % 8).pack(unsigned), rig.gl.address)
+        for i in range(40):
+            rig.fsw.events.emit(rig.fsw.t_s, mav.MAV_SEVERITY_CRITICAL, "test", f"fdir{i}", f"FDIR EVENT {i}")
+        rig.gl.tick(rig.frame)
+    finally:
+        evil.close()
+    assert rig.gl.stats["rx_datagrams"] >= n
+    assert sent.count("PARAM_VALUE") <= n - EVENT_SHARE and sent.count("STATUSTEXT") >= EVENT_SHARE, sent
+    assert rig.gl.stats["reads_limited"] >= EVENT_SHARE

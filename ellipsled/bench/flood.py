@@ -36,6 +36,7 @@ from collections import deque
 
 from pymavlink.dialects.v10 import common as v10
 
+from common import argtypes
 from ellipsled.node_reports import read_fsw
 from ellipsled.procs import ELLIPSLED, stop_process
 from interfaces.mavlink import dialect as mav
@@ -469,9 +470,9 @@ def main(argv: list[str] | None = None) -> int:
     from gse.tlog import read_records
     ap = argparse.ArgumentParser(prog="python -m ellipsled.bench.flood", description=__doc__.splitlines()[0])
     ap.add_argument("--target", required=True, help="udp:127.0.0.1:PORT (the vehicle's MAVLink address)")
-    ap.add_argument("--rate", type=float, default=2500.0, help="datagrams per second")
-    ap.add_argument("--seconds", type=float, default=12.0)
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--rate", type=argtypes.float_range(1.0, 1e6), default=2500.0, help="datagrams per second")
+    ap.add_argument("--seconds", type=argtypes.timeout_s, default=12.0)
+    ap.add_argument("--seed", type=argtypes.seed, default=1)
     ap.add_argument("--replay", default=None, metavar="FILE.tlog", help="genuine frames to replay")
     ap.add_argument("--reflect", default=None, metavar="FILE.tlog",
                     help="frames sniffed off the link: those the vehicle signed are sent back to it")

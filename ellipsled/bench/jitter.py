@@ -31,6 +31,7 @@ import subprocess
 import sys
 import time
 
+from common import argtypes
 from ellipsled.procs import stop_process
 
 from .rows import NO_TARGET, Row, fmt, g, le, ratio, row, speed
@@ -370,9 +371,10 @@ def rt_rows(res: dict) -> list[Row]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--child", action="store_true", help="run the real-time loop here, print its statistics")
-    ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--priority", type=int, default=PRIORITY, help="SCHED_FIFO priority (0: none)")
-    ap.add_argument("--cpu", type=int, default=-1, help="pin to this CPU (-1: no pinning)")
+    ap.add_argument("--seconds", type=argtypes.timeout_s, default=10.0)
+    ap.add_argument("--priority", type=argtypes.int_range(0, 99), default=PRIORITY, help="SCHED_FIFO priority (0: none)")
+    ap.add_argument("--cpu", type=argtypes.int_range(-1, (os.cpu_count() or 1) - 1), default=-1,
+                    help="pin to this CPU (-1: no pinning)")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args(argv)
     if a.child:

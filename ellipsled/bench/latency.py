@@ -38,6 +38,7 @@ import time
 
 import numpy as np
 
+from common import argtypes
 from ellipsled.procs import stop_process
 
 from .rows import NO_TARGET, Row, fmt, ratio, row
@@ -357,7 +358,7 @@ def rows(res: dict) -> list[Row]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--echo", choices=("udp", "zenoh"))
-    ap.add_argument("--port", type=int, default=0)
+    ap.add_argument("--port", type=argtypes.udp_port, default=0)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--placement", choices=("default", "sil"), default="default")
     ap.add_argument("--client", action="store_true", help="measure both round trips, print JSON")
@@ -365,8 +366,8 @@ def main(argv=None) -> int:
     ap.add_argument("--standard-transport", action="store_true", help="(echo) Zenoh's standard transport")
     ap.add_argument("--variants", action="store_true",
                     help="the Zenoh round trip with bytes vs shared-memory payloads, low-latency vs standard transport")
-    ap.add_argument("--n", type=int, default=1000)
-    ap.add_argument("--rate", type=float, default=100.0)
+    ap.add_argument("--n", type=argtypes.int_range(1, 10_000_000), default=1000)
+    ap.add_argument("--rate", type=argtypes.float_range(0.0, 1e6, lo_open=True), default=100.0)
     a = ap.parse_args(argv)
     if a.echo == "udp":
         _echo_udp(a.port, a.placement)

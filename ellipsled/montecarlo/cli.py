@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
+from common import argtypes
+from common.argtypes import nonneg_int
 from common.model import Scenario
-from ellipsled.sil import argtypes
-from ellipsled.sil.argtypes import nonneg_int
 
 from .campaign import MAX_RUNS
 

@@ -20,7 +20,7 @@ import os
 import sys
 from pathlib import Path
 
-from ellipsled.sil import argtypes
+from common import argtypes
 
 # Role -> certificate common name; the names the router's policy refers to. ``dask``:
 # the Monte Carlo cluster's scheduler, workers and client (Dask's TLS is mutual too; each

@@ -21,8 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from common import argtypes
 from common.config import DATA_DIR
-from ellipsled.sil import argtypes
 
 DEFAULT_CONFIG = DATA_DIR / "zenoh" / "router.json5"
 

@@ -7,10 +7,10 @@ import signal
 import sys
 import time
 
+from common import argtypes
 from interfaces import transport
 from interfaces.keys import DEFAULT_PREFIX, keys
 
-from . import argtypes
 from .variant import add_variant_arguments
 
 

@@ -21,6 +21,7 @@ from common import rt
 
 import numpy as np  # noqa: E402   (threads pinned by ellipsled.cli before any import)
 
+from common import argtypes  # noqa: E402
 from common.events import EventLog, Severity  # noqa: E402
 from fsw.executive import LockstepClock, RealTimeClock  # noqa: E402
 from fsw.flightsoftware import FlightSoftware  # noqa: E402
@@ -29,7 +30,6 @@ from interfaces import records, transport  # noqa: E402
 from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_KINDS, HEALTH_NAMES, NOMINAL  # noqa: E402
 
-from . import argtypes  # noqa: E402
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
 from .frame_timing import due_step, phase_origin_ns, take_due_frame  # noqa: E402
 from .fsw_report import alloc_sample, fsw_report  # noqa: E402

@@ -25,6 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from common import argtypes
 from ellipsled.node_reports import read_fsw, read_sim
 from ellipsled.procs import ELLIPSLED, die_with_parent, stop_process
 from ellipsled.runlib import EXIT_NOT_COMPLETED, exit_code, format_summary, judge
@@ -32,7 +33,6 @@ from ellipsled.terminal import RunProgress, files_written
 from interfaces import transport
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE
 
-from . import argtypes
 from .common import DEFAULT_PREFIX, say
 from .history import History, merge
 from .progress import ProgressFile

@@ -16,14 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from common import rt
+from common import argtypes, rt
 from common.rt import sleep_until_ns
 from interfaces import records, transport
 from interfaces.codec import Codec, SequenceGuard
 from interfaces.vocabulary import FAULT_KINDS
 from sim.plant import Plant
 
-from . import argtypes
 from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say
 from .history import History, record_truth
 from .progress import ProgressFile

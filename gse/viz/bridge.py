@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 
+from common import argtypes
 from common.events import Event, EventLog, Severity
 from gse.viz.logger import RerunLogger
 from gse.viz.sinks import open_sinks
@@ -31,6 +32,8 @@ from interfaces import codec
 from interfaces import keys as keymod
 from interfaces.event_catalogue import EV
 from interfaces.keys import DEFAULT_PREFIX
+
+WALL_S = argtypes.float_range(0.0, 7 * 86_400.0, lo_open=True)     # a wall-clock limit [s], a week at most
 
 
 def make_codecs(on_reject=None) -> dict[str, codec.Codec]:
@@ -127,11 +130,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rerun", default="auto", help="viewer | web | file | none | auto, or '+'-joined")
     p.add_argument("--out", default="out/viz", help="folder of the .rrd")
     p.add_argument("--name", default="run", help="recording / file name")
-    p.add_argument("--flush-rows", type=int, default=50)
-    p.add_argument("--flush-s", type=float, default=1.0)
-    p.add_argument("--max-seconds", type=float, default=math.inf, help="stop after this wall time")
-    p.add_argument("--idle-exit-s", type=float, default=math.inf,
-                   help="stop when nothing has arrived for this long after data was seen")
+    p.add_argument("--flush-rows", type=argtypes.int_range(1, 1_000_000), default=50)
+    p.add_argument("--flush-s", type=argtypes.timeout_s, default=1.0)
+    p.add_argument("--max-seconds", type=WALL_S, default=math.inf, help="stop after this wall time (default: none)")
+    p.add_argument("--idle-exit-s", type=WALL_S, default=math.inf,
+                   help="stop when nothing has arrived for this long after data was seen (default: never)")
 
 
 def bridge_main(args) -> int:

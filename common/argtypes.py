@@ -1,6 +1,7 @@
-"""argparse types of the ``ellipsled`` commands: a bad value is refused with a message
-naming the option and its range, never passed on (argparse turns the refusal into a usage
-error, exit status 2)."""
+"""argparse types of the ``ellipsled`` commands (the harness's, the ground station's and the
+viewer bridge's: here in common/ so that each tree can use them): a bad value is refused
+with a message naming the option and its range, never passed on (argparse turns the
+refusal into a usage error, exit status 2)."""
 from __future__ import annotations
 
 import argparse
@@ -74,3 +75,5 @@ speed = float_range(0.01, 100.0)
 offset_us = float_range(-1e6, 1e6)
 wait_us = float_range(0.0, 1e6)
 rt_priority = int_range(1, 99)
+udp_port = int_range(0, 65535)              # 0: an ephemeral port
+retries = int_range(0, 100)

@@ -46,7 +46,7 @@ BAD = [
     (["report", "--out", "x", "--dt-control", "inf"], "--dt-control"),
     (["pki", "init", "/nonexistent", "--days", "0"], "--days"),
     *[(["gse", "arm", "on", "--timeout", v], "--timeout") for v in ("nan", "-1", "0", "inf", "1e300")],
-    (["gse", "inject", "--jet", "1", "--kind", "off", "--retries", "-1"], "--retries"),
+    (["gse", "inject", "--jet", "1", "--kind", "failed_off", "--retries", "-1"], "--retries"),
     (["gse", "mode", "safe", "--gcs-port", "70000"], "--gcs-port"),
     (["gse", "console", "--gcs-port", "-1"], "--gcs-port"),
     *[(["gse", "console", "--replay", "x.tlog", "--speed", v], "--speed") for v in ("0", "nan", "-1", "inf")],

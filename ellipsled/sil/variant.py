@@ -10,7 +10,7 @@ from pathlib import Path
 from common.config import ConfigError
 from common.model import Scenario, load_scenario
 
-from . import argtypes
+from common import argtypes
 from .history import budget_refusal
 
 IDENTIFICATION = ("detect", "oracle")     # fdir.mode: the product's FDIR, or the test mode's fault log

@@ -58,8 +58,8 @@ def test_case1_failures_injected_from_the_ground_during_a_realtime_sil(tmp_path)
             # ... and jets 2, 17, 1 from the console: two by its command handler (what Enter
             # runs), the last typed key by key on its command line
             for jet in (2, 17):
-                app.submit(f"inject {jet} off")
-                await until(lambda: f"inject jet {jet} off: ACCEPTED" in app.ack_lines, 10, f"ACK jet {jet}")
+                app.submit(f"inject {jet} failed_off")
+                await until(lambda: f"inject jet {jet} failed_off: ACCEPTED" in app.ack_lines, 10, f"ACK jet {jet}")
             await type_line("inject 1 failed_off")
             await until(lambda: "inject jet 1 failed_off: ACCEPTED" in app.ack_lines, 10, "ACK jet 1")
             cli = await cli_task

@@ -48,7 +48,7 @@ TEXT_PATTERNS = [
     re.compile(rf"(?<!`)`({_W})`(?!`)", re.I),                              # code-formatted (not an RST ``name``)
     re.compile(rf"\bkind\s*=\s*[\"']({_W})[\"']", re.I),                    # a TOML fault entry
     re.compile(rf"--kind[ =]+({_W})\b", re.I),                              # the gse command line
-    re.compile(rf"\b(inject|mark)\s+(JET\s+)?(\d+|JET|ALL JETS)\s+({_W})\b", re.I),  # console, STATUSTEXT
+    re.compile(rf"\b(inject|mark)\s+(JET\s+)?(\d+|JET|ALL JETS|\{{\w+\}})\s+({_W})\b", re.I),  # console, STATUSTEXT, f-string
     # a list of states: "off | stuck", "off/stuck", "off + stuck", "off, stuck" (not "failed off, stuck on")
     re.compile(rf"(?<![\w-])(?<!failed )({_W})\s*\\?[|/+]\s*({_ANY})\b|\b({_ANY})\s*\\?[|/+]\s*({_W})\b", re.I),
     re.compile(rf"(?<![\w-])(?<!failed )({_W}),\s*({_ANY})\b|\b({_ANY}),\s*({_W})(?![\w-]| on)", re.I),
@@ -116,6 +116,11 @@ def code_findings(path: Path) -> list[str]:
                                    if isinstance(t, ast.Name)} for x in ast.walk(a)}
     found = []
     for n in ast.walk(tree):
+        if isinstance(n, ast.JoinedStr):              # an f-string: its text, each field as {x}
+            text = "".join(v.value if isinstance(v, ast.Constant) else "{x}" for v in n.values)
+            if any(p.search(text) for p in TEXT_PATTERNS):
+                found.append(f"line {n.lineno}: {text[:60]!r}")
+            continue
         if not (isinstance(n, ast.Constant) and isinstance(n.value, str)) or id(n) in table:
             continue
         if n.value.lower() in RETIRED:
@@ -182,7 +187,8 @@ def test_the_scan_finds_retired_jet_state_words_and_spares_switches_and_the_clea
         'run_cli(r, key, "ft", "off") == 0 and not r.fsw.allocator.fault_tolerance\n'
         'run_cli(r, key, "clear", "--jet", "4") == 0 and r.fsw.fdir.health_active.state[3] == 0\n'
         'if verb == "clear": pass\n'
-        'RETIRED_STATE_WORDS = {"off": "failed_off", "stuck": "stuck_on"}\n')
+        'RETIRED_STATE_WORDS = {"off": "failed_off", "stuck": "stuck_on"}\n'
+        'app.submit(f"inject {jet} off")\n')
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "x.md").write_text(
         'kind = "stuck"   # off | stuck | degraded\n'
@@ -194,7 +200,7 @@ def test_the_scan_finds_retired_jet_state_words_and_spares_switches_and_the_clea
         'arm on|off, ft on|off; the jet fails off and stays stuck on; switch the jets off.\n'
         'the retired words: `off`, `stuck`\n')
     bad = scan(tmp_path)
-    assert sorted(int(f.split(":")[0][5:]) for f in bad["fsw/m.py"]) == [1, 1, 2, 3, 4, 5, 6, 7, 8, 8, 9]
+    assert sorted(int(f.split(":")[0][5:]) for f in bad["fsw/m.py"]) == [1, 1, 2, 3, 4, 5, 6, 7, 8, 8, 9, 16]
     assert [int(f.split(":")[0][5:]) for f in bad["docs/x.md"]] == [1, 2, 3, 4, 5]
 
 

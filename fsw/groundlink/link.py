@@ -178,7 +178,6 @@ class GroundLink:
         self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
         self.stats = dict.fromkeys(STAT_NAMES, 0)
         self.stats["rx_poll_max_us"] = 0.0
-        self.tick_ns_max = 0
         self.send_ns_peak = 0
 
     # -------------------------------------------------------------- configuration
@@ -236,7 +235,7 @@ class GroundLink:
             log.exception("ground link tick failed")
         finally:
             self.in_tick = False
-        self.tick_ns_max = max(self.tick_ns_max, b.finish())
+        b.finish()
 
     def warm_up(self, spare_fsw, sensors=None) -> None:
         """Encode (pack) every telemetry message once from ``spare_fsw`` — a throwaway

@@ -174,7 +174,7 @@ class FlightSoftware(GroundCommands):
         t_s = float(frame["t_ns"]) * 1e-9     # a Python float (a 0-d field times 1e-9 is a NumPy scalar)
         ok = self.monitor.check(t_s, frame)
         if not ok or self.monitor.stale:
-            return self._hold_off(t_s)
+            return self._sent_for(self._hold_off(t_s))
         fv = self._frame_views
         if fv[0] is not frame:     # field views of the record, made once per record object
             fv = self._frame_views = (frame, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
@@ -196,7 +196,7 @@ class FlightSoftware(GroundCommands):
         self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
         if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,
                                    tracking_error_rad=self.bank_err_rad) == FailsafeAction.HOLD_JETS_OFF:
-            return self._hold_off(t_s)
+            return self._sent_for(self._hold_off(t_s))
         mode = self.modes.mode
         if mode == Mode.ENTRY:
             # no learning while FDIR holds a detection not yet reconfigured: the torque
@@ -225,10 +225,18 @@ class FlightSoftware(GroundCommands):
         return self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
-        """Note ``u`` as this frame's answer (frame index self.k); returns u."""
+        """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,
+        different answer under the same index (jets held off on a rejected frame after the
+        last good one was answered) leaves the plant holding either: the slot is marked
+        ambiguous (-k-3, which matches no index) and the period it reports is no evidence."""
         i = self.k % self._ring
-        self._sent[i] = u
-        self._sent_k[i] = self.k
+        k_slot = self._sent_k[i]
+        if k_slot == self.k:
+            if not np.array_equal(self._sent[i], u):
+                self._sent_k[i] = -self.k - 3
+        elif k_slot != -self.k - 3:
+            self._sent[i] = u
+            self._sent_k[i] = self.k
         return u
 
     def _command_in_force(self, u_k: int) -> np.ndarray | None:
@@ -263,9 +271,11 @@ class FlightSoftware(GroundCommands):
         self._tau_last[:] = 0.0
         self.t_s = t_s
         self.monitor.tick(t_s, got_frame=False)
+        # no frame, so no answer is sent and none is noted (stale or not): the plant still
+        # holds the answer to frame k, which FDIR judges the next frame by
         if self.monitor.stale:
             return self._hold_off(t_s)
-        return self._sent_for(self.driver.command(self._zero_u, False))
+        return self.driver.command(self._zero_u, False)
 
     def _count_torque(self) -> None:
         self._tau_sum += self._tau_last
@@ -279,7 +289,7 @@ class FlightSoftware(GroundCommands):
         self.tau_alloc_B[:] = 0.0
         self._tau_last[:] = 0.0
         self.alloc_short = False
-        return self._sent_for(self.driver.command(self._zero_u, False))
+        return self.driver.command(self._zero_u, False)
 
     # ---------------------------------------------------------------- RG2
     def slow_step(self) -> None:

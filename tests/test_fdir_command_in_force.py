@@ -76,3 +76,58 @@ def test_a_command_older_than_the_ring_is_no_evidence(dt_s, ring):
         assert fsw.fdir.unknown_command_periods == 1 and not fsw.fdir.detections
     finally:
         fsw.close()
+
+
+def fly_missing_frames(p_miss: float, seed: int = 7) -> tuple[int, int]:
+    """(FDIR declarations, periods without a frame). ``p_miss``: chance per period that the
+    frame reaches the FSW after its tick (a starved FSW in real time): that tick runs
+    without a frame and sends nothing, the plant holds the last answer it had, and the next
+    tick takes the newest frame, which reports that older answer as the command held."""
+    scn = load_scenario("nominal")
+    plant, fsw = Plant(scn, seed=1), FlightSoftware(scn)
+    rng = np.random.default_rng(seed)
+    frame, held, held_k, missed = plant.sensors, np.zeros(18, np.uint8), -1, 0
+    try:
+        for k in range(STEPS):
+            if k > 0 and rng.random() < p_miss:
+                fsw.no_frame(fsw.t_s + fsw.dt_s)
+                missed += 1
+            else:
+                held, held_k = fsw.control_step(frame).copy(), k
+            frame = plant.step(held, u_k=held_k)
+        return len(fsw.fdir.detections), missed
+    finally:
+        fsw.close()
+
+
+def test_ticks_without_a_frame_raise_no_false_alarm():
+    """A tick without a frame sends no command, so it must not stand in the record of
+    answers for the frame before: the plant still holds that frame's answer (jets firing),
+    and judged against the tick's jets-off the chamber pressures read as stuck-on jets."""
+    det, missed = fly_missing_frames(0.2)
+    assert missed > 200 and det == 0
+
+
+def test_a_second_different_answer_to_a_frame_makes_its_period_no_evidence():
+    """A rejected frame (here frame k again: a duplicate) is answered with jets off under
+    the last good index k, after k was answered with jets firing: the plant may hold
+    either, so the period it reports as k's is not judged (neither answer is assumed)."""
+    scn = load_scenario("nominal")
+    plant, fsw = Plant(scn, seed=1), FlightSoftware(scn)
+    try:
+        frame = plant.sensors
+        for k in range(STEPS):
+            u = fsw.control_step(frame).copy()
+            if k > 50 and u.any():
+                break
+            frame = plant.step(u, u_k=k)
+        else:
+            pytest.fail("no jet fired in the first 30 s")
+        again = fsw.control_step(frame)                   # the same frame: refused as a duplicate
+        assert fsw.monitor.counts["duplicate"] == 1 and not again.any()
+        frame = plant.step(u, u_k=k)                      # the plant held the first answer
+        before = fsw.fdir.unknown_command_periods
+        fsw.control_step(frame)
+        assert fsw.fdir.unknown_command_periods == before + 1
+    finally:
+        fsw.close()

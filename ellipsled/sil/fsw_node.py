@@ -108,6 +108,7 @@ class FswNode:
         self.frame_age_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
         self.n_frames = 0
         self.ticks = 0
+        self._taken_wall_ns = self._taken_cpu_ns = 0     # real time: when the input task took its frame
         clock = LockstepClock() if args.mode == "lockstep" else RealTimeClock(
             int(round(self.scn.dt_control_s * 1e9)), spin_ns=int(self.fsw.params["executive.spin_us"] * 1e3))
         # lockstep: the frame comes with each tick; real time: the input task fetches the newest
@@ -190,6 +191,9 @@ class FswNode:
         due = due_step(self.next_k, self.topo.executive.cycle.k, self.source_id == self.lock_source)
         k = take_due_frame(self._fetch_frame, due, now_ns() + int(self.args.frame_wait_us * 1e3), now_ns,
                            self._pause)
+        # the rest of the cycle from here: wall and thread CPU time, so that a cycle slip can
+        # say how long the thread was off its CPU (fsw.executive.own_slips)
+        self._taken_wall_ns, self._taken_cpu_ns = now_ns(), time.thread_time_ns()
         if k is None:
             return None
         self.next_k = k + 1
@@ -255,6 +259,13 @@ class FswNode:
     # ------------------------------------------------------------------ loops
     def _record(self) -> None:
         cyc = self.topo.executive.cycle
+        ex = self.topo.executive
+        if (self.args.mode == "realtime" and ex.slip_records and ex.slip_records[-1]["k"] == cyc.k
+                and "off_cpu_us" not in ex.slip_records[-1]):
+            # the time the thread was off its CPU since it took the frame (preempted: the
+            # host's or a higher-priority thread's time, not this cycle's work)
+            wall, cpu = now_ns() - self._taken_wall_ns, time.thread_time_ns() - self._taken_cpu_ns
+            ex.slip_records[-1]["off_cpu_us"] = max(0, wall - cpu) / 1e3
         if self.ticks >= len(self.jitter_ns):
             self.jitter_ns = np.concatenate((self.jitter_ns, np.zeros_like(self.jitter_ns)))
         self.jitter_ns[self.ticks] = cyc.t_start_ns - cyc.t_release_ns

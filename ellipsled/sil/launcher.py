@@ -287,6 +287,8 @@ class Launcher:
                "fsw_control_us": (fsw_info.get("tasks_us") or {}).get("control"),
                "jitter_p50_us": fsw_info["jitter_p50_us"], "jitter_p99_us": fsw_info["jitter_p99_us"],
                "jitter_max_us": fsw_info["jitter_max_us"], "slips": fsw_info["cycle_slips"],
+               # the slips the FSW's own work explains (fsw.executive.own_slips) among those recorded
+               **own_slip_counts(fsw_info, scn.dt_control_s, sim_info.get("steps")),
                "sim_counts": sim_info["counts"], "sim_rejects": sim_info["rejects"],
                "fsw_sensor_rejects": fsw_info["sensor_rejects"], "end_reason": sim_info["end_reason"],
                "message": sim_info["message"], "rt": fsw_info.get("rt"), "sim_rt": sim_info.get("rt"),
@@ -312,6 +314,16 @@ class Launcher:
                 for role, m in mem.items() if m))
         print(files_written(self.out))
         return exit_code(summary["end_reason"])
+
+
+def own_slip_counts(fsw_info: dict, dt_s: float, plant_steps: int | None) -> dict:
+    """{own_slips, slips_recorded}: of the cycle slips the FSW recorded (the first
+    Executive.SLIP_RECORDS), those its own work explains (fsw.executive.own_slips: not the
+    host's preemption, a late release or a late frame, nor after the plant's last step)."""
+    from fsw.executive import own_slips
+    recs = (fsw_info.get("executive") or {}).get("slip_records") or []
+    last_k = plant_steps - 1 if plant_steps else None
+    return {"own_slips": len(own_slips(recs, dt_s * 1e6, last_k)), "slips_recorded": len(recs)}
 
 
 def _memory(info: dict) -> dict | None:

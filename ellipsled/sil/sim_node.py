@@ -99,8 +99,11 @@ class SimNode:
         self.u_k = -1                  # JETS.k of the command held (-1: none, jets off)
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
         self.sensor_seq = 0     # per publication: a frame sent again is a new sample, not a replay
-        self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
-                       "resent_frames": 0, "warmup_frames": 0,
+        # real time: a step without its command by the deadline is missed once the FSW has
+        # answered once; before that (the FSW phase-locks its clock on the first frames of the
+        # running plant, ellipsled/sil/fsw_node.py) it is unanswered at start
+        self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "unanswered_at_start": 0,
+                       "fault_rejected": 0, "resent_frames": 0, "warmup_frames": 0,
                        "faults_applied": 0}
         self.rejects: dict[str, int] = {}
         # one latency per step at most: preallocated, nothing grows during the run
@@ -279,7 +282,7 @@ class SimNode:
                     got = True
                     break
             if not got:
-                self.counts["missed_commands"] += 1
+                self.counts["missed_commands" if last_cmd_k >= 0 else "unanswered_at_start"] += 1
             if k - last_cmd_k >= self.args.miss_periods:
                 self.u[:] = 0
                 self.u_k = -1

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import resource
 import time
 from pathlib import Path
 
@@ -37,6 +38,7 @@ from .history import History, record_fsw  # noqa: E402
 from .variant import prepare_args  # noqa: E402
 
 ROLE = "fsw"
+RUSAGE_THREAD = getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)     # Linux: this thread's own
 
 
 def add_arguments(p) -> None:
@@ -108,7 +110,7 @@ class FswNode:
         self.frame_age_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
         self.n_frames = 0
         self.ticks = 0
-        self._taken_wall_ns = self._taken_cpu_ns = 0     # real time: when the input task took its frame
+        self._taken_wall_ns, self._taken_ru = 0, None     # real time: when the input task took its frame
         clock = LockstepClock() if args.mode == "lockstep" else RealTimeClock(
             int(round(self.scn.dt_control_s * 1e9)), spin_ns=int(self.fsw.params["executive.spin_us"] * 1e3))
         # lockstep: the frame comes with each tick; real time: the input task fetches the newest
@@ -191,9 +193,9 @@ class FswNode:
         due = due_step(self.next_k, self.topo.executive.cycle.k, self.source_id == self.lock_source)
         k = take_due_frame(self._fetch_frame, due, now_ns() + int(self.args.frame_wait_us * 1e3), now_ns,
                            self._pause)
-        # the rest of the cycle from here: wall and thread CPU time, so that a cycle slip can
-        # say how long the thread was off its CPU (fsw.executive.own_slips)
-        self._taken_wall_ns, self._taken_cpu_ns = now_ns(), time.thread_time_ns()
+        # the rest of the cycle from here: wall time and the thread's resource use, so that a
+        # cycle slip can say how long the thread was off its CPU (fsw.executive.own_slips)
+        self._taken_wall_ns, self._taken_ru = now_ns(), resource.getrusage(RUSAGE_THREAD)
         if k is None:
             return None
         self.next_k = k + 1
@@ -263,9 +265,14 @@ class FswNode:
         if (self.args.mode == "realtime" and ex.slip_records and ex.slip_records[-1]["k"] == cyc.k
                 and "off_cpu_us" not in ex.slip_records[-1]):
             # the time the thread was off its CPU since it took the frame (preempted: the
-            # host's or a higher-priority thread's time, not this cycle's work)
-            wall, cpu = now_ns() - self._taken_wall_ns, time.thread_time_ns() - self._taken_cpu_ns
-            ex.slip_records[-1]["off_cpu_us"] = max(0, wall - cpu) / 1e3
+            # host's or a higher-priority thread's time, not this cycle's work), and what it
+            # spent on its CPU in the kernel, page faults and involuntary switches meanwhile
+            wall, ru0, ru = now_ns() - self._taken_wall_ns, self._taken_ru, resource.getrusage(RUSAGE_THREAD)
+            cpu_us = (ru.ru_utime - ru0.ru_utime + ru.ru_stime - ru0.ru_stime) * 1e6
+            ex.slip_records[-1].update(
+                off_cpu_us=max(0.0, wall / 1e3 - cpu_us), sys_us=(ru.ru_stime - ru0.ru_stime) * 1e6,
+                minor_faults=ru.ru_minflt - ru0.ru_minflt, major_faults=ru.ru_majflt - ru0.ru_majflt,
+                involuntary_switches=ru.ru_nivcsw - ru0.ru_nivcsw)
         if self.ticks >= len(self.jitter_ns):
             self.jitter_ns = np.concatenate((self.jitter_ns, np.zeros_like(self.jitter_ns)))
         self.jitter_ns[self.ticks] = cyc.t_start_ns - cyc.t_release_ns

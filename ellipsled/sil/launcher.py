@@ -77,6 +77,9 @@ def add_arguments(p) -> None:
     p.add_argument("--rt-offset-us", type=argtypes.offset_us, default=None,
                    help="real time: the FSW releases this long after the plant publishes a step "
                         "(default: ellipsled fsw's)")
+    p.add_argument("--rehearse", action=argparse.BooleanOptionalAction, default=True,
+                   help="real time: each node runs its receiving path once on a scratch copy while it "
+                        "waits, so that it is warm when the frame or command comes (default on)")
     p.add_argument("--no-plots", action="store_true")
 
 
@@ -186,7 +189,7 @@ class Launcher:
         scen = [a.scenario] + (["--seed", str(a.seed)] if a.seed is not None else []) \
             + (["--ft-off"] if a.ft_off else []) + (["--duration", str(a.duration)] if a.duration is not None else []) \
             + variant_argv(a)
-        mode = ["--realtime" if a.mode == "realtime" else "--lockstep"]
+        mode = ["--realtime" if a.mode == "realtime" else "--lockstep"] + ([] if a.rehearse else ["--no-rehearse"])
         key = self._key_file()
         if not a.console:               # the console owns the terminal otherwise
             self.relay = LogRelay(self.say_child)

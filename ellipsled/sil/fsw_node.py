@@ -120,6 +120,7 @@ class FswNode:
         self.n_frames = 0
         self.ticks = 0
         self._taken_wall_ns, self._taken_ru = 0, None     # real time: when the input task took its frame
+        self._input_wall_ns, self._input_ru = 0, None     # ... and when it began
         clock = LockstepClock() if args.mode == "lockstep" else RealTimeClock(
             int(round(self.scn.dt_control_s * 1e9)), spin_ns=int(self.fsw.params["executive.spin_us"] * 1e3))
         # lockstep: the frame comes with each tick; real time: the input task fetches the newest
@@ -212,6 +213,7 @@ class FswNode:
 
     def _newest_frame(self):
         """Real time: the newest fresh frame (waiting briefly for the one due), or None."""
+        self._input_wall_ns, self._input_ru = now_ns(), resource.getrusage(RUSAGE_THREAD)
         if self.args.rehearse:
             self._rehearse()
         due = due_step(self.next_k, self.topo.executive.cycle.k, self.source_id == self.lock_source)
@@ -292,11 +294,12 @@ class FswNode:
             # host's or a higher-priority thread's time, not this cycle's work), and what it
             # spent on its CPU in the kernel, page faults and involuntary switches meanwhile
             wall, ru0, ru = now_ns() - self._taken_wall_ns, self._taken_ru, resource.getrusage(RUSAGE_THREAD)
-            cpu_us = (ru.ru_utime - ru0.ru_utime + ru.ru_stime - ru0.ru_stime) * 1e6
             ex.slip_records[-1].update(
-                off_cpu_us=max(0.0, wall / 1e3 - cpu_us), sys_us=(ru.ru_stime - ru0.ru_stime) * 1e6,
+                off_cpu_us=_off_cpu_us(wall, ru0, ru), sys_us=(ru.ru_stime - ru0.ru_stime) * 1e6,
                 minor_faults=ru.ru_minflt - ru0.ru_minflt, major_faults=ru.ru_majflt - ru0.ru_majflt,
-                involuntary_switches=ru.ru_nivcsw - ru0.ru_nivcsw)
+                involuntary_switches=ru.ru_nivcsw - ru0.ru_nivcsw,
+                # the same over the input task (its wait for the frame): off its CPU there too?
+                input_off_cpu_us=_off_cpu_us(self._taken_wall_ns - self._input_wall_ns, self._input_ru, ru0))
         if self.ticks >= len(self.jitter_ns):
             self.jitter_ns = np.concatenate((self.jitter_ns, np.zeros_like(self.jitter_ns)))
         self.jitter_ns[self.ticks] = cyc.t_start_ns - cyc.t_release_ns
@@ -440,6 +443,13 @@ class FswNode:
             self.link.close()
         transport.close(self.ready, self.token, self.plant_presence, self.sub_sensors, self.pub_jets, self.pub_state,
                         self.pub_events, self.pub_faults, self.sub_fault_log, self.session)
+
+
+def _off_cpu_us(wall_ns: int, ru0, ru1) -> float:
+    """Of ``wall_ns`` between two getrusage() readings of this thread, the time it was not
+    on its CPU [us]."""
+    cpu_us = (ru1.ru_utime - ru0.ru_utime + ru1.ru_stime - ru0.ru_stime) * 1e6
+    return max(0.0, wall_ns / 1e3 - cpu_us)
 
 
 def main(args) -> int:

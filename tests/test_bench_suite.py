@@ -274,3 +274,11 @@ def test_latency_floor_is_the_same_runs_round_trip_at_the_runs_rate_plus_the_con
     assert rows[2][1] == "520.0 (20.0)" and "= Zenoh + codec round trip 400.0 + FSW control task 100.0" in rows[2][2]
     assert sil.latency_floor({"sil_realtime": {"idle": run(800.0, 200.0)}}, "idle", 50.0)["floor_p99_us"] is None
 
+
+
+def test_the_rehearsal_row_sets_the_run_without_it_beside_the_idle_run():
+    res = {"sil_realtime": {"idle": {"latency_p50_us": 800.0, "latency_p99_us": 1100.0},
+                            "idle_no_rehearse": {"latency_p50_us": 920.0, "latency_p99_us": 1200.0}}}
+    r = [x for x in sil.realtime_rows(res) if "--no-rehearse" in x[0]]
+    assert len(r) == 1 and r[0][1] == "920.0 / 1200" and r[0][2] == "rehearsal on 800.0 / 1100"
+    assert r[0][3].startswith("1.15x")

@@ -9,7 +9,10 @@
   (target: locked resident <= 1.2x unlocked);
 - rate headroom: the idle run again at a 5-ms control period (``--dt-control 0.005``, 200 Hz)
   beside the 50-Hz one: cycle slips, release jitter, commands the plant missed, the control
-  task (target: 0 slips, every command answered).
+  task (target: 0 slips, every command answered);
+- the latency floor: sensor-to-actuator p99 at 50 and 200 Hz against the same invocation's
+  Zenoh + codec round trip paced at that rate plus the control task (target ≤ 1.1×), and the
+  idle run with the nodes' rehearsal off (``--no-rehearse``) beside it.
 
 ``ellipsled run <scenario> --lockstep|--realtime --duration S --out DIR --rerun none`` is
 called as a subprocess with a timeout. When the command is absent or fails, every figure
@@ -136,7 +139,9 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
            # the footprint's baseline: the same run with nothing locked (nor SCHED_FIFO)
            "idle_unlocked": one(("--no-rt",)),
            # rate headroom: the same run at 200 Hz
-           "idle_200hz": one(("--dt-control", "0.005"))}
+           "idle_200hz": one(("--dt-control", "0.005")),
+           # the nodes' rehearsal of their receiving paths off: what it takes off the latency
+           "idle_no_rehearse": one(("--no-rehearse",))}
     res["footprint"] = footprint(res["idle"], res["idle_unlocked"])
     tools_ok, tools_why = ensure_tools()
     if not tools_ok:
@@ -344,6 +349,13 @@ def realtime_rows(res: dict) -> list[Row]:
         R += latency_rows(res, regime, s)
         if regime == "idle":
             R += footprint_rows(res) + rate_rows(res) + floor_rows(res)
+    s = g(res, "sil_realtime", "idle_no_rehearse") or {}
+    if s:
+        on = g(res, "sil_realtime", "idle") or {}
+        R.append(row("sensor-to-actuator latency idle, --no-rehearse p50 / p99 [us]",
+                     f"{fmt(s.get('latency_p50_us'))} / {fmt(s.get('latency_p99_us'))}",
+                     f"rehearsal on {fmt(on.get('latency_p50_us'))} / {fmt(on.get('latency_p99_us'))}",
+                     f"{fmt(ratio(s.get('latency_p50_us'), on.get('latency_p50_us')))}x (p50)", "", NO_TARGET))
     s = g(res, "sil_realtime", "idle_standard_transport") or {}
     if s:
         low = g(res, "sil_realtime", "idle", "latency_p99_us")

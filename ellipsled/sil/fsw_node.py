@@ -203,10 +203,10 @@ class FswNode:
     def _rehearse(self) -> None:
         """Real time, at the release, before the frame due comes: the path the frame takes in
         (its decode) and the answer takes out (the JETS encode) run once on scratch copies,
-        so that what they need is in the caches when the frame comes. Idle for a period those
-        paths run an order of magnitude slower (a SENSORS decode p50 about 5 us warm, 77 us
-        after 19 ms and a sweep of other memory: docs/changelog.md); the wait for the frame
-        is spent spinning anyway. Guard-less scratch codecs: nothing counted, nothing kept."""
+        so that what they need is in the caches when the frame comes: idle for a period, with
+        other work in between, those paths run an order of magnitude slower (docs/changelog.md);
+        the wait for the frame is spent spinning anyway. Guard-less scratch codecs: nothing
+        counted, nothing kept."""
         if self._last_raw is not None:
             self._warm_dec.decode(self._last_raw, out=self._warm_frame)
         self._warm_enc.encode_view(self.jets, 0, 0)

@@ -187,10 +187,22 @@ def own_slips(records: list[dict], period_us: float, last_k: int | None = None) 
     elsewhere: a higher-priority thread, the host), or a late release whose tasks still took
     half the period or more. With ``last_k`` (the plant's last step), a slip after it is no
     one's deadline: the plant had gone (its leaving costs Zenoh's threads, one priority above
-    the loop, time the loop cannot use)."""
+    the loop, time the loop cannot use). A record the process shell gave ``off_cpu_us`` (the
+    time the loop's thread was off its CPU after its input task, from taking the frame to the
+    cycle's end) is the host's when the release jitter, the input task (the wait for the
+    plant's frame) and that time cover its lateness: released on time, with the frame on
+    time and its CPU throughout, the cycle met its deadline."""
     return [r for r in records
             if (last_k is None or r["k"] <= last_k)
-            and (r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us)]
+            and (r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us)
+            and not _host_explains(r)]
+
+
+def _host_explains(r: dict) -> bool:
+    off = r.get("off_cpu_us")
+    if off is None or "late_us" not in r:
+        return False
+    return r.get("jitter_us", 0.0) + off + r["tasks_us"].get("input", 0.0) >= r["late_us"]
 
 
 class Executive:

@@ -240,14 +240,45 @@ def test_shared_memory_variant_sends_every_frame_through_shared_memory_and_the_d
 
 
 def test_rate_rows_set_200_hz_beside_50_hz():
-    def run(slips, missed, n, p99):
+    def run(slips, missed, n, p99, own=None):
         return {"slips": slips, "jitter_p50_us": 1.0, "jitter_p99_us": p99, "jitter_max_us": 50.0,
-                "extra": {"sim_counts": {"missed_commands": missed}, "latency_samples": n,
+                "extra": {"sim_counts": {"missed_commands": missed, "unanswered_at_start": 10},
+                          "latency_samples": n, "own_slips": own,
                           "fsw_control_us": {"p50": 80.0, "p99": 160.0}}}
-    res = {"sil_realtime": {"idle": run(0, 0, 500, 3.0), "idle_200hz": run(0, 0, 2000, 6.0)}}
+    res = {"sil_realtime": {"idle": run(0, 0, 500, 3.0), "idle_200hz": run(0, 0, 2000, 6.0)},
+           "jitter": {"idle_200hz": {"cyclictest_p99_us": 4.0}}}
     rows = sil.rate_rows(res)
-    assert rows[0][1] == "0; 0 of 2000" and rows[0][2] == "50 Hz 0; 0 of 500" and rows[0][-1] == "pass"
-    assert rows[1][3].startswith("2.00x")
+    assert rows[0][1] == "0 (0); 0 of 2000 (+10 before the first command)"
+    assert rows[0][2] == "50 Hz 0 (0); 0 of 500 (+10 before the first command)" and rows[0][-1] == "pass"
+    assert rows[1][3].startswith("1.50x") and rows[1][-1].startswith("pass")       # 6 us against cyclictest's 4
     res["sil_realtime"]["idle_200hz"] = run(0, 3, 1997, 6.0)         # three commands missed: fails
     assert sil.rate_rows(res)[0][-1] == "**FAIL**"
+    res["sil_realtime"]["idle_200hz"] = run(2, 0, 2000, 6.0, own=0)  # two slips, both the host's: passes
+    assert sil.rate_rows(res)[0][1].startswith("0 (2)") and sil.rate_rows(res)[0][-1] == "pass"
+    res["sil_realtime"]["idle_200hz"] = run(2, 0, 2000, 6.0, own=1)
+    assert sil.rate_rows(res)[0][-1] == "**FAIL**"
     assert sil.rate_rows({"sil_realtime": {"idle": run(0, 0, 1, 1.0)}}) == []
+
+
+def test_latency_floor_is_the_same_runs_round_trip_at_the_runs_rate_plus_the_control_task():
+    def run(p99, ctl99):
+        return {"latency_p99_us": p99, "extra": {"fsw_control_us": {"p50": 50.0, "p99": ctl99},
+                                                 "latency_split_us": {}}}
+    res = {"sil_realtime": {"idle": run(800.0, 200.0), "idle_200hz": run(520.0, 100.0)},
+           "latency": {"sil_50hz_zenoh_p99_us": 500.0, "sil_200hz_zenoh_p99_us": 400.0,
+                       "sil_zenoh_p99_us": 1.0}}                        # the 100-Hz figure is not the floor
+    f = sil.latency_floor(res, "idle", 50.0)
+    assert f["floor_p99_us"] == 700.0 and f["remainder_us"] == 100.0 and abs(f["over_floor"] - 800 / 700) < 1e-12
+    rows = sil.floor_rows(res)
+    assert [r[-1] for r in rows[::2]] == ["**FAIL**", "pass"]            # 800 / 700 = 1.14x; 520 / 500 = 1.04x
+    assert rows[2][1] == "520.0 (20.0)" and "= Zenoh + codec round trip 400.0 + FSW control task 100.0" in rows[2][2]
+    assert sil.latency_floor({"sil_realtime": {"idle": run(800.0, 200.0)}}, "idle", 50.0)["floor_p99_us"] is None
+
+
+
+def test_the_rehearsal_row_sets_the_run_without_it_beside_the_idle_run():
+    res = {"sil_realtime": {"idle": {"latency_p50_us": 800.0, "latency_p99_us": 1100.0},
+                            "idle_no_rehearse": {"latency_p50_us": 920.0, "latency_p99_us": 1200.0}}}
+    r = [x for x in sil.realtime_rows(res) if "--no-rehearse" in x[0]]
+    assert len(r) == 1 and r[0][1] == "920.0 / 1200" and r[0][2] == "rehearsal on 800.0 / 1100"
+    assert r[0][3].startswith("1.15x")

@@ -294,6 +294,24 @@ def test_own_slips_keeps_overruns_and_heavy_late_releases_up_to_the_plants_last_
     assert [r["k"] for r in own_slips(recs, 20000.0, last_k=3000)] == [10, 12]
 
 
+def test_own_slips_leaves_the_host_a_slip_its_preemption_or_a_late_frame_explains():
+    """5-ms period: a cycle 2 ms late is the host's when the thread was off its CPU for that
+    long after taking its frame, or when it waited for its frame that long; the same cycle on
+    its CPU throughout, its frame on time, is its own."""
+    def rec(k, off=None, wait=100.0, jitter=1.0):
+        r = {"k": k, "cause": "overrun", "late_us": 2000.0, "jitter_us": jitter,
+             "tasks_us": {"input": wait, "control": 6900.0 - wait}}
+        if off is not None:
+            r["off_cpu_us"] = off
+        return r
+    recs = [rec(1, off=2500.0),              # preempted for longer than it was late: the host's
+            rec(2, off=500.0),               # preempted, but its work alone was still too long: own
+            rec(3, off=0.0, wait=2100.0),    # waited 2.1 ms for the plant's frame: not its work
+            rec(4),                          # no CPU figure (batch, older records): judged as before
+            rec(5, off=1000.0, jitter=1000.0)]   # late release and preemption together cover it
+    assert [r["k"] for r in own_slips(recs, 5000.0)] == [2, 4]
+
+
 def test_rate_group_periods_are_seconds_whatever_the_control_rate():
     from fsw.executive import divisors, rate_divisor
     p = load_params(PARAMS)

@@ -59,3 +59,27 @@ def test_only_garbage_gives_no_frame_and_keeps_the_last_one():
     node.frame["k"] = 7
     assert FswNode._fetch_frame(node) is None
     assert int(node.frame["k"]) == 7 and sum(node.dec.rejects.values()) == 2
+
+
+def test_the_rehearsal_before_a_frame_touches_nothing_the_loop_flies_with():
+    """The real-time FSW's rehearsal decodes the last frame again on scratch codecs: the
+    frame it flies, its decoder's counts and its replay guard stay as they were (the same
+    frame decoded again by the flying decoder would be refused as a replay)."""
+    plant = Codec.for_schema("SENSORS")
+    node = _node([_frame(plant, 0, 0)])
+    assert FswNode._fetch_frame(node) == 0
+    raw = _frame(plant, 1, 1)
+    node.sub_sensors = Sub([raw])
+    assert FswNode._fetch_frame(node) == 1
+    node.frame["t_ns"] = 123
+    snapshot = node.frame.copy()
+    node._last_raw, node.jets = raw, records.new(records.JETS)
+    node._warm_dec, node._warm_enc = Codec.for_schema("SENSORS", guard=False), Codec.for_schema("JETS")
+    node._warm_frame = records.new(records.SENSORS)
+    for _ in range(3):
+        FswNode._rehearse(node)
+    assert node.frame.tobytes() == snapshot.tobytes()
+    assert int(node._warm_frame["k"]) == 1 and node._warm_dec.decoded == 3 and sum(node._warm_dec.rejects.values()) == 0
+    assert sum(node.dec.rejects.values()) == 0 and node.dec.decoded == 2
+    node.sub_sensors = Sub([_frame(plant, 2, 2)])
+    assert FswNode._fetch_frame(node) == 2                  # the flying decoder's guard moved on only by its own frames

@@ -1,4 +1,4 @@
-"""Release jitter of the real-time 50 Hz loop (docs/benchmarks.md) next to cyclictest.
+"""Release jitter of the real-time loop at 50 and 200 Hz (docs/benchmarks.md) next to cyclictest.
 
 The loop: fsw.executive.RealTimeClock + the FSW topology's rate groups (RG1 control,
 RG2 fdir_slow) fed by the plant in the same process (an extra RG1 task
@@ -11,10 +11,12 @@ real-time policy nor the locked memory leaks into the rest of the benchmark.
 Jitter is the executive's: cycle start minus its absolute release on the monotonic clock;
 a slip is a cycle that ends after its deadline (one period), a missed release a whole
 period lost. The floor of the operating system comes from ``cyclictest -m -p <prio> -i
-20000 -l <loops> -a <cpu> -q -h <range>`` run right after, under the same load; its p50/p99
-come from its histogram (1 us bins). Both run idle and with ``stress-ng --cpu 2`` in the
-background. Missing tools are installed (apt-get, Debian packages rt-tests and stress-ng)
-when possible, else the figures are null with the reason.
+<period> -l <loops> -a <cpu> -q -h <range>`` run right after at the loop's own period, under
+the same load; its p50/p99 come from its histogram (1 us bins). Both run idle and with
+``stress-ng --cpu 2`` in the background, at the scenario's 50 Hz and again at 200 Hz (the
+control period 5 ms, ``--dt-control 0.005``: rate headroom). Missing tools are installed
+(apt-get, Debian packages rt-tests and stress-ng) when possible, else the figures are null
+with the reason.
 
     python -m ellipsled.bench.jitter [--quick]
 """
@@ -37,6 +39,7 @@ from ellipsled.procs import stop_process
 from .rows import NO_TARGET, Row, fmt, g, le, ratio, row, speed
 
 PERIOD_US = 20_000
+FAST_PERIOD_US = 5_000          # rate headroom: the same loop at 200 Hz
 PRIORITY = 80
 RESULT_TAG = "JITTER-RESULT "
 TARGETS = {"idle_p99_over_cyclictest_max": 2.0, "load_p99_over_cyclictest_max": 3.0,
@@ -155,22 +158,24 @@ def _threads() -> int:
     return _proc_status("Threads")
 
 
-def child(seconds: float, priority: int | None, cpu: int | None, scenario: str = "nominal") -> dict:
-    """The real-time loop in this process; returns its statistics (plain JSON values)."""
+def child(seconds: float, priority: int | None, cpu: int | None, scenario: str = "nominal",
+          period_us: int = PERIOD_US) -> dict:
+    """The real-time loop in this process at control period ``period_us``; returns its
+    statistics (plain JSON values)."""
     from common import rt
     threads_rep = rt.single_threaded_numerics()
     import gc
 
     import numpy as np
 
-    from common.model import load_scenario
     from common.events import EventLog
+    from ellipsled.sil.variant import prepare
     from fsw.executive import RealTimeClock
     from fsw.flightsoftware import FlightSoftware
     from fsw.topology import Topology
     from sim.plant import Plant
 
-    scn = load_scenario(scenario)
+    scn = prepare(scenario, dt_control_s=period_us * 1e-6)
     # warm-up on a throw-away pair: numba cache loads, first calls, allocator tables
     wp, wf = Plant(scn, scn.seed), FlightSoftware(scn, EventLog())
     fr = wp.sensors
@@ -238,9 +243,11 @@ def child(seconds: float, priority: int | None, cpu: int | None, scenario: str =
     }
 
 
-def run_child(seconds: float, priority: int | None = PRIORITY, cpu: int | None = 1) -> dict:
+def run_child(seconds: float, priority: int | None = PRIORITY, cpu: int | None = 1,
+              period_us: int = PERIOD_US) -> dict:
     cmd = [sys.executable, "-m", "ellipsled.bench.jitter", "--child", "--seconds", str(seconds),
-           "--priority", str(priority if priority is not None else 0), "--cpu", str(cpu if cpu is not None else -1)]
+           "--priority", str(priority if priority is not None else 0), "--cpu", str(cpu if cpu is not None else -1),
+           "--period-us", str(period_us)]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         out, err = p.communicate(timeout=seconds + 120.0)
@@ -262,11 +269,13 @@ def _cpu() -> int | None:
     return cpus[-1] if cpus else None
 
 
-def measure(seconds: float, cpu: int | None, tools_ok: bool, tools_reason: str) -> dict:
-    """One regime (idle or under load, set by the caller): the loop, then cyclictest."""
-    res: dict = {}
+def measure(seconds: float, cpu: int | None, tools_ok: bool, tools_reason: str,
+            period_us: int = PERIOD_US) -> dict:
+    """One regime (idle or under load, set by the caller): the loop, then cyclictest, both
+    at ``period_us``."""
+    res: dict = {"period_us": period_us}
     try:
-        loop = run_child(seconds, PRIORITY, cpu)
+        loop = run_child(seconds, PRIORITY, cpu, period_us)
         for k in ("p50_us", "p99_us", "max_us", "slips", "missed_releases", "cycles", "spin_us",
                   "compute_p50_us", "compute_p99_us", "compute_max_us", "rss_growth_kb"):
             res[k] = loop[k]
@@ -275,14 +284,14 @@ def measure(seconds: float, cpu: int | None, tools_ok: bool, tools_reason: str) 
         for k in ("p50_us", "p99_us", "max_us", "slips"):
             res[k] = None
             res[f"{k}_reason"] = f"real-time loop failed: {type(e).__name__}: {e}"
-    loops = int(round(seconds * 1e6 / PERIOD_US))
+    loops = int(round(seconds * 1e6 / period_us))
     if not tools_ok:
         for k in ("cyclictest_p50_us", "cyclictest_p99_us", "cyclictest_max_us"):
             res[k] = None
             res[f"{k}_reason"] = tools_reason
     else:
         try:
-            ct = cyclictest(loops, PRIORITY, cpu)
+            ct = cyclictest(loops, PRIORITY, cpu, interval_us=period_us, hist_us=period_us)
             res["cyclictest_p50_us"], res["cyclictest_p99_us"] = ct["p50_us"], ct["p99_us"]
             res["cyclictest_max_us"], res["cyclictest_avg_us"] = ct["max_us"], ct["avg_us"]
             res["cyclictest"] = ct
@@ -297,29 +306,43 @@ def measure(seconds: float, cpu: int | None, tools_ok: bool, tools_reason: str) 
     return res
 
 
-def run(quick: bool) -> dict:
-    """Idle and under ``stress-ng --cpu 2``: loop jitter p50/p99/max [us], slips, and
-    cyclictest at the same period, priority and CPU."""
-    seconds = 10.0 if quick else 60.0
-    tools_ok, why = ensure_tools()
-    cpu = _cpu()
-    idle = measure(seconds, cpu, tools_ok, why)
+def _regimes(seconds: float, cpu: int | None, tools_ok: bool, why: str, period_us: int) -> tuple[dict, dict]:
+    """(idle, under ``stress-ng --cpu 2``) at ``period_us``."""
+    idle = measure(seconds, cpu, tools_ok, why, period_us)
     if shutil.which("stress-ng") is None:
         reason = why or "stress-ng not installed"
         load = {k: None for k in ("p50_us", "p99_us", "max_us", "slips", "cyclictest_p99_us", "cyclictest_max_us")}
         load.update({f"{k}_reason": f"no background load: {reason}" for k in list(load)})
-    else:
-        try:
-            with background_load(2, timeout_s=2 * seconds + 300):
-                load = measure(seconds, cpu, tools_ok, why)
-            load["background"] = "stress-ng --cpu 2"
-        except Exception as e:
-            load = {k: None for k in ("p50_us", "p99_us", "max_us", "slips", "cyclictest_p99_us",
-                                      "cyclictest_max_us")}
-            load.update({f"{k}_reason": f"background load failed: {type(e).__name__}: {e}" for k in list(load)})
-    res = {"figure": "release jitter of the 50 Hz loop [us] vs cyclictest, same period/priority/CPU/load",
-           "seconds_per_regime": seconds, "period_us": PERIOD_US, "priority": PRIORITY, "cpu": cpu,
-           "idle": idle, "load": load,
+        return idle, load
+    try:
+        with background_load(2, timeout_s=2 * seconds + 300):
+            load = measure(seconds, cpu, tools_ok, why, period_us)
+        load["background"] = "stress-ng --cpu 2"
+    except Exception as e:
+        load = {k: None for k in ("p50_us", "p99_us", "max_us", "slips", "cyclictest_p99_us",
+                                  "cyclictest_max_us")}
+        load.update({f"{k}_reason": f"background load failed: {type(e).__name__}: {e}" for k in list(load)})
+    return idle, load
+
+
+# the regimes measured: (key in the results, the regime whose targets apply, period [us])
+REGIMES = (("idle", "idle", PERIOD_US), ("load", "load", PERIOD_US),
+           ("idle_200hz", "idle", FAST_PERIOD_US), ("load_200hz", "load", FAST_PERIOD_US))
+
+
+def run(quick: bool) -> dict:
+    """Idle and under ``stress-ng --cpu 2``, at 50 and at 200 Hz: loop jitter p50/p99/max [us],
+    slips, and cyclictest at the same period, priority and CPU."""
+    seconds = 10.0 if quick else 60.0
+    tools_ok, why = ensure_tools()
+    cpu = _cpu()
+    idle, load = _regimes(seconds, cpu, tools_ok, why, PERIOD_US)
+    idle_fast, load_fast = _regimes(seconds, cpu, tools_ok, why, FAST_PERIOD_US)
+    res = {"figure": "release jitter of the real-time loop at 50 and 200 Hz [us] vs cyclictest, same "
+                     "period/priority/CPU/load",
+           "seconds_per_regime": seconds, "period_us": PERIOD_US, "fast_period_us": FAST_PERIOD_US,
+           "priority": PRIORITY, "cpu": cpu,
+           "idle": idle, "load": load, "idle_200hz": idle_fast, "load_200hz": load_fast,
            "targets": dict(TARGETS)}
     loop = idle.get("loop") or load.get("loop")
     if loop:
@@ -339,18 +362,19 @@ def jitter_verdict(regime: str, p99, max_us, cyclictest_p99) -> tuple[str, objec
 
 def rows(res: dict) -> list[Row]:
     R = []
-    for regime in ("idle", "load"):
-        j = g(res, "jitter", regime) or {}
+    for key, regime, period_us in REGIMES:
+        j = g(res, "jitter", key) or {}
         if not j:
             continue
         ct99 = j.get("cyclictest_p99_us")
         target, ok, absolute = jitter_verdict(regime, j.get("p99_us"), j.get("max_us"), ct99)
-        R.append(row(f"release jitter {regime} p50 / p99 / max [us]",
+        R.append(row(f"release jitter {regime} at {1e6 / period_us:g} Hz p50 / p99 / max [us]",
                      f"{fmt(j.get('p50_us'))} / {fmt(j.get('p99_us'))} / {fmt(j.get('max_us'))}",
                      f"cyclictest {fmt(j.get('cyclictest_p50_us'))} / {fmt(ct99)} / {fmt(j.get('cyclictest_max_us'))}",
                      f"{fmt(ratio(j.get('p99_us'), ct99))}x (p99)", target, ok, absolute=absolute,
                      machine=speed(res)))
-        R.append(row(f"cycle slips, in-process loop {regime} ({fmt(j.get('cycles'))} cycles)", fmt(j.get("slips")),
+        R.append(row(f"cycle slips, in-process loop {regime} at {1e6 / period_us:g} Hz ({fmt(j.get('cycles'))} cycles)",
+                     fmt(j.get("slips")),
                      "", "", f"{TARGETS['slips']}", None if j.get("slips") is None else j.get("slips") == TARGETS["slips"]))
     return R
 
@@ -375,10 +399,12 @@ def main(argv=None) -> int:
     ap.add_argument("--priority", type=argtypes.int_range(0, 99), default=PRIORITY, help="SCHED_FIFO priority (0: none)")
     ap.add_argument("--cpu", type=argtypes.int_range(-1, (os.cpu_count() or 1) - 1), default=-1,
                     help="pin to this CPU (-1: no pinning)")
+    ap.add_argument("--period-us", type=argtypes.int_range(1000, 100_000), default=PERIOD_US,
+                    help="(child) the loop's control period [us]")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args(argv)
     if a.child:
-        res = child(a.seconds, a.priority or None, a.cpu if a.cpu >= 0 else None)
+        res = child(a.seconds, a.priority or None, a.cpu if a.cpu >= 0 else None, period_us=a.period_us)
         print(RESULT_TAG + json.dumps(res), flush=True)
     else:
         print(json.dumps(run(a.quick), indent=2))

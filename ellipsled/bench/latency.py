@@ -315,6 +315,9 @@ def _both(n: int, rate_hz: float, placement: str) -> dict:
     return {"udp": udp_roundtrip(n, rate_hz, placement), "zenoh": zenoh_roundtrip(n, rate_hz, placement)}
 
 
+SIL_RATES_HZ = (50.0, 200.0)      # the real-time SIL's control rates whose latency floor the bench states
+
+
 def run(quick: bool) -> dict:
     n, rate = (1000, 100.0) if quick else (6000, 100.0)
     d = _both(n, rate, "default")
@@ -336,6 +339,19 @@ def run(quick: bool) -> dict:
         for kind in ("udp", "zenoh"):
             res[f"sil_{kind}_p99_us"] = None
             res[f"sil_{kind}_p99_us_reason"] = f"{type(e).__name__}: {e}"
+    # the floor of the SIL's sensor-to-actuator latency at each of its control rates: the same
+    # round trip paced at that rate (the idle time between round trips is what cools the
+    # caches and lets the cores sleep, as between the SIL's frames)
+    seconds = 10.0 if quick else 30.0
+    for hz in SIL_RATES_HZ:
+        key = f"sil_{hz:g}hz_zenoh"
+        try:
+            z = _in_child(int(seconds * hz), hz, "sil")["zenoh"]
+            for q in ("p50_us", "p99_us", "max_us", "lost"):
+                res[f"{key}_{q}"] = z[q]
+        except Exception as e:
+            res[f"{key}_p99_us"] = None
+            res[f"{key}_p99_us_reason"] = f"{type(e).__name__}: {e}"
     return res
 
 
@@ -352,6 +368,12 @@ def rows(res: dict) -> list[Row]:
                      f"{fmt(lat.get('sil_zenoh_p50_us'))} / {fmt(lat.get('sil_zenoh_p99_us'))}",
                      f"UDP {fmt(lat.get('sil_udp_p50_us'))} / {fmt(lat.get('sil_udp_p99_us'))}",
                      f"{fmt(ratio(lat.get('sil_zenoh_p99_us'), lat.get('sil_udp_p99_us')))}x (p99)", "", NO_TARGET))
+    for hz in SIL_RATES_HZ:
+        key = f"sil_{hz:g}hz_zenoh"
+        if f"{key}_p99_us" in lat:
+            R.append(row(f"Zenoh + codec round trip, SIL placement, paced at {hz:g} Hz p50 / p99 [us]",
+                         f"{fmt(lat.get(f'{key}_p50_us'))} / {fmt(lat.get(f'{key}_p99_us'))}",
+                         "", "", "the SIL's latency floor at that rate", NO_TARGET))
     return R
 
 

@@ -9,7 +9,10 @@
   (target: locked resident <= 1.2x unlocked);
 - rate headroom: the idle run again at a 5-ms control period (``--dt-control 0.005``, 200 Hz)
   beside the 50-Hz one: cycle slips, release jitter, commands the plant missed, the control
-  task (target: 0 slips, every command answered).
+  task (target: 0 slips, every command answered);
+- the latency floor: sensor-to-actuator p99 at 50 and 200 Hz against the same invocation's
+  Zenoh + codec round trip paced at that rate plus the control task (target ≤ 1.1×), and the
+  idle run with the nodes' rehearsal off (``--no-rehearse``) beside it.
 
 ``ellipsled run <scenario> --lockstep|--realtime --duration S --out DIR --rerun none`` is
 called as a subprocess with a timeout. When the command is absent or fails, every figure
@@ -136,7 +139,9 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
            # the footprint's baseline: the same run with nothing locked (nor SCHED_FIFO)
            "idle_unlocked": one(("--no-rt",)),
            # rate headroom: the same run at 200 Hz
-           "idle_200hz": one(("--dt-control", "0.005"))}
+           "idle_200hz": one(("--dt-control", "0.005")),
+           # the nodes' rehearsal of their receiving paths off: what it takes off the latency
+           "idle_no_rehearse": one(("--no-rehearse",))}
     res["footprint"] = footprint(res["idle"], res["idle_unlocked"])
     tools_ok, tools_why = ensure_tools()
     if not tools_ok:
@@ -176,36 +181,104 @@ def footprint(locked: dict, unlocked: dict) -> dict:
 
 
 RATE_TARGETS = {"slips": 0, "missed_commands": 0}
+FLOOR_TARGETS = {"latency_over_floor_p99_max": 1.1}
+# the real-time runs the floor is stated for: (sil_realtime key, control rate [Hz])
+FLOOR_RUNS = (("idle", 50.0), ("idle_200hz", 200.0))
+
+
+def _missed(s: dict):
+    return g(s, "extra", "sim_counts", "missed_commands")
+
+
+def _answered(s: dict) -> str | None:
+    """"m of n" commands missed after the FSW's first answer, and the steps before it."""
+    n, m = g(s, "extra", "latency_samples"), _missed(s)
+    if n is None or m is None:
+        return None
+    start = g(s, "extra", "sim_counts", "unanswered_at_start")
+    return f"{m} of {n + m}" + (f" (+{start} before the first command)" if start is not None else "")
+
+
+def _own(s: dict):
+    """The run's slips the FSW's own work explains; all of them when the run did not say."""
+    own = g(s, "extra", "own_slips")
+    return s.get("slips") if own is None else own
 
 
 def rate_rows(res: dict) -> list[Row]:
-    """The idle run at 200 Hz beside the same run at 50 Hz."""
+    """The idle run at 200 Hz beside the same run at 50 Hz; its jitter against cyclictest at
+    the same 5-ms period (the jitter section's 200-Hz regime)."""
     fast, base = g(res, "sil_realtime", "idle_200hz") or {}, g(res, "sil_realtime", "idle") or {}
     if not fast:
         return []
 
-    def missed(s):
-        return g(s, "extra", "sim_counts", "missed_commands")
-
     def ctl(s, q):
         return g(s, "extra", "fsw_control_us", q)
-
-    def answered(s):
-        n, m = g(s, "extra", "latency_samples"), missed(s)
-        return None if n is None or m is None else f"{m} of {n + m}"
+    own, missed = _own(fast), _missed(fast)
+    ct99 = g(res, "jitter", "idle_200hz", "cyclictest_p99_us")
+    target, ok, absolute = jitter_verdict("idle", fast.get("jitter_p99_us"), fast.get("jitter_max_us"), ct99)
     return [
-        row("real-time SIL at 200 Hz: cycle slips; commands missed", f"{fmt(fast.get('slips'))}; {answered(fast) or 'n/m'}",
-            f"50 Hz {fmt(base.get('slips'))}; {answered(base) or 'n/m'}", "", "0; 0",
-            None if fast.get("slips") is None or missed(fast) is None
-            else fast["slips"] == RATE_TARGETS["slips"] and missed(fast) == RATE_TARGETS["missed_commands"]),
+        row("real-time SIL at 200 Hz: cycle slips by the FSW's own work (all); commands missed",
+            f"{fmt(own)} ({fmt(fast.get('slips'))}); {_answered(fast) or 'n/m'}",
+            f"50 Hz {fmt(_own(base))} ({fmt(base.get('slips'))}); {_answered(base) or 'n/m'}", "", "0; 0",
+            None if own is None or missed is None
+            else own == RATE_TARGETS["slips"] and missed == RATE_TARGETS["missed_commands"]),
         row("real-time SIL at 200 Hz: release jitter p50 / p99 / max [us]",
             f"{fmt(fast.get('jitter_p50_us'))} / {fmt(fast.get('jitter_p99_us'))} / {fmt(fast.get('jitter_max_us'))}",
-            f"50 Hz {fmt(base.get('jitter_p50_us'))} / {fmt(base.get('jitter_p99_us'))} / {fmt(base.get('jitter_max_us'))}",
-            f"{fmt(ratio(fast.get('jitter_p99_us'), base.get('jitter_p99_us')))}x (p99)", "", NO_TARGET),
+            f"cyclictest at 5 ms p99 {fmt(ct99)}; 50 Hz {fmt(base.get('jitter_p99_us'))}",
+            f"{fmt(ratio(fast.get('jitter_p99_us'), ct99))}x (p99)", target, ok, absolute=absolute,
+            machine=speed(res)),
         row("real-time SIL at 200 Hz: control task p50 / p99 [us]", f"{fmt(ctl(fast, 'p50'))} / {fmt(ctl(fast, 'p99'))}",
             f"50 Hz {fmt(ctl(base, 'p50'))} / {fmt(ctl(base, 'p99'))}",
             f"{fmt(ratio(ctl(fast, 'p99'), ctl(base, 'p99')))}x (p99)", "", NO_TARGET),
     ]
+
+
+def latency_floor(res: dict, key: str, hz: float) -> dict:
+    """The sensor-to-actuator p99 of the real-time run ``key`` against its floor [us]: the
+    same bench run's Zenoh + codec round trip p99 with the SIL's placement paced at the
+    run's rate, plus the FSW's control task p99 (its share); the remainder is the rest."""
+    s = g(res, "sil_realtime", key) or {}
+    lat = s.get("latency_p99_us")
+    rt = g(res, "latency", f"sil_{hz:g}hz_zenoh_p99_us")
+    ctl = g(s, "extra", "fsw_control_us", "p99")
+    floor = None if rt is None or ctl is None else rt + ctl
+    return {"latency_p99_us": lat, "roundtrip_p99_us": rt, "control_p99_us": ctl, "floor_p99_us": floor,
+            "remainder_us": None if lat is None or floor is None else lat - floor,
+            "over_floor": ratio(lat, floor)}
+
+
+def floor_rows(res: dict) -> list[Row]:
+    """Sensor-to-actuator p99 against its floor at 50 and 200 Hz, and where the time goes."""
+    k = FLOOR_TARGETS["latency_over_floor_p99_max"]
+    R = []
+    for key, hz in FLOOR_RUNS:
+        s = g(res, "sil_realtime", key) or {}
+        if not s:
+            continue
+        f = latency_floor(res, key, hz)
+        r = f["over_floor"]
+        R.append(row(f"sensor-to-actuator p99 at {hz:g} Hz against its floor [us]: measured (remainder)",
+                     f"{fmt(f['latency_p99_us'])} ({fmt(f['remainder_us'])})",
+                     f"floor {fmt(f['floor_p99_us'])} = Zenoh + codec round trip {fmt(f['roundtrip_p99_us'])} "
+                     f"+ FSW control task {fmt(f['control_p99_us'])}",
+                     f"{fmt(r)}x floor", f"p99 <= {k:g}x floor", None if r is None else r <= k))
+        ex = s.get("extra") or {}
+        sp = ex.get("latency_split_us") or {}
+        R.append(row(f"  where it goes at {hz:g} Hz, p50 / p99 [us]: plant -> FSW has the frame; FSW frame -> "
+                     "answer published; FSW publish -> plant has the command",
+                     f"{fmt(ex.get('fsw_frame_age_p50_us'))} / {fmt(ex.get('fsw_frame_age_p99_us'))}; "
+                     f"{fmt(_minus(sp.get('sensor_and_fsw_p50_us'), ex.get('fsw_frame_age_p50_us')))} / "
+                     f"{fmt(_minus(sp.get('sensor_and_fsw_p99_us'), ex.get('fsw_frame_age_p99_us')))}; "
+                     f"{fmt(sp.get('command_p50_us'))} / {fmt(sp.get('command_p99_us'))}",
+                     f"control task {fmt(g(ex, 'fsw_control_us', 'p50'))} / {fmt(g(ex, 'fsw_control_us', 'p99'))}",
+                     "", "", NO_TARGET))
+    return R
+
+
+def _minus(a, b):
+    """a - b (the middle leg of two percentiles: an estimate, percentiles do not subtract exactly)."""
+    return None if a is None or b is None else a - b
 
 
 def footprint_rows(res: dict) -> list[Row]:
@@ -275,7 +348,14 @@ def realtime_rows(res: dict) -> list[Row]:
                      f"{slips}", None if s.get("slips") is None else s.get("slips") == slips))
         R += latency_rows(res, regime, s)
         if regime == "idle":
-            R += footprint_rows(res) + rate_rows(res)
+            R += footprint_rows(res) + rate_rows(res) + floor_rows(res)
+    s = g(res, "sil_realtime", "idle_no_rehearse") or {}
+    if s:
+        on = g(res, "sil_realtime", "idle") or {}
+        R.append(row("sensor-to-actuator latency idle, --no-rehearse p50 / p99 [us]",
+                     f"{fmt(s.get('latency_p50_us'))} / {fmt(s.get('latency_p99_us'))}",
+                     f"rehearsal on {fmt(on.get('latency_p50_us'))} / {fmt(on.get('latency_p99_us'))}",
+                     f"{fmt(ratio(s.get('latency_p50_us'), on.get('latency_p50_us')))}x (p50)", "", NO_TARGET))
     s = g(res, "sil_realtime", "idle_standard_transport") or {}
     if s:
         low = g(res, "sil_realtime", "idle", "latency_p99_us")

@@ -77,6 +77,9 @@ def add_arguments(p) -> None:
     p.add_argument("--rt-offset-us", type=argtypes.offset_us, default=None,
                    help="real time: the FSW releases this long after the plant publishes a step "
                         "(default: ellipsled fsw's)")
+    p.add_argument("--rehearse", action=argparse.BooleanOptionalAction, default=True,
+                   help="real time: each node runs its receiving path once on a scratch copy while it "
+                        "waits, so that it is warm when the frame or command comes (default on)")
     p.add_argument("--no-plots", action="store_true")
 
 
@@ -186,7 +189,7 @@ class Launcher:
         scen = [a.scenario] + (["--seed", str(a.seed)] if a.seed is not None else []) \
             + (["--ft-off"] if a.ft_off else []) + (["--duration", str(a.duration)] if a.duration is not None else []) \
             + variant_argv(a)
-        mode = ["--realtime" if a.mode == "realtime" else "--lockstep"]
+        mode = ["--realtime" if a.mode == "realtime" else "--lockstep"] + ([] if a.rehearse else ["--no-rehearse"])
         key = self._key_file()
         if not a.console:               # the console owns the terminal otherwise
             self.relay = LogRelay(self.say_child)
@@ -287,6 +290,8 @@ class Launcher:
                "fsw_control_us": (fsw_info.get("tasks_us") or {}).get("control"),
                "jitter_p50_us": fsw_info["jitter_p50_us"], "jitter_p99_us": fsw_info["jitter_p99_us"],
                "jitter_max_us": fsw_info["jitter_max_us"], "slips": fsw_info["cycle_slips"],
+               # the slips the FSW's own work explains (fsw.executive.own_slips) among those recorded
+               **own_slip_counts(fsw_info, scn.dt_control_s, sim_info.get("steps")),
                "sim_counts": sim_info["counts"], "sim_rejects": sim_info["rejects"],
                "fsw_sensor_rejects": fsw_info["sensor_rejects"], "end_reason": sim_info["end_reason"],
                "message": sim_info["message"], "rt": fsw_info.get("rt"), "sim_rt": sim_info.get("rt"),
@@ -312,6 +317,16 @@ class Launcher:
                 for role, m in mem.items() if m))
         print(files_written(self.out))
         return exit_code(summary["end_reason"])
+
+
+def own_slip_counts(fsw_info: dict, dt_s: float, plant_steps: int | None) -> dict:
+    """{own_slips, slips_recorded}: of the cycle slips the FSW recorded (the first
+    Executive.SLIP_RECORDS), those its own work explains (fsw.executive.own_slips: not the
+    host's preemption, a late release or a late frame, nor after the plant's last step)."""
+    from fsw.executive import own_slips
+    recs = (fsw_info.get("executive") or {}).get("slip_records") or []
+    last_k = plant_steps - 1 if plant_steps else None
+    return {"own_slips": len(own_slips(recs, dt_s * 1e6, last_k)), "slips_recorded": len(recs)}
 
 
 def _memory(info: dict) -> dict | None:

@@ -9,6 +9,7 @@ Fault injections arrive on sim/faults and are applied at the next step boundary.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
@@ -43,6 +44,9 @@ def add_arguments(p) -> None:
     p.add_argument("--wait-bridge", action="store_true", help="also wait for the Rerun bridge before step 0")
     p.add_argument("--miss-periods", type=argtypes.int_range(1, 1000), default=3,
                    help="real time: hold jets off after this many periods without a fresh command")
+    p.add_argument("--rehearse", action=argparse.BooleanOptionalAction, default=True,
+                   help="real time: while the command is on its way, run its decode once on a scratch "
+                        "copy of the last one, so that it is warm when the command comes")
     p.add_argument("--progress-file", default=None, metavar="PATH",
                    help="keep the simulated time reached in this file (ellipsled run's progress bar)")
 
@@ -94,13 +98,18 @@ class SimNode:
         # the FSW owns the jets key; another publisher takes over only after 1 s of silence
         self.dec_jets = Codec.for_schema("JETS", guard=SequenceGuard(takeover_after_s=1.0), on_reject=self._rejected)
         self.dec_faults = Codec.for_schema("FAULT", on_reject=self._rejected)
+        self._warm_dec = Codec.for_schema("JETS", guard=False)      # real time: _rehearse's scratch codec
+        self._last_raw: bytes | None = None
         self.truth_rec = records.new(records.TRUTH)
         self.u = np.zeros(records.N_JETS, dtype=np.uint8)
         self.u_k = -1                  # JETS.k of the command held (-1: none, jets off)
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
         self.sensor_seq = 0     # per publication: a frame sent again is a new sample, not a replay
-        self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "fault_rejected": 0,
-                       "resent_frames": 0, "warmup_frames": 0,
+        # real time: a step without its command by the deadline is missed once the FSW has
+        # answered once; before that (the FSW phase-locks its clock on the first frames of the
+        # running plant, ellipsled/sil/fsw_node.py) it is unanswered at start
+        self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "unanswered_at_start": 0,
+                       "fault_rejected": 0, "resent_frames": 0, "warmup_frames": 0,
                        "faults_applied": 0}
         self.rejects: dict[str, int] = {}
         # one latency per step at most: preallocated, nothing grows during the run
@@ -188,6 +197,13 @@ class SimNode:
         self.plant.step(self.u, u_k=self.u_k)
         return False
 
+    def _rehearse(self) -> None:
+        """Real time, while the command is on its way: its decode runs once on a scratch copy
+        of the last one, so that it is warm when the command comes (ellipsled/sil/fsw_node.py
+        rehearses its side the same way). Guard-less scratch codec: nothing counted."""
+        if self._last_raw is not None:
+            self._warm_dec.decode(self._last_raw)
+
     def _take_command(self, rec) -> int:
         self.u[:] = rec["u"]
         self.u_k = int(rec["k"])
@@ -253,6 +269,8 @@ class SimNode:
             self.apply_faults()
             self.publish_fault_log()
             t_pub = self.publish_sensors()
+            if self.args.rehearse:
+                self._rehearse()
             deadline = release + period - margin
             got = False
             while now_ns() < deadline and not self.stop:
@@ -260,9 +278,11 @@ class SimNode:
                                    spin_s=self.spin_s)
                 if s is None:
                     break
-                rec = self.dec_jets.decode(s.payload.to_bytes())
+                raw = s.payload.to_bytes()
+                rec = self.dec_jets.decode(raw)
                 if rec is None or self._refused(rec, k):
                     continue
+                self._last_raw = raw
                 kc = int(rec["k"])
                 if kc < last_cmd_k:
                     self.counts["stale_commands"] += 1
@@ -279,7 +299,7 @@ class SimNode:
                     got = True
                     break
             if not got:
-                self.counts["missed_commands"] += 1
+                self.counts["missed_commands" if last_cmd_k >= 0 else "unanswered_at_start"] += 1
             if k - last_cmd_k >= self.args.miss_periods:
                 self.u[:] = 0
                 self.u_k = -1

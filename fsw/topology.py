@@ -64,7 +64,7 @@ class Topology:
         if isinstance(clock, RealTimeClock) and lead_ns > 0:
             if lead_ns >= period_ns:
                 raise ValueError(f"executive.rehearse_us = {lead_ns / 1e3:g} us: not shorter than the control period "
-                                 f"({period_ns / 1e3:g} us)")
+                                 f"({period_ns / 1e3:g} us); set it lower, or 0 for no rehearsal")
             self.rehearsal = FlightSoftware(fsw.scenario, EventLog(),
                                             param_overrides={**fsw.params, "fdir.mode": "oracle"})
             clock.set_rehearsal(self._rehearse, lead_ns)

@@ -9,7 +9,10 @@ faster control rate keeps their rates) and calls its tasks in registration order
 - ``LockstepClock``: the tick is the arrival of sensor frame k — the caller hands it in;
   the release time is the moment it is handed in (no jitter by definition);
 - ``RealTimeClock``: absolute releases t0 + k·period on the monotonic clock (never drift),
-  waited for with an absolute clock_nanosleep and an optional final spin.
+  waited for with an absolute clock_nanosleep and an optional final spin; optionally a
+  rehearsal shortly before each release (``set_rehearsal``): after a period asleep, the
+  interpreter's code and data the control task runs through are out of the caches, and
+  running the same code once just before the release brings them back.
 
 Every cycle records its release, its release jitter (start − scheduled release), the
 compute time of each task and in total, and whether it finished before its deadline
@@ -38,6 +41,8 @@ PARAMS = [
           ground_settable=False),
     Param("executive.spin_us", 0.0, 5000.0, "us", "real-time clock: final busy-wait before each release",
           ground_settable=False),
+    Param("executive.rehearse_us", 0.0, 5000.0, "us", "real-time clock: the control task rehearsed this long "
+          "before each release, then a spin to it (0 = never)", ground_settable=False),
 ]
 
 
@@ -81,6 +86,11 @@ class RealTimeClock:
     busy-waits the rest (spin_ns = 0: sleep only). If the caller is already later than a
     whole period behind, the missed releases are skipped (counted in ``missed``) so that
     tick k stays at time t0 + k·period: rate groups keep their phase with time.
+    With a rehearsal (``set_rehearsal(fn, lead_ns)``), ``fn()`` runs once before each release
+    at release - lead_ns (- spin_ns if that is longer), when the caller is not already past
+    that time, and the rest of the lead is spun, not slept (a sleep, however short, lets the
+    caches cool again): the lead costs its length of a core every period. Its time falls before the release, so the
+    cycle's compute time does not include it (an overrun shows as release jitter).
     ``now_ns`` and ``sleep_until`` are injectable (tests use a fake clock).
     """
 
@@ -99,6 +109,20 @@ class RealTimeClock:
         self.t0_ns: int | None = None
         self.missed = 0
         self._k = -1
+        self.rehearse: Callable[[], None] | None = None
+        self.rehearse_ns = 0
+        self.rehearsals = 0        # rehearsals run
+        self.rehearsals_skipped = 0   # releases whose rehearsal time had passed already
+
+    def set_rehearsal(self, fn: Callable[[], None] | None, lead_ns: int) -> None:
+        """Run ``fn()`` ``lead_ns`` before each release (None or lead_ns 0: no rehearsal)."""
+        lead_ns = int(lead_ns)
+        if not 0 <= lead_ns < self.period_ns:
+            raise ValueError(f"RealTimeClock: need 0 <= rehearsal lead < period_ns ({self.period_ns}), got {lead_ns}")
+        if fn is not None and not callable(fn):
+            raise TypeError("RealTimeClock.set_rehearsal: fn is not callable")
+        self.rehearse = fn if lead_ns > 0 else None
+        self.rehearse_ns = lead_ns if fn is not None else 0
 
     @classmethod
     def from_params(cls, params: dict, period_ns: int, **kw) -> "RealTimeClock":
@@ -123,6 +147,18 @@ class RealTimeClock:
             k, t_rel = k_now, self.t0_ns + k_now * self.period_ns
         else:
             wake = t_rel - self.spin_ns
+            if self.rehearse is not None:
+                t_reh = t_rel - max(self.rehearse_ns, self.spin_ns)
+                if now < t_reh:
+                    while now < t_reh:
+                        self.sleep_until(t_reh)
+                        now = self.now_ns()
+                    self.rehearse()
+                    self.rehearsals += 1
+                    now = self.now_ns()
+                    wake = now          # no sleep between the rehearsal and the release: spin
+                else:
+                    self.rehearsals_skipped += 1
             while now < wake:                 # loop: a signal may end the sleep early
                 self.sleep_until(wake)
                 now = self.now_ns()

@@ -9,12 +9,23 @@ Process shells append their own tasks (publish the jet command, ground link) wit
 The batch runner and the SIL FSW process both fly through this object. It stamps the loop
 timing fields (records.FSW_STATE_SHELL) of the FSW's output record: release, jitter and
 slips when the control task has run, the compute time when the tick has ended.
+
+Real time (executive.rehearse_us > 0): a period asleep leaves the control task's code and
+the interpreter's paths through it out of the caches, and the first cycle after it runs
+several times slower than the same cycle run back to back. A spare FlightSoftware (the
+rehearsal) runs the control cycle on the last frame shortly before each release
+(RealTimeClock.set_rehearsal), so the flying one finds the code warm. The spare is the same
+code, not a copy of it; its outputs go nowhere, and its FDIR identifies nothing (mode
+oracle without a fault log), so it never rebuilds tables or solves the controllability LP
+inside the rehearsal. Lockstep and batch have no idle gap and no rehearsal.
 """
 from __future__ import annotations
 
 from typing import Callable
 
 import numpy as np
+
+from common.events import EventLog
 
 from .executive import Cycle, Executive, LockstepClock, RealTimeClock
 from .flightsoftware import FlightSoftware
@@ -46,6 +57,27 @@ class Topology:
         if fsw.entry is not None:
             self.executive.add(3, "entry_guidance", lambda c: fsw.entry_guidance_step())
         self.executive.add(3, "controllability", lambda c: fsw.reassess_step())
+        self.rehearsal: FlightSoftware | None = None
+        self.rehearsal_errors = 0
+        self._last_frame = None
+        lead_ns = int(round(fsw.params["executive.rehearse_us"] * 1e3))
+        if isinstance(clock, RealTimeClock) and lead_ns > 0:
+            if lead_ns >= period_ns:
+                raise ValueError(f"executive.rehearse_us = {lead_ns / 1e3:g} us: not shorter than the control period "
+                                 f"({period_ns / 1e3:g} us); set it lower, or 0 for no rehearsal")
+            self.rehearsal = FlightSoftware(fsw.scenario, EventLog(),
+                                            param_overrides={**fsw.params, "fdir.mode": "oracle"})
+            clock.set_rehearsal(self._rehearse, lead_ns)
+
+    def _rehearse(self) -> None:
+        """The control cycle of the spare on the last frame the flying FSW took (never raises:
+        a failing rehearsal is counted, the flight goes on)."""
+        if self._last_frame is None:
+            return
+        try:
+            self.rehearsal.control_step(self._last_frame)
+        except Exception:
+            self.rehearsal_errors += 1
 
     def _input(self, cyc: Cycle) -> None:
         self._frame = self.frame_source()
@@ -58,6 +90,7 @@ class Topology:
             self.u = self.fsw.no_frame(self.fsw.t_s + self.fsw.dt_s)
         else:
             self.u = self.fsw.control_step(frame)
+            self._last_frame = frame
         self._t_release_ns[()] = cyc.t_release_ns
         self._jitter_us[()] = (cyc.t_start_ns - cyc.t_release_ns) * 1e-3
         self._slips[()] = self.executive.slips

@@ -202,6 +202,37 @@ def test_spin_mode_sleeps_to_release_minus_spin_then_busy_waits():
         RealTimeClock(period, spin_ns=period)
 
 
+def test_rehearsal_runs_once_lead_before_each_release_then_spins_to_it():
+    ft = FakeTime(per_read_ns=1_000)
+    period, spin, lead = 20 * MS, 200_000, 800_000
+    clock = RealTimeClock(period, spin_ns=spin, now_ns=ft.now, sleep_until=ft.sleep_until)
+    ran_at = []
+    clock.set_rehearsal(lambda: ran_at.append(ft.t), lead)
+    clock.start(ft.t + period)
+    for k in range(3):
+        _, t_rel = clock.release()
+        assert ft.sleeps[-1] == t_rel - lead      # slept to the rehearsal, not to release - spin
+        assert t_rel - lead <= ran_at[-1] < t_rel - lead + 3_000
+        assert t_rel <= ft.t < t_rel + 2_000     # then spun to the release
+    assert clock.rehearsals == len(ran_at) == 3 and clock.rehearsals_skipped == 0
+    # a spin longer than the lead: the rehearsal starts when the spin would
+    clock.set_rehearsal(lambda: ran_at.append(ft.t), 100_000)
+    _, t_rel = clock.release()
+    assert ft.sleeps[-1] == t_rel - spin and t_rel - spin <= ran_at[-1] < t_rel - spin + 3_000
+    # a caller already inside the lead: no rehearsal (it could not end in time), counted
+    ft.t = t_rel + period - 50_000
+    n = len(ran_at)
+    clock.release()
+    assert len(ran_at) == n and clock.rehearsals_skipped == 1
+    clock.set_rehearsal(None, 0)
+    clock.release()
+    assert len(ran_at) == n and clock.rehearse is None
+    with pytest.raises(ValueError):
+        clock.set_rehearsal(lambda: None, period)
+    with pytest.raises(TypeError):
+        clock.set_rehearsal(5, lead)
+
+
 def test_real_clock_releases_are_absolute_and_never_drift():
     period = 2 * MS
     clock = RealTimeClock(period)

@@ -1,0 +1,83 @@
+"""fsw/topology.py: the real-time rehearsal (a spare flight software runs the control cycle
+on the last frame before each release) leaves the flight unchanged, runs only in real time,
+and never rebuilds tables or solves the controllability LP (its FDIR identifies nothing)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from common.events import EventLog
+from common.model import load_scenario
+from fsw.executive import LockstepClock, RealTimeClock
+from fsw.flightsoftware import FlightSoftware
+from fsw.topology import Topology
+from sim.plant import Plant
+
+MS = 1_000_000
+
+
+class FakeTime:
+    def __init__(self):
+        self.t = 1_000 * MS
+
+    def now(self) -> int:
+        self.t += 1_000
+        return self.t
+
+    def sleep_until(self, t: int) -> None:
+        self.t = max(self.t, t)
+
+
+def _fly(rehearse_us: float, n: int = 60):
+    """``n`` real-time ticks on a fake clock with the plant stepped in the loop (as the
+    bench's in-process loop does); the jet commands and output records of every tick."""
+    scn = load_scenario("nominal")
+    plant = Plant(scn, scn.seed)
+    fsw = FlightSoftware(scn, EventLog(), param_overrides={"executive.rehearse_us": rehearse_us})
+    ft = FakeTime()
+    clock = RealTimeClock(int(round(fsw.dt_s * 1e9)), now_ns=ft.now, sleep_until=ft.sleep_until)
+    topo = Topology(fsw, clock, frame_source=lambda: plant.sensors)
+    topo.add(1, "plant", lambda c: plant.step(topo.u))
+    jets, outs = [], []
+    clock.start()
+    for _ in range(n):
+        topo.tick()
+        jets.append(topo.u.copy())
+        outs.append(fsw.output.copy())
+    return topo, clock, np.array(jets), outs
+
+
+def test_the_rehearsal_runs_before_each_release_and_changes_nothing_in_the_flight():
+    topo, clock, jets, outs = _fly(800.0)
+    ref_topo, ref_clock, ref_jets, ref_outs = _fly(0.0)
+    assert ref_topo.rehearsal is None and ref_clock.rehearse is None
+    assert topo.rehearsal is not None and topo.rehearsal is not topo.fsw
+    assert clock.rehearse_ns == 800_000 and clock.rehearsals == len(jets)
+    # the first release has no frame taken yet: nothing to rehearse; then one cycle per release
+    assert topo.rehearsal.cycles == len(jets) - 1 and topo.rehearsal_errors == 0
+    assert jets.any()                         # the flight commanded jets: a real comparison
+    np.testing.assert_array_equal(jets, ref_jets)
+    for a, b in zip(outs, ref_outs):
+        for name in a.dtype.names:
+            if name not in ("t_release_ns", "jitter_us", "compute_us", "alloc_us"):    # host timing
+                np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    # the spare's FDIR identifies nothing: no table rebuild, no LP inside a rehearsal
+    assert topo.rehearsal.fdir.oracle and not topo.fsw.fdir.oracle
+
+
+def test_a_failing_rehearsal_is_counted_and_the_flight_goes_on():
+    topo, clock, jets, _ = _fly(800.0, n=3)
+    topo.rehearsal.control_step = None           # calling it raises TypeError
+    topo.tick()
+    assert topo.rehearsal_errors == 1 and topo.fsw.cycles == 4
+
+
+def test_no_rehearsal_in_lockstep_and_a_lead_of_a_period_refused():
+    scn = load_scenario("nominal")
+    fsw = FlightSoftware(scn, EventLog(), param_overrides={"executive.rehearse_us": 800.0})
+    assert Topology(fsw, LockstepClock()).rehearsal is None
+    fast = scn.with_(dt_control_s=0.002)
+    fsw = FlightSoftware(fast, EventLog(), param_overrides={"executive.rehearse_us": 2000.0,
+                                                            "executive.rg2_period_s": 0.1})
+    with pytest.raises(ValueError, match="executive.rehearse_us = 2000 us: not shorter than the control period"):
+        Topology(fsw, RealTimeClock(2 * MS))

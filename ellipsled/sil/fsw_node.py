@@ -51,8 +51,10 @@ def add_arguments(p) -> None:
     p.add_argument("--frame-wait-us", type=argtypes.wait_us, default=3000.0,
                    help="real time: at a release, wait this long at most for the frame due")
     p.add_argument("--rehearse", action=argparse.BooleanOptionalAction, default=True,
-                   help="real time: at each release run the frame's decode and the answer's encode "
-                        "once on scratch copies, so that they are warm when the frame comes")
+                   help="real time: rehearse before each release -- a spare flight software runs the "
+                        "control cycle on the last frame (executive.rehearse_us before it) and the "
+                        "frame's decode and the answer's encode run once on scratch copies at it -- "
+                        "so that they are warm when the frame comes; --no-rehearse: neither")
     p.add_argument("--gcs", default=DEFAULT_GCS, help="ground station address (MAVLink)")
     p.add_argument("--mavlink-bind", default=DEFAULT_VEHICLE, help="the vehicle's MAVLink address")
     p.add_argument("--signing-key", default=None,
@@ -70,7 +72,10 @@ class FswNode:
         self.rt_report = apply_rt(ROLE, args)   # before the Zenoh session opens
         self.scn = prepare_args(args)
         self.events = EventLog()
-        self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime")
+        # --no-rehearse: no rehearsal at either layer (the executive's control cycle before
+        # the release, this shell's receiving path at it)
+        self.fsw = FlightSoftware(self.scn, self.events, realtime=args.mode == "realtime",
+                                  param_overrides=None if args.rehearse else {"executive.rehearse_us": 0.0})
         self.session, self.K = open_node(ROLE, args, self.rt_report)
         self.spin = rt_in_force(self.rt_report)
         self.sub_sensors = transport.subscriber(self.session, self.K.sensors,

@@ -78,8 +78,10 @@ def add_arguments(p) -> None:
                    help="real time: the FSW releases this long after the plant publishes a step "
                         "(default: ellipsled fsw's)")
     p.add_argument("--rehearse", action=argparse.BooleanOptionalAction, default=True,
-                   help="real time: each node runs its receiving path once on a scratch copy while it "
-                        "waits, so that it is warm when the frame or command comes (default on)")
+                   help="real time: each node rehearses while it waits, so that what it runs is warm "
+                        "when the frame or command comes -- the FSW its control cycle on a spare "
+                        "(executive.rehearse_us) and its receiving path, the plant its command's "
+                        "decode (default on)")
     p.add_argument("--no-plots", action="store_true")
 
 

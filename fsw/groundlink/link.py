@@ -219,7 +219,7 @@ class GroundLink:
         b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
         self.in_tick = True
         try:
-            rx_ns = b.receive_ns(self.send_ns_peak)
+            rx_ns = b.receive_ns(self.send_ns_peak, self.streams.overdue_ns(self.clock()))
             if rx_ns > 0:
                 self.poll(rx_ns)
             else:

@@ -92,16 +92,21 @@ class TelemetryStreams:
             self.alloc_degraded += 1
 
     def send_due(self, now: float, ms: int) -> None:
-        """The streams due at ``now``, the longest-waiting first, while the link's tick has
-        time for each (as long as it took recently); the longest-waiting one that does not
-        fit ends the tick's streams (a later, smaller one must not overtake it for good),
-        unless it is a period overdue: then it goes while any time is left (no stream waits
-        longer, however short the budget). What is left stays due, counted."""
+        """The streams due at ``now``, those a period overdue first, then the longest-waiting
+        first, while the link's tick has time for each (as long as it took recently); the
+        first one that does not fit ends the tick's streams (a later, smaller one must not
+        overtake it for good), unless it is a period overdue: then it goes while any time is
+        left (no stream waits longer, however short the budget). What is left stays due,
+        counted."""
         link = self.link
         fsw, sched = link.fsw, link.schedule
         C_LN = None
         self.cut, self.deferred_ns = False, 0
-        for unit in sched.longest_waiting(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now):
+        units = sched.longest_waiting(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now)
+        # a period overdue first: receiving left their cost for them (schedule.py), which a
+        # longer-waiting slower stream must not take
+        units.sort(key=lambda u: not sched.overdue(u, now))
+        for unit in units:
             # its cost, a peak decaying x0.9 each tick it is due: a noisy unit is met, one slow
             # send forgotten whether it is sent or deferred
             self.unit_ns[unit] = int(self.unit_ns.get(unit, 0) * 0.9)
@@ -122,6 +127,13 @@ class TelemetryStreams:
             for msg in msgs:
                 link._send(msg)
             self.unit_ns[unit] = max(link.budget.elapsed_ns() - t0, self.unit_ns.get(unit, 0))
+
+    def overdue_ns(self, now: float) -> int:
+        """What the units with a stream a period overdue at ``now`` cost recently [ns]:
+        they go this tick, whatever the budget leaves them."""
+        sched = self.link.schedule
+        units = ALL_UNITS if tm.nav_valid(self.link.fsw) else SINGLE_UNITS
+        return sum(self.unit_ns.get(u, 0) for u in units if sched.overdue(u, now))
 
     def _fits(self, unit: tuple[str, ...], overdue: bool) -> bool:
         """Inside a tick: time is left for ``unit`` as long as it took recently (overdue:

@@ -177,12 +177,13 @@ def test_a_budget_that_is_no_share_of_the_period_is_refused(tmp_path):
 def test_receiving_leaves_the_overdue_streams_their_cost_keeping_a_quarter_and_work_stops_short_of_the_end():
     b = TickBudget(1000, lambda: 0)
     b.start()
-    assert b.receive_ns(300, 0) == 700 and b.receive_ns(300, 600) == 400
-    assert b.receive_ns(900, 600) == 400                 # the overdue streams: more than half
+    assert b.left_ns() == 1000 - 80                      # the end reserve: 8 % of the budget
+    assert b.receive_ns(300, 0) == 700                   # the overdue streams and the reserve:
+    assert b.receive_ns(300, 500) == 1000 - 500 - 80     # ... more than the recent cost
+    assert b.receive_ns(900, 600) == 1000 - 600 - 80     # ... more than half
     assert b.receive_ns(0, 5000) == 250                  # ... but receiving keeps a quarter
-    assert b.left_ns() == 1000 - 40                      # the end reserve: 4 % of the budget
     b.start(cap_ns=500)
-    assert b.left_ns() == 500 - 20 and b.receive_ns(0, 5000) == 125
+    assert b.left_ns() == 500 - 40 and b.receive_ns(0, 5000) == 125
 
 
 def test_a_stream_a_period_overdue_goes_before_a_slower_one_waiting_longer(priced):

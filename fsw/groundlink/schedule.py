@@ -35,7 +35,7 @@ DUE_SLACK = 0.05                 # a stream may go out up to 5 % of its period e
 TICK_BUDGET_FRAC = 0.15          # the link's share of a control period
 COST_RING = 1024                 # ticks whose cost is kept for the percentiles
 RECEIVE_FLOOR = 0.25             # the budget's share receiving keeps whatever the streams owe
-END_RESERVE = 0.04               # the budget's share kept for what follows the last check of a tick
+END_RESERVE = 0.08               # the budget's share kept for what follows the last check of a tick
 
 
 class TickBudget:
@@ -87,10 +87,11 @@ class TickBudget:
 
     def receive_ns(self, send_ns_recent: int, overdue_ns: int = 0) -> int:
         """What receiving may take: all but the send side's recent cost, at least half;
-        and all but what the streams a period overdue cost (they go this tick), at least
-        RECEIVE_FLOOR of the budget."""
+        and all but what sending the streams a period overdue costs (they go this tick) with
+        the end reserve, at least RECEIVE_FLOOR of the budget."""
+        owed = int(overdue_ns) + self.reserve_ns if overdue_ns > 0 else 0
         keep = max(min(int(send_ns_recent), self.limit_ns // 2),
-                   min(int(overdue_ns), self.limit_ns - int(RECEIVE_FLOOR * self.limit_ns)))
+                   min(owed, self.limit_ns - int(RECEIVE_FLOOR * self.limit_ns)))
         return self.limit_ns - keep
 
 

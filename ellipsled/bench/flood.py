@@ -29,6 +29,7 @@ import argparse
 import json
 import random
 import socket
+import struct
 import sys
 import threading
 import time
@@ -296,6 +297,8 @@ def _free_udp() -> int:
 # 0.1 s each): one waiting for the tick that reads it, one more if that tick's budget kept it
 ANSWER_IN_TIME_S = 0.2
 ANSWER_WAIT_S = 1.0              # commands sent this close to the run's end are not judged
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)     # Linux: the kernel's arrival time of a datagram
+_TIMESPEC = struct.Struct("=qq")
 PROBE = mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 0, 1, 0, 0, 0, 0, 0, 0)
 
 
@@ -321,9 +324,15 @@ class GroundWatch:
         self.offsets_s: list[float] = []                      # Unix time - mission time, per SYSTEM_TIME
         self.pace_hz, self.vehicle = float(pace_hz), vehicle
         self.signer = Signer(key, system_id=255, component_id=190, link_id=2) if pace_hz else None
-        self.sent_t: list[float] = []                         # monotonic s of each PROBE sent
-        self.ack_t: list[float] = []                          # ... of each PROBE's COMMAND_ACK back
-        self.last_rx_t = 0.0                                  # ... of the vehicle's last frame
+        # Unix time [s] of each PROBE sent, of each of its COMMAND_ACKs as the kernel stamped
+        # its arrival (SO_TIMESTAMPNS: not when this thread, on a busy host, got to it), and
+        # of the vehicle's last frame
+        self.sent_t: list[float] = []
+        self.ack_t: list[float] = []
+        self.last_rx_t = 0.0
+        self._next_t = 0.0
+        if pace_hz:
+            self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         self._pacing = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="ground-watch", daemon=True)
@@ -333,12 +342,13 @@ class GroundWatch:
         self._pacing.set()
 
     def _send_due(self, now: float) -> None:
-        if not self._pacing.is_set() or (self.sent_t and now < self.sent_t[-1] + 1.0 / self.pace_hz):
+        if not self._pacing.is_set() or now < self._next_t:
             return
-        t = self.sent_t[-1] + 1.0 / self.pace_hz if self.sent_t else now
-        self.sent_t.append(max(t, now - 1.0 / self.pace_hz))       # a steady pace, never a burst
+        self._next_t = max(self._next_t + 1.0 / self.pace_hz, now)   # a steady pace, never a burst
         try:
-            self.sock.sendto(self.signer.pack(PROBE), self.vehicle)
+            frame = self.signer.pack(PROBE)
+            self.sent_t.append(time.time())
+            self.sock.sendto(frame, self.vehicle)
         except OSError:
             pass
 
@@ -371,19 +381,21 @@ class GroundWatch:
             if self.pace_hz:
                 self._send_due(time.monotonic())
             try:
-                data, addr = self.sock.recvfrom(65536)
+                data, anc, _, addr = self.sock.recvmsg(65536, 64)
             except (socket.timeout, InterruptedError):
                 continue
             except OSError:
                 return
             now = time.time()
+            arrived = next((sec + ns * 1e-9 for lvl, typ, raw in anc if lvl == socket.SOL_SOCKET
+                            and typ == SO_TIMESTAMPNS for sec, ns in (_TIMESPEC.unpack(raw[:16]),)), now)
             n_ev, n_time = st.events_total, st.rx_counts.get("SYSTEM_TIME", 0)
             n_ack = st.rx_counts.get("COMMAND_ACK", 0)
             fed = self.client.feed(data, addr, now)
             if fed:
-                self.last_rx_t = time.monotonic()
+                self.last_rx_t = arrived
             if st.rx_counts.get("COMMAND_ACK", 0) != n_ack and st.acks[-1].command == PROBE.command:
-                self.ack_t.append(time.monotonic())
+                self.ack_t.append(arrived)
             if fed and self.flood is not None:
                 hdr = parse_header(data)
                 if hdr is not None and hdr.msgid == mav.MAVLINK_MSG_ID_HEARTBEAT and vehicle_signed(data):

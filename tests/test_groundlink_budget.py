@@ -4,9 +4,12 @@ host. Proven: a tick stops sending once its budget is spent, over by at most the
 sending; what it did not send stays due and is counted; under a short budget every stream
 still gets its turn (the longest-waiting first), events and a mode change go out first; with
 time to spare nothing is deferred; receiving leaves the send side its recent cost, at most
-half the budget; the cycle's deadline shortens the budget."""
+half the budget, and the cost of the streams a period overdue, keeping a quarter; those go
+first; a signed command sent before each tick is answered in that tick however much the
+streams owe; the cycle's deadline shortens the budget."""
 from __future__ import annotations
 
+import time
 from collections import Counter
 
 import pytest
@@ -14,7 +17,8 @@ import pytest
 from fsw.groundlink.schedule import DUE_SLACK, StreamSchedule, TickBudget
 from fsw.groundlink.streams import ATTITUDE_GROUP
 from interfaces.event_catalogue import EV
-from tests.rig import flown
+from tests.rig import ACCEPTED, flown
+from interfaces.mavlink import dialect as mav
 
 FRAME_NS = 250_000                 # what one frame costs on the injected clock
 
@@ -146,7 +150,7 @@ def test_receiving_leaves_the_send_side_its_recent_cost_at_most_half_the_budget(
     b.start(cap_ns=400)                                  # the cycle's deadline is nearer
     assert b.limit_ns == 400 and b.receive_ns(300) == 200
     b.start(cap_ns=-5)                                   # the deadline is past: nothing
-    assert b.left_ns() == 0 and b.receive_ns(0) == 0
+    assert b.left_ns() <= 0 and b.receive_ns(0) == 0
     t[0] += 1500
     assert b.finish() == 1500 and b.over == 1 and b.report()["max_us"] == 1.5
 
@@ -168,3 +172,56 @@ def test_a_budget_that_is_no_share_of_the_period_is_refused(tmp_path):
         for frac in (0.0, -0.1, 1.5, float("nan")):
             with pytest.raises(ValueError, match="tick_budget_frac"):
                 GroundLink(rig.fsw, rig.key, bind="udp:127.0.0.1:0", tick_budget_frac=frac)
+
+
+def test_receiving_leaves_the_overdue_streams_their_cost_keeping_a_quarter_and_work_stops_short_of_the_end():
+    b = TickBudget(1000, lambda: 0)
+    b.start()
+    assert b.left_ns() == 1000 - 80                      # the end reserve: 8 % of the budget
+    assert b.receive_ns(300, 0) == 700                   # the overdue streams and the reserve:
+    assert b.receive_ns(300, 500) == 1000 - 500 - 80     # ... more than the recent cost
+    assert b.receive_ns(900, 600) == 1000 - 600 - 80     # ... more than half
+    assert b.receive_ns(0, 5000) == 250                  # ... but receiving keeps a quarter
+    b.start(cap_ns=500)
+    assert b.left_ns() == 500 - 40 and b.receive_ns(0, 5000) == 125
+
+
+def test_a_stream_a_period_overdue_goes_before_a_slower_one_waiting_longer(priced):
+    """A 1 Hz stream due half a second ago (not overdue) and the 10 Hz attitude group due
+    1.5 periods ago (overdue), a budget of one unit: the group goes, not the stream."""
+    rig, clock, turns = priced
+    gl = rig.gl
+    gl.budget.budget_ns = 1
+    now = rig.clock.t + 1.0 / gl.max_rate_hz            # the next tick's time
+    for name in gl.rates_hz:
+        gl.rates_hz[name] = 0.0
+    gl.rates_hz["HEARTBEAT"] = 1.0
+    gl.schedule.next_due["HEARTBEAT"] = now - 0.5
+    for name in ATTITUDE_GROUP:
+        gl.rates_hz[name] = 10.0
+        gl.schedule.next_due[name] = now - 0.15
+    assert gl.schedule.longest_waiting([("HEARTBEAT",), ATTITUDE_GROUP], now)[0] == ("HEARTBEAT",)
+    _ticks(rig, 1)
+    assert turns == Counter({name: 1 for name in ATTITUDE_GROUP})
+
+
+def test_a_signed_command_before_each_tick_is_answered_in_that_tick_however_much_the_streams_owe(priced):
+    """Every stream at its fastest, due every tick and more than the budget can send (they
+    fall overdue), receiving priced on the same clock: a signed command sent before each tick
+    is answered (COMMAND_ACK) in that tick, and no tick exceeds its budget by more than the
+    unit it was sending."""
+    rig, clock, turns = priced
+    gl = rig.gl
+    gl.intake.clock_ns = clock
+    budget = gl.budget.budget_ns = 8 * FRAME_NS         # a quarter: the command's ACK and reply
+    costs = []
+    for k in range(40):
+        pc = rig.gcs.start_command(mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1, timeout_s=60.0, retries=0)
+        time.sleep(0.002)                                 # loopback delivery
+        costs += _ticks(rig, 1)
+        rig.gcs.poll(0.05)
+        assert pc.result == ACCEPTED, f"command {k} not answered in its tick"
+    assert gl.stats["tx_deferred"] > 0 and gl.stats["rx_deferred"] == 0   # the streams wanted more
+    # over by at most the unit under way, once every unit has gone once (before that, a
+    # unit not sent yet is taken to cost nothing)
+    assert max(costs[3:]) <= budget + len(ATTITUDE_GROUP) * FRAME_NS

@@ -427,6 +427,7 @@ def test_answers_to_single_reads_leave_the_events_their_share_of_a_tick(rig):
     from fsw.groundlink.link import EVENT_SHARE
     rig.gl.tick(rig.frame)
     rig.gl.intake.budget_ns = 10**9              # one tick reads them all: the send side is judged
+    rig.gl.budget.budget_ns = 10**12             # (the tick's receive share bounds the intake's call too)
     n = rig.gl.max_tx_per_tick
     sent = []
     send = rig.gl._send

@@ -215,3 +215,77 @@ def test_the_time_budget_is_checked_before_each_frame_and_what_it_leaves_waits()
         assert all(m.get_type() == "COMMAND_LONG" for m in b.got) and not b.link.counts[Reject.REPLAY]
     finally:
         b.close()
+
+
+class PricedHandle:
+    """A clock that moves only while a verified frame is handled: each frame costs the next
+    price of ``prices`` (cycled), so what a call spends is exact on any host."""
+
+    def __init__(self, prices_ns):
+        self.t = 0
+        self.prices = list(prices_ns)
+        self.n = 0
+
+    def clock_ns(self) -> int:
+        return self.t
+
+    def __call__(self, msg, addr) -> None:
+        self.t += self.prices[self.n % len(self.prices)]
+        self.n += 1
+
+
+def _priced_bench(prices_ns, budget_us: float = 1000.0):
+    h = PricedHandle(prices_ns)
+    return Bench(budget_us=budget_us, clock_ns=h.clock_ns), h
+
+
+def _priced_polls(b, h, n: int) -> list[tuple[int, int]]:
+    """n calls, each with a fresh command queued behind the ones left: (frames handled, ns spent) per call."""
+    out = []
+    for _ in range(n):
+        n0, t0 = h.n, h.t
+        b.intake.poll(h)
+        out.append((h.n - n0, h.t - t0))
+    return out
+
+
+def test_a_frame_to_verify_is_begun_only_when_its_estimated_cost_is_left():
+    """Frames costing 100 or 190 us in turn, a 1 ms budget: without an estimate (the first
+    call) the last frame carries the call past its budget; once the costs are known no
+    call exceeds it, and each still verifies as many frames as the estimate lets fit."""
+    b, h = _priced_bench([100_000, 190_000])
+    try:
+        for _ in range(120):
+            b.send(b.ground.pack(ARM))
+        time.sleep(0.02)
+        first, *rest = _priced_polls(b, h, 10)
+        assert first[1] > 1_000_000                       # no estimate yet: over by the last frame
+        assert all(ns <= 1_000_000 for _, ns in rest)      # the 0.9 quantile (190 us) bounds the last
+        assert all(n >= 5 for n, _ in rest)                # ... and reading goes on: 810 us is begun
+        assert b.intake.stats["frames_deferred"] == 9      # each later call: a frame not begun waits
+    finally:
+        b.close()
+
+
+def test_one_slow_command_moves_neither_the_estimate_nor_the_reading():
+    """A command that takes 40 ms (a reconfiguration) among 100 us ones: the calls after it
+    read as many frames as before; frames all slow are capped at a quarter of the budget,
+    so a call still verifies frames (the estimate never stops the intake)."""
+    prices = [100_000] * 40
+    prices[20] = 40_000_000
+    b, h = _priced_bench(prices)
+    try:
+        for _ in range(120):
+            b.send(b.ground.pack(ARM))
+        time.sleep(0.02)
+        polls = _priced_polls(b, h, 8)
+        slow = next(i for i, (_, ns) in enumerate(polls) if ns >= 40_000_000)
+        assert polls[slow + 1][0] == polls[1][0] >= 9       # the same frames a call after it
+        assert b.intake.frame_estimate_ns(1_000_000) == 100_000
+        b.intake.frame_ns.extend([40_000_000] * 32)           # every recent frame slow
+        assert b.intake.frame_estimate_ns(1_000_000) == 250_000
+        h.prices = [1_000]
+        n, ns = _priced_polls(b, h, 1)[0]
+        assert n >= 1 and ns <= 1_000_000
+    finally:
+        b.close()

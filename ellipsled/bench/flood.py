@@ -29,6 +29,7 @@ import argparse
 import json
 import random
 import socket
+import struct
 import sys
 import threading
 import time
@@ -292,24 +293,79 @@ def _free_udp() -> int:
         return s.getsockname()[1]
 
 
+# a command is answered in time when its COMMAND_ACK is back within two link ticks (RG2,
+# 0.1 s each): one waiting for the tick that reads it, one more if that tick's budget kept it
+ANSWER_IN_TIME_S = 0.2
+ANSWER_WAIT_S = 1.0              # commands sent this close to the run's end are not judged
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)     # Linux: the kernel's arrival time of a datagram
+_TIMESPEC = struct.Struct("=qq")
+PROBE = mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 0, 1, 0, 0, 0, 0, 0, 0)
+
+
 class GroundWatch:
     """The ground station of a benchmark run, in a thread: listens where the vehicle sends
     its telemetry, with the key (GroundClient: only verified vehicle frames), and notes when
     each STATUSTEXT arrived and the vehicle's SYSTEM_TIME (Unix time against mission time);
     it also gives the vehicle's HEARTBEATs, as sniffed off the link, to the flood's reflect
-    pool. Sends nothing."""
+    pool. With ``pace_hz`` and once ``pace()`` is called, it also sends a signed read-only
+    command (PROBE: the protocol version, answered ACK + PROTOCOL_VERSION, changing nothing)
+    to ``vehicle`` at that pace from the same port, and notes when each was sent and when
+    each COMMAND_ACK came back."""
 
-    def __init__(self, key: SigningKey, port: int, flood: Flood | None):
+    def __init__(self, key: SigningKey, port: int, flood: Flood | None, pace_hz: float = 0.0,
+                 vehicle: tuple[str, int] | None = None):
         from gse.client import GroundClient
         self.client = GroundClient(key, listen=None)
         self.flood = flood
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", port))
-        self.sock.settimeout(0.05)
+        self.sock.settimeout(0.005 if pace_hz else 0.05)
         self.arrivals: list[tuple[float, str]] = []          # (Unix s, text) of each STATUSTEXT
         self.offsets_s: list[float] = []                      # Unix time - mission time, per SYSTEM_TIME
+        self.pace_hz, self.vehicle = float(pace_hz), vehicle
+        self.signer = Signer(key, system_id=255, component_id=190, link_id=2) if pace_hz else None
+        # Unix time [s] of each PROBE sent, of each of its COMMAND_ACKs as the kernel stamped
+        # its arrival (SO_TIMESTAMPNS: not when this thread, on a busy host, got to it), and
+        # of the vehicle's last frame
+        self.sent_t: list[float] = []
+        self.ack_t: list[float] = []
+        self.last_rx_t = 0.0
+        self._next_t = 0.0
+        if pace_hz:
+            self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        self._pacing = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="ground-watch", daemon=True)
+
+    def pace(self) -> None:
+        """Start sending the paced commands (after the run's warm-up)."""
+        self._pacing.set()
+
+    def _send_due(self, now: float) -> None:
+        if not self._pacing.is_set() or now < self._next_t:
+            return
+        self._next_t = max(self._next_t + 1.0 / self.pace_hz, now)   # a steady pace, never a burst
+        try:
+            frame = self.signer.pack(PROBE)
+            self.sent_t.append(time.time())
+            self.sock.sendto(frame, self.vehicle)
+        except OSError:
+            pass
+
+    def answers(self) -> dict:
+        """The paced commands sent ANSWER_WAIT_S or more before the vehicle's last frame
+        (the link still ticked): how many, answered in time (ANSWER_IN_TIME_S), late,
+        missing; the answer latency [ms]. ACKs match the commands in order (one command in
+        flight at a time at this pace)."""
+        import numpy as np
+        judged = [t for t in self.sent_t if t < self.last_rx_t - ANSWER_WAIT_S]
+        lat = [a - s for s, a in zip(judged, self.ack_t)]
+        in_time = sum(x <= ANSWER_IN_TIME_S for x in lat)
+        a = np.asarray(lat or [np.nan]) * 1e3
+        return {"pace_hz": self.pace_hz, "in_time_s": ANSWER_IN_TIME_S, "sent": len(judged), "in_time": int(in_time),
+                "late": len(lat) - int(in_time), "missing": len(judged) - len(lat),
+                "latency_p50_ms": float(np.percentile(a, 50)), "latency_p99_ms": float(np.percentile(a, 99)),
+                "latency_max_ms": float(np.max(a))}
 
     def start(self) -> None:
         self._thread.start()
@@ -322,15 +378,25 @@ class GroundWatch:
     def _loop(self) -> None:
         st = self.client.state
         while not self._stop.is_set():
+            if self.pace_hz:
+                self._send_due(time.monotonic())
             try:
-                data, addr = self.sock.recvfrom(65536)
+                data, anc, _, addr = self.sock.recvmsg(65536, 64)
             except (socket.timeout, InterruptedError):
                 continue
             except OSError:
                 return
             now = time.time()
+            arrived = next((sec + ns * 1e-9 for lvl, typ, raw in anc if lvl == socket.SOL_SOCKET
+                            and typ == SO_TIMESTAMPNS for sec, ns in (_TIMESPEC.unpack(raw[:16]),)), now)
             n_ev, n_time = st.events_total, st.rx_counts.get("SYSTEM_TIME", 0)
-            if self.client.feed(data, addr, now) and self.flood is not None:
+            n_ack = st.rx_counts.get("COMMAND_ACK", 0)
+            fed = self.client.feed(data, addr, now)
+            if fed:
+                self.last_rx_t = arrived
+            if st.rx_counts.get("COMMAND_ACK", 0) != n_ack and st.acks[-1].command == PROBE.command:
+                self.ack_t.append(arrived)
+            if fed and self.flood is not None:
                 hdr = parse_header(data)
                 if hdr is not None and hdr.msgid == mav.MAVLINK_MSG_ID_HEARTBEAT and vehicle_signed(data):
                     self.flood.reflect.append(bytes(data[:hdr.frame_len]))
@@ -360,12 +426,15 @@ class GroundWatch:
 
 
 def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, timeout_s: float = 300.0,
-            scenario: str = "case1") -> dict:
-    """One real-time SIL (``ellipsled run SCENARIO --realtime``), flooded for ``flood_s``
-    from its first jet command (None: quiet), watched by a ground station: the FSW's cycle
-    compute, ground-link task cost and slips from its fsw.json; what the flood changed
-    (commands accepted, parameters set, telemetry peers added: none of it is genuine); how
-    late the FDIR events (case1: jets fail at 2.5 s, under the flood) reached the ground."""
+            scenario: str = "case1", dt_control_s: float | None = None, pace_hz: float = 0.0) -> dict:
+    """One real-time SIL (``ellipsled run SCENARIO --realtime``, at ``dt_control_s`` if
+    given), flooded for ``flood_s`` from its first jet command (None: quiet), watched by a
+    ground station: the FSW's cycle compute, ground-link task cost and slips from its
+    fsw.json; what the flood changed (commands accepted, parameters set, telemetry peers
+    added: none of it is genuine); how late the FDIR events (case1: jets fail at 2.5 s,
+    under the flood) reached the ground. ``pace_hz``: the ground station also sends a signed
+    command at that pace from the first jet command on (warm-up over) and counts the answers
+    (``GroundWatch.answers``)."""
     import subprocess
     import tempfile
     from pathlib import Path
@@ -376,12 +445,14 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
         key.write_file(key_file)
         vehicle, gcs = _free_udp(), _free_udp()
         fl = Flood(1) if flood_s else None
-        watch = GroundWatch(key, gcs, fl)
+        watch = GroundWatch(key, gcs, fl, pace_hz, ("127.0.0.1", vehicle))
         watch.start()
         log_path = Path(d) / "run.log"
         with open(log_path, "w") as log:
+            dt = ["--dt-control", f"{dt_control_s:g}"] if dt_control_s else []
             run = subprocess.Popen(ELLIPSLED + ["run", scenario, "--realtime", "--duration", f"{duration_s:g}",
-                                                "--out", d, "--rerun", "none", "--no-plots", "--signing-key", str(key_file),
+                                                *dt, "--out", d, "--rerun", "none", "--no-plots",
+                                                "--signing-key", str(key_file),
                                                 "--mavlink-bind", f"udp:127.0.0.1:{vehicle}",
                                                 "--gcs", f"udp:127.0.0.1:{gcs}"],
                                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
@@ -392,6 +463,7 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
                     if run.poll() is not None or time.monotonic() > end:
                         raise RuntimeError(f"the SIL did not fly: {log_path.read_text()[-300:]}")
                     time.sleep(0.1)
+                watch.pace()
                 if flood_s:
                     sent = send(("127.0.0.1", vehicle), rate, flood_s, flood=fl)
                 run.wait(timeout_s)
@@ -399,6 +471,7 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
                 stop_process(run, 10.0)
                 watch.stop()
         fsw = read_fsw(d)
+        answers = watch.answers() if pace_hz else None
     ex, gl = fsw["executive"], fsw["tasks_us"].get("groundlink", {})
     link = fsw.get("ground_link") or {}
     n_fdir, lat = watch.event_latencies(fsw.get("event_log", []))
@@ -410,7 +483,7 @@ def sil_run(duration_s: float, flood_s: float | None, rate: float = 2500.0, time
             "peers_added": link.get("peers_added") if link else None,
             "fdir_events": n_fdir, "fdir_events_received": len(lat),
             "fdir_latency_max_s": max(lat) if lat and len(lat) == n_fdir else None,
-            "duration_s": duration_s, "scenario": scenario}
+            "duration_s": duration_s, "scenario": scenario, "dt_control_s": dt_control_s, "answers": answers}
 
 
 def run(quick: bool) -> dict:

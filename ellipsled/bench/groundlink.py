@@ -1,7 +1,8 @@
 """Ground-link benchmark (fsw/groundlink/): cost of one ``GroundLink.tick`` (receive and
 answer, sample the allocator, send the MAVLink telemetry that is due, signed) against its
 budget per tick (fsw/groundlink/schedule.py: a share of the control period), at 50 and
-200 Hz, beside the FSW control step measured in the same run.
+200 Hz, beside the FSW control step measured in the same run; the loop runs SCHED_FIFO when
+permitted, as the FSW's control thread does in the real-time SIL (``sched_fifo`` says).
 
 Three regimes, the scheduling clock advanced one RG2 period a tick: the default stream
 rates; every stream at the fastest rate a ground station may set with
@@ -9,6 +10,12 @@ MAV_CMD_SET_MESSAGE_INTERVAL (the bound on what the interval command can cost); 
 rates while a keyless sender floods the link at FLOOD_PER_S (unsigned reads and commands,
 MAVLink 1, garbage). Deferred stream sends are counted beside each. The telemetry goes to a
 UDP socket on 127.0.0.1 that the benchmark drains.
+
+And every command answered: the real-time SIL (``ellipsled run case1 --realtime``) at 50
+and at 200 Hz (``--dt-control``), a ground station with the key sending a signed read-only
+command at ANSWER_PACE_HZ from the first jet command on (the warm-up over), counting the
+answers: in time when the COMMAND_ACK is back within flood.ANSWER_IN_TIME_S (two link ticks),
+late, or missing (a command sent a second or more before the vehicle's last frame).
 """
 from __future__ import annotations
 
@@ -19,6 +26,7 @@ import time
 
 import numpy as np
 
+from common import rt
 from common.model import load_scenario
 from fsw.executive import divisors
 from fsw.flightsoftware import FlightSoftware
@@ -46,6 +54,8 @@ def _pct(ns: list[int]) -> dict:
 
 FLOOD_PER_S = 2500                   # datagrams a second in the flood regime (the flood section's rate)
 RATES_HZ = (50, 200)                 # control rates the link's budget is measured at
+ANSWER_PACE_HZ = 5.0                 # signed commands a second in the real-time runs
+PRIORITY = 50                        # SCHED_FIFO priority of the measured loop, when permitted
 
 
 def _flood_datagrams(n: int) -> list[bytes]:
@@ -109,6 +119,9 @@ def _at_rate(hz: int, quick: bool) -> dict:
     ctl_ns.clear()
     out = {}
     defaults = dict(gl.rates_hz)
+    # the link ticks in the FSW's control thread, SCHED_FIFO in the real-time SIL: measured
+    # so too when permitted (else a busy host's preemption is what the tail shows)
+    rt_rep = rt.apply(priority=PRIORITY, lock_memory=False)
     gc_was = gc.isenabled()
     gc.disable()
     try:
@@ -131,6 +144,7 @@ def _at_rate(hz: int, quick: bool) -> dict:
             out[name] = {**_pct(ns), "tx_bytes_per_tick": (gl.stats["tx_bytes"] - b0) / n,
                          "over_budget": gl.budget.over - over0, "tx_deferred": gl.stats["tx_deferred"] - d0}
     finally:
+        rt.restore()
         if gc_was:
             gc.enable()
         gl.close()
@@ -143,14 +157,26 @@ def _at_rate(hz: int, quick: bool) -> dict:
             "flood_datagrams_per_tick": len(per_tick), "fastest_rate_hz": gl.max_rate_hz, **out,
             "worst_p99_us": max(out[k]["p99_us"] for k in out), "worst_max_us": max(out[k]["max_us"] for k in out),
             "baseline_control_step_p50_us": ctl["p50_us"], "baseline_control_step_p99_us": ctl["p99_us"],
-            "tx_errors": int(gl.stats["tx_errors"])}
+            "tx_errors": int(gl.stats["tx_errors"]), "sched_fifo": bool(rt_rep.get("sched_fifo"))}
+
+
+def _answers(hz: int, quick: bool) -> dict:
+    """The real-time SIL at ``hz`` with paced signed commands: their answers, and the FSW's
+    slips and ground-link task cost in the same run."""
+    from .flood import sil_run
+    r = sil_run(20.0 if quick else 60.0, None, dt_control_s=1.0 / hz, pace_hz=ANSWER_PACE_HZ)
+    return {**(r["answers"] or {}), "slips": r["slips"], "groundlink_p99_us": r["groundlink_p99_us"],
+            "groundlink_max_us": r["groundlink_max_us"], "duration_s": r["duration_s"]}
 
 
 def run(quick: bool) -> dict:
     at = {f"{hz}Hz": _at_rate(hz, quick) for hz in RATES_HZ}
     base = at[f"{RATES_HZ[0]}Hz"]
+    for hz in RATES_HZ:
+        at[f"{hz}Hz"]["answers"] = _answers(hz, quick)
     return {"figure": "ground link tick [us] against its budget per tick (a share of the control period), "
-                      "FSW control step in the same run", "ticks": 300 if quick else 2000, **at,
+                      "FSW control step in the same run; signed commands answered in the real-time SIL",
+            "ticks": 300 if quick else 2000, **at,
             "tick_p99_us": base["default_rates"]["p99_us"],
             "baseline_control_step_p99_us": base["baseline_control_step_p99_us"]}
 
@@ -167,11 +193,25 @@ def rows(res: dict) -> list[Row]:
             x = r.get(name) or {}
             out.append(row(f"ground link tick at {hz} Hz, {what}: p99 / max [us]",
                            f"{fmt(x.get('p99_us'))} / {fmt(x.get('max_us'))}",
-                           f"budget {fmt(r.get('budget_us'))} ({fmt(100 * r['budget_share'])} % of the period); "
+                           f"budget {fmt(r.get('budget_us'))} ({fmt(100 * r['budget_share'])} % of the period"
+                           f"{', SCHED_FIFO' if r.get('sched_fifo') else ''}); "
                            f"control step p99 {fmt(r.get('baseline_control_step_p99_us'))}",
                            f"{fmt(ratio(x.get('p99_us'), r.get('budget_us')))} of the budget; "
                            f"{x.get('tx_deferred', 'n/m')} stream sends deferred", "p99 <= budget",
                            le(x.get("p99_us"), r.get("budget_us"))))
+    for hz in RATES_HZ:
+        a = (gl.get(f"{hz}Hz") or {}).get("answers")
+        if not a:
+            continue
+        judged = a.get("sent")
+        ok = None if not judged else a.get("late") == 0 and a.get("missing") == 0
+        out.append(row(f"signed commands answered in time in the real-time SIL at {hz} Hz "
+                       f"({fmt(a.get('pace_hz'))}/s after warm-up): in time / sent",
+                       f"{fmt(a.get('in_time'))} / {fmt(judged)}",
+                       f"late {fmt(a.get('late'))}, missing {fmt(a.get('missing'))}; answer p99 / max "
+                       f"{fmt(a.get('latency_p99_ms'))} / {fmt(a.get('latency_max_ms'))} ms; slips {fmt(a.get('slips'))}",
+                       f"in time: ACK within {fmt(1e3 * a['in_time_s']) if a.get('in_time_s') else 'n/m'} ms",
+                       "0 late, 0 missing", ok))
     return out
 
 

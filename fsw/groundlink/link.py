@@ -179,6 +179,7 @@ class GroundLink:
         self.stats = dict.fromkeys(STAT_NAMES, 0)
         self.stats["rx_poll_max_us"] = 0.0
         self.send_ns_peak = 0
+        self.send_overhead_ns = 0
 
     # -------------------------------------------------------------- configuration
     @property
@@ -219,18 +220,21 @@ class GroundLink:
         b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
         self.in_tick = True
         try:
-            rx_ns = b.receive_ns(self.send_ns_peak)
+            overdue = self.streams.overdue_ns(self.clock())      # the streams owed, with what sending costs besides
+            rx_ns = b.receive_ns(self.send_ns_peak, overdue + self.send_overhead_ns if overdue else 0)
             if rx_ns > 0:
                 self.poll(rx_ns)
             else:
                 self.stats["rx_deferred"] += 1
-            self.streams.sample_allocator()
             t_send = b.elapsed_ns()
+            self.streams.sample_allocator()
             self.send_due(sensors)
             # what receiving leaves the send side: what it wanted (sent, and what the budget
-            # deferred), a peak decaying x0.9 a tick (one outlier is forgotten within seconds)
-            wanted_ns = b.elapsed_ns() - t_send + self.streams.deferred_ns
-            self.send_ns_peak = max(wanted_ns, int(self.send_ns_peak * 0.9))
+            # deferred), and its cost besides the streams, peaks decaying x0.9 a tick (one
+            # outlier is forgotten within seconds)
+            send_ns = b.elapsed_ns() - t_send
+            self.send_ns_peak = max(send_ns + self.streams.deferred_ns, int(self.send_ns_peak * 0.9))
+            self.send_overhead_ns = max(send_ns - self.streams.sent_ns, int(self.send_overhead_ns * 0.9))
         except Exception:                       # the link must never take the FSW down
             log.exception("ground link tick failed")
         finally:

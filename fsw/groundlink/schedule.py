@@ -4,15 +4,21 @@ The link's tick is one task of a control cycle (RG2), so its cost comes out of t
 period. ``TickBudget`` bounds it: ``tick_budget_frac`` of the control period (0.15: 0.75 ms at
 200 Hz, 3 ms at 50 Hz). Within it, receiving (and answering what arrived) may take all but
 the send side's recent cost, and never more than half the budget when sending wants more
-(so a flood cannot starve the telemetry, nor heavy telemetry the commands); sending takes
-what receiving left, in this order:
+(so a flood cannot starve the telemetry, nor heavy telemetry the commands); when streams are
+a period overdue (they go this tick whatever the budget), receiving also leaves their cost,
+keeping at least ``RECEIVE_FLOOR`` of the budget, so sending them does not carry the tick
+past its budget; sending takes what receiving left, in this order:
 
 1. events, their share of frames (``EVENT_SHARE``) whatever the budget: what the flight
    software reports reaches the ground even in a tick whose budget a flood used up;
-2. the telemetry streams that are due, the longest-waiting first, while budget is left; a
-   stream not sent stays due and goes out at a later tick (counted: ``tx_deferred``), so
-   under a short budget every stream still gets its turn and none is dropped;
+2. the telemetry streams that are due, those a period overdue first, then the
+   longest-waiting, while budget is left; a stream not sent stays due and goes out at a
+   later tick (counted: ``tx_deferred``), so under a short budget every stream still gets
+   its turn and none is dropped;
 3. answers to requests (parameter lists) and further events, from the reply budget.
+
+Work is begun only while time is left short of ``END_RESERVE`` of the budget: what follows
+the last check (the tick's bookkeeping) lands inside the budget.
 
 ``StreamSchedule`` keeps when each stream is next due; a stream may go out up to
 ``DUE_SLACK`` of its period early (tick jitter must not skip a period).
@@ -28,6 +34,8 @@ import numpy as np
 DUE_SLACK = 0.05                 # a stream may go out up to 5 % of its period early
 TICK_BUDGET_FRAC = 0.15          # the link's share of a control period
 COST_RING = 1024                 # ticks whose cost is kept for the percentiles
+RECEIVE_FLOOR = 0.25             # the budget's share receiving keeps whatever the streams owe
+END_RESERVE = 0.08               # the budget's share kept for what follows the last check of a tick
 
 
 class TickBudget:
@@ -40,6 +48,7 @@ class TickBudget:
         self.clock_ns = clock_ns
         self.t0_ns = 0
         self.limit_ns = self.budget_ns
+        self.reserve_ns = 0
         self.costs = np.zeros(COST_RING, dtype=np.int64)   # the last ticks' costs [ns], a ring
         self.ticks = 0
         self.over = 0                                    # ticks that cost more than the budget
@@ -49,6 +58,7 @@ class TickBudget:
         """A tick begins; ``cap_ns``: less time than the budget is left (the cycle's deadline)."""
         self.t0_ns = self.clock_ns()
         self.limit_ns = self.budget_ns if cap_ns is None else max(0, min(self.budget_ns, int(cap_ns)))
+        self.reserve_ns = int(END_RESERVE * self.limit_ns)
 
     def finish(self) -> int:
         """The tick ends: its cost [ns], kept."""
@@ -71,11 +81,18 @@ class TickBudget:
         return self.clock_ns() - self.t0_ns
 
     def left_ns(self) -> int:
-        return self.limit_ns - self.elapsed_ns()
+        """Time left to begin more work: the limit less the end reserve (the tick's
+        bookkeeping after its last check: parameter lists, events, the cost ring)."""
+        return self.limit_ns - self.reserve_ns - self.elapsed_ns()
 
-    def receive_ns(self, send_ns_recent: int) -> int:
-        """What receiving may take: all but the send side's recent cost, at least half."""
-        return self.limit_ns - min(int(send_ns_recent), self.limit_ns // 2)
+    def receive_ns(self, send_ns_recent: int, overdue_ns: int = 0) -> int:
+        """What receiving may take: all but the send side's recent cost, at least half;
+        and all but what sending the streams a period overdue costs (they go this tick) with
+        the end reserve, at least RECEIVE_FLOOR of the budget."""
+        owed = int(overdue_ns) + self.reserve_ns if overdue_ns > 0 else 0
+        keep = max(min(int(send_ns_recent), self.limit_ns // 2),
+                   min(owed, self.limit_ns - int(RECEIVE_FLOOR * self.limit_ns)))
+        return self.limit_ns - keep
 
 
 class StreamSchedule:

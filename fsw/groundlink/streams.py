@@ -40,6 +40,7 @@ SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STA
                   "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS",
                   "LOCAL_POSITION_NED", "CURRENT_MODE")
 MAX_RATE_HZ = 100.0
+UNIT_COST_RING = 8               # sends of a unit its cost estimate is taken from
 # What a tick sends as one unit: each single stream, and the attitude and position groups
 # (one frame conversion each); the groups only once navigation is valid.
 SINGLE_UNITS = tuple((name,) for name in SINGLE_STREAMS)
@@ -73,9 +74,11 @@ class TelemetryStreams:
         self.sensors = None                            # latest sensor frame given to tick()
         self.origin = None                             # LOCAL_POSITION_NED's, at the first navigation fix
         self.mode_sent = None                          # the Mode CURRENT_MODE last told
-        self.unit_ns: dict[tuple[str, ...], int] = {}  # what each unit cost recently [ns], its peak
+        self.unit_ns: dict[tuple[str, ...], int] = {}  # what each unit is taken to cost [ns] (``_cost``)
+        self.unit_costs: dict[tuple[str, ...], deque[int]] = {}    # ... from its last sends' costs
         self.cut = False                               # the last tick's budget deferred a stream
         self.deferred_ns = 0                           # ... and what those would have cost [ns]
+        self.sent_ns = 0                               # what the last tick's streams cost [ns]
 
     def set_loop_timing(self, rate_group: int, *, jitter_p50_us: float, jitter_p99_us: float,
                         jitter_max_us: float, compute_p50_us: float, compute_p99_us: float,
@@ -92,23 +95,25 @@ class TelemetryStreams:
             self.alloc_degraded += 1
 
     def send_due(self, now: float, ms: int) -> None:
-        """The streams due at ``now``, the longest-waiting first, while the link's tick has
-        time for each (as long as it took recently); the longest-waiting one that does not
-        fit ends the tick's streams (a later, smaller one must not overtake it for good),
-        unless it is a period overdue: then it goes while any time is left (no stream waits
-        longer, however short the budget). What is left stays due, counted."""
+        """The streams due at ``now``, those a period overdue first, then the longest-waiting
+        first, while the link's tick has time for each (as long as it took recently); the
+        first one that does not fit ends the tick's streams (a later, smaller one must not
+        overtake it for good), unless it is a period overdue: then it goes while any time is
+        left (no stream waits longer, however short the budget). What is left stays due,
+        counted."""
         link = self.link
         fsw, sched = link.fsw, link.schedule
         C_LN = None
-        self.cut, self.deferred_ns = False, 0
-        for unit in sched.longest_waiting(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now):
-            # its cost, a peak decaying x0.9 each tick it is due: a noisy unit is met, one slow
-            # send forgotten whether it is sent or deferred
-            self.unit_ns[unit] = int(self.unit_ns.get(unit, 0) * 0.9)
+        self.cut, self.deferred_ns, self.sent_ns = False, 0, 0
+        units = sched.longest_waiting(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now)
+        # a period overdue first: receiving left their cost for them (schedule.py), which a
+        # longer-waiting slower stream must not take
+        units.sort(key=lambda u: not sched.overdue(u, now))
+        for unit in units:
             self.cut = self.cut or not self._fits(unit, sched.overdue(unit, now))
             if self.cut:
                 link.stats["tx_deferred"] += sum(sched.waiting(n, now) for n in unit)
-                self.deferred_ns += self.unit_ns[unit]
+                self.deferred_ns += self.unit_ns.get(unit, 0)
                 continue
             t0 = link.budget.elapsed_ns()
             if len(unit) == 1:
@@ -121,7 +126,27 @@ class TelemetryStreams:
                 msgs = (tm.attitude if unit is ATTITUDE_GROUP else tm.position)(fsw, ms, C_LN, want)
             for msg in msgs:
                 link._send(msg)
-            self.unit_ns[unit] = max(link.budget.elapsed_ns() - t0, self.unit_ns.get(unit, 0))
+            cost = link.budget.elapsed_ns() - t0
+            self.sent_ns += cost
+            self._cost(unit, cost)
+
+    def _cost(self, unit: tuple[str, ...], ns: int) -> None:
+        """``unit`` was sent at a cost of ``ns``: its estimate is the second costliest of its
+        last UNIT_COST_RING sends (a noisy unit is met; one slow send moves nothing, two
+        are forgotten within the ring; a unit not sent keeps its estimate: no stream waits
+        more than a period past its due time whatever it is, see ``_fits``)."""
+        ring = self.unit_costs.get(unit)
+        if ring is None:
+            ring = self.unit_costs[unit] = deque(maxlen=UNIT_COST_RING)
+        ring.append(int(ns))
+        self.unit_ns[unit] = sorted(ring)[-2] if len(ring) > 1 else ring[0]
+
+    def overdue_ns(self, now: float) -> int:
+        """What the units with a stream a period overdue at ``now`` cost recently [ns]:
+        they go this tick, whatever the budget leaves them."""
+        sched = self.link.schedule
+        units = ALL_UNITS if tm.nav_valid(self.link.fsw) else SINGLE_UNITS
+        return sum(self.unit_ns.get(u, 0) for u in units if sched.overdue(u, now))
 
     def _fits(self, unit: tuple[str, ...], overdue: bool) -> bool:
         """Inside a tick: time is left for ``unit`` as long as it took recently (overdue:

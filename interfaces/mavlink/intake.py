@@ -21,7 +21,13 @@ to end (what a ground station sends is one), each refused or passed by the rules
 and then given to ``SignedLink.receive_single`` (signature first: one HMAC, which also
 authenticates the CRC bytes; then decoding). Bytes that are not a frame where one should
 start end the datagram (the rest is refused with them). The time budget is checked before
-each frame: frames of a datagram left when it is spent are kept for the next call.
+each frame: frames of a datagram left when it is spent are kept for the next call. A frame
+that passes the early refusals (verified, decoded and handled: what costs) is begun only
+when the call's time left covers what such a frame costs: a high percentile
+(``FRAME_COST_QUANTILE``) of the last ``FRAME_COST_RING`` such frames, at most a quarter
+of the call's budget, so the last frame does not carry the call past its budget, while a
+few slow frames (a command that reconfigures) do not move the estimate, and capped it
+never stops the reading: a frame kept for the next call is the first it takes up.
 
 Refusals are also counted per sender address (``refused_by_sender``: the last
 ``max_senders`` senders refused; the others' refusals together in ``refused_other_senders``).
@@ -37,7 +43,7 @@ from __future__ import annotations
 import socket
 import struct
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Callable, Collection
 
 from . import framing
@@ -62,6 +68,8 @@ DEFAULT_BUDGET_US = 2000.0
 DEFAULT_MAX_DATAGRAM_BYTES = 4 * framing.MAX_FRAME_LEN        # a few frames; a ground station sends one
 RCVBUF_PER_DATAGRAM = 1024      # the kernel doubles it: ~2 kB of accounting per small datagram
 DEFAULT_MAX_SENDERS = 64
+FRAME_COST_RING = 32            # verified frames whose cost the estimate is taken from ...
+FRAME_COST_QUANTILE = 0.9       # ... its quantile: 3 slow frames in the ring move nothing
 
 
 class DatagramIntake:
@@ -95,6 +103,15 @@ class DatagramIntake:
         self._drops0 = self._kernel_drops_total()
         self.kernel_counts = self._drops0 is not None
         self.last_poll_ns = 0
+        self.frame_ns: deque[int] = deque(maxlen=FRAME_COST_RING)   # verify + handle cost of the last frames
+
+    def frame_estimate_ns(self, budget_ns: int) -> int:
+        """What a verified frame is taken to cost in a call of ``budget_ns``: the
+        FRAME_COST_QUANTILE of the last frames' costs, at most a quarter of the budget."""
+        if not self.frame_ns:
+            return 0
+        costs = sorted(self.frame_ns)
+        return min(costs[int(FRAME_COST_QUANTILE * (len(costs) - 1))], budget_ns // 4)
 
     def _kernel_drops_total(self) -> int | None:
         return kernel_drops(self.sock)
@@ -117,13 +134,14 @@ class DatagramIntake:
             self.refused_other_senders += by.popitem(last=False)[1]
         by[addr] = n
 
-    def _frames(self, view, size: int, addr, handle, refuse, over_budget) -> int | None:
+    def _frames(self, view, size: int, addr, handle, refuse, over_budget, fits) -> int | None:
         """Judge and pass on the frames of one datagram (``view[:size]``), laid end to end.
         Returns None when done, or the offset of the first frame left for the next call
-        because ``over_budget()`` said so."""
+        because ``over_budget()`` said so, or ``fits()`` that a frame to verify does not."""
         i = 0
         st = self.stats
         link, verifier = self.link, self.link.verifier
+        clock = self.clock_ns
         while i < size:
             if i and over_budget():
                 return i
@@ -143,22 +161,29 @@ class DatagramIntake:
                 refuse(addr, Reject.TRUNCATED, sysid, compid, msgid, f"{size - i} of {frame_len} bytes")
                 return None
             j, i = i, i + frame_len
-            st["frames"] += 1
             if sysid == self.own_sysid:
-                refuse(addr, Reject.OWN_SYSTEM, sysid, compid, msgid, "the receiver's own system id")
+                reason, detail = Reject.OWN_SYSTEM, "the receiver's own system id"
+            elif msgid not in self.accept:
+                reason, detail = Reject.UNKNOWN_MESSAGE, "not taken by the vehicle"
+            elif not iflags & framing.IFLAG_SIGNED and msgid not in self.allow_unsigned:
+                reason, detail = Reject.UNSIGNED, ""
+            else:
+                reason = None
+            if reason is not None:
+                st["frames"] += 1
+                refuse(addr, reason, sysid, compid, msgid, detail)
                 continue
-            if msgid not in self.accept:
-                refuse(addr, Reject.UNKNOWN_MESSAGE, sysid, compid, msgid, "not taken by the vehicle")
-                continue
-            if not iflags & framing.IFLAG_SIGNED and msgid not in self.allow_unsigned:
-                refuse(addr, Reject.UNSIGNED, sysid, compid, msgid)
-                continue
+            if not fits():
+                return j
+            st["frames"] += 1
+            t = clock()
             before = verifier.rejected
             msgs = link.receive_single(view[j:i])
             if verifier.rejected != before:
                 self.count_sender(addr, verifier.rejected - before)
             for msg in msgs:
                 handle(msg, addr)
+            self.frame_ns.append(clock() - t)
         return None
 
     def poll(self, handle: Callable[[object, tuple[str, int]], None], budget_ns: int | None = None) -> int:
@@ -183,10 +208,17 @@ class DatagramIntake:
         def over_budget() -> bool:
             return self.clock_ns() - t0 >= budget
 
+        estimate = self.frame_estimate_ns(budget)
+
+        def fits() -> bool:
+            """A frame to verify has its estimated cost left in the budget (at the start
+            of a call it always has: the estimate is at most a quarter of it)."""
+            return self.clock_ns() - t0 + estimate <= budget
+
         if self._rest is not None and budget > 0:
             rest, addr = self._rest
             self._rest = None
-            at = self._frames(memoryview(rest), len(rest), addr, handle, refuse, over_budget)
+            at = self._frames(memoryview(rest), len(rest), addr, handle, refuse, over_budget, fits)
             if at is not None:
                 self._rest = (rest[at:], addr)
                 st["frames_deferred"] += 1
@@ -209,7 +241,7 @@ class DatagramIntake:
             if size > self.max_datagram_bytes:
                 refuse(addr, Reject.MALFORMED, detail=f"oversized datagram, {size} bytes")
                 continue
-            at = self._frames(view, size, addr, handle, refuse, over_budget)
+            at = self._frames(view, size, addr, handle, refuse, over_budget, fits)
             if at is not None:
                 self._rest = (bytes(view[at:size]), addr)
                 st["frames_deferred"] += 1

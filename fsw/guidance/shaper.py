@@ -120,6 +120,12 @@ class BankShaper:
         self._sign = 1.0 if phi0_rad >= 0 else -1.0
         self._turn = 0.0            # target = command + turn (a multiple of 2 pi)
         self._t = None
+        # the reference governor: the vehicle's bank (observe) and the lag band over which
+        # the reference's acceleration away from it fades to zero; None: not governed
+        self.vehicle_rad: float | None = None
+        self.lag_free_rad = math.radians(0.15)
+        self.lag_max_rad = math.radians(0.4)
+        self.governed_cycles = 0
 
     def command(self, bank_signed_rad: float) -> None:
         self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
@@ -154,7 +160,36 @@ class BankShaper:
         self._t += n * self.dt_s if n > 0 else 0.0
         self.phidd = shaper_accel(self.phi, self.phid, self.target, self.rate_limit_radps,
                                   self.accel_limit_radps2, self.dt_s)
+        if self.vehicle_rad is not None:
+            self._govern()
         return self.phi, self.phid, self.phidd
+
+    def observe(self, bank_rad: float) -> None:
+        """The vehicle's bank now (navigation), for the governor of the next evaluate."""
+        self.vehicle_rad = float(bank_rad)
+
+    def _govern(self) -> None:
+        """The reference does not run away from a vehicle that lags it. The lag is the
+        reference minus the vehicle's bank (the shorter way). Beyond lag_free_rad, an
+        acceleration to the lag's side fades linearly to zero at lag_max_rad; beyond
+        lag_max_rad, a reference still moving to that side brakes, at up to its acceleration
+        limit (reached at one band's width further). So the reference keeps, at most, the
+        pace the vehicle shows it can fly and the loop's whole authority closes the gap,
+        instead of the reference leaving at an acceleration the jets cannot match (their
+        authority is estimated for the nominal inertia and is an average over cycles).
+        Accelerations towards the vehicle are left as they are."""
+        lag = math.remainder(self.phi - self.vehicle_rad, 2.0 * math.pi)
+        a, band = abs(lag), self.lag_max_rad - self.lag_free_rad
+        if a <= self.lag_free_rad:
+            return
+        s = 1.0 if lag > 0.0 else -1.0
+        if a > self.lag_max_rad and self.phid * s > 0.0:
+            brake = -s * self.accel_limit_radps2 * min(1.0, (a - self.lag_max_rad) / band)
+            self.phidd = min(self.phidd, brake) if s > 0.0 else max(self.phidd, brake)
+            self.governed_cycles += 1
+        elif self.phidd * s > 0.0:
+            self.phidd *= max(0.0, (self.lag_max_rad - a) / band)
+            self.governed_cycles += 1
 
     def transition_s(self, angle_rad: float) -> float:
         """Time [s] of a rest-to-rest turn through angle_rad within the rate and acceleration

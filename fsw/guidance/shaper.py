@@ -107,7 +107,13 @@ class BankShaper:
     target, braking on sqrt(2 a |e|)), stepped once per control period. A reversal (sign
     change) goes the shorter way round (through lift up below 90 deg, lift down above);
     magnitude changes keep the branch. Same interface as reference.BankProfile for the
-    attitude chain: evaluate(t) and replan(t, rate, accel)."""
+    attitude chain: evaluate(t) and replan(t, rate, accel). Told the vehicle's bank each
+    cycle (observe), it is also a reference governor (_govern)."""
+
+    # the governor's lag band [deg]: above the attitude loop's own tracking error in a
+    # fault-free entry (about 0.1 deg), below the 1 deg the faulted loop is held to
+    LAG_FREE_DEG = 0.15
+    LAG_MAX_DEG = 0.4
 
     def __init__(self, phi0_rad: float, rate_limit_radps: float, accel_limit_radps2: float, dt_s: float):
         self.rate_limit_radps = float(rate_limit_radps)
@@ -120,12 +126,11 @@ class BankShaper:
         self._sign = 1.0 if phi0_rad >= 0 else -1.0
         self._turn = 0.0            # target = command + turn (a multiple of 2 pi)
         self._t = None
-        # the reference governor: the vehicle's bank (observe) and the lag band over which
-        # the reference's acceleration away from it fades to zero; None: not governed
+        # the reference governor (_govern): the vehicle's bank (observe; None: not governed)
         self.vehicle_rad: float | None = None
-        self.lag_free_rad = math.radians(0.15)
-        self.lag_max_rad = math.radians(0.4)
-        self.governed_cycles = 0
+        self.lag_free_rad = math.radians(self.LAG_FREE_DEG)
+        self.lag_max_rad = math.radians(self.LAG_MAX_DEG)
+        self.governed_cycles = 0    # control cycles whose acceleration the governor changed
 
     def command(self, bank_signed_rad: float) -> None:
         self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
@@ -165,8 +170,10 @@ class BankShaper:
         return self.phi, self.phid, self.phidd
 
     def observe(self, bank_rad: float) -> None:
-        """The vehicle's bank now (navigation), for the governor of the next evaluate."""
-        self.vehicle_rad = float(bank_rad)
+        """The vehicle's bank now (navigation), for the governor of the next evaluate; a
+        non-finite one leaves the reference ungoverned."""
+        b = float(bank_rad)
+        self.vehicle_rad = b if math.isfinite(b) else None
 
     def _govern(self) -> None:
         """The reference does not run away from a vehicle that lags it. The lag is the
@@ -180,7 +187,7 @@ class BankShaper:
         Accelerations towards the vehicle are left as they are."""
         lag = math.remainder(self.phi - self.vehicle_rad, 2.0 * math.pi)
         a, band = abs(lag), self.lag_max_rad - self.lag_free_rad
-        if a <= self.lag_free_rad:
+        if not a > self.lag_free_rad:      # within the band's start, or no valid bank
             return
         s = 1.0 if lag > 0.0 else -1.0
         if a > self.lag_max_rad and self.phid * s > 0.0:

@@ -177,25 +177,26 @@ class BankShaper:
 
     def _govern(self) -> None:
         """The reference does not run away from a vehicle that lags it. The lag is the
-        reference minus the vehicle's bank (the shorter way). Beyond lag_free_rad, an
-        acceleration to the lag's side fades linearly to zero at lag_max_rad; beyond
-        lag_max_rad, a reference still moving to that side brakes, at up to its acceleration
-        limit (reached at one band's width further). So the reference keeps, at most, the
-        pace the vehicle shows it can fly and the loop's whole authority closes the gap,
-        instead of the reference leaving at an acceleration the jets cannot match (their
+        reference minus the vehicle's bank (the shorter way); the reference runs away while
+        it moves to the lag's side. Then, beyond lag_free_rad, its acceleration to that side
+        fades linearly to zero at lag_max_rad, and beyond lag_max_rad it brakes, at up to its
+        acceleration limit (reached one band's width further). So the reference keeps, at
+        most, the pace the vehicle shows it can fly and the loop's whole authority closes the
+        gap, instead of the reference leaving at an acceleration the jets cannot match (their
         authority is estimated for the nominal inertia and is an average over cycles).
-        Accelerations towards the vehicle are left as they are."""
+        A reference at rest, or moving towards the vehicle (a vehicle ahead of it, pushed by a
+        torque the jets cannot hold), follows the law: the vehicle never drags it along."""
         lag = math.remainder(self.phi - self.vehicle_rad, 2.0 * math.pi)
         a, band = abs(lag), self.lag_max_rad - self.lag_free_rad
-        if not a > self.lag_free_rad:      # within the band's start, or no valid bank
-            return
         s = 1.0 if lag > 0.0 else -1.0
-        if a > self.lag_max_rad and self.phid * s > 0.0:
+        if not (a > self.lag_free_rad and self.phid * s > 0.0):   # (NaN: no valid bank)
+            return
+        if a > self.lag_max_rad:
             brake = -s * self.accel_limit_radps2 * min(1.0, (a - self.lag_max_rad) / band)
             self.phidd = min(self.phidd, brake) if s > 0.0 else max(self.phidd, brake)
             self.governed_cycles += 1
         elif self.phidd * s > 0.0:
-            self.phidd *= max(0.0, (self.lag_max_rad - a) / band)
+            self.phidd *= (self.lag_max_rad - a) / band
             self.governed_cycles += 1
 
     def transition_s(self, angle_rad: float) -> float:

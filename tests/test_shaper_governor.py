@@ -77,11 +77,12 @@ def test_a_vehicle_ahead_of_the_reference_never_drags_it():
     gov = shaper.BankShaper(0.0, RATE, ACCEL, DT)
     for sh in (free, gov):
         sh.command(math.radians(20.0))
-    for k in range(int(40.0 / DT)):
-        gov.observe(free.phi + math.radians(0.05 * k))       # ever further ahead
+    k = 0
+    while abs(free.phi - math.radians(20.0)) > math.radians(0.01):     # until it arrives
+        gov.observe(free.phi + math.radians(min(0.05 * k, 90.0)))     # ever further ahead
         assert gov.evaluate(k * DT) == free.evaluate(k * DT)
-    assert gov.governed_cycles == 0
-    assert math.degrees(gov.phi) == pytest.approx(20.0, abs=0.01)
+        k += 1
+    assert gov.governed_cycles == 0 and k * DT > 10.0
 
 
 def test_guided_case2_first_reversal_with_seven_jets_stuck_on_keeps_within_a_degree():

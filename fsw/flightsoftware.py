@@ -189,6 +189,7 @@ class FlightSoftware(GroundCommands):
         self.authority.step(t_s, reconfigured)          # assessed with this cycle's navigation
         if self.entry is not None:
             self.entry.steer(nav)
+            self.entry.shaper.observe(nav.bank_rad)
         if self.deploy is not None:
             self.deploy.update(nav, t_s, self.entry.estimator.k_rho if self.entry is not None else 1.0)
         self.authority.hold_trim(nav.qbar_pa)

@@ -107,7 +107,13 @@ class BankShaper:
     target, braking on sqrt(2 a |e|)), stepped once per control period. A reversal (sign
     change) goes the shorter way round (through lift up below 90 deg, lift down above);
     magnitude changes keep the branch. Same interface as reference.BankProfile for the
-    attitude chain: evaluate(t) and replan(t, rate, accel)."""
+    attitude chain: evaluate(t) and replan(t, rate, accel). Told the vehicle's bank each
+    cycle (observe), it is also a reference governor (_govern)."""
+
+    # the governor's lag band [deg]: above the attitude loop's own tracking error in a
+    # fault-free entry (about 0.1 deg), below the 1 deg the faulted loop is held to
+    LAG_FREE_DEG = 0.15
+    LAG_MAX_DEG = 0.4
 
     def __init__(self, phi0_rad: float, rate_limit_radps: float, accel_limit_radps2: float, dt_s: float):
         self.rate_limit_radps = float(rate_limit_radps)
@@ -120,6 +126,11 @@ class BankShaper:
         self._sign = 1.0 if phi0_rad >= 0 else -1.0
         self._turn = 0.0            # target = command + turn (a multiple of 2 pi)
         self._t = None
+        # the reference governor (_govern): the vehicle's bank (observe; None: not governed)
+        self.vehicle_rad: float | None = None
+        self.lag_free_rad = math.radians(self.LAG_FREE_DEG)
+        self.lag_max_rad = math.radians(self.LAG_MAX_DEG)
+        self.governed_cycles = 0    # control cycles whose acceleration the governor changed
 
     def command(self, bank_signed_rad: float) -> None:
         self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
@@ -154,7 +165,39 @@ class BankShaper:
         self._t += n * self.dt_s if n > 0 else 0.0
         self.phidd = shaper_accel(self.phi, self.phid, self.target, self.rate_limit_radps,
                                   self.accel_limit_radps2, self.dt_s)
+        if self.vehicle_rad is not None:
+            self._govern()
         return self.phi, self.phid, self.phidd
+
+    def observe(self, bank_rad: float) -> None:
+        """The vehicle's bank now (navigation), for the governor of the next evaluate; a
+        non-finite one leaves the reference ungoverned."""
+        b = float(bank_rad)
+        self.vehicle_rad = b if math.isfinite(b) else None
+
+    def _govern(self) -> None:
+        """The reference does not run away from a vehicle that lags it. The lag is the
+        reference minus the vehicle's bank (the shorter way); the reference runs away while
+        it moves to the lag's side. Then, beyond lag_free_rad, its acceleration to that side
+        fades linearly to zero at lag_max_rad, and beyond lag_max_rad it brakes, at up to its
+        acceleration limit (reached one band's width further). So the reference keeps, at
+        most, the pace the vehicle shows it can fly and the loop's whole authority closes the
+        gap, instead of the reference leaving at an acceleration the jets cannot match (their
+        authority is estimated for the nominal inertia and is an average over cycles).
+        A reference at rest, or moving towards the vehicle (a vehicle ahead of it, pushed by a
+        torque the jets cannot hold), follows the law: the vehicle never drags it along."""
+        lag = math.remainder(self.phi - self.vehicle_rad, 2.0 * math.pi)
+        a, band = abs(lag), self.lag_max_rad - self.lag_free_rad
+        s = 1.0 if lag > 0.0 else -1.0
+        if not (a > self.lag_free_rad and self.phid * s > 0.0):   # (NaN: no valid bank)
+            return
+        if a > self.lag_max_rad:
+            brake = -s * self.accel_limit_radps2 * min(1.0, (a - self.lag_max_rad) / band)
+            self.phidd = min(self.phidd, brake) if s > 0.0 else max(self.phidd, brake)
+            self.governed_cycles += 1
+        elif self.phidd * s > 0.0:
+            self.phidd *= (self.lag_max_rad - a) / band
+            self.governed_cycles += 1
 
     def transition_s(self, angle_rad: float) -> float:
         """Time [s] of a rest-to-rest turn through angle_rad within the rate and acceleration

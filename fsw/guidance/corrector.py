@@ -17,7 +17,7 @@ import numpy as np
 
 from common.model import Scenario
 from .geometry import central_angle, crossrange, unit_from_latlon
-from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_T, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict,
+from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_H_BOX, O_T, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict,
                         predict_shaped, predictor_constants)
 from .shaper import reversal_other_way
 
@@ -174,7 +174,8 @@ class Correction(TypedDict):
     range_to_go_m: float      # great-circle range from the state answered to the target
     lat_rad: float            # predicted deploy point, planet-fixed
     lon_rad: float
-    h_final_m: float          # predicted deploy altitude
+    h_final_m: float          # predicted deploy altitude (at the deploy condition) ...
+    h_box_m: float            # ... and where the deploy box is entered: the floor's (the highest deploy)
     t_go_s: float             # predicted time to deploy, from the state answered
     xr_keep_m: float          # predicted deploy crossrange (+ left), sign kept (NaN: not predicted) ...
     xr_rev_m: float           # ... and reversed t_flip from now
@@ -223,12 +224,14 @@ class Corrector:
         c[C_KRHO], c[C_KLD] = self.constants[C_KRHO], self.constants[C_KLD]
         self.constants[:] = c
 
-    def _z(self, x, e0, s_togo, sign, t_switch=0.0):
-        """The corrector's miss function z(p) [m]: predicted range past the target."""
+    def _z(self, x, e0, s_togo, sign, t_switch=0.0, f=None):
+        """The corrector's miss function z(p) [m]: predicted range past the target (f: the
+        family's phi_f, None: npc.bank_final_deg)."""
         out = self._out
+        f = self.bank_final_rad if f is None else f
 
         def z(p):
-            b0, bf = bank_profile(p, self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
+            b0, bf = bank_profile(p, self.bank_min_rad, self.bank_max_rad, f)
             self._predict(x, b0, bf, e0, sign, out, t_switch)
             if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
                 # out of the atmosphere: far long. Its range so far says little, so the miss
@@ -255,10 +258,39 @@ class Corrector:
         def deploy(b):
             self._predict(x, b, min(self.bank_final_rad, b), e0, sign, out)
             if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
-                return out[O_H], None
-            return out[O_H], central_angle(x[:3], out[:3]) * self.radius_m - s_togo
+                return out[O_H_BOX], None
+            return out[O_H_BOX], central_angle(x[:3], out[:3]) * self.radius_m - s_togo
         return floor_bank(deploy, h_floor, b_hi, h_hi, self.bank_min_rad, self.params["npc.tol_m"],
                           int(self.params["npc.max_iter"]), self.params["npc.floor_miss_max_m"])
+
+    LIFT_STEPS = 4                        # _lift_late's bisection on phi_f
+
+    def _lift_late(self, x, e0, s_togo, sign, h_floor, p_warm, tol, n_max):
+        """(p, phi_f, miss, predictions): the range solution of the family with phi_f lowered
+        towards phi_0's lower bound (lift up at the end of the entry, which deploys higher)
+        whose predicted box-entry altitude reaches h_floor, phi_f the largest found that does
+        (least change); p None when even phi_f at the bound does not reach it with the range
+        solved (then only a range trade can: the floor's). Bisection on phi_f, each a range
+        solution warm-started at the last."""
+        lo, hi, f_nom = self.bank_min_rad, self.bank_max_rad, self.bank_final_rad
+        out, n = self._out, 0
+        f_ok, f_bad, best = lo, f_nom, None
+        f = lo
+        for _ in range(self.LIFT_STEPS + 1):
+            p_lo, p_hi = profile_span(lo, hi, f)
+            p, zb, k, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), p_lo, p_hi, p_warm, tol, n_max)
+            n += k
+            b0, bf = bank_profile(p, lo, hi, f)
+            self._predict(x, b0, bf, e0, sign, out)
+            n += 1
+            if ok and out[O_FLAG] == REACHED and out[O_H_BOX] >= h_floor:
+                best, f_ok, p_warm = (p, f, zb), f, p
+            elif best is None:
+                return None, f, zb, n          # not even at the bound
+            else:
+                f_bad = f
+            f = 0.5 * (f_ok + f_bad)
+        return (best[0], best[1], best[2], n)
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
               shp: np.ndarray | None = None, h_floor_m: float | None = None) -> Correction:
@@ -307,12 +339,23 @@ class Corrector:
         self._predict(x, b0, bf, e0, sign, self._out)
         floor = False
         h_floor = self.params["npc.h_floor_m"] if h_floor_m is None else h_floor_m
-        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H] < h_floor and p > lo:
+        if h_floor > 0.0 and self._out[O_FLAG] == REACHED and self._out[O_H_BOX] < h_floor and f > lo:
+            # the range solution deploys too low: first lift up late, range kept (phi_f lowered,
+            # phi_0 solved again for the range, the way MSL straightened up before its deploy)
+            lift = self._lift_late(x, e0, s_togo, sign, h_floor, p, tol, n_max)
+            n += lift[3]
+            if lift[0] is not None:
+                p, f, zb = lift[0], lift[1], lift[2]
+                b_range = p
+                b0, bf = bank_profile(p, lo, hi, f)
+                held = not lo <= p <= hi
+            self._predict(x, b0, bf, e0, sign, self._out)
+        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H_BOX] < h_floor and p > lo:
             # the range solution deploys too low: trade range for altitude (more lift up, so
             # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
             # fixed phi_f would otherwise take the lift-up away just where it counts), and
             # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
-            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, hi), self._out[O_H])
+            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, hi), self._out[O_H_BOX])
             n += nh
             if math.isnan(b_fl):        # no trade deploys higher: the range solution's prediction again
                 self._predict(x, b0, bf, e0, sign, self._out)
@@ -329,7 +372,7 @@ class Corrector:
                          bank_final_rad=bf, floor=floor, held=held and not floor, miss_m=zb, predictions=n + 1,
                          turn_rad=turn, ok=ok or floor, range_to_go_m=s_togo,
                          lat_rad=math.asin(rf[2] / math.sqrt(float(rf @ rf))), lon_rad=math.atan2(rf[1], rf[0]),
-                         h_final_m=float(self._out[O_H]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,
+                         h_final_m=float(self._out[O_H]), h_box_m=float(self._out[O_H_BOX]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,
                          xr_rev_m=math.nan, compute_ns=0)
         if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
             # the lateral decision's pair, "keep" and "reverse at t_flip", both flown with the

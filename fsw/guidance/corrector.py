@@ -161,7 +161,8 @@ class Correction(TypedDict):
     """One answer of the corrector (Corrector.solve): the bank profile to fly from the
     state it answers, and what its prediction says of the deploy."""
     bank0_rad: float          # phi_0 commanded: the profile's bank now (the line clipped to the bounds)
-    p_range_rad: float        # the range solution's parameter p (bank_profile): the next cycle's warm start
+    p_range_rad: float        # the range solution's parameter p (bank_profile): the next cycle's warm start ...
+    f_family_rad: float       # ... and the family's phi_f it was solved with (lowered by a lift-up late)
     e0_jpkg: float            # energy mu/r - V^2/2 of the state answered: where the profile starts
     bank_line_rad: float      # the profile flown: phi_0 of its line ...
     bank_final_rad: float     # ... and its phi_f (the line clipped to the phi_0 bounds, as predicted)
@@ -207,6 +208,8 @@ class Corrector:
         self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
         self.bank0 = abs(scenario.bank_schedule[0][1])   # the range solution's parameter p [rad]
                                          # (bank_profile: phi_0 within the bounds): the next warm start
+        self.f_lift_rad = self.bank_final_rad   # the family's phi_f now: lowered by the floor's lift-up
+                                         # late (_lift_late), kept lowered for the rest of the entry
         self._p_e0_jpkg = math.nan       # energy at which bank0's profile starts
         self._shp = None                 # the reference shaper's state the predictions start from
         self._out = np.zeros(N_O)
@@ -217,6 +220,8 @@ class Corrector:
         self.bank_final_rad = math.radians(p["npc.bank_final_deg"])
         self.bank_min_rad, self.bank_max_rad = math.radians(p["npc.bank_min_deg"]), math.radians(p["npc.bank_max_deg"])
         self.p_min_rad, self.p_max_rad = profile_span(self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
+        self.f_lift_rad = min(self.f_lift_rad, self.bank_final_rad) if "npc.bank_final_deg" not in names \
+            else self.bank_final_rad
         self.bank0 = min(self.p_max_rad, max(self.p_min_rad, self.bank0))      # the warm start within them
         if "npc.h_deploy_m" in names:
             self.e_deploy_jpkg = deploy_energy(scn, p["npc.h_deploy_m"])
@@ -272,7 +277,7 @@ class Corrector:
         (least change); p None when even phi_f at the bound does not reach it with the range
         solved (then only a range trade can: the floor's). Bisection on phi_f, each a range
         solution warm-started at the last."""
-        lo, hi, f_nom = self.bank_min_rad, self.bank_max_rad, self.bank_final_rad
+        lo, hi, f_nom = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
         out, n = self._out, 0
         f_ok, f_bad, best = lo, f_nom, None
         f = lo
@@ -308,12 +313,13 @@ class Corrector:
         e0 = self.mu_m3ps2 / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.radius_m
         dt = self.params["npc.dt_pred_s"]
-        lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.bank_final_rad
+        lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
+        p_span = profile_span(lo, hi, f)
         p_warm = self.bank0
         if math.isfinite(self._p_e0_jpkg) and self.e_deploy_jpkg != self._p_e0_jpkg:
             p_warm = profile_at(p_warm, lo, hi, f, (e0 - self._p_e0_jpkg) / (self.e_deploy_jpkg - self._p_e0_jpkg))
         tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
-        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.p_min_rad, self.p_max_rad, p_warm, tol, n_max)
+        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
         turn = math.nan
         alt = None
         if shp is not None and not abs(zb) <= self.params["npc.floor_miss_max_m"]:
@@ -325,8 +331,7 @@ class Corrector:
             # Not for less: the lateral decision timed the reversal for the way it began, and
             # turning round delays it, which costs crossrange
             self._shp = alt
-            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign), self.p_min_rad, self.p_max_rad, p_warm,
-                                         tol, n_max)
+            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
             n += na
             if abs(za) < abs(zb) - tol:
                 p, zb, ok, turn = pa, za, oka, float(alt[3])
@@ -368,7 +373,7 @@ class Corrector:
                 ok = False
         rf = self._out[:3].copy()
         # phi_0 commanded: the profile's bank now (the line clipped to the bounds, as predicted)
-        res = Correction(bank0_rad=min(hi, max(lo, b0)), p_range_rad=b_range, e0_jpkg=e0, bank_line_rad=b0,
+        res = Correction(bank0_rad=min(hi, max(lo, b0)), p_range_rad=b_range, f_family_rad=f, e0_jpkg=e0, bank_line_rad=b0,
                          bank_final_rad=bf, floor=floor, held=held and not floor, miss_m=zb, predictions=n + 1,
                          turn_rad=turn, ok=ok or floor, range_to_go_m=s_togo,
                          lat_rad=math.asin(rf[2] / math.sqrt(float(rf @ rf))), lon_rad=math.atan2(rf[1], rf[0]),

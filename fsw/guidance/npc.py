@@ -195,6 +195,7 @@ class EntryGuidance(Corrector):
         self.bank0_hist[i], self.miss_hist[i] = res["bank0_rad"], res["miss_m"]
         self.cycles += 1
         self.bank0, self._p_e0_jpkg = res["p_range_rad"], res["e0_jpkg"]
+        self.f_lift_rad = res["f_family_rad"]
         self.bank0_cmd = res["bank0_rad"]
         self._line = (res["e0_jpkg"], res["bank_line_rad"], res["bank_final_rad"])
         if res["floor"]:

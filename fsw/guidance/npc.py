@@ -225,8 +225,9 @@ class EntryGuidance(Corrector):
     def _measure_prediction(self, h_m: float, t_go_s: float) -> None:
         """The floor's margin from the measured change per cycle of the predicted box-entry
         altitude, npc.floor_margin_k times: its downward drift (low-passed mean) carried over
-        the cycles to the deploy, plus the rest of it (low-passed RMS about that mean) as a
-        random walk (sqrt of their number), within [floor_margin_min_m, floor_margin_max_m].
+        the cycles to the deploy (the part of the mean its own noise does not explain), plus the
+        rest of it (low-passed RMS about that mean) as a random walk (sqrt of their number),
+        within [floor_margin_min_m, floor_margin_max_m].
         A prediction that keeps falling (a density profile or L/D the estimates lag) is a bias,
         not noise: over n cycles it costs n times the drift, not sqrt(n) times."""
         p = self.params
@@ -240,8 +241,10 @@ class EntryGuidance(Corrector):
         self._h_pred_prev = h_m
         if math.isfinite(self._dh_var) and math.isfinite(t_go_s):
             n = max(1.0, t_go_s / max(self._period_s, 1e-3))
-            drift = max(0.0, -self._dh_mean)
-            m = p["npc.floor_margin_k"] * (drift * n + math.sqrt(max(0.0, self._dh_var - drift * drift) * n))
+            rest = max(0.0, self._dh_var - self._dh_mean ** 2)
+            w = self.DH_DRIFT_WEIGHT
+            drift = max(0.0, -self._dh_mean - math.sqrt(rest * w / (2.0 - w)))   # beyond the mean's own noise
+            m = p["npc.floor_margin_k"] * (drift * n + math.sqrt(rest * n))
             self.floor_margin_m = min(p["npc.floor_margin_max_m"], max(p["npc.floor_margin_min_m"], m))
 
     def steer(self, nav) -> None:

@@ -216,7 +216,7 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     qmax = 0.0
     _deriv(x, c, b0, bf, e0, ef, sign, k1, aux)
     m_prev = _end_metric(aux[0], aux[1], c)
-    b_prev = _box_metric(aux[0], aux[1], c)
+    b_prev = _box_metric(aux[0], aux[1], c) if c[C_BOX_MACH] > 0.0 else 1.0
     h_prev = aux[0]
     h_box = math.nan
     flag = TIMEOUT

@@ -270,28 +270,32 @@ class Corrector:
 
     LIFT_STEPS = 4                        # _lift_late's bisection on phi_f
 
-    def _lift_late(self, x, e0, s_togo, sign, h_floor, p_warm, tol, n_max):
+    def _lift_late(self, x, e0, s_togo, sign, h_floor, h_fire, p_warm, tol, n_max):
         """(p, phi_f, miss, predictions): the range solution of the family with phi_f lowered
         towards phi_0's lower bound (lift up at the end of the entry, which deploys higher)
-        whose predicted box-entry altitude reaches h_floor, phi_f the largest found that does
-        (least change); p None when even phi_f at the bound does not reach it with the range
-        solved (then only a range trade can: the floor's). Bisection on phi_f, each a range
-        solution warm-started at the last."""
+        whose predicted box-entry altitude reaches h_floor and whose predicted deploy altitude
+        (at the target: where the range trigger fires) reaches h_fire, phi_f the largest found
+        that does (least change). p None when even phi_f at the bound does not reach h_floor
+        with the range solved (then only a range trade can: the floor's); phi_f at the bound
+        when that reaches h_floor but not h_fire (the most a lift-up late gives). Bisection on
+        phi_f, each a range solution warm-started at the last."""
         lo, hi, f_nom = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
         out, n = self._out, 0
         f_ok, f_bad, best = lo, f_nom, None
         f = lo
-        for _ in range(self.LIFT_STEPS + 1):
+        for i in range(self.LIFT_STEPS + 1):
             p_lo, p_hi = profile_span(lo, hi, f)
             p, zb, k, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), p_lo, p_hi, p_warm, tol, n_max)
             n += k
             b0, bf = bank_profile(p, lo, hi, f)
             self._predict(x, b0, bf, e0, sign, out)
             n += 1
-            if ok and out[O_FLAG] == REACHED and out[O_H_BOX] >= h_floor:
+            box_ok = ok and out[O_FLAG] == REACHED and out[O_H_BOX] >= h_floor
+            if box_ok and out[O_H] >= h_fire:
                 best, f_ok, p_warm = (p, f, zb), f, p
-            elif best is None:
-                return None, f, zb, n          # not even at the bound
+            elif i == 0:
+                # at the bound: the floor unreachable (range to trade) or the most lift-up late gives
+                return (p, f, zb, n) if box_ok else (None, f, zb, n)
             else:
                 f_bad = f
             f = 0.5 * (f_ok + f_bad)
@@ -344,10 +348,13 @@ class Corrector:
         self._predict(x, b0, bf, e0, sign, self._out)
         floor = False
         h_floor = self.params["npc.h_floor_m"] if h_floor_m is None else h_floor_m
-        if h_floor > 0.0 and self._out[O_FLAG] == REACHED and self._out[O_H_BOX] < h_floor and f > lo:
-            # the range solution deploys too low: first lift up late, range kept (phi_f lowered,
-            # phi_0 solved again for the range, the way MSL straightened up before its deploy)
-            lift = self._lift_late(x, e0, s_togo, sign, h_floor, p, tol, n_max)
+        h_fire = self.params["npc.h_fire_m"] if h_floor > 0.0 else 0.0
+        if (h_floor > 0.0 and self._out[O_FLAG] == REACHED and f > lo
+                and (self._out[O_H_BOX] < h_floor or self._out[O_H] < h_fire)):
+            # the range solution deploys too low (or reaches the target only below h_fire, where
+            # the trigger's own floor fires short of it): first lift up late, range kept (phi_f
+            # lowered, phi_0 solved again for the range, as MSL straightened up before its deploy)
+            lift = self._lift_late(x, e0, s_togo, sign, h_floor, h_fire, p, tol, n_max)
             n += lift[3]
             if lift[0] is not None:
                 p, f, zb = lift[0], lift[1], lift[2]

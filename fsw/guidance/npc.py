@@ -50,6 +50,9 @@ PARAMS = [
     Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
     Param("npc.h_floor_m", 0.0, 5e4, "m", "deploy altitude floor: the predicted deploy altitude is kept above it "
           "plus the margin, range traded (0: off)"),
+    Param("npc.h_fire_m", 0.0, 5e4, "m", "predicted altitude at the deploy point (the target) kept above it by "
+          "lifting up late, range kept (below it the trigger's altitude floor fires short of the target)",
+          ground_settable=False),
     # design bounds of the floor's margin (the unit tests show the rule; the guided campaign sized them)
     Param("npc.floor_margin_k", 0.0, 10.0, "", "floor margin: this many times the measured prediction error",
           ground_settable=False),

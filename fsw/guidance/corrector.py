@@ -4,7 +4,8 @@ profile whose predicted deploy reaches the target.
 - ``bank_profile``: the one-parameter family it searches (the line in energy from phi_0 to
   phi_f, a phi_0 bound held beyond it), with ``profile_span`` and ``profile_at``;
 - ``solve_bank``: the root-finder, a safeguarded secant on the range miss z(phi_0);
-- ``floor_bank``: the deploy-altitude floor's search, which trades range for altitude;
+- ``floor_bank``: the deploy-altitude floor's search, which trades range for altitude (after
+  ``Corrector._lift_late``, which keeps the range and lifts up at the end, could not hold it);
 - ``Corrector``: one correction (``solve``), its answer a ``Correction``.
 """
 from __future__ import annotations
@@ -189,7 +190,8 @@ class Corrector:
     """One correction from a planet-fixed state (``solve``): phi_0 of the family
     ``bank_profile`` by ``solve_bank`` on the predicted range miss, warm-started at the last
     answer's profile; a reversal under way turned round when the other way misses by less;
-    the deploy-altitude floor's trade; and the deploy crossranges for the lateral logic.
+    the deploy-altitude floor (on the predicted box-entry altitude: first a lift-up late with the
+    range kept, then a range trade); and the deploy crossranges for the lateral logic.
     ``params``: its own copy of the npc.* values, ``take_params`` applies new ones."""
 
     def __init__(self, scenario: Scenario, params: dict):
@@ -353,7 +355,7 @@ class Corrector:
                 and (self._out[O_H_BOX] < h_floor or self._out[O_H] < h_fire)):
             # the range solution deploys too low (or reaches the target only below h_fire, where
             # the trigger's own floor fires short of it): first lift up late, range kept (phi_f
-            # lowered, phi_0 solved again for the range, as MSL straightened up before its deploy)
+            # lowered, phi_0 solved again for the range: lift down before, lift up at the end)
             lift = self._lift_late(x, e0, s_togo, sign, h_floor, h_fire, p, tol, n_max)
             n += lift[3]
             if lift[0] is not None:

@@ -372,10 +372,12 @@ def test_predicting_through_the_shaper_once_settled_is_the_law_and_a_slow_revers
 
 def test_deploy_altitude_floor_trades_range_for_altitude():
     """From the plant's state 90 s into an entry flown at 90 deg, a target that the range
-    solution (phi_0 = 110 deg) reaches deploying at h_f: with the floor 500 m above h_f the
-    corrector gives up range (more lift up: the deploy point long) for a predicted deploy
-    altitude at the floor (within the corrector's tolerance); with the floor below h_f the
-    answer is the range solution; with the trade bounded, it stops at the bound. (From the entry interface the deploy altitude barely
+    solution (phi_0 = 110 deg) reaches entering the deploy box at h_b: with the floor 300 m
+    above h_b the corrector lifts up late, range kept (phi_f lowered, phi_0 solved again: more
+    lift down before, the box entered at the floor); with the floor 500 m above h_b, beyond
+    what lifting up late reaches, it gives up range (more lift up: the deploy point long) for a
+    predicted box-entry altitude at the floor (within the corrector's tolerance); with the
+    floor below h_b the answer is the range solution; with the trade bounded, it stops at the bound. (From the entry interface the deploy altitude barely
     depends on phi_0 and not monotonically: there the floor is a best effort.)"""
     _, _, _, _, frames = fly_plant(SCN.with_(max_duration_s=95.0), lambda e: math.radians(90.0), every=200)
     t, f, _ = [fr for fr in frames if fr[0] >= 90.0][0]
@@ -394,7 +396,18 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
     finally:
         eg.close()
     assert free["ok"] and not free["floor"] and math.degrees(free["bank0_rad"]) == pytest.approx(110.0, abs=0.5)
-    for floor_m, binds in ((free["h_final_m"] + 500.0, True), (free["h_final_m"] - 2000.0, False)):
+    eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": free["h_box_m"] + 300.0}), EventLog(), 0.02)
+    try:
+        eg.target_u = target
+        eg.bank0 = math.radians(100.0)
+        lift = eg.solve(x, 1.0, 1.0, 1.0)
+    finally:
+        eg.close()
+    assert lift["ok"] and not lift["floor"] and abs(lift["miss_m"]) <= PARAMS["npc.tol_m"]      # range kept
+    assert lift["h_box_m"] >= free["h_box_m"] + 300.0 - PARAMS["npc.tol_m"]
+    assert lift["bank_final_rad"] == lift["f_family_rad"] < eg.bank_final_rad                  # lift up late ...
+    assert lift["bank0_rad"] > free["bank0_rad"]                                                # ... lift down before
+    for floor_m, binds in ((free["h_box_m"] + 500.0, True), (free["h_box_m"] - 2000.0, False)):
         eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": floor_m}), EventLog(), 0.02)
         try:
             eg.target_u = target
@@ -404,15 +417,15 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
             eg.close()
         assert res["floor"] is binds
         if binds:
-            assert res["h_final_m"] >= floor_m - PARAMS["npc.tol_m"]
+            assert res["h_box_m"] >= floor_m - PARAMS["npc.tol_m"]
             assert res["bank0_rad"] < free["bank0_rad"] and res["miss_m"] > 10e3         # long
             assert res["p_range_rad"] == pytest.approx(free["bank0_rad"], abs=1e-6)     # next cycle's warm start
             res_binds = res
         else:
-            assert res["bank0_rad"] == free["bank0_rad"] and res["h_final_m"] == free["h_final_m"]
+            assert res["bank0_rad"] == free["bank0_rad"] and res["h_box_m"] == free["h_box_m"]
     # a trade bounded to half that miss: the floor gives up less (below the floor, within the bound)
     traded = res_binds["miss_m"]
-    p = dict(base, **{"npc.h_floor_m": free["h_final_m"] + 500.0, "npc.floor_miss_max_m": 0.5 * traded})
+    p = dict(base, **{"npc.h_floor_m": free["h_box_m"] + 500.0, "npc.floor_miss_max_m": 0.5 * traded})
     eg = npc.EntryGuidance(SCN, p, EventLog(), 0.02)
     try:
         eg.target_u = target
@@ -420,7 +433,7 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
         res = eg.solve(x, 1.0, 1.0, 1.0)
     finally:
         eg.close()
-    assert res["h_final_m"] < free["h_final_m"] + 500.0 - PARAMS["npc.tol_m"]
+    assert res["h_box_m"] < free["h_box_m"] + 500.0 - PARAMS["npc.tol_m"]
     assert free["bank0_rad"] >= res["bank0_rad"] > res_binds["bank0_rad"] and abs(res["miss_m"]) <= 0.5 * traded
     assert res["floor"] == (res["bank0_rad"] < free["bank0_rad"])      # a trade is flagged; none is the range solution
 
@@ -452,7 +465,7 @@ def test_deploy_altitude_floor_without_a_higher_deploy_keeps_the_range_solution(
             eg.target_u = target
             eg.bank0 = math.radians(100.0)
             if h_floor is None:
-                eg.params["npc.h_floor_m"] = res["free"]["h_final_m"] + 500.0
+                eg.params["npc.h_floor_m"] = res["free"]["h_box_m"] + 500.0
             res[name] = eg.solve(x, 1.0, 1.0, 1.0)
         finally:
             eg.close()
@@ -604,3 +617,49 @@ def test_a_reversal_turns_round_only_when_the_other_way_is_the_shorter():
     assert np.all(np.diff(path[np.argmin(path):np.argmax(path) + 1]) >= 0.0)
     n0 = shaper.shaped_transition(s0, d(10.0), 0.0, d(10.0), 0.5, tab)
     assert np.degrees(tab[n0 - 1]) == pytest.approx(-350.0, abs=0.1)   # the way it began
+
+
+def test_predicted_box_entry_is_where_a_prediction_to_the_box_mach_ends():
+    """O_H_BOX, the altitude where the deploy box is entered (the highest the trigger can
+    deploy), against its independent truth: the same prediction ended at the box's Mach
+    maximum instead of the deploy Mach (the box's dynamic-pressure maximum not binding there
+    in the nominal atmosphere). Without a box the final altitude."""
+    box = SCN.vehicle.deploy_box
+    x0 = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x0[:3]) - 0.5 * float(x0[3:] @ x0[3:])
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    c = predictor.predictor_constants(SCN, PARAMS)
+    b, bf = math.radians(150.0), math.radians(60.0)      # about guided-nominal's solution
+    out, ref = np.zeros(predictor.N_O), np.zeros(predictor.N_O)
+    predictor.predict(x0, c, b, bf, e0, ef, 1.0, 0.5, out, 0.0)
+    c_box = c.copy()
+    c_box[predictor.C_MACH_F] = box.mach_max
+    predictor.predict(x0, c_box, b, bf, e0, ef, 1.0, 0.5, ref, 0.0)
+    assert out[predictor.O_FLAG] == ref[predictor.O_FLAG] == predictor.REACHED
+    assert out[predictor.O_H_BOX] == pytest.approx(ref[predictor.O_H], abs=50.0)
+    assert out[predictor.O_H_BOX] > out[predictor.O_H] + 500.0       # the box entered above the deploy Mach
+    c[predictor.C_BOX_MACH] = 0.0
+    predictor.predict(x0, c, b, bf, e0, ef, 1.0, 0.5, out, 0.0)
+    assert out[predictor.O_H_BOX] == out[predictor.O_H]
+
+
+def test_floor_margin_carries_a_falling_prediction_over_the_cycles_to_go():
+    """The floor's margin from the measured change of the predicted box-entry altitude: a
+    prediction that falls 30 m every cycle with 100 cycles to go is a bias worth about 3 km
+    (n times the drift), not the random walk's 300 m (sqrt(n) times); noise of the same RMS
+    about a zero mean stays about the random walk; a rising prediction needs no margin."""
+    p = dict(PARAMS, **{"npc.floor_margin_k": 1.0, "npc.floor_margin_min_m": 0.0, "npc.floor_margin_max_m": 1e4})
+    margins = {}
+    for name, step in (("falling", lambda i: -30.0), ("noise", lambda i: 30.0 * (-1) ** i), ("rising", lambda i: 30.0)):
+        eg = npc.EntryGuidance(SCN, p, EventLog(), 0.02)
+        try:
+            h = 9000.0
+            for i in range(200):
+                h += step(i)
+                eg._measure_prediction(h, 100.0)
+            margins[name] = eg.floor_margin_m
+        finally:
+            eg.close()
+    assert margins["falling"] == pytest.approx(3000.0, rel=0.05)
+    assert 300.0 - 15.0 <= margins["noise"] <= 400.0      # the low-passed mean of +-30 m still wobbles a little
+    assert margins["rising"] < 10.0

@@ -4,7 +4,8 @@ profile whose predicted deploy reaches the target.
 - ``bank_profile``: the one-parameter family it searches (the line in energy from phi_0 to
   phi_f, a phi_0 bound held beyond it), with ``profile_span`` and ``profile_at``;
 - ``solve_bank``: the root-finder, a safeguarded secant on the range miss z(phi_0);
-- ``floor_bank``: the deploy-altitude floor's search, which trades range for altitude;
+- ``floor_bank``: the deploy-altitude floor's search, which trades range for altitude (after
+  ``Corrector._lift_late``, which keeps the range and lifts up at the end, could not hold it);
 - ``Corrector``: one correction (``solve``), its answer a ``Correction``.
 """
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 
 from common.model import Scenario
 from .geometry import central_angle, crossrange, unit_from_latlon
-from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_T, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict,
+from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_H_BOX, O_T, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict,
                         predict_shaped, predictor_constants)
 from .shaper import reversal_other_way
 
@@ -161,7 +162,8 @@ class Correction(TypedDict):
     """One answer of the corrector (Corrector.solve): the bank profile to fly from the
     state it answers, and what its prediction says of the deploy."""
     bank0_rad: float          # phi_0 commanded: the profile's bank now (the line clipped to the bounds)
-    p_range_rad: float        # the range solution's parameter p (bank_profile): the next cycle's warm start
+    p_range_rad: float        # the range solution's parameter p (bank_profile): the next cycle's warm start ...
+    f_family_rad: float       # ... and the family's phi_f it was solved with (lowered by a lift-up late)
     e0_jpkg: float            # energy mu/r - V^2/2 of the state answered: where the profile starts
     bank_line_rad: float      # the profile flown: phi_0 of its line ...
     bank_final_rad: float     # ... and its phi_f (the line clipped to the phi_0 bounds, as predicted)
@@ -174,7 +176,8 @@ class Correction(TypedDict):
     range_to_go_m: float      # great-circle range from the state answered to the target
     lat_rad: float            # predicted deploy point, planet-fixed
     lon_rad: float
-    h_final_m: float          # predicted deploy altitude
+    h_final_m: float          # predicted deploy altitude (at the deploy condition) ...
+    h_box_m: float            # ... and where the deploy box is entered: the floor's (the highest deploy)
     t_go_s: float             # predicted time to deploy, from the state answered
     xr_keep_m: float          # predicted deploy crossrange (+ left), sign kept (NaN: not predicted) ...
     xr_rev_m: float           # ... and reversed t_flip from now
@@ -187,7 +190,8 @@ class Corrector:
     """One correction from a planet-fixed state (``solve``): phi_0 of the family
     ``bank_profile`` by ``solve_bank`` on the predicted range miss, warm-started at the last
     answer's profile; a reversal under way turned round when the other way misses by less;
-    the deploy-altitude floor's trade; and the deploy crossranges for the lateral logic.
+    the deploy-altitude floor (on the predicted box-entry altitude: first a lift-up late with the
+    range kept, then a range trade); and the deploy crossranges for the lateral logic.
     ``params``: its own copy of the npc.* values, ``take_params`` applies new ones."""
 
     def __init__(self, scenario: Scenario, params: dict):
@@ -206,6 +210,8 @@ class Corrector:
         self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
         self.bank0 = abs(scenario.bank_schedule[0][1])   # the range solution's parameter p [rad]
                                          # (bank_profile: phi_0 within the bounds): the next warm start
+        self.f_lift_rad = self.bank_final_rad   # the family's phi_f now: lowered by the floor's lift-up
+                                         # late (_lift_late), kept lowered for the rest of the entry
         self._p_e0_jpkg = math.nan       # energy at which bank0's profile starts
         self._shp = None                 # the reference shaper's state the predictions start from
         self._out = np.zeros(N_O)
@@ -216,6 +222,8 @@ class Corrector:
         self.bank_final_rad = math.radians(p["npc.bank_final_deg"])
         self.bank_min_rad, self.bank_max_rad = math.radians(p["npc.bank_min_deg"]), math.radians(p["npc.bank_max_deg"])
         self.p_min_rad, self.p_max_rad = profile_span(self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
+        self.f_lift_rad = min(self.f_lift_rad, self.bank_final_rad) if "npc.bank_final_deg" not in names \
+            else self.bank_final_rad
         self.bank0 = min(self.p_max_rad, max(self.p_min_rad, self.bank0))      # the warm start within them
         if "npc.h_deploy_m" in names:
             self.e_deploy_jpkg = deploy_energy(scn, p["npc.h_deploy_m"])
@@ -223,12 +231,14 @@ class Corrector:
         c[C_KRHO], c[C_KLD] = self.constants[C_KRHO], self.constants[C_KLD]
         self.constants[:] = c
 
-    def _z(self, x, e0, s_togo, sign, t_switch=0.0):
-        """The corrector's miss function z(p) [m]: predicted range past the target."""
+    def _z(self, x, e0, s_togo, sign, t_switch=0.0, f=None):
+        """The corrector's miss function z(p) [m]: predicted range past the target (f: the
+        family's phi_f, None: npc.bank_final_deg)."""
         out = self._out
+        f = self.bank_final_rad if f is None else f
 
         def z(p):
-            b0, bf = bank_profile(p, self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
+            b0, bf = bank_profile(p, self.bank_min_rad, self.bank_max_rad, f)
             self._predict(x, b0, bf, e0, sign, out, t_switch)
             if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
                 # out of the atmosphere: far long. Its range so far says little, so the miss
@@ -255,10 +265,43 @@ class Corrector:
         def deploy(b):
             self._predict(x, b, min(self.bank_final_rad, b), e0, sign, out)
             if out[O_FLAG] == SKIPPED or out[O_FLAG] == TIMEOUT:
-                return out[O_H], None
-            return out[O_H], central_angle(x[:3], out[:3]) * self.radius_m - s_togo
+                return out[O_H_BOX], None
+            return out[O_H_BOX], central_angle(x[:3], out[:3]) * self.radius_m - s_togo
         return floor_bank(deploy, h_floor, b_hi, h_hi, self.bank_min_rad, self.params["npc.tol_m"],
                           int(self.params["npc.max_iter"]), self.params["npc.floor_miss_max_m"])
+
+    LIFT_STEPS = 4                        # _lift_late's bisection on phi_f
+
+    def _lift_late(self, x, e0, s_togo, sign, h_floor, h_fire, p_warm, tol, n_max):
+        """(p, phi_f, miss, predictions): the range solution of the family with phi_f lowered
+        towards phi_0's lower bound (lift up at the end of the entry, which deploys higher)
+        whose predicted box-entry altitude reaches h_floor and whose predicted deploy altitude
+        (at the target: where the range trigger fires) reaches h_fire, phi_f the largest found
+        that does (least change). p None when even phi_f at the bound does not reach h_floor
+        with the range solved (then only a range trade can: the floor's); phi_f at the bound
+        when that reaches h_floor but not h_fire (the most a lift-up late gives). Bisection on
+        phi_f, each a range solution warm-started at the last."""
+        lo, hi, f_nom = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
+        out, n = self._out, 0
+        f_ok, f_bad, best = lo, f_nom, None
+        f = lo
+        for i in range(self.LIFT_STEPS + 1):
+            p_lo, p_hi = profile_span(lo, hi, f)
+            p, zb, k, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), p_lo, p_hi, p_warm, tol, n_max)
+            n += k
+            b0, bf = bank_profile(p, lo, hi, f)
+            self._predict(x, b0, bf, e0, sign, out)
+            n += 1
+            box_ok = ok and out[O_FLAG] == REACHED and out[O_H_BOX] >= h_floor
+            if box_ok and out[O_H] >= h_fire:
+                best, f_ok, p_warm = (p, f, zb), f, p
+            elif i == 0:
+                # at the bound: the floor unreachable (range to trade) or the most lift-up late gives
+                return (p, f, zb, n) if box_ok else (None, f, zb, n)
+            else:
+                f_bad = f
+            f = 0.5 * (f_ok + f_bad)
+        return (best[0], best[1], best[2], n)
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
               shp: np.ndarray | None = None, h_floor_m: float | None = None) -> Correction:
@@ -276,12 +319,13 @@ class Corrector:
         e0 = self.mu_m3ps2 / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.radius_m
         dt = self.params["npc.dt_pred_s"]
-        lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.bank_final_rad
+        lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
+        p_span = profile_span(lo, hi, f)
         p_warm = self.bank0
         if math.isfinite(self._p_e0_jpkg) and self.e_deploy_jpkg != self._p_e0_jpkg:
             p_warm = profile_at(p_warm, lo, hi, f, (e0 - self._p_e0_jpkg) / (self.e_deploy_jpkg - self._p_e0_jpkg))
         tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
-        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign), self.p_min_rad, self.p_max_rad, p_warm, tol, n_max)
+        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
         turn = math.nan
         alt = None
         if shp is not None and not abs(zb) <= self.params["npc.floor_miss_max_m"]:
@@ -293,8 +337,7 @@ class Corrector:
             # Not for less: the lateral decision timed the reversal for the way it began, and
             # turning round delays it, which costs crossrange
             self._shp = alt
-            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign), self.p_min_rad, self.p_max_rad, p_warm,
-                                         tol, n_max)
+            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
             n += na
             if abs(za) < abs(zb) - tol:
                 p, zb, ok, turn = pa, za, oka, float(alt[3])
@@ -307,12 +350,26 @@ class Corrector:
         self._predict(x, b0, bf, e0, sign, self._out)
         floor = False
         h_floor = self.params["npc.h_floor_m"] if h_floor_m is None else h_floor_m
-        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H] < h_floor and p > lo:
+        h_fire = self.params["npc.h_fire_m"] if h_floor > 0.0 else 0.0
+        if (h_floor > 0.0 and self._out[O_FLAG] == REACHED and f > lo
+                and (self._out[O_H_BOX] < h_floor or self._out[O_H] < h_fire)):
+            # the range solution deploys too low (or reaches the target only below h_fire, where
+            # the trigger's own floor fires short of it): first lift up late, range kept (phi_f
+            # lowered, phi_0 solved again for the range: lift down before, lift up at the end)
+            lift = self._lift_late(x, e0, s_togo, sign, h_floor, h_fire, p, tol, n_max)
+            n += lift[3]
+            if lift[0] is not None:
+                p, f, zb = lift[0], lift[1], lift[2]
+                b_range = p
+                b0, bf = bank_profile(p, lo, hi, f)
+                held = not lo <= p <= hi
+            self._predict(x, b0, bf, e0, sign, self._out)
+        if h_floor > 0.0 and self._out[O_FLAG] != SKIPPED and self._out[O_H_BOX] < h_floor and p > lo:
             # the range solution deploys too low: trade range for altitude (more lift up, so
             # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
             # fixed phi_f would otherwise take the lift-up away just where it counts), and
             # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
-            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, hi), self._out[O_H])
+            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, hi), self._out[O_H_BOX])
             n += nh
             if math.isnan(b_fl):        # no trade deploys higher: the range solution's prediction again
                 self._predict(x, b0, bf, e0, sign, self._out)
@@ -325,11 +382,11 @@ class Corrector:
                 ok = False
         rf = self._out[:3].copy()
         # phi_0 commanded: the profile's bank now (the line clipped to the bounds, as predicted)
-        res = Correction(bank0_rad=min(hi, max(lo, b0)), p_range_rad=b_range, e0_jpkg=e0, bank_line_rad=b0,
+        res = Correction(bank0_rad=min(hi, max(lo, b0)), p_range_rad=b_range, f_family_rad=f, e0_jpkg=e0, bank_line_rad=b0,
                          bank_final_rad=bf, floor=floor, held=held and not floor, miss_m=zb, predictions=n + 1,
                          turn_rad=turn, ok=ok or floor, range_to_go_m=s_togo,
                          lat_rad=math.asin(rf[2] / math.sqrt(float(rf @ rf))), lon_rad=math.atan2(rf[1], rf[0]),
-                         h_final_m=float(self._out[O_H]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,
+                         h_final_m=float(self._out[O_H]), h_box_m=float(self._out[O_H_BOX]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,
                          xr_rev_m=math.nan, compute_ns=0)
         if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
             # the lateral decision's pair, "keep" and "reverse at t_flip", both flown with the

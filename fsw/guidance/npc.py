@@ -50,6 +50,9 @@ PARAMS = [
     Param("npc.tgo_freeze_s", 0.0, 300.0, "s", "predicted time to deploy below which phi_0 is held"),
     Param("npc.h_floor_m", 0.0, 5e4, "m", "deploy altitude floor: the predicted deploy altitude is kept above it "
           "plus the margin, range traded (0: off)"),
+    Param("npc.h_fire_m", 0.0, 5e4, "m", "predicted altitude at the deploy point (the target) kept above it by "
+          "lifting up late, range kept (below it the trigger's altitude floor fires short of the target)",
+          ground_settable=False),
     # design bounds of the floor's margin (the unit tests show the rule; the guided campaign sized them)
     Param("npc.floor_margin_k", 0.0, 10.0, "", "floor margin: this many times the measured prediction error",
           ground_settable=False),
@@ -109,7 +112,8 @@ class EntryGuidance(Corrector):
         # predicted deploy altitude from one answer to the next (what the prediction did not
         # foresee: density, L/D, the state), a random walk over the cycles still to fly
         self._h_pred_prev = math.nan
-        self._dh_var = math.nan          # low-passed square of that change [m^2]
+        self._dh_var = math.nan          # low-passed square of that change [m^2] ...
+        self._dh_mean = 0.0              # ... and its low-passed mean [m]
         self._period_s = 1.0             # guidance cycle period
         self.floor_margin_m = params["npc.floor_margin_min_m"]
         self.held_cycles = 0             # cycles whose range solution holds a phi_0 bound (bank_profile)
@@ -194,6 +198,7 @@ class EntryGuidance(Corrector):
         self.bank0_hist[i], self.miss_hist[i] = res["bank0_rad"], res["miss_m"]
         self.cycles += 1
         self.bank0, self._p_e0_jpkg = res["p_range_rad"], res["e0_jpkg"]
+        self.f_lift_rad = res["f_family_rad"]
         self.bank0_cmd = res["bank0_rad"]
         self._line = (res["e0_jpkg"], res["bank_line_rad"], res["bank_final_rad"])
         if res["floor"]:
@@ -203,7 +208,7 @@ class EntryGuidance(Corrector):
         self.held_cycles += bool(res["held"])
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat_rad"], res["lon_rad"])
-        self._measure_prediction(res["h_final_m"], res["t_go_s"])
+        self._measure_prediction(res["h_box_m"], res["t_go_s"])
         self.pred_h_m = res["h_final_m"]
         self.t_go_s, self._t_answer = res["t_go_s"], res["t_s"]
         if self.shaper.turn_round(res["turn_rad"], res["sign"]):
@@ -218,20 +223,31 @@ class EntryGuidance(Corrector):
             self._frozen = True         # too close to the deploy for the range to respond
 
     DH_WEIGHT = 0.2                      # low-pass weight of one new change of the prediction
+    DH_DRIFT_WEIGHT = 0.05               # ... and of its mean (a drift shows over tens of cycles)
 
     def _measure_prediction(self, h_m: float, t_go_s: float) -> None:
-        """The floor's margin: npc.floor_margin_k times the measured change per cycle of the
-        predicted deploy altitude (low-passed RMS), grown as a random walk over the cycles to
-        the deploy (sqrt of their number), within [floor_margin_min_m, floor_margin_max_m]."""
+        """The floor's margin from the measured change per cycle of the predicted box-entry
+        altitude, npc.floor_margin_k times: its downward drift (low-passed mean) carried over
+        the cycles to the deploy (the part of the mean its own noise does not explain), plus the
+        rest of it (low-passed RMS about that mean) as a random walk (sqrt of their number),
+        within [floor_margin_min_m, floor_margin_max_m].
+        A prediction that keeps falling (a density profile or L/D the estimates lag) is a bias,
+        not noise: over n cycles it costs n times the drift, not sqrt(n) times."""
         p = self.params
         if math.isfinite(h_m) and math.isfinite(self._h_pred_prev):
-            d2 = (h_m - self._h_pred_prev) ** 2
-            self._dh_var = d2 if not math.isfinite(self._dh_var) else \
-                (1.0 - self.DH_WEIGHT) * self._dh_var + self.DH_WEIGHT * d2
+            d = h_m - self._h_pred_prev
+            if not math.isfinite(self._dh_var):
+                self._dh_var, self._dh_mean = d * d, 0.0
+            else:
+                self._dh_var = (1.0 - self.DH_WEIGHT) * self._dh_var + self.DH_WEIGHT * d * d
+                self._dh_mean = (1.0 - self.DH_DRIFT_WEIGHT) * self._dh_mean + self.DH_DRIFT_WEIGHT * d
         self._h_pred_prev = h_m
         if math.isfinite(self._dh_var) and math.isfinite(t_go_s):
             n = max(1.0, t_go_s / max(self._period_s, 1e-3))
-            m = p["npc.floor_margin_k"] * math.sqrt(self._dh_var * n)
+            rest = max(0.0, self._dh_var - self._dh_mean ** 2)
+            w = self.DH_DRIFT_WEIGHT
+            drift = max(0.0, -self._dh_mean - math.sqrt(rest * w / (2.0 - w)))   # beyond the mean's own noise
+            m = p["npc.floor_margin_k"] * (drift * n + math.sqrt(rest * n))
             self.floor_margin_m = min(p["npc.floor_margin_max_m"], max(p["npc.floor_margin_min_m"], m))
 
     def steer(self, nav) -> None:

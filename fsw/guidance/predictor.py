@@ -48,14 +48,17 @@ C_G0, C_RN, C_SG = 16, 17, 18   # surface gravity (the load factor's unit) [m/s^
 C_NLIM, C_QLIM = 19, 20         # path limits: load factor [g], heat rate [W/m^2] (0: off)
 C_HTAU, C_HGAIN = 21, 22        # path-limit feedback: closing time [s], gain [s/m]
 C_BLO, C_BHI = 23, 24           # the law's bank magnitude clipped to the phi_0 bounds [rad] (bank_profile)
-N_C = 25
+C_BOX_MACH, C_BOX_QBAR = 25, 26 # the deploy box's Mach and dynamic-pressure maxima [-, Pa] (0: no box)
+N_C = 27
 # The predictor's outputs, indexed likewise
 O_R = 0                         # 3: final position, planet-fixed [m]
 O_T = 3                         # time of flight [s]
 O_NMAX, O_QMAX = 4, 5           # peak load factor [g], peak heat rate [W/m^2]
 O_H, O_V = 6, 7                 # final altitude [m] and speed [m/s]
 O_FLAG = 8                      # how it ended: REACHED, SKIPPED, GROUND or TIMEOUT
-N_O = 9
+O_H_BOX = 9                     # altitude where the deploy box is entered [m] (the final one without a box,
+                                # or when the box is not entered before the deploy condition)
+N_O = 10
 REACHED, SKIPPED, GROUND, TIMEOUT = 0, 1, 2, 3
 T_PRED_MAX_S = 1500.0           # a prediction longer than this is a skip-out
 SUTTON_GRAVES_MARS = 1.9027e-4  # k of q = k sqrt(rho / R_n) V^3 [SI] (docs/fsw/entry-guidance.md)
@@ -148,6 +151,15 @@ def _end_metric(h, V, c):
 
 
 @njit(cache=True, nogil=True)
+def _box_metric(h, V, c):
+    """Distance to the deploy box from above, positive before it: the larger of the Mach and
+    the dynamic pressure (density scaled by the estimate) past the box's maxima, relative."""
+    rho = _rho_exp(h, c[C_RHO0], c[C_H]) if c[C_RHO_MODEL] == 0.0 else _rho_poly(h)
+    q = 0.5 * rho * c[C_KRHO] * V * V
+    return max(V / _speed_of_sound(h) / c[C_BOX_MACH] - 1.0, q / c[C_BOX_QBAR] - 1.0)
+
+
+@njit(cache=True, nogil=True)
 def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     """Fly the 3-DOF model from x0 (planet-fixed [r, v_rel], m and m/s) until the deploy
     condition (or skip, ground, timeout). c: the constants (predictor_constants, indices
@@ -156,7 +168,8 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     bank's sign is ``sign``, or ``-sign`` before ``t_flip`` [s] (a reversal that takes
     effect then: the lateral mid-point of the shaped transition). out: final position (3)
     [m, planet-fixed], time of flight [s], peak load [g], peak heat rate [W/m^2], final
-    altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT). The last step is
+    altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT), the altitude where
+    the deploy box was entered [m] (O_H_BOX: the highest the trigger can deploy). The last step is
     cut back linearly to the deploy condition. The law's bank is flown from the start."""
     _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, np.empty(0), 0)
 
@@ -203,6 +216,9 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     qmax = 0.0
     _deriv(x, c, b0, bf, e0, ef, sign, k1, aux)
     m_prev = _end_metric(aux[0], aux[1], c)
+    b_prev = _box_metric(aux[0], aux[1], c) if c[C_BOX_MACH] > 0.0 else 1.0
+    h_prev = aux[0]
+    h_box = math.nan
     flag = TIMEOUT
     frac = 1.0
     while t < c[C_T_MAX]:
@@ -233,6 +249,12 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
         r = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
         h = r - c[C_RE]
         V = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+        if math.isnan(h_box) and c[C_BOX_MACH] > 0.0:
+            b = _box_metric(h, V, c)
+            if b <= 0.0:
+                h_box = h_prev + (b_prev / (b_prev - b) if b_prev > b else 1.0) * (h - h_prev)
+            b_prev = b
+        h_prev = h
         m = _end_metric(h, V, c)
         if m <= 0.0:
             frac = m_prev / (m_prev - m) if m_prev > m else 1.0
@@ -255,6 +277,7 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     out[O_H] = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) - c[C_RE]
     out[O_V] = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
     out[O_FLAG] = flag
+    out[O_H_BOX] = out[O_H] if math.isnan(h_box) else h_box
 
 
 def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:
@@ -279,6 +302,9 @@ def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:
     c[C_QLIM] = params["npc.limit_frac"] * veh.max_heat_rate_wcm2 * 1e4
     c[C_HTAU], c[C_HGAIN] = params["npc.hdot_tau_s"], params["npc.hdot_gain"]
     c[C_BLO], c[C_BHI] = math.radians(params["npc.bank_min_deg"]), math.radians(params["npc.bank_max_deg"])
+    box = veh.deploy_box
+    if box is not None:
+        c[C_BOX_MACH], c[C_BOX_QBAR] = box.mach_max, box.qbar_max_pa
     return c
 
 

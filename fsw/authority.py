@@ -127,11 +127,12 @@ class AuthoritySupervisor:
         solve may return another of its equally good trims, and the reference's alpha/beta
         would jump between them.
 
-        While a trim is held, the authority is asked again with that trim as flown now: the
+        While a trim is held, the authority is asked again from that trim as flown now: the
         jets' share of the bias grows as the dynamic pressure falls (the offset is held within
-        guidance.trim_max_deg) and the aerodynamic factors are learned, so the authority found
-        at the reconfiguration's dynamic pressure does not hold for a reversal flown at the
-        entry's lowest."""
+        guidance.trim_max_deg) and the aerodynamic factors are learned, so neither the trim nor
+        the authority found at the reconfiguration's dynamic pressure holds for a reversal flown
+        at the entry's lowest. The LP moves the trim to the weak-way-best one closest to it
+        (fsw/controllability.py), never to another equally good one."""
         r = self.controllability
         if r is None or r.bias_Nm == 0.0 or self.lp.busy or self.lp.ready:
             return
@@ -155,12 +156,13 @@ class AuthoritySupervisor:
         tracking, not the reference, shows what the jets cannot do). A periodic re-assessment
         whose answer reads the same as the last (the event's precision: 0.01 deg/s^2, 1 N m,
         0.1 deg) and keeps its verdict changes nothing but the trim's dynamic pressure.
-        ``held``: the answer with the held trim (``reassess``): the trim stays, and the
-        reference is only ever slowed by it (the authority it needs is no longer there), never
+        ``held``: the answer with the held trim (``reassess``): the trim moves to the LP's (the
+        weak-way-best trim closest to the one flown), and the reference is only ever slowed by it (the authority it needs is no longer there), never
         sped up again before the next reconfiguration (no re-shaping back and forth as the
         dynamic pressure falls and rises)."""
         last, self.controllability = self.controllability, r
         if held:
+            self._set_trim_ref(r)          # the weak-way-best trim closest to the one flown
             if last is not None and r.controllable != last.controllable and not r.controllable:
                 self.events.emit(t_s, EV.NOT_CONTROLLABLE, reason=r.reason)
             if self._reference_limit(need, r)[0] < self.guidance.profile.accel_limit_radps2:

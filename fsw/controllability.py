@@ -177,6 +177,29 @@ def bank_authority(C: np.ndarray, rhs: np.ndarray, W: np.ndarray) -> list[float]
     return out
 
 
+def _closest_trim(M: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, t_best: float,
+                  held: np.ndarray) -> np.ndarray | None:
+    """Item 2 again with the weaker way held at its best ``t_best``: of the trims that give it,
+    the one closest (sum of |theta_i - held_i|) to the trim flown, so that a trim carried
+    through the entry moves only as far as the flight condition makes it, never between equally
+    good trims. x as item 2's, or None when HiGHS finds none (then item 2's own answer stands)."""
+    n = M.shape[1]                       # x = [d+, d-, dalpha, beta, a+, a-, t, u0, u1]; u_i >= |theta_i - held_i|
+    j = n - 5                            # first trim column
+    Mc = np.zeros((M.shape[0] + 5, n + 2))
+    Mc[:M.shape[0], :n] = M
+    for k, (i, sg) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):   # +-(theta_i - held_i) - u_i <= 0
+        Mc[M.shape[0] + k, j + i] = sg
+        Mc[M.shape[0] + k, n + i] = -1.0
+    Mc[-1, n - 1] = 1.0                  # t >= t_best, less HiGHS's tolerance
+    t_floor = t_best - 1e-9 * max(1.0, abs(t_best))
+    row_lo = np.concatenate([rhs, [0.0, 0.0], np.full(4, -math.inf), [t_floor]])
+    row_hi = np.concatenate([rhs, [math.inf, math.inf], [held[0], -held[0], held[1], -held[1]], [math.inf]])
+    cost = np.zeros(n + 2)
+    cost[n:] = 1.0
+    x = _lp(cost, Mc, row_lo, row_hi, np.concatenate([lo, [0.0, 0.0]]), np.concatenate([hi, [math.inf, math.inf]]))
+    return None if x is None else x[:n]
+
+
 def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: np.ndarray, A_aero: np.ndarray,
                     trim_max_deg: float, authority_min_radps2: float, qbar_pa: float = float("nan"),
                     inertia_unc_frac: float = 0.0, held_trim_rad=None) -> Controllability:
@@ -186,8 +209,11 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
     in body axes, ``A_aero`` (3x2) from ``aero_moment_per_rad`` (zeros: jets only);
     ``qbar_pa`` is only recorded. ``inertia_unc_frac``: the authority holds for every inertia
     within that fraction of ``I_B``, element by element (``inertia_corners``; 0: ``I_B`` is
-    the truth). ``held_trim_rad`` (dalpha, beta): the authority with this trim flown (the
-    weaker-way trim search, item 2, is skipped; the smallest trim, item 1, is still reported)."""
+    the truth). ``held_trim_rad`` (dalpha, beta): the trim flown now; of the trims that give the
+    weaker way its best (item 2), the one closest to it is returned with its authority (the
+    best trim turns with the flight condition: held unchanged, the offset is no longer the
+    one that balances the bias, and the weaker way can fall to nothing while another trim
+    within ``trim_max_deg`` still gives it); the held trim itself when no trim exists."""
     t0 = time.perf_counter()
     C, b = jet_columns(T_Nm, health)
     p = C.shape[1]
@@ -220,10 +246,8 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
     #    x = [d+ (p), d- (p), dalpha, beta, a+, a-, t]; max t, a+ >= t, -a- >= t. The trim may use
     #    the whole allowed offset once the jets alone cannot cancel the bias (else none: beta_r = 0)
     auth = [0.0, 0.0]
-    if held_trim_rad is not None:
-        theta = np.asarray(held_trim_rad, float)
-        auth = bank_authority(C, -b - A @ theta, inertia_corners(I_B, v, inertia_unc_frac))
-    elif math.isfinite(s_star):
+    held = None if held_trim_rad is None else np.asarray(held_trim_rad, float)
+    if math.isfinite(s_star):
         box = (max(s_star, math.radians(trim_max_deg)) * (1.0 + 1e-9) + 1e-12) if s_star > 0.0 else 0.0
         M = np.zeros((8, 2 * p + 5))
         M[0:3, 0:p], M[3:6, p:2 * p] = C, C
@@ -238,11 +262,17 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
         hi = np.concatenate([np.ones(2 * p), [box, box, inf, inf, inf]])
         rhs = np.concatenate([-b, -b])
         x = _lp(cost, M, np.concatenate([rhs, [0.0, 0.0]]), np.concatenate([rhs, [inf, inf]]), lo, hi)
+        if x is not None and held is not None:
+            x_near = _closest_trim(M, rhs, lo, hi, x[-1], held)
+            x = x if x_near is None else x_near
         if x is not None:
             theta = x[2 * p:2 * p + 2]
             # 3. each way's own maximum with that trim held, for every inertia the FSW cannot
             #    tell from its estimate
             auth = bank_authority(C, -b - A @ theta, inertia_corners(I_B, v, inertia_unc_frac))
+    if held is not None and (not math.isfinite(s_star) or x is None):    # no trim to move to: the one flown
+        theta = held
+        auth = bank_authority(C, -b - A @ theta, inertia_corners(I_B, v, inertia_unc_frac))
     if not math.isfinite(s_star):
         reason = (f"stuck-on bias {np.linalg.norm(b):.0f} N m beyond what the jets and the aerodynamics "
                   f"can cancel at qbar {qbar_pa:.0f} Pa")

@@ -197,3 +197,55 @@ def test_the_truth_label_uses_the_faults_the_plant_applied_with_their_thrust_fac
     lab = truth_controllability(scn, applied, t, q, 5.0)
     assert lab["qbar_min_pa"] == 150.0                       # the lowest dynamic pressure after the fault
     assert truth_controllability(scn, [], t, q, 5.0) == {"controllable": True, "reason": ""}
+
+
+def _weak_way_truth(C, b, A, W, theta):
+    """The weaker way's bank authority with trim theta held, from scipy's LP on the stacked
+    inertia corners (an independent formulation of item 2/3: one duty-cycle set per corner)."""
+    from scipy.optimize import linprog
+    p, K = C.shape[1], W.shape[0]
+    out = []
+    for sg in (1.0, -1.0):
+        Aeq = np.zeros((3 * K, K * p + 1))
+        for k in range(K):
+            Aeq[3 * k:3 * k + 3, k * p:(k + 1) * p] = C
+            Aeq[3 * k:3 * k + 3, -1] = -W[k]
+        c = np.zeros(K * p + 1)
+        c[-1] = -sg
+        res = linprog(c, A_eq=Aeq, b_eq=np.tile(-b - A @ theta, K), bounds=[(0, 1)] * (K * p) + [(None, None)],
+                      method="highs")
+        out.append(max(0.0, sg * res.x[-1]) if res.status == 0 else 0.0)
+    return min(out)
+
+
+def test_held_trim_moves_to_the_weak_way_best_one_closest_to_it():
+    """A trim chosen at a high dynamic pressure and carried (clipped at trim_max) to a low one
+    no longer balances the bias: with it held, the weaker way has nothing (truth: scipy on a
+    grid of trims), while another trim within trim_max gives it authority. Asked with the held
+    trim, the LP returns that best weak way and the trim giving it; a held trim that is already
+    best stays where it is."""
+    from common.model import load_scenario
+    from fsw.controllability import aero_moment_per_rad, jet_columns, inertia_corners, velocity_dir_B
+    veh = load_scenario("case2").vehicle
+    a = veh.aero
+    h = JetHealth.of(failed_off=[6, 7, 15, 16], stuck_on=[4, 14], degraded=[(13, 0.575)])
+    v = velocity_dir_B(a.alpha_trim_rad)
+    A = aero_moment_per_rad(422.0, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta, a.C_malpha, a.C_nbeta)
+    args = (veh.torque_matrix_Nm, h, veh.inertia_kgm2, v, A, 5.0, 0.0, 422.0, veh.inertia_uncertainty_frac)
+    C, b = jet_columns(veh.torque_matrix_Nm, h)
+    W = inertia_corners(veh.inertia_kgm2, v, veh.inertia_uncertainty_frac)
+    held = np.radians([-5.0, 2.32])
+    assert _weak_way_truth(C, b, A, W, held) == 0.0
+    grid = np.radians(np.linspace(-5.0, 5.0, 21))
+    best = max(_weak_way_truth(C, b, A, W, np.array([x, y])) for x in grid for y in grid)
+    assert best > math.radians(0.5)
+    r = controllability(*args, held)
+    weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
+    theta = np.radians([r.trim_alpha_deg, r.trim_beta_deg])
+    assert np.max(np.abs(theta)) <= math.radians(5.0) * (1 + 1e-6)
+    assert weak >= best * (1 - 1e-6)
+    assert weak == pytest.approx(_weak_way_truth(C, b, A, W, theta), rel=1e-6)
+    # already the best: held where it is (not moved to another trim as good)
+    r2 = controllability(*args, theta)
+    assert np.radians([r2.trim_alpha_deg, r2.trim_beta_deg]) == pytest.approx(theta, abs=1e-9)
+    assert min(r2.authority_pos_radps2, r2.authority_neg_radps2) == pytest.approx(weak, rel=1e-6)

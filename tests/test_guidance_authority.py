@@ -288,9 +288,10 @@ def test_a_bias_left_to_the_air_is_assessed_again_as_the_dynamic_pressure_grows(
         f.t_s = 232.0
         tr, limit = f.authority._trim_ref, f.guidance.profile.accel_limit_radps2
         f.authority.hold_trim(5000.0)                               # what the control cycle does
-        f.reassess_step()          # a trim exists: carried by its qbar scaling, the authority asked with it
-        r2 = f.controllability
-        assert f.authority._trim_ref is tr and r2 is not r1
+        f.reassess_step()          # a trim exists: carried by its qbar scaling, the authority asked from it
+        r2 = f.controllability     # still the weak-way-best trim: not moved
+        assert r2 is not r1 and f.authority._trim_ref[2] == 5000.0
+        assert f.authority._trim_ref[:2] == pytest.approx((tr[0] * 3000.0 / 5000.0, tr[1] * 3000.0 / 5000.0))
         assert r2.trim_alpha_deg == pytest.approx(r1.trim_alpha_deg * 3000.0 / 5000.0)
         assert r2.trim_beta_deg == pytest.approx(r1.trim_beta_deg * 3000.0 / 5000.0)
         # the same LP asked directly with that trim held

@@ -389,32 +389,30 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
     eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": 0.0}), EventLog(), 0.02)
     try:
         predictor.predict(x, eg.constants, math.radians(110.0), eg.bank_final_rad, e0, ef, 1.0, PARAMS["npc.dt_pred_s"], out, 0.0)
-        target = out[:3] / np.linalg.norm(out[:3])
-        eg.target_u = target
-        eg.bank0 = math.radians(100.0)
-        free = eg.solve(x, 1.0, 1.0, 1.0)
     finally:
         eg.close()
-    assert free["ok"] and not free["floor"] and math.degrees(free["bank0_rad"]) == pytest.approx(110.0, abs=0.5)
-    eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": free["h_box_m"] + 300.0}), EventLog(), 0.02)
-    try:
-        eg.target_u = target
-        eg.bank0 = math.radians(100.0)
-        lift = eg.solve(x, 1.0, 1.0, 1.0)
-    finally:
-        eg.close()
-    assert lift["ok"] and not lift["floor"] and abs(lift["miss_m"]) <= PARAMS["npc.tol_m"]      # range kept
-    assert lift["h_box_m"] >= free["h_box_m"] + 300.0 - PARAMS["npc.tol_m"]
-    assert lift["bank_final_rad"] == lift["f_family_rad"] < eg.bank_final_rad                  # lift up late ...
-    assert lift["bank0_rad"] > free["bank0_rad"]                                                # ... lift down before
-    for floor_m, binds in ((free["h_box_m"] + 500.0, True), (free["h_box_m"] - 2000.0, False)):
-        eg = npc.EntryGuidance(SCN, dict(base, **{"npc.h_floor_m": floor_m}), EventLog(), 0.02)
+    target = out[:3] / np.linalg.norm(out[:3])
+
+    def solve(**over) -> tuple[dict, float]:
+        """The corrector's answer from x for the target, first guess 100 deg, with these
+        parameters over base; and the bank_final_rad it was configured with."""
+        eg = npc.EntryGuidance(SCN, dict(base, **over), EventLog(), 0.02)
         try:
             eg.target_u = target
             eg.bank0 = math.radians(100.0)
-            res = eg.solve(x, 1.0, 1.0, 1.0)
+            return eg.solve(x, 1.0, 1.0, 1.0), eg.bank_final_rad
         finally:
             eg.close()
+
+    free, _ = solve(**{"npc.h_floor_m": 0.0})
+    assert free["ok"] and not free["floor"] and math.degrees(free["bank0_rad"]) == pytest.approx(110.0, abs=0.5)
+    lift, bank_final_rad = solve(**{"npc.h_floor_m": free["h_box_m"] + 300.0})
+    assert lift["ok"] and not lift["floor"] and abs(lift["miss_m"]) <= PARAMS["npc.tol_m"]      # range kept
+    assert lift["h_box_m"] >= free["h_box_m"] + 300.0 - PARAMS["npc.tol_m"]
+    assert lift["bank_final_rad"] == lift["f_family_rad"] < bank_final_rad                     # lift up late ...
+    assert lift["bank0_rad"] > free["bank0_rad"]                                                # ... lift down before
+    for floor_m, binds in ((free["h_box_m"] + 500.0, True), (free["h_box_m"] - 2000.0, False)):
+        res, _ = solve(**{"npc.h_floor_m": floor_m})
         assert res["floor"] is binds
         if binds:
             assert res["h_box_m"] >= floor_m - PARAMS["npc.tol_m"]
@@ -425,14 +423,7 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
             assert res["bank0_rad"] == free["bank0_rad"] and res["h_box_m"] == free["h_box_m"]
     # a trade bounded to half that miss: the floor gives up less (below the floor, within the bound)
     traded = res_binds["miss_m"]
-    p = dict(base, **{"npc.h_floor_m": free["h_box_m"] + 500.0, "npc.floor_miss_max_m": 0.5 * traded})
-    eg = npc.EntryGuidance(SCN, p, EventLog(), 0.02)
-    try:
-        eg.target_u = target
-        eg.bank0 = math.radians(100.0)
-        res = eg.solve(x, 1.0, 1.0, 1.0)
-    finally:
-        eg.close()
+    res, _ = solve(**{"npc.h_floor_m": free["h_box_m"] + 500.0, "npc.floor_miss_max_m": 0.5 * traded})
     assert res["h_box_m"] < free["h_box_m"] + 500.0 - PARAMS["npc.tol_m"]
     assert free["bank0_rad"] >= res["bank0_rad"] > res_binds["bank0_rad"] and abs(res["miss_m"]) <= 0.5 * traded
     assert res["floor"] == (res["bank0_rad"] < free["bank0_rad"])      # a trade is flagged; none is the range solution

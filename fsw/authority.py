@@ -157,8 +157,8 @@ class AuthoritySupervisor:
         whose answer reads the same as the last (the event's precision: 0.01 deg/s^2, 1 N m,
         0.1 deg) and keeps its verdict changes nothing but the trim's dynamic pressure.
         ``held``: the answer with the held trim (``reassess``): the trim moves to the LP's (the
-        weak-way-best trim closest to the one flown), and the reference is only ever slowed by it (the authority it needs is no longer there), never
-        sped up again before the next reconfiguration (no re-shaping back and forth as the
+        weak-way-best trim closest to the one flown), and the reference is only ever slowed by
+        it (the authority it needs is no longer there), never sped up again before the next reconfiguration (no re-shaping back and forth as the
         dynamic pressure falls and rises)."""
         last, self.controllability = self.controllability, r
         if held:

@@ -89,8 +89,9 @@ class RealTimeClock:
     With a rehearsal (``set_rehearsal(fn, lead_ns)``), ``fn()`` runs once before each release
     at release - lead_ns (- spin_ns if that is longer), when the caller is not already past
     that time, and the rest of the lead is spun, not slept (a sleep, however short, lets the
-    caches cool again): the lead costs its length of a core every period. Its time falls before the release, so the
-    cycle's compute time does not include it (an overrun shows as release jitter).
+    caches cool again): the lead costs its length of a core every period. Its time falls
+    before the release, so the cycle's compute time does not include it (an overrun shows as
+    release jitter).
     ``now_ns`` and ``sleep_until`` are injectable (tests use a fake clock).
     """
 

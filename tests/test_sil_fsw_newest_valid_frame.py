@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+from ellipsled.sil.common import DecodeRehearsal
 from ellipsled.sil.fsw_node import FswNode
 from interfaces import records
 from interfaces.codec import Codec, SequenceGuard
@@ -73,13 +74,14 @@ def test_the_rehearsal_before_a_frame_touches_nothing_the_loop_flies_with():
     assert FswNode._fetch_frame(node) == 1
     node.frame["t_ns"] = 123
     snapshot = node.frame.copy()
-    node._last_raw, node.jets = raw, records.new(records.JETS)
-    node._warm_dec, node._warm_enc = Codec.for_schema("SENSORS", guard=False), Codec.for_schema("JETS")
-    node._warm_frame = records.new(records.SENSORS)
+    node.jets, node._warm_enc = records.new(records.JETS), Codec.for_schema("JETS")
+    node._warm_frame = DecodeRehearsal("SENSORS", copy=True)
+    node._warm_frame.last = raw                            # what FswNode._accept notes
     for _ in range(3):
         FswNode._rehearse(node)
     assert node.frame.tobytes() == snapshot.tobytes()
-    assert int(node._warm_frame["k"]) == 1 and node._warm_dec.decoded == 3 and sum(node._warm_dec.rejects.values()) == 0
+    warm = node._warm_frame
+    assert int(warm._out["k"]) == 1 and warm._dec.decoded == 3 and sum(warm._dec.rejects.values()) == 0
     assert sum(node.dec.rejects.values()) == 0 and node.dec.decoded == 2
     node.sub_sensors = Sub([_frame(plant, 2, 2)])
     assert FswNode._fetch_frame(node) == 2                  # the flying decoder's guard moved on only by its own frames

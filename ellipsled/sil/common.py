@@ -8,7 +8,8 @@ import sys
 import time
 
 from common import argtypes
-from interfaces import transport
+from interfaces import records, transport
+from interfaces.codec import Codec
 from interfaces.keys import DEFAULT_PREFIX, keys
 
 from .variant import add_variant_arguments
@@ -108,3 +109,21 @@ def say(role: str, text: str) -> None:
 
 def now_ns() -> int:
     return time.monotonic_ns()
+
+
+class DecodeRehearsal:
+    """Real time: a key's decode path run once more, on a guard-less scratch codec, on the
+    last payload the node accepted -- at a moment the node would spend waiting anyway, so
+    that what the decode needs is in the caches when the next payload comes (idle for a
+    period, with other work in between, that path runs an order of magnitude slower:
+    docs/changelog.md). Nothing counted, nothing kept. ``copy``: decode into a scratch record,
+    as the node does (else a view, as the node does)."""
+
+    def __init__(self, schema: str, copy: bool):
+        self._dec = Codec.for_schema(schema, guard=False)
+        self._out = records.new(getattr(records, schema)) if copy else None
+        self.last: bytes | None = None
+
+    def run(self) -> None:
+        if self.last is not None:
+            self._dec.decode(self.last, out=self._out)

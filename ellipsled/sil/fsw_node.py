@@ -32,7 +32,7 @@ from interfaces import records, transport  # noqa: E402
 from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_KINDS, HEALTH_NAMES, NOMINAL  # noqa: E402
 
-from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
+from .common import DecodeRehearsal, Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
 from .frame_timing import due_step, phase_origin_ns, take_due_frame  # noqa: E402
 from .fsw_report import alloc_sample, fsw_report  # noqa: E402
 from .history import History, record_fsw  # noqa: E402
@@ -101,11 +101,9 @@ class FswNode:
         self.enc_events = Codec.for_schema("EVENT")
         self.enc_faults = Codec.for_schema("FAULT")
         self.frame = records.new(records.SENSORS)        # our own copy of the newest frame
-        # real time: scratch codecs and record of the rehearsal before each frame (_rehearse)
-        self._warm_dec = Codec.for_schema("SENSORS", guard=False)
+        # real time: the frame's decode and the answer's encode rehearsed before each frame (_rehearse)
+        self._warm_frame = DecodeRehearsal("SENSORS", copy=True)
         self._warm_enc = Codec.for_schema("JETS")
-        self._warm_frame = records.new(records.SENSORS)
-        self._last_raw: bytes | None = None
         self.jets = records.new(records.JETS)
         self.fault = records.new(records.FAULT)
         self.history = History(int(math.ceil(self.scn.max_duration_s / self.scn.dt_control_s)) + 2)
@@ -152,7 +150,7 @@ class FswNode:
         rec = self.dec_sensors.decode(raw, out=self.frame)
         if rec is None:
             return False
-        self._last_raw = raw
+        self._warm_frame.last = raw
         pid = self.dec_sensors.last_publisher_id
         if self.source_id is not None and pid != self.source_id:
             self.fsw.monitor.restart_sequence()
@@ -212,8 +210,7 @@ class FswNode:
         other work in between, those paths run an order of magnitude slower (docs/changelog.md);
         the wait for the frame is spent spinning anyway. Guard-less scratch codecs: nothing
         counted, nothing kept."""
-        if self._last_raw is not None:
-            self._warm_dec.decode(self._last_raw, out=self._warm_frame)
+        self._warm_frame.run()
         self._warm_enc.encode_view(self.jets, 0, 0)
 
     def _newest_frame(self):

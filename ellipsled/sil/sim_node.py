@@ -24,7 +24,7 @@ from interfaces.codec import Codec, SequenceGuard
 from interfaces.vocabulary import FAULT_KINDS
 from sim.plant import Plant
 
-from .common import Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say
+from .common import DecodeRehearsal, Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say
 from .history import History, record_truth
 from .progress import ProgressFile
 from .variant import end_reason_of, prepare_args
@@ -98,8 +98,7 @@ class SimNode:
         # the FSW owns the jets key; another publisher takes over only after 1 s of silence
         self.dec_jets = Codec.for_schema("JETS", guard=SequenceGuard(takeover_after_s=1.0), on_reject=self._rejected)
         self.dec_faults = Codec.for_schema("FAULT", on_reject=self._rejected)
-        self._warm_dec = Codec.for_schema("JETS", guard=False)      # real time: _rehearse's scratch codec
-        self._last_raw: bytes | None = None
+        self._warm_command = DecodeRehearsal("JETS", copy=False)    # real time, while the command is on its way
         self.truth_rec = records.new(records.TRUTH)
         self.u = np.zeros(records.N_JETS, dtype=np.uint8)
         self.u_k = -1                  # JETS.k of the command held (-1: none, jets off)
@@ -197,13 +196,6 @@ class SimNode:
         self.plant.step(self.u, u_k=self.u_k)
         return False
 
-    def _rehearse(self) -> None:
-        """Real time, while the command is on its way: its decode runs once on a scratch copy
-        of the last one, so that it is warm when the command comes (ellipsled/sil/fsw_node.py
-        rehearses its side the same way). Guard-less scratch codec: nothing counted."""
-        if self._last_raw is not None:
-            self._warm_dec.decode(self._last_raw)
-
     def _take_command(self, rec) -> int:
         self.u[:] = rec["u"]
         self.u_k = int(rec["k"])
@@ -270,7 +262,7 @@ class SimNode:
             self.publish_fault_log()
             t_pub = self.publish_sensors()
             if self.args.rehearse:
-                self._rehearse()
+                self._warm_command.run()   # its decode warm when the command comes (DecodeRehearsal)
             deadline = release + period - margin
             got = False
             while now_ns() < deadline and not self.stop:
@@ -282,7 +274,7 @@ class SimNode:
                 rec = self.dec_jets.decode(raw)
                 if rec is None or self._refused(rec, k):
                     continue
-                self._last_raw = raw
+                self._warm_command.last = raw
                 kc = int(rec["k"])
                 if kc < last_cmd_k:
                     self.counts["stale_commands"] += 1

@@ -225,6 +225,16 @@ class FlightSoftware(GroundCommands):
         self._tau_last[:] = self.tau_alloc_B
         return self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))
 
+    def rehearse(self, frame, demand_B: np.ndarray) -> None:
+        """Real time, shortly before a release (fsw/topology.py): the compiled kernels the
+        rehearsal's spare cannot warm for this instance run on this instance's data, their
+        answers discarded -- the allocator's query on its own tables for ``demand_B`` (the
+        spare's demand on the last frame) and the jet monitor on ``frame``'s chamber
+        pressures. Nothing the next cycle reads changes."""
+        self.allocator.rehearse(demand_B)
+        if self._frame_views[0] is frame:
+            self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), self._frame_views[6])
+
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,
         different answer under the same index (jets held off on a rejected frame after the

@@ -117,6 +117,15 @@ class Topology:
             self.fsw.warm_background()
         return spare
 
+    def close(self) -> None:
+        """Stop the rehearsal's spare's background work (the flying FSW is its owner's to
+        close); the rehearsal ends with it. Safe to call twice."""
+        if self.rehearsal is not None:
+            if isinstance(self.executive.clock, RealTimeClock):
+                self.executive.clock.set_rehearsal(None, 0)
+            self.rehearsal.close()
+            self.rehearsal = None
+
     def add(self, group: int, name: str, fn: Callable[[Cycle], object]) -> None:
         self.executive.add(group, name, fn)
 

@@ -113,6 +113,18 @@ def test_allocator_rehearse_leaves_the_answer_and_its_outputs():
     assert not np.array_equal(u1, u2)
 
 
+def test_close_ends_the_rehearsal_and_its_spare():
+    topo, clock, _, _ = _fly(800.0, n=3)
+    spare = topo.rehearsal
+    closed = []
+    spare.close = lambda: closed.append(True)
+    topo.close()
+    topo.close()                                 # a second call does nothing
+    assert closed == [True] and topo.rehearsal is None and clock.rehearse is None
+    topo.tick()                                  # flies on, unrehearsed
+    assert clock.rehearsals == 3 and topo.fsw.cycles == 4
+
+
 def test_a_failing_rehearsal_is_counted_and_the_flight_goes_on():
     topo, clock, jets, _ = _fly(800.0, n=3)
     topo.rehearsal.control_step = None           # calling it raises TypeError

@@ -31,7 +31,7 @@ from .health import JetHealth
 from .jetdriver import JetDriver
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
-from .navigation import Navigation
+from .navigation import Navigation, frame_vectors
 from .output import OutputFiller
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
@@ -177,15 +177,14 @@ class FlightSoftware(GroundCommands):
             return self._sent_for(self._hold_off(t_s))
         fv = self._frame_views
         if fv[0] is not frame:     # field views of the record, made once per record object
-            fv = self._frame_views = (frame, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
-                                      frame["accel_B"], frame["chamber"])
+            fv = self._frame_views = (frame, frame_vectors(frame), frame["chamber"])
         self.k = self.monitor.last_k
         self.t_s = t_s
-        reconfigured = self.fdir.update(t_s, self._command_in_force(int(frame["u_k"])), fv[6])
+        reconfigured = self.fdir.update(t_s, self._command_in_force(int(frame["u_k"])), fv[2])
         if reconfigured:
             self.allocator.set_health(self.fdir.health_active)
             self.reconfig_times.append(t_s)
-        nav = self.nav.update(t_s, fv[1], fv[2], fv[3], fv[4], fv[5])
+        nav = self.nav.update_packed(t_s, fv[1])
         self.authority.step(t_s, reconfigured)          # assessed with this cycle's navigation
         if self.entry is not None:
             self.entry.steer(nav)
@@ -233,7 +232,7 @@ class FlightSoftware(GroundCommands):
         pressures. Nothing the next cycle reads changes."""
         self.allocator.rehearse(demand_B)
         if self._frame_views[0] is frame:
-            self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), self._frame_views[6])
+            self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), self._frame_views[2])
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,

@@ -123,6 +123,7 @@ class FlightSoftware(GroundCommands):
         # control.shortfall_frac of a demand worth two or more of the largest jet increments
         # (the rule SAMI's saturation awareness applies per body axis)
         self.bank_axis_B = velocity_dir_B(veh.aero.alpha_trim_rad)
+        self._bank_axis = tuple(float(a) for a in self.bank_axis_B)
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
         # while the bank axis falls short, the duty-cycle LP's average realised over cycles
         # (fsw/allocation/dutycycle.py) instead of one pattern per cycle
@@ -259,11 +260,14 @@ class FlightSoftware(GroundCommands):
         return self._sent[i] if self._sent_k[i] == u_k else None
 
     def _check_bank_shortfall(self, t_s: float) -> None:
-        ax = self.bank_axis_B
-        d = float(ax[0] * self.u_cal_B[0] + ax[1] * self.u_cal_B[1] + ax[2] * self.u_cal_B[2])
-        got = float(ax[0] * self.tau_alloc_B[0] + ax[1] * self.tau_alloc_B[1] + ax[2] * self.tau_alloc_B[2])
+        # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
+        a0, a1, a2 = self._bank_axis
+        u0, u1, u2 = self.u_cal_B.tolist()
+        t0, t1, t2 = self.tau_alloc_B.tolist()
+        d = a0 * u0 + a1 * u1 + a2 * u2
+        got = a0 * t0 + a1 * t1 + a2 * t2
         self.alloc_short = (abs(d) > self._bank_short_min_Nm
-                            and (d - got) * np.sign(d) > self.params["control.shortfall_frac"] * abs(d))
+                            and (d - got) * (1.0 if d > 0.0 else -1.0) > self.params["control.shortfall_frac"] * abs(d))
         if self.alloc_short:
             self.alloc_short_cycles += 1
             self.events.emit(t_s, EV.ALLOC_SHORT)

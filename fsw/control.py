@@ -30,6 +30,12 @@ from fsw.params import Param
 # prm vector layout (derived from the parameters, see SamiController._derive)
 _CD, _KD, _KI, _GH, _GD, _DT, _VDEAD, _ILIM, _SFRAC, _DMIN, _DMAX, _SWITCH, _QSL, _CLB, _CMA, _CNB, _ATRIM = range(17)
 _NPRM = 17
+# the kernel's buffers: constants (prm, h_scale, h_lo, h_hi, u_sat_min, P 9x9) and state
+# (theta, eps_int, sigma_c, u_cal, eps, eps_dot, diag); two arrays to hand it, not twenty
+_K_PRM, _K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_N = 0, 17, 23, 29, 35, 38, 119
+_S_THETA, _S_EPSINT, _S_SIGC, _S_U, _S_EPS, _S_EPSDOT, _S_DIAG, _S_N = 0, 9, 12, 15, 18, 21, 24, 31
+assert (_K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_N) == (_NPRM, _NPRM + 6, _NPRM + 12, _NPRM + 18, _NPRM + 21,
+                                                          _NPRM + 102)
 # diag vector layout (telemetry of the last update)
 _D_V, _D_ADAPT, _D_SAT, _D_PROJ, _D_SWITCH, _D_BAD, _D_SHORT = range(7)
 
@@ -134,9 +140,25 @@ def _I_mul(h, x, out):
 
 @njit(cache=True)
 def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R, domega_RN_R,
-                u_prev, tau_del, have_del, freeze, have_chart, prm, h_scale, h_lo, h_hi, u_sat_min, P,
-                theta, eps_int, sigma_c, u_out, eps, eps_dot, diag):
-    """One SAMI cycle. State (theta, eps_int, sigma_c) is committed only when every output is finite."""
+                tau_del, have_del, freeze, have_chart, kb, sb):
+    """One SAMI cycle. ``kb``: the constants' buffer, ``sb``: the state's (their layouts:
+    _K_*, _S_*; the controller's arrays are views of them). The command u_out (u_prev: last
+    cycle's, the same array) is in sb. State (theta, eps_int, sigma_c) is committed only when
+    every output is finite."""
+    prm = kb[_K_PRM:_K_PRM + _NPRM]
+    h_scale = kb[_K_HSCALE:_K_HSCALE + 6]
+    h_lo = kb[_K_HLO:_K_HLO + 6]
+    h_hi = kb[_K_HHI:_K_HHI + 6]
+    u_sat_min = kb[_K_USAT:_K_USAT + 3]
+    P = kb[_K_P:_K_P + 81].reshape((9, 9))
+    theta = sb[_S_THETA:_S_THETA + 9]
+    eps_int = sb[_S_EPSINT:_S_EPSINT + 3]
+    sigma_c = sb[_S_SIGC:_S_SIGC + 3]
+    u_out = sb[_S_U:_S_U + 3]
+    u_prev = u_out
+    eps = sb[_S_EPS:_S_EPS + 3]
+    eps_dot = sb[_S_EPSDOT:_S_EPSDOT + 3]
+    diag = sb[_S_DIAG:_S_DIAG + 7]
     for i in range(diag.shape[0]):
         diag[i] = 0.0
     # --- controller MRP chart: continuous with the last cycle, switched with hysteresis
@@ -365,24 +387,27 @@ class SamiController:
         self.tau_q_B = np.array([absT[i][absT[i] > 0].min() if np.any(absT[i] > 0) else 0.0 for i in range(3)])
         # a command on an axis of at least two of its largest single-jet increments should be
         # deliverable to within shortfall_frac unless authority is missing (saturation)
-        self.u_sat_min_B = 2.0 * absT.max(axis=1)
+        self._kb = kb = np.zeros(_K_N)       # the kernel's constants and state (views below)
+        self._sb = sb = np.zeros(_S_N)
+        self.u_sat_min_B = kb[_K_USAT:_K_USAT + 3]
+        self.u_sat_min_B[:] = 2.0 * absT.max(axis=1)
         a = vehicle.aero
         self._aero = (0.5 * vehicle.S_ref_m2 * vehicle.l_ref_m, a.C_lbeta, a.C_malpha, a.C_nbeta, a.alpha_trim_rad)
-        self.prm = np.zeros(_NPRM)
-        self.h_scale = np.zeros(6)
-        self.h_lo = np.zeros(6)
-        self.h_hi = np.zeros(6)
-        self.P = np.zeros((9, 9))
+        self.prm = kb[_K_PRM:_K_PRM + _NPRM]
+        self.h_scale = kb[_K_HSCALE:_K_HSCALE + 6]
+        self.h_lo = kb[_K_HLO:_K_HLO + 6]
+        self.h_hi = kb[_K_HHI:_K_HHI + 6]
+        self.P = kb[_K_P:_K_P + 81].reshape(9, 9)
         self.A = np.zeros((9, 9))
-        self.theta_hat = np.zeros(9)
+        self.theta_hat = sb[_S_THETA:_S_THETA + 9]
         self.h_hat = self.theta_hat[0:6]
         self.d_hat = self.theta_hat[6:9]
-        self.eps = np.zeros(3)
-        self.eps_dot = np.zeros(3)
-        self.eps_int = np.zeros(3)
-        self.u_cal_B = np.zeros(3)
-        self._sigma_c = np.zeros(3)
-        self._diag = np.zeros(7)
+        self.eps = sb[_S_EPS:_S_EPS + 3]
+        self.eps_dot = sb[_S_EPSDOT:_S_EPSDOT + 3]
+        self.eps_int = sb[_S_EPSINT:_S_EPSINT + 3]
+        self.u_cal_B = sb[_S_U:_S_U + 3]
+        self._sigma_c = sb[_S_SIGC:_S_SIGC + 3]
+        self._diag = sb[_S_DIAG:_S_DIAG + 7]
         self._zero3 = np.zeros(3)
         self._u_safe = np.zeros(3)
         self._lv = np.zeros(3)
@@ -466,10 +491,8 @@ class SamiController:
         have_del = tau_delivered_prev_B is not None
         tau = tau_delivered_prev_B if have_del else self._zero3
         sami_kernel(nav.sigma_BN, nav.omega_BN_B, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
-                    guid.sigma_RN, guid.omega_RN_R, guid.domega_RN_R, self.u_cal_B, tau, have_del,
-                    self.freeze, self._have_chart, self.prm, self.h_scale, self.h_lo, self.h_hi,
-                    self.u_sat_min_B, self.P, self.theta_hat, self.eps_int, self._sigma_c, self.u_cal_B,
-                    self.eps, self.eps_dot, self._diag)
+                    guid.sigma_RN, guid.omega_RN_R, guid.domega_RN_R, tau, have_del,
+                    self.freeze, self._have_chart, self._kb, self._sb)
         if self._diag[_D_BAD] == 0.0:
             self._have_chart = True
         self.V_lyap = float(self._diag[_D_V])

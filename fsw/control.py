@@ -30,6 +30,14 @@ from fsw.params import Param
 # prm vector layout (derived from the parameters, see SamiController._derive)
 _CD, _KD, _KI, _GH, _GD, _DT, _VDEAD, _ILIM, _SFRAC, _DMIN, _DMAX, _SWITCH, _QSL, _CLB, _CMA, _CNB, _ATRIM = range(17)
 _NPRM = 17
+# the kernel's buffers: constants (prm, h_scale, h_lo, h_hi, u_sat_min, P 9x9) and state
+# (theta, eps_int, sigma_c, u_cal, eps, eps_dot, diag; then its work arrays); two arrays to
+# hand it, not twenty
+_K_PRM, _K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_N = 0, 17, 23, 29, 35, 38, 119
+_S_THETA, _S_EPSINT, _S_SIGC, _S_U, _S_EPS, _S_EPSDOT, _S_DIAG, _S_N = 0, 9, 12, 15, 18, 21, 24, 31
+_W_N = 102                # the kernel's work arrays, after the state in the same buffer
+assert (_K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_N) == (_NPRM, _NPRM + 6, _NPRM + 12, _NPRM + 18, _NPRM + 21,
+                                                          _NPRM + 102)
 # diag vector layout (telemetry of the last update)
 _D_V, _D_ADAPT, _D_SAT, _D_PROJ, _D_SWITCH, _D_BAD, _D_SHORT = range(7)
 
@@ -134,19 +142,36 @@ def _I_mul(h, x, out):
 
 @njit(cache=True)
 def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R, domega_RN_R,
-                u_prev, tau_del, have_del, freeze, have_chart, prm, h_scale, h_lo, h_hi, u_sat_min, P,
-                theta, eps_int, sigma_c, u_out, eps, eps_dot, diag):
-    """One SAMI cycle. State (theta, eps_int, sigma_c) is committed only when every output is finite."""
+                tau_del, have_del, freeze, have_chart, kb, sb):
+    """One SAMI cycle. ``kb``: the constants' buffer, ``sb``: the state's (their layouts:
+    _K_*, _S_*; the controller's arrays are views of them). The command u_out (u_prev: last
+    cycle's, the same array) is in sb. State (theta, eps_int, sigma_c) is committed only when
+    every output is finite."""
+    prm = kb[_K_PRM:_K_PRM + _NPRM]
+    h_scale = kb[_K_HSCALE:_K_HSCALE + 6]
+    h_lo = kb[_K_HLO:_K_HLO + 6]
+    h_hi = kb[_K_HHI:_K_HHI + 6]
+    u_sat_min = kb[_K_USAT:_K_USAT + 3]
+    P = kb[_K_P:_K_P + 81].reshape((9, 9))
+    theta = sb[_S_THETA:_S_THETA + 9]
+    eps_int = sb[_S_EPSINT:_S_EPSINT + 3]
+    sigma_c = sb[_S_SIGC:_S_SIGC + 3]
+    u_out = sb[_S_U:_S_U + 3]
+    u_prev = u_out
+    eps = sb[_S_EPS:_S_EPS + 3]
+    eps_dot = sb[_S_EPSDOT:_S_EPSDOT + 3]
+    diag = sb[_S_DIAG:_S_DIAG + 7]
+    wk = sb[_S_N:_S_N + _W_N]               # the cycle's work arrays: no allocation
     for i in range(diag.shape[0]):
         diag[i] = 0.0
     # --- controller MRP chart: continuous with the last cycle, switched with hysteresis
     s2n = sigma_nav[0] ** 2 + sigma_nav[1] ** 2 + sigma_nav[2] ** 2
-    sig = np.empty(3)
-    alt = np.empty(3)
+    sig = wk[0:3]
+    alt = wk[3:6]
     for i in range(3):
         sig[i] = sigma_nav[i]
         alt[i] = -sigma_nav[i] / s2n if s2n > 1e-300 else sigma_nav[i]
-    ei = np.empty(3)
+    ei = wk[6:9]
     for i in range(3):
         ei[i] = eps_int[i]
     if have_chart and s2n > 1e-300:
@@ -169,51 +194,53 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
             diag[_D_SWITCH] = 1.0
     s2 = sig[0] ** 2 + sig[1] ** 2 + sig[2] ** 2
     # --- reference in the same chart
-    sr = np.empty(3)
+    sr = wk[9:12]
     for i in range(3):
         sr[i] = sigma_RN[i]
     nearest_set_into(sr, sig)
-    sr_d = np.empty(3)
-    sr_dd = np.empty(3)
+    sr_d = wk[12:15]
+    sr_dd = wk[15:18]
     sigma_derivatives(sr, omega_RN_R, domega_RN_R, sr_d, sr_dd)
-    sd = np.empty(3)
+    sd = wk[18:21]
     sigma_dot_into(sig, omega, sd)
-    e = np.empty(3)
-    ed = np.empty(3)
+    e = wk[21:24]
+    ed = wk[24:27]
     for i in range(3):
         e[i] = sig[i] - sr[i]
         ed[i] = sd[i] - sr_d[i]
     # --- control law (paper eq 18)
     h = theta[0:6]
-    M = np.empty((3, 6))
+    M = wk[27:45].reshape((3, 6))
     regressor_M(sig, omega, sr_d, sr_dd, M)
-    f = np.empty(3)
+    f = wk[45:48]
     for i in range(3):
         f[i] = prm[_CD] * ed[i] + prm[_KD] * e[i] + prm[_KI] * ei[i]
-    g = np.empty(3)
+    g = wk[48:51]
     _Pa_mul(sig, f, g)
-    ufb = np.empty(3)
+    ufb = wk[51:54]
     _I_mul(h, g, ufb)
     # L(t) = 1/2 S l V^2 diag(beta, alpha - alpha_trim, beta) D_est, D_est = rho_hat diag(C_lb, C_ma, C_nb)
     q = prm[_QSL] * rho * V_mps * V_mps
-    lv = np.empty(3)
+    lv = wk[54:57]
     lv[0] = q * beta * prm[_CLB]
     lv[1] = q * (alpha - prm[_ATRIM]) * prm[_CMA]
     lv[2] = q * beta * prm[_CNB]
-    u = np.empty(3)
+    u = wk[57:60]
     for i in range(3):
         uff = 0.0
         for j in range(6):
             uff += M[i, j] * h[j]
         u[i] = uff - ufb[i] - lv[i] * theta[6 + i]
     # --- Lyapunov error state y = [int eps; eps; eps_dot]
-    y = np.empty(9)
+    y = wk[60:69]
     for i in range(3):
         y[i] = ei[i]
         y[3 + i] = e[i]
         y[6 + i] = ed[i]
     Vl = 0.0
-    w = np.zeros(3)
+    w = wk[96:99]
+    for i in range(3):
+        w[i] = 0.0
     for i in range(9):
         Py = 0.0
         for j in range(9):
@@ -228,7 +255,9 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
     # that was commanded but not delivered (or delivered unasked), which is no evidence about
     # the model, so that axis's aero factor does not learn from it, nor does the inertia.
     sat = False
-    short = np.zeros(3, dtype=np.bool_)
+    short = wk[99:102]                  # 1.0: the axis is short
+    for i in range(3):
+        short[i] = 0.0
     any_short = False
     if have_del:
         for i in range(3):
@@ -236,35 +265,35 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
             if abs(u_prev[i]) > u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
                 sat = True
             if miss > 0.5 * u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
-                short[i] = True
+                short[i] = 1.0
                 any_short = True
     diag[_D_SAT] = 1.0 if sat else 0.0
     diag[_D_SHORT] = 1.0 if any_short else 0.0
     # --- integrator (frozen while saturated, clamped)
-    ei_new = np.empty(3)
+    ei_new = wk[69:72]
     lim = prm[_ILIM]
     for i in range(3):
         v = ei[i] if sat else ei[i] + prm[_DT] * e[i]
         ei_new[i] = min(lim, max(-lim, v))
     # --- adaptation (paper eqs 22-27) with dead zone, freeze, saturation gate, projection
-    th_new = np.empty(9)
+    th_new = wk[72:81]
     for i in range(9):
         th_new[i] = theta[i]
     if (not freeze) and (not sat) and Vl > prm[_VDEAD]:
         diag[_D_ADAPT] = 1.0
         # z = I_a*_hat^-1 w = J I_hat^-1 J^T w
-        nsig = np.empty(3)
+        nsig = wk[81:84]
         for i in range(3):
             nsig[i] = -sig[i]
-        t1 = np.empty(3)
-        t2 = np.empty(3)
-        z = np.empty(3)
+        t1 = wk[84:87]
+        t2 = wk[87:90]
+        z = wk[90:93]
         B_mul(nsig, w, t1)
         _inv3_mul(h, t1, t2)
         B_mul(sig, t2, z)
         for i in range(3):
             z[i] *= 1.0 / 16.0
-        pz = np.empty(3)
+        pz = wk[93:96]
         _Pa_mul(sig, z, pz)
         # h_hat_dot = -Gamma_h Y^T z, Y^T z = M^T P_a z; Gamma_h = gamma_h diag(h_scale^2)
         for j in range(6):
@@ -281,7 +310,7 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
             diag[_D_PROJ] = 1.0
         # d_hat_dot = -Gamma_d (-P_a^T L)^T z = Gamma_d L P_a z
         for i in range(3):
-            if short[i]:
+            if short[i] != 0.0:
                 continue
             v = theta[6 + i] + prm[_DT] * prm[_GD] * lv[i] * pz[i]
             th_new[6 + i] = min(prm[_DMAX], max(prm[_DMIN], v))
@@ -365,24 +394,27 @@ class SamiController:
         self.tau_q_B = np.array([absT[i][absT[i] > 0].min() if np.any(absT[i] > 0) else 0.0 for i in range(3)])
         # a command on an axis of at least two of its largest single-jet increments should be
         # deliverable to within shortfall_frac unless authority is missing (saturation)
-        self.u_sat_min_B = 2.0 * absT.max(axis=1)
+        self._kb = kb = np.zeros(_K_N)       # the kernel's constants and state (views below)
+        self._sb = sb = np.zeros(_S_N + _W_N)
+        self.u_sat_min_B = kb[_K_USAT:_K_USAT + 3]
+        self.u_sat_min_B[:] = 2.0 * absT.max(axis=1)
         a = vehicle.aero
         self._aero = (0.5 * vehicle.S_ref_m2 * vehicle.l_ref_m, a.C_lbeta, a.C_malpha, a.C_nbeta, a.alpha_trim_rad)
-        self.prm = np.zeros(_NPRM)
-        self.h_scale = np.zeros(6)
-        self.h_lo = np.zeros(6)
-        self.h_hi = np.zeros(6)
-        self.P = np.zeros((9, 9))
+        self.prm = kb[_K_PRM:_K_PRM + _NPRM]
+        self.h_scale = kb[_K_HSCALE:_K_HSCALE + 6]
+        self.h_lo = kb[_K_HLO:_K_HLO + 6]
+        self.h_hi = kb[_K_HHI:_K_HHI + 6]
+        self.P = kb[_K_P:_K_P + 81].reshape(9, 9)
         self.A = np.zeros((9, 9))
-        self.theta_hat = np.zeros(9)
+        self.theta_hat = sb[_S_THETA:_S_THETA + 9]
         self.h_hat = self.theta_hat[0:6]
         self.d_hat = self.theta_hat[6:9]
-        self.eps = np.zeros(3)
-        self.eps_dot = np.zeros(3)
-        self.eps_int = np.zeros(3)
-        self.u_cal_B = np.zeros(3)
-        self._sigma_c = np.zeros(3)
-        self._diag = np.zeros(7)
+        self.eps = sb[_S_EPS:_S_EPS + 3]
+        self.eps_dot = sb[_S_EPSDOT:_S_EPSDOT + 3]
+        self.eps_int = sb[_S_EPSINT:_S_EPSINT + 3]
+        self.u_cal_B = sb[_S_U:_S_U + 3]
+        self._sigma_c = sb[_S_SIGC:_S_SIGC + 3]
+        self._diag = sb[_S_DIAG:_S_DIAG + 7]
         self._zero3 = np.zeros(3)
         self._u_safe = np.zeros(3)
         self._lv = np.zeros(3)
@@ -466,10 +498,8 @@ class SamiController:
         have_del = tau_delivered_prev_B is not None
         tau = tau_delivered_prev_B if have_del else self._zero3
         sami_kernel(nav.sigma_BN, nav.omega_BN_B, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
-                    guid.sigma_RN, guid.omega_RN_R, guid.domega_RN_R, self.u_cal_B, tau, have_del,
-                    self.freeze, self._have_chart, self.prm, self.h_scale, self.h_lo, self.h_hi,
-                    self.u_sat_min_B, self.P, self.theta_hat, self.eps_int, self._sigma_c, self.u_cal_B,
-                    self.eps, self.eps_dot, self._diag)
+                    guid.sigma_RN, guid.omega_RN_R, guid.domega_RN_R, tau, have_del,
+                    self.freeze, self._have_chart, self._kb, self._sb)
         if self._diag[_D_BAD] == 0.0:
             self._have_chart = True
         self.V_lyap = float(self._diag[_D_V])

@@ -151,22 +151,24 @@ class RealTimeClock:
             if self.rehearse is not None:
                 t_reh = t_rel - max(self.rehearse_ns, self.spin_ns)
                 if now < t_reh:
-                    while now < t_reh:
-                        self.sleep_until(t_reh)
-                        now = self.now_ns()
+                    self._sleep_to(t_reh, now)
                     self.rehearse()
                     self.rehearsals += 1
-                    now = self.now_ns()
-                    wake = now          # no sleep between the rehearsal and the release: spin
+                    now = wake = self.now_ns()   # no sleep between the rehearsal and the release: spin
                 else:
                     self.rehearsals_skipped += 1
-            while now < wake:                 # loop: a signal may end the sleep early
-                self.sleep_until(wake)
-                now = self.now_ns()
+            now = self._sleep_to(wake, now)
             while now < t_rel:
                 now = self.now_ns()
         self._k = k
         return k, t_rel
+
+    def _sleep_to(self, t_ns: int, now: int) -> int:
+        """Sleep until ``t_ns`` (loop: a signal may end a sleep early); returns the time then."""
+        while now < t_ns:
+            self.sleep_until(t_ns)
+            now = self.now_ns()
+        return now
 
 
 # --------------------------------------------------------------------------- statistics

@@ -226,6 +226,11 @@ class Fdir:
         self._sum_dg = np.zeros(n)
         self._new_kind = np.zeros(n, dtype=np.int8)
         self._eta_new = np.zeros(n)
+        # rehearse's scratch: the counters copied, the declarations discarded
+        self._r_cnt = np.zeros((3, n), dtype=np.int64)
+        self._r_sum_dg = np.zeros(n)
+        self._r_kind = np.zeros(n, dtype=np.int8)
+        self._r_eta = np.zeros(n)
         self._t_apply = np.full(n, np.inf)      # when the latched detection reaches health_active
         self._app_state = np.zeros(n, dtype=np.int8)   # detection state applied to health_active
         self._app_eta = np.ones(n)
@@ -313,6 +318,18 @@ class Fdir:
         if t_s + _T_EPS_S >= self._next_apply:
             return self._apply_due(t_s)
         return False
+
+    def rehearse(self, u_cmd_prev: np.ndarray | None, chamber: np.ndarray) -> None:
+        """Real time, just before a release: the jet monitor's kernel on copies of its counters
+        (the spare of the rehearsal flies FDIR in oracle mode, which never runs it), so the
+        next ``update`` finds it warm. Changes nothing: declarations go to scratch arrays."""
+        if (self.oracle or u_cmd_prev is None or u_cmd_prev.dtype != np.uint8 or chamber.dtype != np.float64
+                or u_cmd_prev.shape != (self.n,) or chamber.shape != (self.n,)):
+            return
+        np.copyto(self._r_cnt, self._cnt)
+        np.copyto(self._r_sum_dg, self._sum_dg)
+        _jet_monitor(u_cmd_prev, chamber, self.health_isolated.state, self._r_cnt, self._r_sum_dg,
+                     self._thr, self._persist_n, self._r_kind, self._r_eta)
 
     def identified(self, t_s: float, jet: int, kind: str, eta: float = 1.0) -> None:
         """Oracle mode (a test mode): the fault of ``jet`` is known as of ``t_s`` (the time the

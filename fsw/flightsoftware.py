@@ -31,7 +31,7 @@ from .health import JetHealth
 from .jetdriver import JetDriver
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
-from .navigation import Navigation
+from .navigation import Navigation, frame_vectors
 from .output import OutputFiller
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
@@ -123,6 +123,7 @@ class FlightSoftware(GroundCommands):
         # control.shortfall_frac of a demand worth two or more of the largest jet increments
         # (the rule SAMI's saturation awareness applies per body axis)
         self.bank_axis_B = velocity_dir_B(veh.aero.alpha_trim_rad)
+        self._bank_axis = tuple(float(a) for a in self.bank_axis_B)
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
         # while the bank axis falls short, the duty-cycle LP's average realised over cycles
         # (fsw/allocation/dutycycle.py) instead of one pattern per cycle
@@ -177,15 +178,14 @@ class FlightSoftware(GroundCommands):
             return self._sent_for(self._hold_off(t_s))
         fv = self._frame_views
         if fv[0] is not frame:     # field views of the record, made once per record object
-            fv = self._frame_views = (frame, frame["sigma_BN"], frame["omega_BN_B"], frame["r_N"], frame["v_N"],
-                                      frame["accel_B"], frame["chamber"])
+            fv = self._frame_views = (frame, frame_vectors(frame), frame["chamber"])
         self.k = self.monitor.last_k
         self.t_s = t_s
-        reconfigured = self.fdir.update(t_s, self._command_in_force(int(frame["u_k"])), fv[6])
+        reconfigured = self.fdir.update(t_s, self._command_in_force(int(frame["u_k"])), fv[2])
         if reconfigured:
             self.allocator.set_health(self.fdir.health_active)
             self.reconfig_times.append(t_s)
-        nav = self.nav.update(t_s, fv[1], fv[2], fv[3], fv[4], fv[5])
+        nav = self.nav.update_packed(t_s, fv[1])
         self.authority.step(t_s, reconfigured)          # assessed with this cycle's navigation
         if self.entry is not None:
             self.entry.steer(nav)
@@ -225,6 +225,16 @@ class FlightSoftware(GroundCommands):
         self._tau_last[:] = self.tau_alloc_B
         return self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))
 
+    def rehearse(self, frame, demand_B: np.ndarray) -> None:
+        """Real time, shortly before a release (fsw/topology.py): the compiled kernels the
+        rehearsal's spare cannot warm for this instance run on this instance's data, their
+        answers discarded -- the allocator's query on its own tables for ``demand_B`` (the
+        spare's demand on the last frame) and the jet monitor on ``frame``'s chamber
+        pressures. Nothing the next cycle reads changes."""
+        self.allocator.rehearse(demand_B)
+        if self._frame_views[0] is frame:
+            self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), self._frame_views[2])
+
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,
         different answer under the same index (jets held off on a rejected frame after the
@@ -250,11 +260,14 @@ class FlightSoftware(GroundCommands):
         return self._sent[i] if self._sent_k[i] == u_k else None
 
     def _check_bank_shortfall(self, t_s: float) -> None:
-        ax = self.bank_axis_B
-        d = float(ax[0] * self.u_cal_B[0] + ax[1] * self.u_cal_B[1] + ax[2] * self.u_cal_B[2])
-        got = float(ax[0] * self.tau_alloc_B[0] + ax[1] * self.tau_alloc_B[1] + ax[2] * self.tau_alloc_B[2])
+        # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
+        a0, a1, a2 = self._bank_axis
+        u0, u1, u2 = self.u_cal_B.tolist()
+        t0, t1, t2 = self.tau_alloc_B.tolist()
+        d = a0 * u0 + a1 * u1 + a2 * u2
+        got = a0 * t0 + a1 * t1 + a2 * t2
         self.alloc_short = (abs(d) > self._bank_short_min_Nm
-                            and (d - got) * np.sign(d) > self.params["control.shortfall_frac"] * abs(d))
+                            and (d - got) * (1.0 if d > 0.0 else -1.0) > self.params["control.shortfall_frac"] * abs(d))
         if self.alloc_short:
             self.alloc_short_cycles += 1
             self.events.emit(t_s, EV.ALLOC_SHORT)

@@ -9,12 +9,29 @@ from numba import njit
 
 from common import atmosphere, frames, mrp
 from common.model import Planet, Vehicle
+from interfaces.records import SENSORS
 
 _rho_exp = njit(cache=True)(atmosphere.density_exponential)
 _rho_poly = njit(cache=True)(atmosphere.density_polynomial)
 _speed_of_sound = njit(cache=True)(atmosphere.speed_of_sound)
-_F8 = np.dtype(np.float64)
 _MODEL_FLAG = {"exponential": 0, "polynomial": 1}
+
+
+# one frame's vectors, packed as the SENSORS record holds them (interfaces/records.py):
+# omega_BN_B, sigma_BN, r_N, v_N, accel_B, 3 floats each from the record's omega_BN_B
+_IN_FIELDS = ("omega_BN_B", "sigma_BN", "r_N", "v_N", "accel_B")
+_IN0 = SENSORS.fields["omega_BN_B"][1]
+assert all(SENSORS.fields[f][1] == _IN0 + 24 * i for i, f in enumerate(_IN_FIELDS))
+N_IN = 15
+# the NavState arrays, views of one buffer the kernel writes: sigma, omega, r, v, accel, vrel
+# (3 each), C_WN, C_BN (9 each, row-major)
+_S_SIGMA, _S_OMEGA, _S_R, _S_V, _S_ACC, _S_VREL, _S_CWN, _S_CBN, _S_N = 0, 3, 6, 9, 12, 15, 18, 27, 36
+
+
+def frame_vectors(frame: np.ndarray) -> np.ndarray:
+    """The packed input of ``Navigation.update_packed``: a float64 view of one SENSORS
+    record's omega_BN_B, sigma_BN, r_N, v_N and accel_B (made once per record object)."""
+    return np.ndarray((N_IN,), dtype=np.float64, buffer=frame, offset=_IN0)
 
 
 class NavState:
@@ -24,18 +41,22 @@ class NavState:
       t_s, sigma_BN (3), omega_BN_B (3) [rad/s], r_N (3) [m], v_N (3) [m/s],
       vrel_N (3), V_rel_mps, h_m, C_WN (3x3), C_BN (3x3), alpha_rad, beta_rad, bank_rad,
       rho_kgpm3 (FSW model, undispersed), qbar_pa, mach, accel_B (3) [m/s^2].
+    The arrays are views of one buffer (``buf``), which the compiled update writes.
     """
 
     def __init__(self):
+        self.buf = b = np.zeros(_S_N)
         self.t_s = 0.0
-        self.sigma_BN = np.zeros(3)
-        self.omega_BN_B = np.zeros(3)
-        self.r_N = np.zeros(3)
-        self.v_N = np.zeros(3)
-        self.vrel_N = np.zeros(3)
-        self.accel_B = np.zeros(3)
-        self.C_WN = np.eye(3)
-        self.C_BN = np.eye(3)
+        self.sigma_BN = b[_S_SIGMA:_S_SIGMA + 3]
+        self.omega_BN_B = b[_S_OMEGA:_S_OMEGA + 3]
+        self.r_N = b[_S_R:_S_R + 3]
+        self.v_N = b[_S_V:_S_V + 3]
+        self.vrel_N = b[_S_VREL:_S_VREL + 3]
+        self.accel_B = b[_S_ACC:_S_ACC + 3]
+        self.C_WN = b[_S_CWN:_S_CWN + 9].reshape(3, 3)
+        self.C_BN = b[_S_CBN:_S_CBN + 9].reshape(3, 3)
+        self.C_WN[:] = np.eye(3)
+        self.C_BN[:] = np.eye(3)
         self.V_rel_mps = 0.0
         self.h_m = 0.0
         self.alpha_rad = 0.0
@@ -47,18 +68,24 @@ class NavState:
 
 
 @njit(cache=True)
-def _nav_kernel(sigma_BN, omega_BN_B, r_N, v_N, accel_B, omega_planet, radius_m, model, rho0, H_m,
-                n_sigma, n_omega, n_r, n_v, n_accel, n_vrel, n_C_WN, n_C_BN):
-    """One navigation update into the NavState arrays n_*; returns (V_rel, h, alpha, beta,
-    bank, rho, qbar, mach). Same steps as the NumPy code it replaced: copy the inputs,
-    v_rel = v - Omega x r, |v_rel|, h = |r| - R, C_WN, C_BN, aerodynamic angles, model
-    density (0 exponential, 1 polynomial), dynamic pressure, Mach."""
+def _nav_kernel(x, omega_planet, radius_m, model, rho0, H_m, b):
+    """One navigation update from the packed frame vectors ``x`` (frame_vectors' order) into
+    the NavState buffer ``b``; returns (V_rel, h, alpha, beta, bank, rho, qbar, mach). Same
+    steps as the NumPy code it replaced: copy the inputs, v_rel = v - Omega x r, |v_rel|,
+    h = |r| - R, C_WN, C_BN, aerodynamic angles, model density (0 exponential, 1
+    polynomial), dynamic pressure, Mach."""
+    n_sigma = b[_S_SIGMA:_S_SIGMA + 3]
+    n_r = b[_S_R:_S_R + 3]
+    n_v = b[_S_V:_S_V + 3]
+    n_vrel = b[_S_VREL:_S_VREL + 3]
+    n_C_WN = b[_S_CWN:_S_CWN + 9].reshape((3, 3))
+    n_C_BN = b[_S_CBN:_S_CBN + 9].reshape((3, 3))
     for j in range(3):
-        n_sigma[j] = sigma_BN[j]
-        n_omega[j] = omega_BN_B[j]
-        n_r[j] = r_N[j]
-        n_v[j] = v_N[j]
-        n_accel[j] = accel_B[j]
+        b[_S_OMEGA + j] = x[j]
+        b[_S_SIGMA + j] = x[3 + j]
+        b[_S_R + j] = x[6 + j]
+        b[_S_V + j] = x[9 + j]
+        b[_S_ACC + j] = x[12 + j]
     n_vrel[0] = n_v[0] + omega_planet * n_r[1]
     n_vrel[1] = n_v[1] - omega_planet * n_r[0]
     n_vrel[2] = n_v[2]
@@ -86,27 +113,26 @@ class Navigation:
         self._consts = (float(planet.omega_radps), float(planet.radius_m), self._model,
                         float(planet.rho0_kgpm3), float(planet.scale_height_m))
         self.state = NavState()
+        self._x = np.zeros(N_IN)            # update's inputs, packed
 
     def update(self, t_s: float, sigma_BN, omega_BN_B, r_N, v_N, accel_B) -> NavState:
         """The flight condition at t_s from one frame's attitude, rate, position, velocity
-        and sensed acceleration (anything that fills a 3-vector); returns the NavState,
-        updated in place. One compiled call when the inputs are float64 3-vectors."""
+        and sensed acceleration (anything that fills a 3-vector, broadcast and converted as
+        NumPy does); returns the NavState, updated in place."""
+        x = self._x
+        x[0:3] = omega_BN_B
+        x[3:6] = sigma_BN
+        x[6:9] = r_N
+        x[9:12] = v_N
+        x[12:15] = accel_B
+        return self.update_packed(t_s, x)
+
+    def update_packed(self, t_s: float, x: np.ndarray) -> NavState:
+        """``update`` from the packed vectors (``frame_vectors`` of a SENSORS record, or any
+        float64 array of 15 in its order): one compiled call."""
         n = self.state
         n.t_s = t_s
-        nd = np.ndarray
-        if not (type(sigma_BN) is nd and sigma_BN.dtype == _F8 and sigma_BN.shape == (3,)
-                and type(omega_BN_B) is nd and omega_BN_B.dtype == _F8 and omega_BN_B.shape == (3,)
-                and type(r_N) is nd and r_N.dtype == _F8 and r_N.shape == (3,)
-                and type(v_N) is nd and v_N.dtype == _F8 and v_N.shape == (3,)
-                and type(accel_B) is nd and accel_B.dtype == _F8 and accel_B.shape == (3,)):
-            n.sigma_BN[:] = sigma_BN           # broadcast / convert as NumPy does, then the same kernel
-            n.omega_BN_B[:] = omega_BN_B
-            n.r_N[:] = r_N
-            n.v_N[:] = v_N
-            n.accel_B[:] = accel_B
-            sigma_BN, omega_BN_B, r_N, v_N, accel_B = n.sigma_BN, n.omega_BN_B, n.r_N, n.v_N, n.accel_B
         om, R, model, rho0, H = self._consts
         (n.V_rel_mps, n.h_m, n.alpha_rad, n.beta_rad, n.bank_rad, n.rho_kgpm3, n.qbar_pa,
-         n.mach) = _nav_kernel(sigma_BN, omega_BN_B, r_N, v_N, accel_B, om, R, model, rho0, H,
-                               n.sigma_BN, n.omega_BN_B, n.r_N, n.v_N, n.accel_B, n.vrel_N, n.C_WN, n.C_BN)
+         n.mach) = _nav_kernel(x, om, R, model, rho0, H, n.buf)
         return n

@@ -17,7 +17,10 @@ rehearsal) runs the control cycle on the last frame shortly before each release
 (RealTimeClock.set_rehearsal), so the flying one finds the code warm. The spare is the same
 code, not a copy of it; its outputs go nowhere, and its FDIR identifies nothing (mode
 oracle without a fault log), so it never rebuilds tables or solves the controllability LP
-inside the rehearsal. Lockstep and batch have no idle gap and no rehearsal.
+inside the rehearsal. What the spare cannot warm for the flying one -- its own data searched
+by a compiled kernel (the allocator's tables) and the kernel the spare skips (the jet
+monitor) -- the flying one rehearses itself, its answers discarded (FlightSoftware.rehearse).
+Lockstep and batch have no idle gap and no rehearsal.
 """
 from __future__ import annotations
 
@@ -76,6 +79,7 @@ class Topology:
             return
         try:
             self.rehearsal.control_step(self._last_frame)
+            self.fsw.rehearse(self._last_frame, self.rehearsal.u_cal_B)
         except Exception:
             self.rehearsal_errors += 1
 
@@ -112,6 +116,15 @@ class Topology:
         if self.fsw.realtime:
             self.fsw.warm_background()
         return spare
+
+    def close(self) -> None:
+        """Stop the rehearsal's spare's background work (the flying FSW is its owner's to
+        close); the rehearsal ends with it. Safe to call twice."""
+        if self.rehearsal is not None:
+            if isinstance(self.executive.clock, RealTimeClock):
+                self.executive.clock.set_rehearsal(None, 0)
+            self.rehearsal.close()
+            self.rehearsal = None
 
     def add(self, group: int, name: str, fn: Callable[[Cycle], object]) -> None:
         self.executive.add(group, name, fn)

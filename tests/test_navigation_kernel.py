@@ -13,7 +13,7 @@ import pytest
 from common import atmosphere, frames, mrp
 from common.frames import R1, R2, R3
 from common.model import load_scenario
-from fsw.navigation import Navigation
+from fsw.navigation import Navigation, frame_vectors
 from interfaces import records
 
 SC = load_scenario("case1")
@@ -101,3 +101,18 @@ def test_bad_shape_raises_and_non_finite_propagates():
     r, v, vrel, sigma = _case(0.0, 0.0, 0.0)
     n = nav.update(0.0, sigma, np.zeros(3), r, np.zeros(3) * np.nan, np.zeros(3))
     assert math.isnan(n.V_rel_mps) and math.isnan(n.alpha_rad) and math.isnan(n.qbar_pa)
+
+
+def test_a_sensors_records_packed_vectors_give_the_update_of_its_fields():
+    r, v, vrel, sigma = _case(-0.2, 0.03, 2.0)
+    rec = records.new(records.SENSORS)
+    rec["sigma_BN"], rec["omega_BN_B"], rec["r_N"], rec["v_N"], rec["accel_B"] = sigma, [0.1, -0.2, 0.3], r, v, [4.0, 5.0, 6.0]
+    x = frame_vectors(rec)
+    assert np.shares_memory(x, rec)                       # a view: made once, read every cycle
+    packed = Navigation(PL, SC.vehicle).update_packed(3.0, x)
+    ref = Navigation(PL, SC.vehicle).update(3.0, sigma, [0.1, -0.2, 0.3], r, v, [4.0, 5.0, 6.0])
+    for name in ("sigma_BN", "omega_BN_B", "r_N", "v_N", "accel_B", "vrel_N", "C_WN", "C_BN"):
+        assert np.array_equal(getattr(packed, name), getattr(ref, name)) and not np.shares_memory(getattr(packed, name), x)
+    for name in ("V_rel_mps", "h_m", "alpha_rad", "beta_rad", "bank_rad", "rho_kgpm3", "qbar_pa", "mach"):
+        assert getattr(packed, name) == getattr(ref, name), name
+    assert packed.accel_B.tolist() == [4.0, 5.0, 6.0] and packed.omega_BN_B.tolist() == [0.1, -0.2, 0.3]

@@ -1,6 +1,8 @@
 """fsw/topology.py: the real-time rehearsal (a spare flight software runs the control cycle
 on the last frame before each release) leaves the flight unchanged, runs only in real time,
-and never rebuilds tables or solves the controllability LP (its FDIR identifies nothing)."""
+and never rebuilds tables or solves the controllability LP (its FDIR identifies nothing). The
+flying instance's own rehearsal (its allocator's query on its tables, its jet monitor on copies
+of its counters) changes nothing either, also through a fault's detection."""
 from __future__ import annotations
 
 import numpy as np
@@ -28,10 +30,10 @@ class FakeTime:
         self.t = max(self.t, t)
 
 
-def _fly(rehearse_us: float, n: int = 60):
+def _fly(rehearse_us: float, n: int = 60, scenario: str = "nominal"):
     """``n`` real-time ticks on a fake clock with the plant stepped in the loop (as the
     bench's in-process loop does); the jet commands and output records of every tick."""
-    scn = load_scenario("nominal")
+    scn = load_scenario(scenario)
     plant = Plant(scn, scn.seed)
     fsw = FlightSoftware(scn, EventLog(), param_overrides={"executive.rehearse_us": rehearse_us})
     ft = FakeTime()
@@ -63,6 +65,64 @@ def test_the_rehearsal_runs_before_each_release_and_changes_nothing_in_the_fligh
                 np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     # the spare's FDIR identifies nothing: no table rebuild, no LP inside a rehearsal
     assert topo.rehearsal.fdir.oracle and not topo.fsw.fdir.oracle
+
+
+def test_the_flying_instances_rehearsal_changes_nothing_through_a_detection():
+    # case1: four jets fail off at 2.5 s (tick 125); the jet monitor counts and declares them
+    # while the flying FDIR and allocator are rehearsed before every release
+    topo, _, jets, outs = _fly(800.0, n=200, scenario="case1")
+    ref_topo, _, ref_jets, ref_outs = _fly(0.0, n=200, scenario="case1")
+    det = [(d["jet"], d["t_s"]) for d in topo.fsw.fdir.detections]
+    assert det and det == [(d["jet"], d["t_s"]) for d in ref_topo.fsw.fdir.detections]
+    assert topo.fsw.allocator.tables_version == ref_topo.fsw.allocator.tables_version > 1
+    np.testing.assert_array_equal(jets, ref_jets)
+    for a, b in zip(outs, ref_outs):
+        for name in ("u_cal_B", "tau_alloc_B", "health", "eta_hat", "theta_hat", "jets_cmd"):
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def test_fdir_rehearse_computes_the_next_update_on_copies():
+    fsw = FlightSoftware(load_scenario("nominal"), EventLog())
+    fd = fsw.fdir
+    u = np.zeros(fd.n, dtype=np.uint8)
+    u[0] = 1
+    chamber = np.zeros(fd.n)                 # jet 1 commanded on, no pressure: failed-off evidence
+    fd.update(0.02, u, chamber)
+    cnt, sums = fd._cnt.copy(), fd._sum_dg.copy()
+    fd.rehearse(u, chamber)
+    np.testing.assert_array_equal(fd._cnt, cnt)               # the counters untouched
+    np.testing.assert_array_equal(fd._sum_dg, sums)
+    fd.update(0.04, u, chamber)
+    assert fd._cnt.sum() > cnt.sum()                          # evidence accumulated ...
+    np.testing.assert_array_equal(fd._r_cnt, fd._cnt)         # ... as the rehearsal computed it
+
+
+def test_allocator_rehearse_leaves_the_answer_and_its_outputs():
+    fsw = FlightSoftware(load_scenario("nominal"), EventLog())
+    a = fsw.allocator
+    d1, d2 = np.array([400.0, -150.0, 80.0]), np.array([-300.0, 60.0, -20.0])
+    u2 = a.solve(d2).copy()
+    tau2, obj2 = a.tau_B.copy(), a.objective
+    u1 = a.solve(d1).copy()
+    a.solve(d2)
+    a.rehearse(d1)
+    np.testing.assert_array_equal(a.u, u2)                    # the last answer stands
+    np.testing.assert_array_equal(a.tau_B, tau2)
+    assert a.objective == obj2
+    np.testing.assert_array_equal(a._warm_u, u1)              # the rehearsal searched for d1
+    assert not np.array_equal(u1, u2)
+
+
+def test_close_ends_the_rehearsal_and_its_spare():
+    topo, clock, _, _ = _fly(800.0, n=3)
+    spare = topo.rehearsal
+    closed = []
+    spare.close = lambda: closed.append(True)
+    topo.close()
+    topo.close()                                 # a second call does nothing
+    assert closed == [True] and topo.rehearsal is None and clock.rehearse is None
+    topo.tick()                                  # flies on, unrehearsed
+    assert clock.rehearsals == 3 and topo.fsw.cycles == 4
 
 
 def test_a_failing_rehearsal_is_counted_and_the_flight_goes_on():

@@ -214,6 +214,8 @@ def child(seconds: float, priority: int | None, cpu: int | None, scenario: str =
         gc_enabled_in_loop = gc.isenabled()
     finally:
         rt.restore()
+        topo.close()
+        fsw.close()
     st = ex.stats
     m = min(st.n, st.capacity)
     jit = st.jitter_ns[:m] * 1e-3

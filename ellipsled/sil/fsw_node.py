@@ -439,6 +439,7 @@ class FswNode:
         (out / "fsw.json").write_text(json.dumps(rep, indent=2, default=str) + "\n")
 
     def close(self) -> None:
+        self.topo.close()
         self.fsw.close()
         if self.link is not None:
             self.link.flush_events()

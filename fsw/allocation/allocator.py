@@ -116,6 +116,9 @@ class Allocator:
         self._obj = np.zeros(1)
         self._stack_k = np.zeros(TREE_STACK, dtype=np.int64)   # spill-box query work arrays
         self._stack_lb = np.zeros(TREE_STACK)
+        self._warm_u = np.zeros(self.n_jets, dtype=np.uint8)    # rehearse's answer, discarded
+        self._warm_tau = np.zeros(N_AXES)
+        self._warm_obj = np.zeros(1)
         self.objective = float("nan")
         self.degraded = False
         self.rejected = False
@@ -355,6 +358,26 @@ class Allocator:
         return True
 
     # -- the cycle
+    def rehearse(self, tau_d: np.ndarray) -> None:
+        """Real time, just before a release: the query of ``solve`` on the active tables for a
+        demand near the next one, its answer discarded, so the tables the next ``solve``
+        searches are in the caches (a period asleep leaves them out). Changes nothing an
+        answer depends on: the outputs go to scratch arrays, the work buffers (ties, stacks)
+        are rewritten by every query before they are read, and no switch of tables is made."""
+        t = self._tables
+        if (t is None or type(tau_d) is not np.ndarray or tau_d.dtype != np.float64 or tau_d.shape != (N_AXES,)):
+            return
+        if t.spill_box:
+            solve_tree_kernel(tau_d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
+                              t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch,
+                              self._forbid, self._delta if self._shifted else ZERO3,
+                              TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                              self._stack_k, self._stack_lb, self._warm_u, self._warm_tau, self._warm_obj)
+        elif not (self.reconfig_pending and self._shifted):
+            solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
+                         t.tau, t.pen, t.pat, t.scratch, self._forbid, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                         self._warm_u, self._warm_tau, self._warm_obj)
+
     def solve(self, tau_d: np.ndarray) -> np.ndarray:
         """u (uint8, n jets; the same array every call) for demand tau_d [N m] in body
         axes. Sets tau_B, objective, degraded, rejected, interim. A non-finite demand is

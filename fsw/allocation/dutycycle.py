@@ -50,6 +50,7 @@ class DutyCycleRealiser:
     def __init__(self, bank_axis_B: np.ndarray, torque_matrix_Nm: np.ndarray, thrust_N: np.ndarray) -> None:
         T = np.asarray(torque_matrix_Nm, dtype=float)
         self.axis = np.asarray(bank_axis_B, dtype=float).copy()
+        self._axis = tuple(self.axis.tolist())
         inc = np.abs(self.axis @ T)
         # the bank shortfall that rounding to the finest jet explains: half its increment
         self.round_Nm = 0.5 * float(np.min(inc[inc > 0.0]))
@@ -79,9 +80,12 @@ class DutyCycleRealiser:
         self._bias = np.zeros(N_AXES)
 
     def _short(self, u_B: np.ndarray, tau_B: np.ndarray) -> bool:
-        a = self.axis
-        d = a[0] * u_B[0] + a[1] * u_B[1] + a[2] * u_B[2]
-        got = a[0] * tau_B[0] + a[1] * tau_B[1] + a[2] * tau_B[2]
+        # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
+        a0, a1, a2 = self._axis
+        u0, u1, u2 = u_B.tolist()
+        t0, t1, t2 = tau_B.tolist()
+        d = a0 * u0 + a1 * u1 + a2 * u2
+        got = a0 * t0 + a1 * t1 + a2 * t2
         if abs(d) <= self.short_min_Nm:
             return False
         return ((d - got) if d >= 0.0 else (got - d)) > max(self.round_Nm, self.short_frac * abs(d))

@@ -103,8 +103,8 @@ class Topology:
         """Run one control cycle of a throwaway FlightSoftware on ``frame`` so every compiled
         kernel is loaded before the first real cycle (the first call of each numba kernel
         costs tens of ms). The flying instance's state is untouched. Returns the spare (it
-        has flown: a source for warming up telemetry encoders). Real time: the flying
-        instance's background work warmed too (FlightSoftware.warm_background)."""
+        has flown: a source for warming up telemetry encoders). Real time: the rehearsal run
+        once and the flying instance's background work warmed (FlightSoftware.warm_background)."""
         spare = FlightSoftware(self.fsw.scenario, param_overrides=None)
         nxt = frame.copy()          # a second, consecutive frame: the second slow step then
         nxt["k"] = frame["k"] + 1   # runs the residual check's kernels too
@@ -113,6 +113,12 @@ class Topology:
             spare.control_step(f)
             spare.slow_step()
         spare.close()
+        if self.rehearsal is not None:
+            # the rehearsal's own first call is cold too (its spare's first cycle, the flying
+            # instance's first rehearsed query): run it once now, not just before the first release
+            self._last_frame = frame
+            self._rehearse()
+            self._last_frame = None
         if self.fsw.realtime:
             self.fsw.warm_background()
         return spare

@@ -30,9 +30,10 @@ class FakeTime:
         self.t = max(self.t, t)
 
 
-def _fly(rehearse_us: float, n: int = 60, scenario: str = "nominal"):
+def _fly(rehearse_us: float, n: int = 60, scenario: str = "nominal", warm: bool = False):
     """``n`` real-time ticks on a fake clock with the plant stepped in the loop (as the
-    bench's in-process loop does); the jet commands and output records of every tick."""
+    bench's in-process loop does); the jet commands and output records of every tick.
+    ``warm``: Topology.warm_up on the first frame before the clock starts (as the SIL does)."""
     scn = load_scenario(scenario)
     plant = Plant(scn, scn.seed)
     fsw = FlightSoftware(scn, EventLog(), param_overrides={"executive.rehearse_us": rehearse_us})
@@ -40,6 +41,8 @@ def _fly(rehearse_us: float, n: int = 60, scenario: str = "nominal"):
     clock = RealTimeClock(int(round(fsw.dt_s * 1e9)), now_ns=ft.now, sleep_until=ft.sleep_until)
     topo = Topology(fsw, clock, frame_source=lambda: plant.sensors)
     topo.add(1, "plant", lambda c: plant.step(topo.u))
+    if warm:
+        topo.warm_up(plant.sensors)
     jets, outs = [], []
     clock.start()
     for _ in range(n):
@@ -65,6 +68,20 @@ def test_the_rehearsal_runs_before_each_release_and_changes_nothing_in_the_fligh
                 np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     # the spare's FDIR identifies nothing: no table rebuild, no LP inside a rehearsal
     assert topo.rehearsal.fdir.oracle and not topo.fsw.fdir.oracle
+
+
+def test_warm_up_runs_the_rehearsal_once_and_changes_nothing_in_the_flight():
+    """The rehearsal's first call is cold: warm_up runs it on the first frame, before the
+    flying instance has flown a cycle; the flight is the same as without any rehearsal."""
+    topo, clock, jets, outs = _fly(800.0, warm=True)
+    ref_topo, _, ref_jets, ref_outs = _fly(0.0, warm=True)
+    assert topo.rehearsal.cycles == len(jets) and topo.rehearsal_errors == 0   # warm_up's + one a release
+    assert jets.any()
+    np.testing.assert_array_equal(jets, ref_jets)
+    for a, b in zip(outs, ref_outs):
+        for name in a.dtype.names:
+            if name not in ("t_release_ns", "jitter_us", "compute_us", "alloc_us"):
+                np.testing.assert_array_equal(a[name], b[name], err_msg=name)
 
 
 def test_the_flying_instances_rehearsal_changes_nothing_through_a_detection():

@@ -188,6 +188,7 @@ def child(seconds: float, priority: int | None, cpu: int | None, scenario: str =
     n_cycles = int(round(seconds * 1e9 / period_ns))
     clock = RealTimeClock.from_params(fsw.params, period_ns)
     topo = Topology(fsw, clock, frame_source=lambda: plant.sensors, history=n_cycles + 8)
+    topo.warm_up(plant.sensors)        # as the SIL's FSW does: the rehearsal's first call too
     state = {"done": False, "reason": ""}
 
     def plant_task(cyc):

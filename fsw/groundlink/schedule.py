@@ -88,11 +88,12 @@ class TickBudget:
     def receive_ns(self, send_ns_recent: int, overdue_ns: int = 0) -> int:
         """What receiving may take: all but the send side's recent cost, at least half;
         and all but what sending the streams a period overdue costs (they go this tick) with
-        the end reserve, at least RECEIVE_FLOOR of the budget."""
+        the end reserve, at least RECEIVE_FLOOR of the budget; less what the tick has spent
+        already (the schedule's own work before receiving is the tick's too)."""
         owed = int(overdue_ns) + self.reserve_ns if overdue_ns > 0 else 0
         keep = max(min(int(send_ns_recent), self.limit_ns // 2),
                    min(owed, self.limit_ns - int(RECEIVE_FLOOR * self.limit_ns)))
-        return self.limit_ns - keep
+        return max(0, self.limit_ns - keep - self.elapsed_ns())
 
 
 class StreamSchedule:
@@ -127,9 +128,33 @@ class StreamSchedule:
         for at once: ``now``)."""
         return any(self.rates_hz[n] > 0.0 and now >= self.next_due[n] + 1.0 / self.rates_hz[n] for n in unit)
 
+    def due(self, units: Iterable[tuple[str, ...]], now: float) -> list[tuple[float, int, tuple[str, ...], bool, int]]:
+        """The units (a stream, or streams sent together) with a stream due at ``now``, in
+        one pass over their streams (it runs every tick, twice: its cost is the link's own):
+        (when its earliest waiting stream was due, its index in ``units``, the unit, whether
+        a stream of it is a period overdue, how many of its streams are due)."""
+        out = []
+        rates, next_due = self.rates_hz, self.next_due
+        for i, unit in enumerate(units):
+            first, overdue, n = math.inf, False, 0
+            for name in unit:
+                hz = rates[name]
+                if hz > 0.0:
+                    t = next_due[name]
+                    if now >= t - DUE_SLACK / hz:
+                        n += 1
+                        first = min(first, t)
+                        overdue = overdue or now >= t + 1.0 / hz
+            if n:
+                out.append((first, i, unit, overdue, n))
+        return out
+
     def longest_waiting(self, units: Iterable[tuple[str, ...]], now: float) -> list[tuple[str, ...]]:
-        """The units (a stream, or streams sent together) with a stream due, the one due
-        earliest first."""
-        due = [(min(self.next_due[n] for n in u if self.waiting(n, now)), i, u)
-               for i, u in enumerate(units) if any(self.waiting(n, now) for n in u)]
-        return [u for _, _, u in sorted(due)]
+        """The units with a stream due, the one due earliest first."""
+        return [u for _, _, u, _, _ in sorted(self.due(units, now))]
+
+    def sending_order(self, units: Iterable[tuple[str, ...]], now: float) -> list[tuple[tuple[str, ...], bool, int]]:
+        """The units with a stream due, in the order a tick sends them: those a period
+        overdue first (receiving left their cost for them), then the one due earliest;
+        each as (unit, overdue, how many of its streams are due)."""
+        return [(u, od, n) for _, _, u, od, n in sorted(self.due(units, now), key=lambda d: (not d[3], d[0], d[1]))]

@@ -7,6 +7,8 @@ import math
 from collections import deque
 from collections.abc import Mapping
 
+import numpy as np
+
 from interfaces.mavlink.signing.verify import Reject
 
 from . import telemetry as tm
@@ -40,6 +42,7 @@ SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STA
                   "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS",
                   "LOCAL_POSITION_NED", "CURRENT_MODE")
 MAX_RATE_HZ = 100.0
+ALLOC_RING = 512                 # link ticks whose allocator solve time ELLIPSLED_CONTROL_STATUS's p99 is of
 UNIT_COST_RING = 8               # sends of a unit its cost estimate is taken from
 # What a tick sends as one unit: each single stream, and the attitude and position groups
 # (one frame conversion each); the groups only once navigation is valid.
@@ -69,7 +72,8 @@ class TelemetryStreams:
     def __init__(self, link) -> None:
         self.link = link
         self.loop_timing: dict[int, tuple] = {}       # rate group -> ELLIPSLED_LOOP_TIMING fields
-        self.alloc_ns: deque[int] = deque(maxlen=512)
+        self.alloc_ring = np.zeros(ALLOC_RING, dtype=np.int64)   # the allocator's last solve times [ns] ...
+        self.alloc_samples = 0                                    # ... how many were taken
         self.alloc_degraded = 0
         self.sensors = None                            # latest sensor frame given to tick()
         self.origin = None                             # LOCAL_POSITION_NED's, at the first navigation fix
@@ -90,7 +94,8 @@ class TelemetryStreams:
 
     def sample_allocator(self) -> None:
         fsw = self.link.fsw
-        self.alloc_ns.append(int(getattr(fsw, "alloc_ns", 0)))
+        self.alloc_ring[self.alloc_samples % ALLOC_RING] = int(getattr(fsw, "alloc_ns", 0))
+        self.alloc_samples += 1
         if fsw.allocator.degraded:
             self.alloc_degraded += 1
 
@@ -105,14 +110,12 @@ class TelemetryStreams:
         fsw, sched = link.fsw, link.schedule
         C_LN = None
         self.cut, self.deferred_ns, self.sent_ns = False, 0, 0
-        units = sched.longest_waiting(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now)
         # a period overdue first: receiving left their cost for them (schedule.py), which a
         # longer-waiting slower stream must not take
-        units.sort(key=lambda u: not sched.overdue(u, now))
-        for unit in units:
-            self.cut = self.cut or not self._fits(unit, sched.overdue(unit, now))
+        for unit, overdue, n_due in sched.sending_order(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now):
+            self.cut = self.cut or not self._fits(unit, overdue)
             if self.cut:
-                link.stats["tx_deferred"] += sum(sched.waiting(n, now) for n in unit)
+                link.stats["tx_deferred"] += n_due
                 self.deferred_ns += self.unit_ns.get(unit, 0)
                 continue
             t0 = link.budget.elapsed_ns()
@@ -144,9 +147,8 @@ class TelemetryStreams:
     def overdue_ns(self, now: float) -> int:
         """What the units with a stream a period overdue at ``now`` cost recently [ns]:
         they go this tick, whatever the budget leaves them."""
-        sched = self.link.schedule
         units = ALL_UNITS if tm.nav_valid(self.link.fsw) else SINGLE_UNITS
-        return sum(self.unit_ns.get(u, 0) for u in units if sched.overdue(u, now))
+        return sum(self.unit_ns.get(u, 0) for _, _, u, overdue, _ in self.link.schedule.due(units, now) if overdue)
 
     def _fits(self, unit: tuple[str, ...], overdue: bool) -> bool:
         """Inside a tick: time is left for ``unit`` as long as it took recently (overdue:
@@ -187,7 +189,8 @@ class TelemetryStreams:
         elif name == "ELLIPSLED_JET_STATUS":
             yield tm.jet_status(fsw, ms, self.sensors)
         elif name == "ELLIPSLED_CONTROL_STATUS":
-            yield tm.control_status(fsw, ms, self.alloc_ns, self.alloc_degraded)
+            yield tm.control_status(fsw, ms, self.alloc_ring[:min(self.alloc_samples, ALLOC_RING)],
+                                    self.alloc_degraded)
         elif name == "ELLIPSLED_LOOP_TIMING":
             yield from tm.loop_timing(ms, self.loop_timing)
         elif name == "ELLIPSLED_GUIDANCE_STATUS":

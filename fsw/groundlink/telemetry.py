@@ -11,7 +11,7 @@ and what follows it must show the change.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -404,9 +404,21 @@ def jet_status(fsw, ms: int, sensors):
         [int(min(x, 0xFFFFFFFF)) for x in fsw.driver.pulses], [float(x) for x in fsw.driver.on_time_s])
 
 
-def control_status(fsw, ms: int, alloc_ns: Iterable[int], alloc_degraded: int):
-    a = np.fromiter(alloc_ns, dtype=np.int64)
-    p99 = float(np.percentile(a, 99)) * 1e-3 if a.size else 0.0
+def percentile99(a: np.ndarray) -> float:
+    """``np.percentile(a, 99)`` (linear interpolation) of a non-empty array, found by
+    partitioning around the two ranks it falls between instead of numpy's general quantile
+    machinery: a few microseconds where that takes tens, and far more with cold caches."""
+    k = 0.99 * (a.size - 1)
+    lo = int(k)
+    hi = min(lo + 1, a.size - 1)
+    part = np.partition(a, (lo, hi))
+    x0, x1, t = float(part[lo]), float(part[hi]), k - lo
+    return x1 - (x1 - x0) * (1.0 - t) if t >= 0.5 else x0 + (x1 - x0) * t
+
+
+def control_status(fsw, ms: int, alloc_ns: np.ndarray, alloc_degraded: int):
+    """ELLIPSLED_CONTROL_STATUS; ``alloc_ns``: the allocator's recent solve times [ns]."""
+    p99 = percentile99(alloc_ns) * 1e-3 if alloc_ns.size else 0.0
     out = fsw.output
     return mav.MAVLink_ellipsled_control_status_message(
         ms, [float(x) for x in out["u_cal_B"]], [float(x) for x in out["tau_alloc_B"]],

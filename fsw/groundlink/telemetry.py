@@ -16,7 +16,6 @@ from collections.abc import Iterator
 import numpy as np
 
 from common import frames, mrp
-from common.frames import local_axes
 from interfaces.mavlink import dialect as mav
 from interfaces.records import GUID_PREDICTION
 from interfaces.vocabulary import INHIBITED, N_JETS, NOMINAL, Mode
@@ -30,9 +29,16 @@ def ascii_text(text: str, n: int) -> bytes:
 
 
 def local_ned_dcm(r_N: np.ndarray) -> np.ndarray:
-    """C_LN: rows north, east, down at r_N (spherical planet, N3 = spin axis)."""
-    north, east, up = local_axes(r_N)
-    return np.vstack((north, east, -up))
+    """C_LN: rows north, east, down at r_N (spherical planet, N3 = spin axis): the axes of
+    common.frames.local_axes, the same arithmetic on floats and one array (its numpy
+    temporaries cost tens of microseconds in a link tick with cold caches)."""
+    x, y, z = float(r_N[0]), float(r_N[1]), float(r_N[2])
+    r = math.sqrt(x ** 2 + y ** 2 + z ** 2)
+    ux, uy, uz = x / r, y / r, z / r
+    lam = math.atan2(y, x)
+    ex, ey = -math.sin(lam), math.cos(lam)             # east; its third component is 0
+    return np.array(((uy * 0.0 - uz * ey, uz * ex - ux * 0.0, ux * ey - uy * ex),
+                     (ex, ey, 0.0), (-ux, -uy, -uz)))
 
 
 def euler321(C: np.ndarray) -> tuple[float, float, float]:

@@ -65,7 +65,7 @@ from .ftp import FtpServer
 from .senders import Peers, ReadBudgets
 from .services import COMMANDS as LINK_COMMANDS
 from .services import LinkServices
-from .schedule import TICK_BUDGET_FRAC, StreamSchedule, TickBudget
+from .schedule import TICK_BUDGET_FRAC, RecentCost, StreamSchedule, TickBudget
 from .streams import MAX_RATE_HZ, TelemetryStreams, check_rates
 
 log = logging.getLogger(__name__)
@@ -180,6 +180,7 @@ class GroundLink:
         self.stats["rx_poll_max_us"] = 0.0
         self.send_ns_peak = 0
         self.send_overhead_ns = 0
+        self.rx_tail = RecentCost()                    # what receiving takes past the intake's budget [ns]
 
     # -------------------------------------------------------------- configuration
     @property
@@ -223,7 +224,13 @@ class GroundLink:
             overdue = self.streams.overdue_ns(self.clock())      # the streams owed, with what sending costs besides
             rx_ns = b.receive_ns(self.send_ns_peak, overdue + self.send_overhead_ns if overdue else 0)
             if rx_ns > 0:
-                self.poll(rx_ns)
+                # the intake's budget ends at its last frame's start; what follows it (that
+                # frame past its estimate, the refusal reports, the link's counters) is
+                # taken from the share too, as recently measured (at most half of it)
+                given = rx_ns - min(self.rx_tail.ns, rx_ns // 2)
+                t_rx = b.elapsed_ns()
+                self.poll(given)
+                self.rx_tail.add(max(0, b.elapsed_ns() - t_rx - given))
             else:
                 self.stats["rx_deferred"] += 1
             t_send = b.elapsed_ns()

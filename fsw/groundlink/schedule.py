@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 
 import numpy as np
@@ -36,6 +37,24 @@ TICK_BUDGET_FRAC = 0.15          # the link's share of a control period
 COST_RING = 1024                 # ticks whose cost is kept for the percentiles
 RECEIVE_FLOOR = 0.25             # the budget's share receiving keeps whatever the streams owe
 END_RESERVE = 0.08               # the budget's share kept for what follows the last check of a tick
+COST_SAMPLES = 8                 # recent costs of a piece of work its estimate is taken from
+
+
+class RecentCost:
+    """What one piece of a tick's work is taken to cost [ns]: the second costliest of its
+    last COST_SAMPLES costs (a noisy piece is met; one slow time moves nothing, two are
+    forgotten within the ring). 0 before the first."""
+
+    __slots__ = ("ring", "ns")
+
+    def __init__(self) -> None:
+        self.ring: deque[int] = deque(maxlen=COST_SAMPLES)
+        self.ns = 0
+
+    def add(self, ns: int) -> None:
+        ring = self.ring
+        ring.append(int(ns))
+        self.ns = sorted(ring)[-2] if len(ring) > 1 else ring[0]
 
 
 class TickBudget:

@@ -4,7 +4,6 @@ the tick's budget are schedule.py's; where a frame goes is link.py's)."""
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Mapping
 
 import numpy as np
@@ -12,6 +11,7 @@ import numpy as np
 from interfaces.mavlink.signing.verify import Reject
 
 from . import telemetry as tm
+from .schedule import RecentCost
 
 # Telemetry streams and their default rates [Hz]; 0 disables a stream. The achieved rate
 # is at most the rate at which the link ticks.
@@ -43,7 +43,6 @@ SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STA
                   "LOCAL_POSITION_NED", "CURRENT_MODE")
 MAX_RATE_HZ = 100.0
 ALLOC_RING = 512                 # link ticks whose allocator solve time ELLIPSLED_CONTROL_STATUS's p99 is of
-UNIT_COST_RING = 8               # sends of a unit its cost estimate is taken from
 # What a tick sends as one unit: each single stream, and the attitude and position groups
 # (one frame conversion each); the groups only once navigation is valid.
 SINGLE_UNITS = tuple((name,) for name in SINGLE_STREAMS)
@@ -79,10 +78,11 @@ class TelemetryStreams:
         self.origin = None                             # LOCAL_POSITION_NED's, at the first navigation fix
         self.mode_sent = None                          # the Mode CURRENT_MODE last told
         self.unit_ns: dict[tuple[str, ...], int] = {}  # what each unit is taken to cost [ns] (``_cost``)
-        self.unit_costs: dict[tuple[str, ...], deque[int]] = {}    # ... from its last sends' costs
+        self.unit_costs: dict[tuple[str, ...], RecentCost] = {}    # ... from its last sends' costs
         self.cut = False                               # the last tick's budget deferred a stream
         self.deferred_ns = 0                           # ... and what those would have cost [ns]
         self.sent_ns = 0                               # what the last tick's streams cost [ns]
+        self.miss = RecentCost()                       # by how much a unit's cost exceeds its estimate [ns]
 
     def set_loop_timing(self, rate_group: int, *, jitter_p50_us: float, jitter_p99_us: float,
                         jitter_max_us: float, compute_p50_us: float, compute_p99_us: float,
@@ -131,18 +131,18 @@ class TelemetryStreams:
                 link._send(msg)
             cost = link.budget.elapsed_ns() - t0
             self.sent_ns += cost
+            self.miss.add(max(0, cost - self.unit_ns.get(unit, cost)))
             self._cost(unit, cost)
 
     def _cost(self, unit: tuple[str, ...], ns: int) -> None:
-        """``unit`` was sent at a cost of ``ns``: its estimate is the second costliest of its
-        last UNIT_COST_RING sends (a noisy unit is met; one slow send moves nothing, two
-        are forgotten within the ring; a unit not sent keeps its estimate: no stream waits
-        more than a period past its due time whatever it is, see ``_fits``)."""
-        ring = self.unit_costs.get(unit)
-        if ring is None:
-            ring = self.unit_costs[unit] = deque(maxlen=UNIT_COST_RING)
-        ring.append(int(ns))
-        self.unit_ns[unit] = sorted(ring)[-2] if len(ring) > 1 else ring[0]
+        """``unit`` was sent at a cost of ``ns``: its estimate (schedule.RecentCost; a unit
+        not sent keeps its estimate: no stream waits more than a period past its due time
+        whatever it is, see ``_fits``)."""
+        est = self.unit_costs.get(unit)
+        if est is None:
+            est = self.unit_costs[unit] = RecentCost()
+        est.add(ns)
+        self.unit_ns[unit] = est.ns
 
     def overdue_ns(self, now: float) -> int:
         """What the units with a stream a period overdue at ``now`` cost recently [ns]:
@@ -151,12 +151,14 @@ class TelemetryStreams:
         return sum(self.unit_ns.get(u, 0) for _, _, u, overdue, _ in self.link.schedule.due(units, now) if overdue)
 
     def _fits(self, unit: tuple[str, ...], overdue: bool) -> bool:
-        """Inside a tick: time is left for ``unit`` as long as it took recently (overdue:
-        any time left). Outside one (a warm-up): always."""
+        """Inside a tick: time is left for ``unit`` as long as it took recently and by as
+        much as the units' costs recently exceeded their estimates (a unit's cost moves with
+        what the tick ran before it: the caches it left); overdue: any time left. Outside
+        one (a warm-up): always."""
         if not self.link.in_tick:
             return True
         left = self.link.budget.left_ns()
-        return left > 0 and (overdue or left >= self.unit_ns.get(unit, 0))
+        return left > 0 and (overdue or left >= self.unit_ns.get(unit, 0) + self.miss.ns)
 
     def messages(self, name: str) -> list:
         """The messages of stream ``name`` now, outside its schedule (a one-shot request);

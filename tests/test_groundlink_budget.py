@@ -6,7 +6,9 @@ still gets its turn (the longest-waiting first), events and a mode change go out
 time to spare nothing is deferred; receiving leaves the send side its recent cost, at most
 half the budget, and the cost of the streams a period overdue, keeping a quarter; those go
 first; a signed command sent before each tick is answered in that tick however much the
-streams owe; the cycle's deadline shortens the budget."""
+streams owe; the cycle's deadline shortens the budget; receiving is given its share less what
+the tick spent before it and what it recently took past the intake's budget; a unit needs
+room for its estimate and the units' recent estimate misses."""
 from __future__ import annotations
 
 import time
@@ -14,7 +16,7 @@ from collections import Counter
 
 import pytest
 
-from fsw.groundlink.schedule import DUE_SLACK, StreamSchedule, TickBudget
+from fsw.groundlink.schedule import COST_SAMPLES, DUE_SLACK, END_RESERVE, RecentCost, StreamSchedule, TickBudget
 from fsw.groundlink.streams import ATTITUDE_GROUP
 from interfaces.event_catalogue import EV
 from tests.rig import ACCEPTED, flown
@@ -225,3 +227,103 @@ def test_a_signed_command_before_each_tick_is_answered_in_that_tick_however_much
     # over by at most the unit under way, once every unit has gone once (before that, a
     # unit not sent yet is taken to cost nothing)
     assert max(costs[3:]) <= budget + len(ATTITUDE_GROUP) * FRAME_NS
+
+
+def test_receiving_is_given_its_share_less_what_the_tick_spent_before_it():
+    t = [0]
+    b = TickBudget(1000, lambda: t[0])
+    b.start()
+    t[0] = 100                                           # the schedule's own work
+    assert b.receive_ns(300) == 1000 - 300 - 100
+    t[0] = 900
+    assert b.receive_ns(300) == 0
+
+
+def test_an_estimate_is_the_second_costliest_of_the_last_eight_costs():
+    e = RecentCost()
+    assert e.ns == 0
+    e.add(10)
+    assert e.ns == 10
+    for ns in (20, 1000, 30):
+        e.add(ns)
+    assert e.ns == 30                                    # one slow time moves nothing
+    e.add(900)
+    assert e.ns == 900                                   # two do
+    for _ in range(COST_SAMPLES):
+        e.add(5)
+    assert e.ns == 5                                     # forgotten within the ring
+
+
+def _streams_off_but(gl, name: str) -> None:
+    """Only stream ``name``, at the fastest rate; the estimates the rig's flight (on the host's
+    clock) left forgotten."""
+    for stream in gl.rates_hz:
+        gl.rates_hz[stream] = 0.0
+    gl.rates_hz[name] = gl.max_rate_hz
+    gl.streams.unit_costs.clear()
+    gl.streams.unit_ns.clear()
+    gl.streams.miss = RecentCost()
+
+
+def test_what_receiving_takes_past_the_intakes_budget_is_taken_from_its_next_share(priced):
+    """No stream and no datagram: receiving may take the whole budget. An intake that runs
+    40 us past whatever budget it is given (its last frame, its reports) carries the first
+    tick past the budget; from the next tick on its share is cut by that much and the tick
+    ends on its budget."""
+    rig, clock, turns = priced
+    gl = rig.gl
+    for stream in gl.rates_hz:
+        gl.rates_hz[stream] = 0.0
+    _ticks(rig, 3)                                      # the start-up events out
+    gl.send_ns_peak = gl.send_overhead_ns = 0
+    gl.rx_tail = RecentCost()
+    given, poll = [], gl.intake.poll
+
+    def late_poll(handle, budget_ns=None):
+        given.append(budget_ns)
+        clock.t += budget_ns + 40_000
+        return poll(handle, 0)
+    gl.intake.poll = late_poll
+    budget = gl.budget.budget_ns
+    costs = _ticks(rig, 4)
+    assert given == [budget] + [budget - 40_000] * 3
+    assert costs == [budget + 40_000] + [budget] * 3
+
+
+def test_a_unit_waits_when_what_is_left_covers_its_estimate_but_not_the_recent_misses(priced):
+    rig, clock, turns = priced
+    gl = rig.gl
+    _streams_off_but(gl, "HEARTBEAT")                   # one frame, every tick
+    _ticks(rig, 3)
+    assert gl.streams.unit_ns[("HEARTBEAT",)] == FRAME_NS and gl.streams.miss.ns == 0
+    gl.budget.budget_ns = 400_000
+    room = gl.budget.budget_ns - int(END_RESERVE * gl.budget.budget_ns)      # what the send side is left
+    assert FRAME_NS <= room < 2 * FRAME_NS
+    turns.clear()
+    _ticks(rig, 1)
+    assert turns["HEARTBEAT"] == 1                      # its estimate fits
+    gl.streams.miss.add(FRAME_NS)                       # two units a frame dearer than their estimates
+    gl.streams.miss.add(FRAME_NS)
+    deferred0 = gl.stats["tx_deferred"]
+    turns.clear()
+    _ticks(rig, 1)
+    assert turns["HEARTBEAT"] == 0 and gl.stats["tx_deferred"] == deferred0 + 1    # it waits, counted
+    turns.clear()
+    _ticks(rig, 1)
+    assert turns["HEARTBEAT"] == 1                      # a period overdue: it goes
+
+
+def test_a_unit_dearer_than_its_estimate_is_counted_as_a_miss(priced):
+    rig, clock, turns = priced
+    gl = rig.gl
+    _streams_off_but(gl, "HEARTBEAT")
+    _ticks(rig, 3)
+    pack = gl.link.pack
+
+    def dear(msg):
+        clock.t += FRAME_NS
+        return pack(msg)
+    gl.link.pack = dear
+    _ticks(rig, 1)
+    assert list(gl.streams.miss.ring)[-1] == FRAME_NS
+    assert gl.streams.unit_ns[("HEARTBEAT",)] == FRAME_NS     # one dear send does not move its estimate

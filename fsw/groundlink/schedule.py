@@ -7,12 +7,15 @@ the send side's recent cost, and never more than half the budget when sending wa
 (so a flood cannot starve the telemetry, nor heavy telemetry the commands); when streams are
 a period overdue (they go this tick whatever the budget), receiving also leaves their cost,
 keeping at least ``RECEIVE_FLOOR`` of the budget, so sending them does not carry the tick
-past its budget; sending takes what receiving left, in this order:
+past its budget; what the tick spent before receiving is taken from receiving's share (and,
+link.py, what receiving recently took past the intake's budget); sending takes what receiving
+left, in this order:
 
 1. events, their share of frames (``EVENT_SHARE``) whatever the budget: what the flight
    software reports reaches the ground even in a tick whose budget a flood used up;
 2. the telemetry streams that are due, those a period overdue first, then the
-   longest-waiting, while budget is left; a stream not sent stays due and goes out at a
+   longest-waiting, while budget is left for each (its ``RecentCost`` and the units' recent
+   estimate misses); a stream not sent stays due and goes out at a
    later tick (counted: ``tx_deferred``), so under a short budget every stream still gets
    its turn and none is dropped;
 3. answers to requests (parameter lists) and further events, from the reply budget.

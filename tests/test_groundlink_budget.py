@@ -21,6 +21,7 @@ from fsw.groundlink.streams import ATTITUDE_GROUP
 from interfaces.event_catalogue import EV
 from tests.rig import ACCEPTED, flown
 from interfaces.mavlink import dialect as mav
+from interfaces.mavlink.signing.sign import Signer
 
 FRAME_NS = 250_000                 # what one frame costs on the injected clock
 
@@ -327,3 +328,35 @@ def test_a_unit_dearer_than_its_estimate_is_counted_as_a_miss(priced):
     _ticks(rig, 1)
     assert list(gl.streams.miss.ring)[-1] == FRAME_NS
     assert gl.streams.unit_ns[("HEARTBEAT",)] == FRAME_NS     # one dear send does not move its estimate
+
+
+def test_what_sending_leaves_is_read_when_the_intake_stopped_on_its_budget(priced):
+    """Signed frames waiting, each costing 100 us to verify; the send side wanted more than
+    half the budget but has nothing due: receiving is given half, then reads on in what
+    sending left, to the end reserve (less one frame), and the tick stays within its budget."""
+    rig, clock, turns = priced
+    gl = rig.gl
+    for stream in gl.rates_hz:
+        gl.rates_hz[stream] = 0.0
+    _ticks(rig, 3)
+    gl.intake.clock_ns = clock
+    verify_ns, verified = 100_000, []
+    receive = gl.intake.link.receive_single
+
+    def priced_receive(frame):
+        clock.t += verify_ns
+        verified.append(frame)
+        return receive(frame)
+    gl.intake.link.receive_single = priced_receive
+    ground = Signer(rig.key, system_id=255, component_id=190, link_id=6)
+    budget = gl.budget.budget_ns
+    n = budget // verify_ns + 10                        # more than a whole tick can read
+    for _ in range(n):
+        rig.gcs.sock.sendto(ground.pack(mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GCS, 0, 0, 0, 0, 3)),
+                            gl.address)
+    time.sleep(0.05)                                    # loopback delivery
+    gl.send_ns_peak = 10 * budget
+    cost = _ticks(rig, 1)[0]
+    can = (budget - int(END_RESERVE * budget)) // verify_ns
+    assert can - 1 <= len(verified) <= can and len(verified) > budget // 2 // verify_ns + 1
+    assert cost <= budget

@@ -18,7 +18,10 @@ left, in this order:
    estimate misses); a stream not sent stays due and goes out at a
    later tick (counted: ``tx_deferred``), so under a short budget every stream still gets
    its turn and none is dropped;
-3. answers to requests (parameter lists) and further events, from the reply budget.
+3. answers to requests (parameter lists) and further events, from the reply budget;
+
+then, when the intake stopped on its budget (datagrams wait), receiving reads on in what
+sending left (link.py).
 
 Work is begun only while time is left short of ``END_RESERVE`` of the budget: what follows
 the last check (the tick's bookkeeping) lands inside the budget.

@@ -214,7 +214,12 @@ def test_every_dialect_message_is_framed_as_pymavlink_frames_it(signed):
         for _ in range(4):
             msg = _random_message(cls, rng)
             ref.seq = s.seq
-            assert s.pack(msg, signed=signed) == msg.pack(ref), cls.__name__
+            ours = s.pack(msg, signed=signed)
+            left = (msg.get_seq(), msg.get_srcSystem(), msg.get_srcComponent(), msg.get_crc(), msg.get_msgbuf())
+            assert ours == msg.pack(ref), cls.__name__
+            # and what packing leaves on the message (a sent message equals the same one received)
+            assert left == (msg.get_seq(), msg.get_srcSystem(), msg.get_srcComponent(), msg.get_crc(),
+                            msg.get_msgbuf()), cls.__name__
             n += 1
     assert n == 4 * len(mav.mavlink_map) > 800
 

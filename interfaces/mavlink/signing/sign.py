@@ -79,8 +79,9 @@ class Signer:
         payload = payload_of(msg)
         body = payload.rstrip(b"\0") or payload[:1]          # MAVLink 2 drops trailing zeros, keeps 1 byte
         msgid = msg._header.msgId                            # (an "id" field may shadow the class id)
-        frame = _HEADER_V2.pack(0xFD, len(body), _IFLAG_SIGNED if signed else 0, 0, mav.seq, mav.srcSystem,
-                                mav.srcComponent, msgid & 0xFFFF, msgid >> 16) + body
+        iflags = _IFLAG_SIGNED if signed else 0
+        frame = _HEADER_V2.pack(0xFD, len(body), iflags, 0, mav.seq, mav.srcSystem, mav.srcComponent,
+                                msgid & 0xFFFF, msgid >> 16) + body
         crc = dialect.x25crc(frame[1:])
         crc.accumulate(bytes((msg.crc_extra,)))
         frame += crc.crc.to_bytes(2, "little")
@@ -90,6 +91,10 @@ class Signer:
             frame += _LINK_STAMP.pack(sg.link_id, stamp)[:7]
             frame += hashlib.sha256(sg.secret_key + frame).digest()[:6]
             sg.timestamp = stamp + 1
+        # what pymavlink's packing leaves on the message (its header, CRC and frame: a sent
+        # message compares equal to the same message received)
+        msg._header = dialect.MAVLink_header(msgid, iflags, 0, len(body), mav.seq, mav.srcSystem, mav.srcComponent)
+        msg._payload, msg._crc, msg._msgbuf = body, crc.crc, bytearray(frame)
         mav.seq = (mav.seq + 1) % 256
         return frame
 

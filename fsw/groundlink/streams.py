@@ -43,10 +43,14 @@ SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STA
                   "LOCAL_POSITION_NED", "CURRENT_MODE")
 MAX_RATE_HZ = 100.0
 ALLOC_RING = 512                 # link ticks whose allocator solve time ELLIPSLED_CONTROL_STATUS's p99 is of
-# What a tick sends as one unit: each single stream, and the attitude and position groups
-# (one frame conversion each); the groups only once navigation is valid.
+# What a tick sends as one unit: each single stream, the attitude group's streams in three
+# units (the attitude messages, which share a frame conversion; the named values; the entry
+# state: the two 5 Hz ones apart, so each unit's cost is one thing to estimate and the largest
+# is a few frames) and the position group (one frame conversion); those of the groups only
+# once navigation is valid.
 SINGLE_UNITS = tuple((name,) for name in SINGLE_STREAMS)
-ALL_UNITS = SINGLE_UNITS + (ATTITUDE_GROUP, POSITION_GROUP)
+ATTITUDE_UNITS = (ATTITUDE_GROUP[:3], ATTITUDE_GROUP[3:4], ATTITUDE_GROUP[4:])
+ALL_UNITS = SINGLE_UNITS + ATTITUDE_UNITS + (POSITION_GROUP,)
 
 
 def check_rates(rates: Mapping[str, float] | None) -> dict[str, float]:
@@ -119,14 +123,15 @@ class TelemetryStreams:
                 self.deferred_ns += self.unit_ns.get(unit, 0)
                 continue
             t0 = link.budget.elapsed_ns()
-            if len(unit) == 1:
+            if unit in SINGLE_UNITS:
                 sched.take(unit[0], now)
                 msgs = self.single(unit[0], ms)
             else:
                 if C_LN is None:
                     C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
-                want = tuple(sched.take(n, now) for n in unit)
-                msgs = (tm.attitude if unit is ATTITUDE_GROUP else tm.position)(fsw, ms, C_LN, want)
+                group = POSITION_GROUP if unit is POSITION_GROUP else ATTITUDE_GROUP
+                want = tuple(n in unit and sched.take(n, now) for n in group)
+                msgs = (tm.position if unit is POSITION_GROUP else tm.attitude)(fsw, ms, C_LN, want)
             for msg in msgs:
                 link._send(msg)
             cost = link.budget.elapsed_ns() - t0

@@ -362,3 +362,26 @@ def test_what_sending_leaves_is_read_when_the_intake_stopped_on_its_budget(price
     can = (budget - int(END_RESERVE * budget)) // verify_ns
     assert can - 1 <= len(verified) <= can and len(verified) > budget // 2 // verify_ns + 1
     assert cost <= budget
+
+
+def test_the_most_overdue_unit_goes_whatever_is_left_the_next_overdue_one_only_if_it_fits(priced):
+    """Two one-frame streams a period overdue, room for one and a half frames: the one due
+    earlier goes, the other waits (counted) and goes first at the next tick."""
+    rig, clock, turns = priced
+    gl = rig.gl
+    _streams_off_but(gl, "HEARTBEAT")
+    gl.rates_hz["SYSTEM_TIME"] = gl.max_rate_hz
+    _ticks(rig, 3)
+    assert gl.streams.unit_ns[("HEARTBEAT",)] == gl.streams.unit_ns[("SYSTEM_TIME",)] == FRAME_NS
+    gl.budget.budget_ns = 400_000                       # room for 1.5 frames: see above
+    now = rig.clock.t + 1.0 / gl.max_rate_hz
+    gl.rates_hz["HEARTBEAT"] = gl.rates_hz["SYSTEM_TIME"] = 1.0
+    gl.schedule.next_due["HEARTBEAT"], gl.schedule.next_due["SYSTEM_TIME"] = now - 1.6, now - 1.5
+    deferred0 = gl.stats["tx_deferred"]
+    turns.clear()
+    cost = _ticks(rig, 1)[0]
+    assert turns == Counter({"HEARTBEAT": 1}) and gl.stats["tx_deferred"] == deferred0 + 1
+    assert cost <= gl.budget.budget_ns
+    turns.clear()
+    _ticks(rig, 1)
+    assert turns == Counter({"SYSTEM_TIME": 1})

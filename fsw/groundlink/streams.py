@@ -107,17 +107,20 @@ class TelemetryStreams:
         """The streams due at ``now``, those a period overdue first, then the longest-waiting
         first, while the link's tick has time for each (as long as it took recently); the
         first one that does not fit ends the tick's streams (a later, smaller one must not
-        overtake it for good), unless it is a period overdue: then it goes while any time is
-        left (no stream waits longer, however short the budget). What is left stays due,
-        counted."""
+        overtake it for good), unless it is the tick's first and a period overdue: then it
+        goes while any time is left (the most overdue unit goes every tick, however short the
+        budget or dear the units: none waits for good, and the budget gives way by one unit
+        at most). What is left stays due, counted."""
         link = self.link
         fsw, sched = link.fsw, link.schedule
         C_LN = None
         self.cut, self.deferred_ns, self.sent_ns = False, 0, 0
+        first = True
         # a period overdue first: receiving left their cost for them (schedule.py), which a
         # longer-waiting slower stream must not take
         for unit, overdue, n_due in sched.sending_order(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now):
-            self.cut = self.cut or not self._fits(unit, overdue)
+            self.cut = self.cut or not self._fits(unit, overdue and first)
+            first = False
             if self.cut:
                 link.stats["tx_deferred"] += n_due
                 self.deferred_ns += self.unit_ns.get(unit, 0)
@@ -141,8 +144,8 @@ class TelemetryStreams:
 
     def _cost(self, unit: tuple[str, ...], ns: int) -> None:
         """``unit`` was sent at a cost of ``ns``: its estimate (schedule.RecentCost; a unit
-        not sent keeps its estimate: no stream waits more than a period past its due time
-        whatever it is, see ``_fits``)."""
+        not sent keeps its estimate: the most overdue unit goes whatever it is, see
+        ``send_due``)."""
         est = self.unit_costs.get(unit)
         if est is None:
             est = self.unit_costs[unit] = RecentCost()
@@ -155,15 +158,15 @@ class TelemetryStreams:
         units = ALL_UNITS if tm.nav_valid(self.link.fsw) else SINGLE_UNITS
         return sum(self.unit_ns.get(u, 0) for _, _, u, overdue, _ in self.link.schedule.due(units, now) if overdue)
 
-    def _fits(self, unit: tuple[str, ...], overdue: bool) -> bool:
+    def _fits(self, unit: tuple[str, ...], forced: bool) -> bool:
         """Inside a tick: time is left for ``unit`` as long as it took recently and by as
         much as the units' costs recently exceeded their estimates (a unit's cost moves with
-        what the tick ran before it: the caches it left); overdue: any time left. Outside
-        one (a warm-up): always."""
+        what the tick ran before it: the caches it left); ``forced`` (the tick's most overdue
+        unit): any time left. Outside one (a warm-up): always."""
         if not self.link.in_tick:
             return True
         left = self.link.budget.left_ns()
-        return left > 0 and (overdue or left >= self.unit_ns.get(unit, 0) + self.miss.ns)
+        return left > 0 and (forced or left >= self.unit_ns.get(unit, 0) + self.miss.ns)
 
     def messages(self, name: str) -> list:
         """The messages of stream ``name`` now, outside its schedule (a one-shot request);

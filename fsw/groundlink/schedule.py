@@ -5,7 +5,7 @@ period. ``TickBudget`` bounds it: ``tick_budget_frac`` of the control period (0.
 200 Hz, 3 ms at 50 Hz). Within it, receiving (and answering what arrived) may take all but
 the send side's recent cost, and never more than half the budget when sending wants more
 (so a flood cannot starve the telemetry, nor heavy telemetry the commands); when streams are
-a period overdue (they go this tick whatever the budget), receiving also leaves their cost,
+a period overdue (they go first, the most overdue whatever the budget), receiving also leaves their cost,
 keeping at least ``RECEIVE_FLOOR`` of the budget, so sending them does not carry the tick
 past its budget; what the tick spent before receiving is taken from receiving's share (and,
 link.py, what receiving recently took past the intake's budget); sending takes what receiving

@@ -154,7 +154,7 @@ class TelemetryStreams:
 
     def overdue_ns(self, now: float) -> int:
         """What the units with a stream a period overdue at ``now`` cost recently [ns]:
-        they go this tick, whatever the budget leaves them."""
+        they go first this tick (``send_due``), receiving leaves them that."""
         units = ALL_UNITS if tm.nav_valid(self.link.fsw) else SINGLE_UNITS
         return sum(self.unit_ns.get(u, 0) for _, _, u, overdue, _ in self.link.schedule.due(units, now) if overdue)
 

@@ -31,7 +31,8 @@ def ascii_text(text: str, n: int) -> bytes:
 def local_ned_dcm(r_N: np.ndarray) -> np.ndarray:
     """C_LN: rows north, east, down at r_N (spherical planet, N3 = spin axis): the axes of
     common.frames.local_axes, the same arithmetic on floats and one array (its numpy
-    temporaries cost tens of microseconds in a link tick with cold caches)."""
+    temporaries and compiled cross product's dispatch are dear in a link tick with cold
+    caches)."""
     x, y, z = float(r_N[0]), float(r_N[1]), float(r_N[2])
     r = math.sqrt(x ** 2 + y ** 2 + z ** 2)
     ux, uy, uz = x / r, y / r, z / r
@@ -413,7 +414,8 @@ def jet_status(fsw, ms: int, sensors):
 def percentile99(a: np.ndarray) -> float:
     """``np.percentile(a, 99)`` (linear interpolation) of a non-empty array, found by
     partitioning around the two ranks it falls between instead of numpy's general quantile
-    machinery: a few microseconds where that takes tens, and far more with cold caches."""
+    machinery, whose Python layers a link tick with cold caches pays dearly (docs/changelog.md,
+    Benchmarks)."""
     k = 0.99 * (a.size - 1)
     lo = int(k)
     hi = min(lo + 1, a.size - 1)

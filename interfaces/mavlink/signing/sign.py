@@ -73,8 +73,8 @@ class Signer:
         """Encode ``msg`` (from the ``dialect`` module) as one frame; the sequence number
         is shared by signed and unsigned frames. The frame is pymavlink's to the byte (its
         payload encoding, zero truncation, CRC and signature: tests/test_mavlink_signing.py),
-        framed here in a few calls instead of its generic per-message path (half the cost,
-        which a link sending tens of frames a tick pays on every one)."""
+        framed here in a few calls instead of its generic per-message path, which a link
+        sending tens of frames a tick pays on every one (docs/changelog.md, Benchmarks)."""
         mav = self._mav
         payload = payload_of(msg)
         body = payload.rstrip(b"\0") or payload[:1]          # MAVLink 2 drops trailing zeros, keeps 1 byte

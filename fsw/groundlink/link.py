@@ -65,7 +65,7 @@ from .ftp import FtpServer
 from .senders import Peers, ReadBudgets
 from .services import COMMANDS as LINK_COMMANDS
 from .services import LinkServices
-from .schedule import TICK_BUDGET_FRAC, StreamSchedule, TickBudget
+from .schedule import TICK_BUDGET_FRAC, RecentCost, StreamSchedule, TickBudget
 from .streams import MAX_RATE_HZ, TelemetryStreams, check_rates
 
 log = logging.getLogger(__name__)
@@ -180,6 +180,7 @@ class GroundLink:
         self.stats["rx_poll_max_us"] = 0.0
         self.send_ns_peak = 0
         self.send_overhead_ns = 0
+        self.rx_tail = RecentCost()                    # what receiving takes past the intake's budget [ns]
 
     # -------------------------------------------------------------- configuration
     @property
@@ -211,7 +212,7 @@ class GroundLink:
     # -------------------------------------------------------------- the tick
     def tick(self, sensors=None, deadline_ns: int | None = None) -> None:
         """Call from RG2: receive and answer, then send what is due, within the tick's budget
-        (schedule.py). ``sensors``: the latest SENSORS record (for "firing" from the chamber
+        (schedule.py); when the intake stopped on its budget, receive more in what sending left. ``sensors``: the latest SENSORS record (for "firing" from the chamber
         pressures). ``deadline_ns`` (time.monotonic_ns): the cycle's deadline; the budget
         then also ends SEND_MARGIN_NS before it: whatever ran late before the link in this
         cycle, the ground's datagrams wait in the socket rather than push the cycle past its
@@ -222,17 +223,22 @@ class GroundLink:
         try:
             overdue = self.streams.overdue_ns(self.clock())      # the streams owed, with what sending costs besides
             rx_ns = b.receive_ns(self.send_ns_peak, overdue + self.send_overhead_ns if overdue else 0)
+            hits = self.intake.stats["budget_hits"]
             if rx_ns > 0:
-                self.poll(rx_ns)
+                self._receive(rx_ns - min(self.rx_tail.ns, rx_ns // 2))
             else:
                 self.stats["rx_deferred"] += 1
             t_send = b.elapsed_ns()
             self.streams.sample_allocator()
             self.send_due(sensors)
+            t_more = b.elapsed_ns()
+            left = b.left_ns() - self.rx_tail.ns
+            if self.intake.stats["budget_hits"] != hits and left > self.intake.frame_estimate_ns(left * 4):
+                self._receive(left)          # the intake stopped on its budget: more, in what sending left
             # what receiving leaves the send side: what it wanted (sent, and what the budget
             # deferred), and its cost besides the streams, peaks decaying x0.9 a tick (one
             # outlier is forgotten within seconds)
-            send_ns = b.elapsed_ns() - t_send
+            send_ns = t_more - t_send
             self.send_ns_peak = max(send_ns + self.streams.deferred_ns, int(self.send_ns_peak * 0.9))
             self.send_overhead_ns = max(send_ns - self.streams.sent_ns, int(self.send_overhead_ns * 0.9))
         except Exception:                       # the link must never take the FSW down
@@ -240,6 +246,14 @@ class GroundLink:
         finally:
             self.in_tick = False
         b.finish()
+
+    def _receive(self, given_ns: int) -> None:
+        """Poll within ``given_ns``. The intake's budget ends at its last frame's start; what
+        follows (that frame past its estimate, the refusal reports, the link's counters) is
+        measured (``rx_tail``) and taken from the next shares (at most half of one)."""
+        t = self.budget.elapsed_ns()
+        self.poll(given_ns)
+        self.rx_tail.add(max(0, self.budget.elapsed_ns() - t - given_ns))
 
     def warm_up(self, spare_fsw, sensors=None) -> None:
         """Encode (pack) every telemetry message once from ``spare_fsw`` — a throwaway

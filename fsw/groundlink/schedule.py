@@ -5,17 +5,23 @@ period. ``TickBudget`` bounds it: ``tick_budget_frac`` of the control period (0.
 200 Hz, 3 ms at 50 Hz). Within it, receiving (and answering what arrived) may take all but
 the send side's recent cost, and never more than half the budget when sending wants more
 (so a flood cannot starve the telemetry, nor heavy telemetry the commands); when streams are
-a period overdue (they go this tick whatever the budget), receiving also leaves their cost,
+a period overdue (they go first, the most overdue whatever the budget), receiving also leaves their cost,
 keeping at least ``RECEIVE_FLOOR`` of the budget, so sending them does not carry the tick
-past its budget; sending takes what receiving left, in this order:
+past its budget; what the tick spent before receiving is taken from receiving's share (and,
+link.py, what receiving recently took past the intake's budget); sending takes what receiving
+left, in this order:
 
 1. events, their share of frames (``EVENT_SHARE``) whatever the budget: what the flight
    software reports reaches the ground even in a tick whose budget a flood used up;
 2. the telemetry streams that are due, those a period overdue first, then the
-   longest-waiting, while budget is left; a stream not sent stays due and goes out at a
+   longest-waiting, while budget is left for each (its ``RecentCost`` and the units' recent
+   estimate misses); a stream not sent stays due and goes out at a
    later tick (counted: ``tx_deferred``), so under a short budget every stream still gets
    its turn and none is dropped;
-3. answers to requests (parameter lists) and further events, from the reply budget.
+3. answers to requests (parameter lists) and further events, from the reply budget;
+
+then, when the intake stopped on its budget (datagrams wait), receiving reads on in what
+sending left (link.py).
 
 Work is begun only while time is left short of ``END_RESERVE`` of the budget: what follows
 the last check (the tick's bookkeeping) lands inside the budget.
@@ -27,6 +33,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 
 import numpy as np
@@ -36,6 +43,24 @@ TICK_BUDGET_FRAC = 0.15          # the link's share of a control period
 COST_RING = 1024                 # ticks whose cost is kept for the percentiles
 RECEIVE_FLOOR = 0.25             # the budget's share receiving keeps whatever the streams owe
 END_RESERVE = 0.08               # the budget's share kept for what follows the last check of a tick
+COST_SAMPLES = 8                 # recent costs of a piece of work its estimate is taken from
+
+
+class RecentCost:
+    """What one piece of a tick's work is taken to cost [ns]: the second costliest of its
+    last COST_SAMPLES costs (a noisy piece is met; one slow time moves nothing, two are
+    forgotten within the ring). 0 before the first."""
+
+    __slots__ = ("ring", "ns")
+
+    def __init__(self) -> None:
+        self.ring: deque[int] = deque(maxlen=COST_SAMPLES)
+        self.ns = 0
+
+    def add(self, ns: int) -> None:
+        ring = self.ring
+        ring.append(int(ns))
+        self.ns = sorted(ring)[-2] if len(ring) > 1 else ring[0]
 
 
 class TickBudget:
@@ -88,11 +113,12 @@ class TickBudget:
     def receive_ns(self, send_ns_recent: int, overdue_ns: int = 0) -> int:
         """What receiving may take: all but the send side's recent cost, at least half;
         and all but what sending the streams a period overdue costs (they go this tick) with
-        the end reserve, at least RECEIVE_FLOOR of the budget."""
+        the end reserve, at least RECEIVE_FLOOR of the budget; less what the tick has spent
+        already (the schedule's own work before receiving is the tick's too)."""
         owed = int(overdue_ns) + self.reserve_ns if overdue_ns > 0 else 0
         keep = max(min(int(send_ns_recent), self.limit_ns // 2),
                    min(owed, self.limit_ns - int(RECEIVE_FLOOR * self.limit_ns)))
-        return self.limit_ns - keep
+        return max(0, self.limit_ns - keep - self.elapsed_ns())
 
 
 class StreamSchedule:
@@ -127,9 +153,33 @@ class StreamSchedule:
         for at once: ``now``)."""
         return any(self.rates_hz[n] > 0.0 and now >= self.next_due[n] + 1.0 / self.rates_hz[n] for n in unit)
 
+    def due(self, units: Iterable[tuple[str, ...]], now: float) -> list[tuple[float, int, tuple[str, ...], bool, int]]:
+        """The units (a stream, or streams sent together) with a stream due at ``now``, in
+        one pass over their streams (it runs every tick, twice: its cost is the link's own):
+        (when its earliest waiting stream was due, its index in ``units``, the unit, whether
+        a stream of it is a period overdue, how many of its streams are due)."""
+        out = []
+        rates, next_due = self.rates_hz, self.next_due
+        for i, unit in enumerate(units):
+            first, overdue, n = math.inf, False, 0
+            for name in unit:
+                hz = rates[name]
+                if hz > 0.0:
+                    t = next_due[name]
+                    if now >= t - DUE_SLACK / hz:
+                        n += 1
+                        first = min(first, t)
+                        overdue = overdue or now >= t + 1.0 / hz
+            if n:
+                out.append((first, i, unit, overdue, n))
+        return out
+
     def longest_waiting(self, units: Iterable[tuple[str, ...]], now: float) -> list[tuple[str, ...]]:
-        """The units (a stream, or streams sent together) with a stream due, the one due
-        earliest first."""
-        due = [(min(self.next_due[n] for n in u if self.waiting(n, now)), i, u)
-               for i, u in enumerate(units) if any(self.waiting(n, now) for n in u)]
-        return [u for _, _, u in sorted(due)]
+        """The units with a stream due, the one due earliest first."""
+        return [u for _, _, u, _, _ in sorted(self.due(units, now))]
+
+    def sending_order(self, units: Iterable[tuple[str, ...]], now: float) -> list[tuple[tuple[str, ...], bool, int]]:
+        """The units with a stream due, in the order a tick sends them: those a period
+        overdue first (receiving left their cost for them), then the one due earliest;
+        each as (unit, overdue, how many of its streams are due)."""
+        return [(u, od, n) for _, _, u, od, n in sorted(self.due(units, now), key=lambda d: (not d[3], d[0], d[1]))]

@@ -4,12 +4,14 @@ the tick's budget are schedule.py's; where a frame goes is link.py's)."""
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Mapping
+
+import numpy as np
 
 from interfaces.mavlink.signing.verify import Reject
 
 from . import telemetry as tm
+from .schedule import RecentCost
 
 # Telemetry streams and their default rates [Hz]; 0 disables a stream. The achieved rate
 # is at most the rate at which the link ticks.
@@ -40,11 +42,15 @@ SINGLE_STREAMS = ("HEARTBEAT", "SYS_STATUS", "SYSTEM_TIME", "ACTUATOR_OUTPUT_STA
                   "ELLIPSLED_CONTROL_STATUS", "ELLIPSLED_LOOP_TIMING", "ELLIPSLED_GUIDANCE_STATUS",
                   "LOCAL_POSITION_NED", "CURRENT_MODE")
 MAX_RATE_HZ = 100.0
-UNIT_COST_RING = 8               # sends of a unit its cost estimate is taken from
-# What a tick sends as one unit: each single stream, and the attitude and position groups
-# (one frame conversion each); the groups only once navigation is valid.
+ALLOC_RING = 512                 # link ticks whose allocator solve time ELLIPSLED_CONTROL_STATUS's p99 is of
+# What a tick sends as one unit: each single stream, the attitude group's streams in three
+# units (the attitude messages, which share a frame conversion; the named values; the entry
+# state: the two 5 Hz ones apart, so each unit's cost is one thing to estimate and the largest
+# is a few frames) and the position group (one frame conversion); those of the groups only
+# once navigation is valid.
 SINGLE_UNITS = tuple((name,) for name in SINGLE_STREAMS)
-ALL_UNITS = SINGLE_UNITS + (ATTITUDE_GROUP, POSITION_GROUP)
+ATTITUDE_UNITS = (ATTITUDE_GROUP[:3], ATTITUDE_GROUP[3:4], ATTITUDE_GROUP[4:])
+ALL_UNITS = SINGLE_UNITS + ATTITUDE_UNITS + (POSITION_GROUP,)
 
 
 def check_rates(rates: Mapping[str, float] | None) -> dict[str, float]:
@@ -69,16 +75,18 @@ class TelemetryStreams:
     def __init__(self, link) -> None:
         self.link = link
         self.loop_timing: dict[int, tuple] = {}       # rate group -> ELLIPSLED_LOOP_TIMING fields
-        self.alloc_ns: deque[int] = deque(maxlen=512)
+        self.alloc_ring = np.zeros(ALLOC_RING, dtype=np.int64)   # the allocator's last solve times [ns] ...
+        self.alloc_samples = 0                                    # ... how many were taken
         self.alloc_degraded = 0
         self.sensors = None                            # latest sensor frame given to tick()
         self.origin = None                             # LOCAL_POSITION_NED's, at the first navigation fix
         self.mode_sent = None                          # the Mode CURRENT_MODE last told
         self.unit_ns: dict[tuple[str, ...], int] = {}  # what each unit is taken to cost [ns] (``_cost``)
-        self.unit_costs: dict[tuple[str, ...], deque[int]] = {}    # ... from its last sends' costs
+        self.unit_costs: dict[tuple[str, ...], RecentCost] = {}    # ... from its last sends' costs
         self.cut = False                               # the last tick's budget deferred a stream
         self.deferred_ns = 0                           # ... and what those would have cost [ns]
         self.sent_ns = 0                               # what the last tick's streams cost [ns]
+        self.miss = RecentCost()                       # by how much a unit's cost exceeds its estimate [ns]
 
     def set_loop_timing(self, rate_group: int, *, jitter_p50_us: float, jitter_p99_us: float,
                         jitter_max_us: float, compute_p50_us: float, compute_p99_us: float,
@@ -90,7 +98,8 @@ class TelemetryStreams:
 
     def sample_allocator(self) -> None:
         fsw = self.link.fsw
-        self.alloc_ns.append(int(getattr(fsw, "alloc_ns", 0)))
+        self.alloc_ring[self.alloc_samples % ALLOC_RING] = int(getattr(fsw, "alloc_ns", 0))
+        self.alloc_samples += 1
         if fsw.allocator.degraded:
             self.alloc_degraded += 1
 
@@ -98,63 +107,66 @@ class TelemetryStreams:
         """The streams due at ``now``, those a period overdue first, then the longest-waiting
         first, while the link's tick has time for each (as long as it took recently); the
         first one that does not fit ends the tick's streams (a later, smaller one must not
-        overtake it for good), unless it is a period overdue: then it goes while any time is
-        left (no stream waits longer, however short the budget). What is left stays due,
-        counted."""
+        overtake it for good), unless it is the tick's first and a period overdue: then it
+        goes while any time is left (the most overdue unit goes every tick, however short the
+        budget or dear the units: none waits for good, and the budget gives way by one unit
+        at most). What is left stays due, counted."""
         link = self.link
         fsw, sched = link.fsw, link.schedule
         C_LN = None
         self.cut, self.deferred_ns, self.sent_ns = False, 0, 0
-        units = sched.longest_waiting(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now)
+        first = True
         # a period overdue first: receiving left their cost for them (schedule.py), which a
         # longer-waiting slower stream must not take
-        units.sort(key=lambda u: not sched.overdue(u, now))
-        for unit in units:
-            self.cut = self.cut or not self._fits(unit, sched.overdue(unit, now))
+        for unit, overdue, n_due in sched.sending_order(ALL_UNITS if tm.nav_valid(fsw) else SINGLE_UNITS, now):
+            self.cut = self.cut or not self._fits(unit, overdue and first)
+            first = False
             if self.cut:
-                link.stats["tx_deferred"] += sum(sched.waiting(n, now) for n in unit)
+                link.stats["tx_deferred"] += n_due
                 self.deferred_ns += self.unit_ns.get(unit, 0)
                 continue
             t0 = link.budget.elapsed_ns()
-            if len(unit) == 1:
+            if unit in SINGLE_UNITS:
                 sched.take(unit[0], now)
                 msgs = self.single(unit[0], ms)
             else:
                 if C_LN is None:
                     C_LN = tm.local_ned_dcm(fsw.nav.state.r_N)
-                want = tuple(sched.take(n, now) for n in unit)
-                msgs = (tm.attitude if unit is ATTITUDE_GROUP else tm.position)(fsw, ms, C_LN, want)
+                group = POSITION_GROUP if unit is POSITION_GROUP else ATTITUDE_GROUP
+                want = tuple(n in unit and sched.take(n, now) for n in group)
+                msgs = (tm.position if unit is POSITION_GROUP else tm.attitude)(fsw, ms, C_LN, want)
             for msg in msgs:
                 link._send(msg)
             cost = link.budget.elapsed_ns() - t0
             self.sent_ns += cost
+            self.miss.add(max(0, cost - self.unit_ns.get(unit, cost)))
             self._cost(unit, cost)
 
     def _cost(self, unit: tuple[str, ...], ns: int) -> None:
-        """``unit`` was sent at a cost of ``ns``: its estimate is the second costliest of its
-        last UNIT_COST_RING sends (a noisy unit is met; one slow send moves nothing, two
-        are forgotten within the ring; a unit not sent keeps its estimate: no stream waits
-        more than a period past its due time whatever it is, see ``_fits``)."""
-        ring = self.unit_costs.get(unit)
-        if ring is None:
-            ring = self.unit_costs[unit] = deque(maxlen=UNIT_COST_RING)
-        ring.append(int(ns))
-        self.unit_ns[unit] = sorted(ring)[-2] if len(ring) > 1 else ring[0]
+        """``unit`` was sent at a cost of ``ns``: its estimate (schedule.RecentCost; a unit
+        not sent keeps its estimate: the most overdue unit goes whatever it is, see
+        ``send_due``)."""
+        est = self.unit_costs.get(unit)
+        if est is None:
+            est = self.unit_costs[unit] = RecentCost()
+        est.add(ns)
+        self.unit_ns[unit] = est.ns
 
     def overdue_ns(self, now: float) -> int:
         """What the units with a stream a period overdue at ``now`` cost recently [ns]:
-        they go this tick, whatever the budget leaves them."""
-        sched = self.link.schedule
+        they go first this tick (``send_due``), receiving leaves them that."""
         units = ALL_UNITS if tm.nav_valid(self.link.fsw) else SINGLE_UNITS
-        return sum(self.unit_ns.get(u, 0) for u in units if sched.overdue(u, now))
+        return sum(self.unit_ns.get(u, 0) for _, _, u, overdue, _ in self.link.schedule.due(units, now) if overdue)
 
-    def _fits(self, unit: tuple[str, ...], overdue: bool) -> bool:
-        """Inside a tick: time is left for ``unit`` as long as it took recently (overdue:
-        any time left). Outside one (a warm-up): always."""
+    def _fits(self, unit: tuple[str, ...], forced: bool) -> bool:
+        """Inside a tick: time is left for ``unit`` as long as it took recently and by as
+        much as the units' costs recently exceeded their estimates (a unit's cost moves with
+        what the tick ran before it: the caches it left); ``forced`` (the tick's most overdue
+        unit): any time left. Outside one (a warm-up): always."""
         if not self.link.in_tick:
             return True
         left = self.link.budget.left_ns()
-        return left > 0 and (overdue or left >= self.unit_ns.get(unit, 0))
+        return left > 0 and (forced or left >= self.unit_ns.get(unit, 0) + self.miss.ns)
 
     def messages(self, name: str) -> list:
         """The messages of stream ``name`` now, outside its schedule (a one-shot request);
@@ -187,7 +199,8 @@ class TelemetryStreams:
         elif name == "ELLIPSLED_JET_STATUS":
             yield tm.jet_status(fsw, ms, self.sensors)
         elif name == "ELLIPSLED_CONTROL_STATUS":
-            yield tm.control_status(fsw, ms, self.alloc_ns, self.alloc_degraded)
+            yield tm.control_status(fsw, ms, self.alloc_ring[:min(self.alloc_samples, ALLOC_RING)],
+                                    self.alloc_degraded)
         elif name == "ELLIPSLED_LOOP_TIMING":
             yield from tm.loop_timing(ms, self.loop_timing)
         elif name == "ELLIPSLED_GUIDANCE_STATUS":

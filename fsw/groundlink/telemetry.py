@@ -11,12 +11,11 @@ and what follows it must show the change.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
 from common import frames, mrp
-from common.frames import local_axes
 from interfaces.mavlink import dialect as mav
 from interfaces.records import GUID_PREDICTION
 from interfaces.vocabulary import INHIBITED, N_JETS, NOMINAL, Mode
@@ -30,9 +29,17 @@ def ascii_text(text: str, n: int) -> bytes:
 
 
 def local_ned_dcm(r_N: np.ndarray) -> np.ndarray:
-    """C_LN: rows north, east, down at r_N (spherical planet, N3 = spin axis)."""
-    north, east, up = local_axes(r_N)
-    return np.vstack((north, east, -up))
+    """C_LN: rows north, east, down at r_N (spherical planet, N3 = spin axis): the axes of
+    common.frames.local_axes, the same arithmetic on floats and one array (its numpy
+    temporaries and compiled cross product's dispatch are dear in a link tick with cold
+    caches)."""
+    x, y, z = float(r_N[0]), float(r_N[1]), float(r_N[2])
+    r = math.sqrt(x ** 2 + y ** 2 + z ** 2)
+    ux, uy, uz = x / r, y / r, z / r
+    lam = math.atan2(y, x)
+    ex, ey = -math.sin(lam), math.cos(lam)             # east; its third component is 0
+    return np.array(((uy * 0.0 - uz * ey, uz * ex - ux * 0.0, ux * ey - uy * ex),
+                     (ex, ey, 0.0), (-ux, -uy, -uz)))
 
 
 def euler321(C: np.ndarray) -> tuple[float, float, float]:
@@ -404,9 +411,22 @@ def jet_status(fsw, ms: int, sensors):
         [int(min(x, 0xFFFFFFFF)) for x in fsw.driver.pulses], [float(x) for x in fsw.driver.on_time_s])
 
 
-def control_status(fsw, ms: int, alloc_ns: Iterable[int], alloc_degraded: int):
-    a = np.fromiter(alloc_ns, dtype=np.int64)
-    p99 = float(np.percentile(a, 99)) * 1e-3 if a.size else 0.0
+def percentile99(a: np.ndarray) -> float:
+    """``np.percentile(a, 99)`` (linear interpolation) of a non-empty array, found by
+    partitioning around the two ranks it falls between instead of numpy's general quantile
+    machinery, whose Python layers a link tick with cold caches pays dearly (docs/changelog.md,
+    Benchmarks)."""
+    k = 0.99 * (a.size - 1)
+    lo = int(k)
+    hi = min(lo + 1, a.size - 1)
+    part = np.partition(a, (lo, hi))
+    x0, x1, t = float(part[lo]), float(part[hi]), k - lo
+    return x1 - (x1 - x0) * (1.0 - t) if t >= 0.5 else x0 + (x1 - x0) * t
+
+
+def control_status(fsw, ms: int, alloc_ns: np.ndarray, alloc_degraded: int):
+    """ELLIPSLED_CONTROL_STATUS; ``alloc_ns``: the allocator's recent solve times [ns]."""
+    p99 = percentile99(alloc_ns) * 1e-3 if alloc_ns.size else 0.0
     out = fsw.output
     return mav.MAVLink_ellipsled_control_status_message(
         ms, [float(x) for x in out["u_cal_B"]], [float(x) for x in out["tau_alloc_B"]],

@@ -209,6 +209,9 @@ class AuthoritySupervisor:
         # the same limit at the precision the event states (0.01 deg/s^2) is no new reference:
         # answers of equal LPs differ in their last bits, and each re-plan would say so again
         if _limit_text(limit) == _limit_text(prof.accel_limit_radps2):
+            brake = self._brake_limit(prof.accel_limit_radps2)       # (the scenario's limit kept: braked all the same)
+            if brake and brake[0] < prof.brake_limit_radps2:
+                prof.replan(t_s, prof.rate_limit_radps, prof.accel_limit_radps2, *brake)
             return
         if prof.replan(t_s, prof.rate_limit_radps, limit, *self._brake_limit(limit)):
             self.events.emit(t_s, EV.REFERENCE_RESHAPED, limit=math.degrees(limit))

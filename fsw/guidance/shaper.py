@@ -22,11 +22,16 @@ def shaper_accel(phi, phid, target, rate_limit, accel_limit, dt):
 
 @njit(cache=True, nogil=True)
 def shaper_accel_braked(phi, phid, target, rate_limit, accel_limit, brake_limit, dt):
-    """``shaper_accel`` with the braking on sqrt(2 b |e|), b = brake_limit <= accel_limit: the
-    reference sets off at the acceleration limit and stops at b."""
+    """``shaper_accel`` slowing down at b = brake_limit <= accel_limit: braking on
+    sqrt(2 b |e|) onto the target, and turning round at most b while it moves away from the
+    target (a new command behind it, e.g. a reversal commanded while it turns); it speeds up
+    at the acceleration limit."""
     e = target - phi
     v_des = math.copysign(min(rate_limit, math.sqrt(2.0 * brake_limit * abs(e)), abs(e) / dt), e)
-    return max(-accel_limit, min(accel_limit, (v_des - phid) / dt))
+    a = max(-accel_limit, min(accel_limit, (v_des - phid) / dt))
+    if phid * e < 0.0:                 # moving away from the target: turning round
+        a = max(-brake_limit, min(brake_limit, a))
+    return a
 
 
 @njit(cache=True, nogil=True)

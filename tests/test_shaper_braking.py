@@ -67,6 +67,26 @@ def test_sets_off_at_the_acceleration_limit_and_brakes_at_the_braking_limit():
     assert np.median(braking) == pytest.approx(ACCEL / 1.3, rel=0.01)
 
 
+def test_a_command_behind_a_turning_reference_turns_it_round_at_the_braking_limit():
+    """A new target behind the reference while it turns (a reversal commanded mid-turn): it
+    slows down at the braking limit, not the acceleration limit, then sets off at the latter;
+    without a braking limit it turns round at the acceleration limit (the law unchanged)."""
+    for brake in (ACCEL / 1.3, ACCEL):
+        sh = shaper.BankShaper(0.0, RATE, ACCEL, DT)
+        sh.replan(0.0, RATE, ACCEL, brake)
+        sh.command(math.radians(90.0))
+        k = 0
+        while sh.evaluate(k * DT)[1] < math.radians(4.0):       # turning positive at 4 deg/s
+            k += 1
+        sh.command(math.radians(-30.0))                          # now behind it
+        slowing, speeding = [], []
+        for j in range(k + 1, k + int(30.0 / DT)):
+            _, rd, rdd = sh.evaluate(j * DT)
+            (slowing if rd > 1e-6 else speeding).append(rdd)
+        assert max(abs(a) for a in slowing[:-1]) == pytest.approx(brake, rel=1e-9)
+        assert min(speeding) == pytest.approx(-ACCEL, rel=1e-9)
+
+
 @pytest.mark.parametrize("angle_deg", [10.0, 120.0])             # triangular and trapezoidal rate
 def test_transition_time_is_the_flown_turn_with_the_braking_limit(angle_deg):
     sh = shaper.BankShaper(0.0, RATE, ACCEL, DT)
@@ -108,6 +128,25 @@ def test_mode_npc_reconfiguration_brakes_at_the_limit_over_one_plus_the_uncertai
         assert unc == 0.3
         assert prof.accel_limit_radps2 < math.radians(1.0)        # re-planned to the LP
         assert prof.brake_limit_radps2 == pytest.approx(prof.accel_limit_radps2 / (1.0 + unc))
+    finally:
+        f.close()
+
+
+def test_mode_npc_reconfiguration_keeping_the_scenarios_limit_brakes_all_the_same():
+    """Four jets failed off (the paper's case 1): 0.75 of the weaker way is above the
+    scenario's 1 deg/s^2, which stays the acceleration limit (no re-shape announced); the
+    reference brakes at it over 1 + guidance.npc_inertia_unc all the same."""
+    scn = load_scenario("guided-case2")
+    f = FlightSoftware(scn)
+    try:
+        prof = f.guidance.profile
+        assert prof.brake_limit_radps2 == prof.accel_limit_radps2 == scn.bank_accel_limit_radps2
+        f.fdir.health_active = JetHealth.of(failed_off=[1, 2, 17, 18])
+        f.t_s = 3.0
+        f.health_changed()
+        assert prof.accel_limit_radps2 == scn.bank_accel_limit_radps2
+        assert not any(e.code == "reference_reshaped" for e in f.events.history)
+        assert prof.brake_limit_radps2 == pytest.approx(scn.bank_accel_limit_radps2 / 1.3)
     finally:
         f.close()
 

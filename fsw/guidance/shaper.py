@@ -108,14 +108,15 @@ def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
     10 deg command: 258 deg on through lift down, ~100 deg back through lift up). The way
     round is the turn (a multiple of 2 pi) added to the command; the shaper keeps a given
     turn until the reference has crossed to the commanded side."""
-    phi, phid, accel, mag = float(shp[0]), float(shp[1]), float(_brake_of(shp)), float(shp[7])
-    if math.sin(phi) * sign >= 0.0 or accel <= 0.0:
+    phi, phid, decel, mag = float(shp[0]), float(shp[1]), float(_brake_of(shp)), float(shp[7])
+    if math.sin(phi) * sign >= 0.0 or decel <= 0.0:
         return None
     s, turn = shaper_branch(phi, float(shp[2]), float(shp[3]), math.copysign(mag, sign))
     target = math.copysign(mag, sign) + turn
     other = target - math.copysign(2.0 * math.pi, target - phi)
-    # moving towards the present target, the other way first brakes: v^2/2a out and back
-    brake = phid * phid / accel if phid * (target - phi) > 0.0 else 0.0
+    # moving towards the present target, the other way first turns round at the braking
+    # limit b: v^2/2b out and back
+    brake = phid * phid / decel if phid * (target - phi) > 0.0 else 0.0
     if abs(other - phi) + brake >= abs(target - phi):
         return None
     alt = shp.copy()

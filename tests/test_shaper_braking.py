@@ -117,12 +117,17 @@ def test_the_predictor_flies_the_shapers_braking_sample_for_sample():
     assert m < n
 
 
+def _reconfigure(f: FlightSoftware, health: JetHealth) -> None:
+    """FDIR's new health taken by the flight software at 3 s (the LP solved in place)."""
+    f.fdir.health_active = health
+    f.t_s = 3.0
+    f.health_changed()
+
+
 def test_mode_npc_reconfiguration_brakes_at_the_limit_over_one_plus_the_uncertainty():
     f = FlightSoftware(load_scenario("guided-case2"))
     try:
-        f.fdir.health_active = JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10])
-        f.t_s = 3.0
-        f.health_changed()
+        _reconfigure(f, JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10]))
         prof = f.guidance.profile
         unc = f.params["guidance.npc_inertia_unc"]
         assert unc == 0.3
@@ -141,9 +146,7 @@ def test_mode_npc_reconfiguration_keeping_the_scenarios_limit_brakes_all_the_sam
     try:
         prof = f.guidance.profile
         assert prof.brake_limit_radps2 == prof.accel_limit_radps2 == scn.bank_accel_limit_radps2
-        f.fdir.health_active = JetHealth.of(failed_off=[1, 2, 17, 18])
-        f.t_s = 3.0
-        f.health_changed()
+        _reconfigure(f, JetHealth.of(failed_off=[1, 2, 17, 18]))
         assert prof.accel_limit_radps2 == scn.bank_accel_limit_radps2
         assert not any(e.code == "reference_reshaped" for e in f.events.history)
         assert prof.brake_limit_radps2 == pytest.approx(scn.bank_accel_limit_radps2 / 1.3)
@@ -154,9 +157,7 @@ def test_mode_npc_reconfiguration_keeping_the_scenarios_limit_brakes_all_the_sam
 def test_mode_profile_reconfiguration_keeps_the_minimum_jerk_profile():
     f = FlightSoftware(load_scenario("case2"))
     try:
-        f.fdir.health_active = JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10])
-        f.t_s = 3.0
-        f.health_changed()
+        _reconfigure(f, JetHealth.of(stuck_on=[2, 3, 4, 5, 8, 9, 10]))
         assert isinstance(f.guidance.profile, BankProfile)
         assert not hasattr(f.guidance.profile, "brake_limit_radps2")
         assert f.authority._brake_limit(0.01) == ()

@@ -45,6 +45,10 @@ class AuthoritySupervisor:
               "way of the controllability LP's bank authority (the rest is kept for the feedback)"),
         Param("guidance.trim_max_deg", 0.0, 30.0, "deg",
               "largest alpha/beta trim offset accepted to absorb a stuck-on bias the jets cannot cancel"),
+        Param("guidance.npc_inertia_unc", 0.0, 0.9, "",
+              "guidance mode npc: after a reconfiguration the reference brakes at its acceleration limit / (1 + this) "
+              "(what the torque of that limit gives a bank-axis inertia this fraction above the nominal)",
+              ground_settable=False),
     ]
 
     def __init__(self, scenario: Scenario, params: dict, events: EventLog, nav: Navigation,
@@ -205,9 +209,24 @@ class AuthoritySupervisor:
         # the same limit at the precision the event states (0.01 deg/s^2) is no new reference:
         # answers of equal LPs differ in their last bits, and each re-plan would say so again
         if _limit_text(limit) == _limit_text(prof.accel_limit_radps2):
+            brake = self._brake_limit(prof.accel_limit_radps2)       # (the scenario's limit kept: braked all the same)
+            if brake and brake[0] < prof.brake_limit_radps2:
+                prof.replan(t_s, prof.rate_limit_radps, prof.accel_limit_radps2, *brake)
             return
-        if prof.replan(t_s, prof.rate_limit_radps, limit):
+        if prof.replan(t_s, prof.rate_limit_radps, limit, *self._brake_limit(limit)):
             self.events.emit(t_s, EV.REFERENCE_RESHAPED, limit=math.degrees(limit))
+
+    def _brake_limit(self, limit: float) -> tuple:
+        """The braking limit for the reference's acceleration limit, as replan's extra argument
+        (none: the reference brakes at its acceleration limit). Mode npc: the limit over
+        1 + guidance.npc_inertia_unc. The LP sizes the limit for the nominal inertia; a turn
+        that sets off too fast for a heavier truth is held back by the shaper's governor, but
+        a braking the truth cannot match carries the vehicle past a reference at rest, and the
+        governor must not ease a braking reference (it would carry it past its target). The
+        paper's schedules (mode profile) fly minimum-jerk transitions and keep their law."""
+        if self.scenario.guidance_mode != "npc":
+            return ()
+        return (limit / (1.0 + self.params["guidance.npc_inertia_unc"]),)
 
     # ---------------------------------------------------------------- parameters, life cycle
     def set_param(self, name: str, value: float) -> None:

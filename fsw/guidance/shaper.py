@@ -15,10 +15,30 @@ from numba import njit
 def shaper_accel(phi, phid, target, rate_limit, accel_limit, dt):
     """The reference's acceleration towards target: bang-bang at the acceleration limit to
     the desired rate min(rate limit, sqrt(2 a |e|) (braking), |e|/dt), by sign of the error.
-    One law for the BankShaper and the predictor."""
+    One law for the BankShaper and the predictor (``shaper_accel_braked`` with the braking
+    limit equal to the acceleration limit)."""
+    return shaper_accel_braked(phi, phid, target, rate_limit, accel_limit, accel_limit, dt)
+
+
+@njit(cache=True, nogil=True)
+def shaper_accel_braked(phi, phid, target, rate_limit, accel_limit, brake_limit, dt):
+    """``shaper_accel`` slowing down at b = brake_limit <= accel_limit: braking on
+    sqrt(2 b |e|) onto the target, and turning round at most b while it moves away from the
+    target (a new command behind it, e.g. a reversal commanded while it turns); it speeds up
+    at the acceleration limit."""
     e = target - phi
-    v_des = math.copysign(min(rate_limit, math.sqrt(2.0 * accel_limit * abs(e)), abs(e) / dt), e)
-    return max(-accel_limit, min(accel_limit, (v_des - phid) / dt))
+    v_des = math.copysign(min(rate_limit, math.sqrt(2.0 * brake_limit * abs(e)), abs(e) / dt), e)
+    a = max(-accel_limit, min(accel_limit, (v_des - phid) / dt))
+    if phid * e < 0.0:                 # moving away from the target: turning round
+        a = max(-brake_limit, min(brake_limit, a))
+    return a
+
+
+@njit(cache=True, nogil=True)
+def _brake_of(shp):
+    """The braking limit of a shaper state (shaped_transition's shp; its acceleration limit when
+    the state has none)."""
+    return shp[8] if shp.shape[0] > 8 else shp[5]
 
 
 @njit(cache=True, nogil=True)
@@ -42,7 +62,8 @@ def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
     while the BankShaper moves from its state towards bank_a and, from t_switch on, towards
     bank_b (a reversal commanded then): the same branch rule and acceleration law, stepped
     at the control period. shp: [phi, phidot, sign, turn, rate limit, acceleration limit,
-    control period, the magnitude commanded now]. The branch (which way round) is the one
+    control period, the magnitude commanded now, braking limit (optional: the acceleration
+    limit when absent)]. The branch (which way round) is the one
     the shaper takes for the command now, fixed for the prediction: in flight the new
     answer arrives after the reversal has set off, and a branch that followed the
     corrector's trial bank would flip near a 180 deg swing and make the miss function jump.
@@ -50,6 +71,7 @@ def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
     reference has settled on bank_b (<= 1 when it already has)."""
     phi, phid, s_now, turn = shp[0], shp[1], shp[2], shp[3]
     rate, accel, dtc, mag_now = shp[4], shp[5], shp[6], shp[7]
+    brake = _brake_of(shp)
     s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_a))
     target = bank_a + turn
     switched = t_switch <= 0.0
@@ -69,7 +91,7 @@ def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
             n += 1
             if switched and abs(target - phi) < 1e-3 and abs(phid) < 1e-3:
                 break
-        a = shaper_accel(phi, phid, target, rate, accel, dtc)
+        a = shaper_accel_braked(phi, phid, target, rate, accel, brake, dtc)
         phi += phid * dtc + 0.5 * a * dtc * dtc
         phid += a * dtc
         k += 1
@@ -86,14 +108,15 @@ def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
     10 deg command: 258 deg on through lift down, ~100 deg back through lift up). The way
     round is the turn (a multiple of 2 pi) added to the command; the shaper keeps a given
     turn until the reference has crossed to the commanded side."""
-    phi, phid, accel, mag = float(shp[0]), float(shp[1]), float(shp[5]), float(shp[7])
-    if math.sin(phi) * sign >= 0.0 or accel <= 0.0:
+    phi, phid, decel, mag = float(shp[0]), float(shp[1]), float(_brake_of(shp)), float(shp[7])
+    if math.sin(phi) * sign >= 0.0 or decel <= 0.0:
         return None
     s, turn = shaper_branch(phi, float(shp[2]), float(shp[3]), math.copysign(mag, sign))
     target = math.copysign(mag, sign) + turn
     other = target - math.copysign(2.0 * math.pi, target - phi)
-    # moving towards the present target, the other way first brakes: v^2/2a out and back
-    brake = phid * phid / accel if phid * (target - phi) > 0.0 else 0.0
+    # moving towards the present target, the other way first turns round at the braking
+    # limit b: v^2/2b out and back
+    brake = phid * phid / decel if phid * (target - phi) > 0.0 else 0.0
     if abs(other - phi) + brake >= abs(target - phi):
         return None
     alt = shp.copy()
@@ -118,6 +141,7 @@ class BankShaper:
     def __init__(self, phi0_rad: float, rate_limit_radps: float, accel_limit_radps2: float, dt_s: float):
         self.rate_limit_radps = float(rate_limit_radps)
         self.accel_limit_radps2 = float(accel_limit_radps2)
+        self.brake_limit_radps2 = self.accel_limit_radps2     # braking (replan), <= the acceleration limit
         self.dt_s = float(dt_s)
         self.phi = float(phi0_rad)
         self.phid = 0.0
@@ -139,7 +163,7 @@ class BankShaper:
     def state(self, mag_rad: float) -> np.ndarray:
         """The state shaped_transition starts from (its shp), mag_rad the magnitude commanded now."""
         return np.array([self.phi, self.phid, self._sign, self._turn, self.rate_limit_radps, self.accel_limit_radps2,
-                         self.dt_s, mag_rad])
+                         self.dt_s, mag_rad, self.brake_limit_radps2])
 
     def turn_round(self, turn_rad: float, sign: float) -> bool:
         """Take another way round (turn_rad, as reversal_other_way's; NaN: none) for the
@@ -163,8 +187,8 @@ class BankShaper:
         for _ in range(max(0, n)):
             self._step()
         self._t += n * self.dt_s if n > 0 else 0.0
-        self.phidd = shaper_accel(self.phi, self.phid, self.target, self.rate_limit_radps,
-                                  self.accel_limit_radps2, self.dt_s)
+        self.phidd = shaper_accel_braked(self.phi, self.phid, self.target, self.rate_limit_radps,
+                                         self.accel_limit_radps2, self.brake_limit_radps2, self.dt_s)
         if self.vehicle_rad is not None:
             self._govern()
         return self.phi, self.phid, self.phidd
@@ -200,19 +224,25 @@ class BankShaper:
             self.governed_cycles += 1
 
     def transition_s(self, angle_rad: float) -> float:
-        """Time [s] of a rest-to-rest turn through angle_rad within the rate and acceleration
-        limits (trapezoidal rate, triangular when the rate limit is not reached)."""
-        w, a, d = self.rate_limit_radps, self.accel_limit_radps2, abs(angle_rad)
-        if w <= 0.0 or a <= 0.0:
+        """Time [s] of a rest-to-rest turn through angle_rad within the rate, acceleration and
+        braking limits (trapezoidal rate, triangular when the rate limit is not reached)."""
+        w, a, b, d = self.rate_limit_radps, self.accel_limit_radps2, self.brake_limit_radps2, abs(angle_rad)
+        if w <= 0.0 or a <= 0.0 or b <= 0.0:
             return math.inf
-        return d / w + w / a if d >= w * w / a else 2.0 * math.sqrt(d / a)
+        h = a if b == a else 2.0 * a * b / (a + b)     # the harmonic mean: d = v^2/2a + v^2/2b = v^2/h
+        return d / w + w / h if d >= w * w / h else 2.0 * math.sqrt(d / h)
 
     def reversal_s(self, mag_rad: float) -> float:
         """Time [s] of a reversal at bank magnitude mag_rad (the shorter way: through 0 below
         90 deg, through 180 above)."""
         return self.transition_s(2.0 * min(abs(mag_rad), math.pi - abs(mag_rad)))
 
-    def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float) -> bool:
-        changed = (rate_limit_radps, accel_limit_radps2) != (self.rate_limit_radps, self.accel_limit_radps2)
-        self.rate_limit_radps, self.accel_limit_radps2 = float(rate_limit_radps), float(accel_limit_radps2)
+    def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float,
+               brake_limit_radps2: float | None = None) -> bool:
+        """New limits from now; the braking limit (None: the acceleration limit) is held within
+        the acceleration limit. True if any changed."""
+        brake = accel_limit_radps2 if brake_limit_radps2 is None else min(brake_limit_radps2, accel_limit_radps2)
+        new = (float(rate_limit_radps), float(accel_limit_radps2), float(brake))
+        changed = new != (self.rate_limit_radps, self.accel_limit_radps2, self.brake_limit_radps2)
+        self.rate_limit_radps, self.accel_limit_radps2, self.brake_limit_radps2 = new
         return changed

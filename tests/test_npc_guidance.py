@@ -654,3 +654,52 @@ def test_floor_margin_carries_a_falling_prediction_over_the_cycles_to_go():
     assert margins["falling"] == pytest.approx(3000.0, rel=0.05)
     assert 300.0 - 15.0 <= margins["noise"] <= 400.0      # the low-passed mean of +-30 m still wobbles a little
     assert margins["rising"] < 10.0
+
+
+def test_range_trigger_aims_the_deploy_point_the_reserve_beyond_the_target():
+    """The same oracle as the root-finder's: the predictor flown at phi_0* = 120 deg ends at a
+    point P. The target put 2 km short of P along the track: with the range trigger and a 2 km
+    reserve the corrector's answer is phi_0* again (its deploy point P, 2 km beyond the
+    target); with the velocity trigger (no reserve) it flies 2 km shorter (more bank); and a
+    flight software that leaves the deploy to the plant aims at the target too."""
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    out = np.zeros(predictor.N_O)
+    c = predictor.predictor_constants(SCN, PARAMS)
+    b_star = math.radians(120.0)
+    predictor.predict(x, c, b_star, math.radians(PARAMS["npc.bank_final_deg"]), e0, ef, 1.0, PARAMS["npc.dt_pred_s"],
+                      out, 0.0)
+    end_u = out[:3] / np.linalg.norm(out[:3])
+    axis = np.cross(x[:3], end_u)
+    axis /= np.linalg.norm(axis)
+    ang = -2e3 / SCN.planet.radius_m              # 2 km back along the great circle from x through P
+    target = end_u * math.cos(ang) + np.cross(axis, end_u) * math.sin(ang)
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.range_reserve_m": 2000.0,
+                           "npc.tol_m": 50.0})
+    fsw_scn = SCN.with_(deploy_by="fsw")
+
+    def answer(scn, trigger):
+        eg = npc.EntryGuidance(scn, dict(base, **{"deploy.trigger": trigger}), EventLog(), 0.02)
+        try:
+            eg.target_u = target
+            eg.bank0 = math.radians(100.0)
+            return eg.solve(x, 1.0, 1.0, 1.0), eg.reserve_m
+        finally:
+            eg.close()
+
+    rng, reserve = answer(fsw_scn, "range")
+    assert reserve == 2000.0 and rng["ok"]
+    assert math.degrees(rng["bank0_rad"]) == pytest.approx(120.0, abs=0.3)
+    end = np.array([math.cos(rng["lat_rad"]) * math.cos(rng["lon_rad"]), math.cos(rng["lat_rad"]) * math.sin(rng["lon_rad"]),
+                    math.sin(rng["lat_rad"])])
+    past = geometry.central_angle(x[:3], end) * SCN.planet.radius_m - rng["range_to_go_m"]
+    assert past == pytest.approx(2000.0, abs=base["npc.tol_m"])         # the deploy point 2 km beyond the target
+    assert rng["range_to_go_m"] == pytest.approx(geometry.central_angle(x[:3], target) * SCN.planet.radius_m)
+    for scn, trigger in ((fsw_scn, "velocity"), (SCN, "range")):
+        res, reserve = answer(scn, trigger)
+        assert reserve == 0.0 and res["ok"] and res["bank0_rad"] > rng["bank0_rad"] + math.radians(0.2)
+        end = np.array([math.cos(res["lat_rad"]) * math.cos(res["lon_rad"]),
+                        math.cos(res["lat_rad"]) * math.sin(res["lon_rad"]), math.sin(res["lat_rad"])])
+        assert geometry.central_angle(x[:3], end) * SCN.planet.radius_m - res["range_to_go_m"] == pytest.approx(
+            0.0, abs=base["npc.tol_m"])

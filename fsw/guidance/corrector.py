@@ -158,6 +158,21 @@ def floor_bank(deploy, h_floor_m: float, b_hi: float, h_hi_m: float, b_min: floa
     return (b_ok if not math.isnan(b_ok) else best_b if best_h > h_hi_m else math.nan), n
 
 
+def range_reserve(scenario: Scenario, params: dict) -> float:
+    """How far beyond the target the range solution aims its predicted deploy point [m]:
+    npc.range_reserve_m when this flight software deploys by the range trigger, else 0.
+    The range trigger deploys where the target comes abeam once inside the deploy box, so a
+    vehicle that flies long by less than its stretch from the box entry to the deploy
+    condition still deploys at the target; one that flies short goes on past the deploy
+    condition, descending, until the trigger's altitude floor fires short of it. Aimed at the
+    target, every error that shows late (a final reversal, a shift of the prediction, the
+    lift-up late's range held at the edge of what lift up reaches) lands on the short side;
+    aimed beyond it, the vehicle reaches the target higher and the same error is absorbed."""
+    if scenario.deploy_by == "fsw" and params.get("deploy.trigger") == "range":
+        return float(params["npc.range_reserve_m"])
+    return 0.0
+
+
 class Correction(TypedDict):
     """One answer of the corrector (Corrector.solve): the bank profile to fly from the
     state it answers, and what its prediction says of the deploy."""
@@ -169,7 +184,8 @@ class Correction(TypedDict):
     bank_final_rad: float     # ... and its phi_f (the line clipped to the phi_0 bounds, as predicted)
     floor: bool               # the deploy-altitude floor traded range for altitude
     held: bool                # the range solution holds a phi_0 bound (and no floor trade)
-    miss_m: float             # predicted range miss (NaN: the floor's profile does not reach the deploy)
+    miss_m: float             # predicted range miss, past the aim point (range_reserve beyond the target;
+                              # NaN: the floor's profile does not reach the deploy)
     predictions: int          # predictor runs it took
     turn_rad: float           # the way round for the reversal under way, added to the command (NaN: kept)
     ok: bool                  # a range solution within tolerance, or a floor trade
@@ -208,6 +224,7 @@ class Corrector:
         self.bank_max_rad = math.radians(params["npc.bank_max_deg"])
         self.p_min_rad, self.p_max_rad = profile_span(self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
         self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
+        self.reserve_m = range_reserve(scenario, params)
         self.bank0 = abs(scenario.bank_schedule[0][1])   # the range solution's parameter p [rad]
                                          # (bank_profile: phi_0 within the bounds): the next warm start
         self.f_lift_rad = self.bank_final_rad   # the family's phi_f now: lowered by the floor's lift-up
@@ -318,6 +335,7 @@ class Corrector:
         r = math.sqrt(float(x[:3] @ x[:3]))
         e0 = self.mu_m3ps2 / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.radius_m
+        s_aim = s_togo + self.reserve_m          # the aim point: range_reserve beyond the target
         dt = self.params["npc.dt_pred_s"]
         lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
         p_span = profile_span(lo, hi, f)
@@ -325,7 +343,7 @@ class Corrector:
         if math.isfinite(self._p_e0_jpkg) and self.e_deploy_jpkg != self._p_e0_jpkg:
             p_warm = profile_at(p_warm, lo, hi, f, (e0 - self._p_e0_jpkg) / (self.e_deploy_jpkg - self._p_e0_jpkg))
         tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
-        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
+        p, zb, n, ok = solve_bank(self._z(x, e0, s_aim, sign, f=f), *p_span, p_warm, tol, n_max)
         turn = math.nan
         alt = None
         if shp is not None and not abs(zb) <= self.params["npc.floor_miss_max_m"]:
@@ -337,7 +355,7 @@ class Corrector:
             # Not for less: the lateral decision timed the reversal for the way it began, and
             # turning round delays it, which costs crossrange
             self._shp = alt
-            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
+            pa, za, na, oka = solve_bank(self._z(x, e0, s_aim, sign, f=f), *p_span, p_warm, tol, n_max)
             n += na
             if abs(za) < abs(zb) - tol:
                 p, zb, ok, turn = pa, za, oka, float(alt[3])
@@ -356,7 +374,7 @@ class Corrector:
             # the range solution deploys too low (or reaches the target only below h_fire, where
             # the trigger's own floor fires short of it): first lift up late, range kept (phi_f
             # lowered, phi_0 solved again for the range: lift down before, lift up at the end)
-            lift = self._lift_late(x, e0, s_togo, sign, h_floor, h_fire, p, tol, n_max)
+            lift = self._lift_late(x, e0, s_aim, sign, h_floor, h_fire, p, tol, n_max)
             n += lift[3]
             if lift[0] is not None:
                 p, f, zb = lift[0], lift[1], lift[2]
@@ -369,7 +387,7 @@ class Corrector:
             # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
             # fixed phi_f would otherwise take the lift-up away just where it counts), and
             # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
-            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, hi), self._out[O_H_BOX])
+            b_fl, nh = self._floor_bank(x, e0, s_aim, sign, h_floor, min(p, hi), self._out[O_H_BOX])
             n += nh
             if math.isnan(b_fl):        # no trade deploys higher: the range solution's prediction again
                 self._predict(x, b0, bf, e0, sign, self._out)
@@ -377,7 +395,7 @@ class Corrector:
                 floor = True
                 b0, bf = b_fl, min(f, b_fl)
                 self._predict(x, b0, bf, e0, sign, self._out)
-                zb = (central_angle(x[:3], self._out[:3]) * self.radius_m - s_togo if self._out[O_FLAG] == REACHED
+                zb = (central_angle(x[:3], self._out[:3]) * self.radius_m - s_aim if self._out[O_FLAG] == REACHED
                       else math.nan)
                 ok = False
         rf = self._out[:3].copy()

@@ -703,3 +703,56 @@ def test_range_trigger_aims_the_deploy_point_the_reserve_beyond_the_target():
                         math.cos(res["lat_rad"]) * math.sin(res["lon_rad"]), math.sin(res["lat_rad"])])
         assert geometry.central_angle(x[:3], end) * SCN.planet.radius_m - res["range_to_go_m"] == pytest.approx(
             0.0, abs=base["npc.tol_m"])
+
+
+def test_range_trigger_turns_a_reversal_round_that_leaves_the_vehicle_short_of_the_target():
+    """From the plant's state 180 s into an entry flown at 90 deg, a reversal under way through
+    lift down (begun at -92 deg, now -100 deg, 10 deg commanded: 250 deg on, 110 deg back
+    through lift up). The predictor is the oracle: flown at the lower bound (the most range)
+    the way it goes, it ends R_cur from the vehicle, and the other way much further. With the
+    range trigger (2 km reserve) and the target 1 km beyond R_cur, the way it goes falls 3 km
+    short of the aim point, 1 km short of the target itself: the corrector turns it round and
+    solves the range the other way. With the target 1 km short of R_cur (the vehicle short of
+    the aim point only, by 1 km), or with the velocity trigger (no reserve: 1 km short, within
+    the range the guidance trades), the reversal keeps its way."""
+    _, _, _, _, frames = fly_plant(SCN.with_(max_duration_s=185.0), lambda e: math.radians(90.0), every=200)
+    t, f, _ = [fr for fr in frames if fr[0] >= 180.0][0]
+    x = geometry.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    d = math.radians
+    shp = np.array([d(-100.0), d(-2.0), 1.0, -2.0 * math.pi, d(8.0), d(1.0), 0.02, d(10.0)])
+    alt = shaper.reversal_other_way(shp, 1.0)
+    assert alt is not None
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.range_reserve_m": 2000.0})
+    c = predictor.predictor_constants(SCN, base)
+    lo, out = d(base["npc.bank_min_deg"]), np.zeros(predictor.N_O)
+    reach = []
+    for s in (shp, alt):
+        predictor.predict_shaped(x, c, lo, lo, e0, ef, 1.0, base["npc.dt_pred_s"], out, s, 0.0)
+        assert out[predictor.O_FLAG] == predictor.REACHED
+        reach.append((geometry.central_angle(x[:3], out[:3]) * SCN.planet.radius_m, out[:3] / np.linalg.norm(out[:3])))
+    (r_cur, end_u), (r_alt, _) = reach
+    assert r_alt > r_cur + 20e3                      # the other way reaches much further
+    x_u = x[:3] / np.linalg.norm(x[:3])
+    axis = np.cross(x_u, end_u)
+    axis /= np.linalg.norm(axis)
+
+    def answer(beyond_m, scn, trigger):
+        ang = (r_cur + beyond_m) / SCN.planet.radius_m
+        eg = npc.EntryGuidance(scn, dict(base, **{"deploy.trigger": trigger}), EventLog(), 0.02)
+        try:
+            eg.target_u = x_u * math.cos(ang) + np.cross(axis, x_u) * math.sin(ang)
+            eg.bank0 = d(60.0)
+            return eg.solve(x, 1.0, 1.0, 1.0, shp=shp.copy())
+        finally:
+            eg.close()
+
+    fsw_scn = SCN.with_(deploy_by="fsw")
+    turned = answer(1000.0, fsw_scn, "range")
+    assert turned["turn_rad"] == pytest.approx(0.0, abs=1e-12)            # the other way round: back through 0
+    assert turned["ok"] and abs(turned["miss_m"]) <= base["npc.tol_m"]
+    for beyond_m, scn, trigger in ((-1000.0, fsw_scn, "range"), (1000.0, fsw_scn, "velocity")):
+        kept = answer(beyond_m, scn, trigger)
+        assert math.isnan(kept["turn_rad"]) and not kept["ok"]
+        assert kept["miss_m"] == pytest.approx(-1000.0, abs=base["npc.tol_m"])      # 1 km short of its aim

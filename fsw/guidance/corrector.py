@@ -346,14 +346,18 @@ class Corrector:
         p, zb, n, ok = solve_bank(self._z(x, e0, s_aim, sign, f=f), *p_span, p_warm, tol, n_max)
         turn = math.nan
         alt = None
-        if shp is not None and not abs(zb) <= self.params["npc.floor_miss_max_m"]:
+        short = self.reserve_m > 0.0 and zb < -self.reserve_m
+        if shp is not None and (short or not abs(zb) <= self.params["npc.floor_miss_max_m"]):
             alt = reversal_other_way(shp, sign)
         if alt is not None:
             # a reversal in progress whose way round costs more range than the guidance
-            # trades anywhere (npc.floor_miss_max_m): the other way (the reference braked and
-            # turned back, as the shaper would fly it) if that one's answer misses by less.
-            # Not for less: the lateral decision timed the reversal for the way it began, and
-            # turning round delays it, which costs crossrange
+            # trades anywhere (npc.floor_miss_max_m), or, with the range trigger, leaves the
+            # vehicle short of the target itself (beyond the reserve: the trigger's altitude
+            # floor then fires short, while a vehicle turned long still deploys at the target):
+            # the other way (the reference braked and turned back, as the shaper would fly it)
+            # if that one's answer misses by less. Not for less: the lateral decision timed
+            # the reversal for the way it began, and turning round delays it, which costs
+            # crossrange
             self._shp = alt
             pa, za, na, oka = solve_bank(self._z(x, e0, s_aim, sign, f=f), *p_span, p_warm, tol, n_max)
             n += na

@@ -119,6 +119,12 @@ def test_secant_on_a_known_function_and_the_no_root_case():
     assert not ok and x == 1.0
     x, zx, n, ok = corrector.solve_bank(lambda v: -z(v), 0.1, 0.5, 0.3, tol=1e-3, max_iter=20)
     assert not ok and x == 0.5
+    # no root on a flat z (short everywhere, 30 m across the whole range): the bound the secant
+    # runs into is no better by the tolerance (200 m), so the warm start stays
+    flat = []
+    x, zx, n, ok = corrector.solve_bank(lambda v: flat.append(v) or -1000.0 + 10.0 * v, 0.0, 3.0, 0.5, tol=200.0,
+                                        max_iter=8)
+    assert not ok and x == 0.5 and zx == -995.0 and max(flat) == 3.0     # the bound was tried, not taken
 
 
 def test_reversal_logic_on_a_scripted_heading_history():

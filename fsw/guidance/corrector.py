@@ -29,7 +29,8 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
     x0; once two points of opposite sign are known, an iterate outside them is replaced by
     their midpoint (so it cannot diverge). Returns (x, z(x), evaluations, converged
     |z| <= tol). Without a root in the bounds the secant runs into a bound and stops
-    there: the answer is then the point of smallest |z| seen (converged False)."""
+    there: the answer is then the point of smallest |z| seen, or of those within tol of it the
+    one nearest x0 (converged False)."""
     pts: list[tuple[float, float]] = []
 
     def ev(x: float) -> float:
@@ -60,6 +61,12 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
                 break              # pushed against a bound already tried: no root inside
         ev(xn)
     best = min(pts, key=lambda p: abs(p[1]))
+    if abs(best[1]) > tol:
+        # no root: a point within tol of the smallest |z| is as good an answer, and the one
+        # nearest the warm start (the profile flown) is taken. On a flat z (near the deploy,
+        # or far beyond any reach) the bound the secant ran into differs by metres, and flying
+        # it swings the bank across its range: lift down for a vehicle that is short
+        best = min((p for p in pts if abs(p[1]) <= abs(best[1]) + tol), key=lambda p: abs(p[0] - x1))
     return best[0], best[1], len(pts), abs(best[1]) <= tol
 
 

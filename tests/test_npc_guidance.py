@@ -125,6 +125,15 @@ def test_secant_on_a_known_function_and_the_no_root_case():
     x, zx, n, ok = corrector.solve_bank(lambda v: flat.append(v) or -1000.0 + 10.0 * v, 0.0, 3.0, 0.5, tol=200.0,
                                         max_iter=8)
     assert not ok and x == 0.5 and zx == -995.0 and max(flat) == 3.0     # the bound was tried, not taken
+    # a root inside, but z flat near the bound the warm start sits on, its slope there pointing
+    # the secant out of the bounds (a bound held for nearly all the energy to go): the other
+    # bound brackets it
+    kink = 1.0 + 1001.0 / 1500.0
+
+    def bent(v):
+        return 1000.0 + v if v < 1.0 else 1001.0 - 1500.0 * (v - 1.0)
+    x, zx, n, ok = corrector.solve_bank(bent, 0.0, 3.0, 0.0, tol=1.0, max_iter=20)
+    assert ok and x == pytest.approx(kink, abs=1e-3) and abs(zx) <= 1.0
 
 
 def test_reversal_logic_on_a_scripted_heading_history():

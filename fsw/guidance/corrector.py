@@ -28,9 +28,10 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
     """Root of a monotonic scalar function z on [x_lo, x_hi]: secant steps warm-started at
     x0; once two points of opposite sign are known, an iterate outside them is replaced by
     their midpoint (so it cannot diverge). Returns (x, z(x), evaluations, converged
-    |z| <= tol). Without a root in the bounds the secant runs into a bound and stops
-    there: the answer is then the point of smallest |z| seen, or of those within tol of it the
-    one nearest x0 (converged False)."""
+    |z| <= tol). Without a root in the bounds the secant runs into a bound, tries the other
+    bound once (no sign change there either: no root), and stops: the answer is then the
+    point of smallest |z| seen, or of those within tol of it the one nearest x0 (converged
+    False)."""
     pts: list[tuple[float, float]] = []
 
     def ev(x: float) -> float:
@@ -58,7 +59,13 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
         else:
             xn = min(max(xn, x_lo), x_hi)
             if any(abs(xn - p[0]) < 1e-12 for p in pts):
-                break              # pushed against a bound already tried: no root inside
+                # pushed against a bound already tried: the other bound once, then no root
+                # inside. Near a bound z can be flat to metres (a bound held for nearly all the
+                # energy to go), and its slope there may point the secant the wrong way
+                other = x_hi if xn == x_lo else x_lo if xn == x_hi else math.nan
+                if math.isnan(other) or any(abs(other - p[0]) < 1e-12 for p in pts):
+                    break
+                xn = other
         ev(xn)
     best = min(pts, key=lambda p: abs(p[1]))
     if abs(best[1]) > tol:

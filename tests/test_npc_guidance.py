@@ -671,6 +671,11 @@ def test_floor_margin_carries_a_falling_prediction_over_the_cycles_to_go():
     assert margins["rising"] < 10.0
 
 
+def _unit(res):
+    """The predicted deploy point of a corrector's answer, a unit vector (planet-fixed)."""
+    return geometry.unit_from_latlon(res["lat_rad"], res["lon_rad"])
+
+
 def test_range_trigger_aims_the_deploy_point_the_reserve_beyond_the_target():
     """The same oracle as the root-finder's: the predictor flown at phi_0* = 120 deg ends at a
     point P. The target put 2 km short of P along the track: with the range trigger and a 2 km
@@ -706,17 +711,13 @@ def test_range_trigger_aims_the_deploy_point_the_reserve_beyond_the_target():
     rng, reserve = answer(fsw_scn, "range")
     assert reserve == 2000.0 and rng["ok"]
     assert math.degrees(rng["bank0_rad"]) == pytest.approx(120.0, abs=0.3)
-    end = np.array([math.cos(rng["lat_rad"]) * math.cos(rng["lon_rad"]), math.cos(rng["lat_rad"]) * math.sin(rng["lon_rad"]),
-                    math.sin(rng["lat_rad"])])
-    past = geometry.central_angle(x[:3], end) * SCN.planet.radius_m - rng["range_to_go_m"]
+    past = geometry.central_angle(x[:3], _unit(rng)) * SCN.planet.radius_m - rng["range_to_go_m"]
     assert past == pytest.approx(2000.0, abs=base["npc.tol_m"])         # the deploy point 2 km beyond the target
     assert rng["range_to_go_m"] == pytest.approx(geometry.central_angle(x[:3], target) * SCN.planet.radius_m)
     for scn, trigger in ((fsw_scn, "velocity"), (SCN, "range")):
         res, reserve = answer(scn, trigger)
         assert reserve == 0.0 and res["ok"] and res["bank0_rad"] > rng["bank0_rad"] + math.radians(0.2)
-        end = np.array([math.cos(res["lat_rad"]) * math.cos(res["lon_rad"]),
-                        math.cos(res["lat_rad"]) * math.sin(res["lon_rad"]), math.sin(res["lat_rad"])])
-        assert geometry.central_angle(x[:3], end) * SCN.planet.radius_m - res["range_to_go_m"] == pytest.approx(
+        assert geometry.central_angle(x[:3], _unit(res)) * SCN.planet.radius_m - res["range_to_go_m"] == pytest.approx(
             0.0, abs=base["npc.tol_m"])
 
 

@@ -119,6 +119,21 @@ def test_secant_on_a_known_function_and_the_no_root_case():
     assert not ok and x == 1.0
     x, zx, n, ok = corrector.solve_bank(lambda v: -z(v), 0.1, 0.5, 0.3, tol=1e-3, max_iter=20)
     assert not ok and x == 0.5
+    # no root on a flat z (short everywhere, 30 m across the whole range): the bound the secant
+    # runs into is no better by the tolerance (200 m), so the warm start stays
+    flat = []
+    x, zx, n, ok = corrector.solve_bank(lambda v: flat.append(v) or -1000.0 + 10.0 * v, 0.0, 3.0, 0.5, tol=200.0,
+                                        max_iter=8)
+    assert not ok and x == 0.5 and zx == -995.0 and max(flat) == 3.0     # the bound was tried, not taken
+    # a root inside, but z flat near the bound the warm start sits on, its slope there pointing
+    # the secant out of the bounds (a bound held for nearly all the energy to go): the other
+    # bound brackets it
+    kink = 1.0 + 1001.0 / 1500.0
+
+    def bent(v):
+        return 1000.0 + v if v < 1.0 else 1001.0 - 1500.0 * (v - 1.0)
+    x, zx, n, ok = corrector.solve_bank(bent, 0.0, 3.0, 0.0, tol=1.0, max_iter=20)
+    assert ok and x == pytest.approx(kink, abs=1e-3) and abs(zx) <= 1.0
 
 
 def test_reversal_logic_on_a_scripted_heading_history():
@@ -654,3 +669,106 @@ def test_floor_margin_carries_a_falling_prediction_over_the_cycles_to_go():
     assert margins["falling"] == pytest.approx(3000.0, rel=0.05)
     assert 300.0 - 15.0 <= margins["noise"] <= 400.0      # the low-passed mean of +-30 m still wobbles a little
     assert margins["rising"] < 10.0
+
+
+def _unit(res):
+    """The predicted deploy point of a corrector's answer, a unit vector (planet-fixed)."""
+    return geometry.unit_from_latlon(res["lat_rad"], res["lon_rad"])
+
+
+def test_range_trigger_aims_the_deploy_point_the_reserve_beyond_the_target():
+    """The same oracle as the root-finder's: the predictor flown at phi_0* = 120 deg ends at a
+    point P. The target put 2 km short of P along the track: with the range trigger and a 2 km
+    reserve the corrector's answer is phi_0* again (its deploy point P, 2 km beyond the
+    target); with the velocity trigger (no reserve) it flies 2 km shorter (more bank); and a
+    flight software that leaves the deploy to the plant aims at the target too."""
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    x = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    out = np.zeros(predictor.N_O)
+    c = predictor.predictor_constants(SCN, PARAMS)
+    b_star = math.radians(120.0)
+    predictor.predict(x, c, b_star, math.radians(PARAMS["npc.bank_final_deg"]), e0, ef, 1.0, PARAMS["npc.dt_pred_s"],
+                      out, 0.0)
+    end_u = out[:3] / np.linalg.norm(out[:3])
+    axis = np.cross(x[:3], end_u)
+    axis /= np.linalg.norm(axis)
+    ang = -2e3 / SCN.planet.radius_m              # 2 km back along the great circle from x through P
+    target = end_u * math.cos(ang) + np.cross(axis, end_u) * math.sin(ang)
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.range_reserve_m": 2000.0,
+                           "npc.tol_m": 50.0})
+    fsw_scn = SCN.with_(deploy_by="fsw")
+
+    def answer(scn, trigger):
+        eg = npc.EntryGuidance(scn, dict(base, **{"deploy.trigger": trigger}), EventLog(), 0.02)
+        try:
+            eg.target_u = target
+            eg.bank0 = math.radians(100.0)
+            return eg.solve(x, 1.0, 1.0, 1.0), eg.reserve_m
+        finally:
+            eg.close()
+
+    rng, reserve = answer(fsw_scn, "range")
+    assert reserve == 2000.0 and rng["ok"]
+    assert math.degrees(rng["bank0_rad"]) == pytest.approx(120.0, abs=0.3)
+    past = geometry.central_angle(x[:3], _unit(rng)) * SCN.planet.radius_m - rng["range_to_go_m"]
+    assert past == pytest.approx(2000.0, abs=base["npc.tol_m"])         # the deploy point 2 km beyond the target
+    assert rng["range_to_go_m"] == pytest.approx(geometry.central_angle(x[:3], target) * SCN.planet.radius_m)
+    for scn, trigger in ((fsw_scn, "velocity"), (SCN, "range")):
+        res, reserve = answer(scn, trigger)
+        assert reserve == 0.0 and res["ok"] and res["bank0_rad"] > rng["bank0_rad"] + math.radians(0.2)
+        assert geometry.central_angle(x[:3], _unit(res)) * SCN.planet.radius_m - res["range_to_go_m"] == pytest.approx(
+            0.0, abs=base["npc.tol_m"])
+
+
+def test_range_trigger_turns_a_reversal_round_that_leaves_the_vehicle_short_of_the_target():
+    """From the plant's state 180 s into an entry flown at 90 deg, a reversal under way through
+    lift down (begun at -92 deg, now -100 deg, 10 deg commanded: 250 deg on, 110 deg back
+    through lift up). The predictor is the oracle: flown at the lower bound (the most range)
+    the way it goes, it ends R_cur from the vehicle, and the other way much further. With the
+    range trigger (2 km reserve) and the target 1 km beyond R_cur, the way it goes falls 3 km
+    short of the aim point, 1 km short of the target itself: the corrector turns it round and
+    solves the range the other way. With the target 1 km short of R_cur (the vehicle short of
+    the aim point only, by 1 km), or with the velocity trigger (no reserve: 1 km short, within
+    the range the guidance trades), the reversal keeps its way."""
+    _, _, _, _, frames = fly_plant(SCN.with_(max_duration_s=185.0), lambda e: math.radians(90.0), every=200)
+    t, f, _ = [fr for fr in frames if fr[0] >= 180.0][0]
+    x = geometry.planet_fixed(f["r_N"], f["v_N"], t, SCN.planet.omega_radps)
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    d = math.radians
+    shp = np.array([d(-100.0), d(-2.0), 1.0, -2.0 * math.pi, d(8.0), d(1.0), 0.02, d(10.0)])
+    alt = shaper.reversal_other_way(shp, 1.0)
+    assert alt is not None
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.range_reserve_m": 2000.0})
+    c = predictor.predictor_constants(SCN, base)
+    lo, out = d(base["npc.bank_min_deg"]), np.zeros(predictor.N_O)
+    reach = []
+    for s in (shp, alt):
+        predictor.predict_shaped(x, c, lo, lo, e0, ef, 1.0, base["npc.dt_pred_s"], out, s, 0.0)
+        assert out[predictor.O_FLAG] == predictor.REACHED
+        reach.append((geometry.central_angle(x[:3], out[:3]) * SCN.planet.radius_m, out[:3] / np.linalg.norm(out[:3])))
+    (r_cur, end_u), (r_alt, _) = reach
+    assert r_alt > r_cur + 20e3                      # the other way reaches much further
+    x_u = x[:3] / np.linalg.norm(x[:3])
+    axis = np.cross(x_u, end_u)
+    axis /= np.linalg.norm(axis)
+
+    def answer(beyond_m, scn, trigger):
+        ang = (r_cur + beyond_m) / SCN.planet.radius_m
+        eg = npc.EntryGuidance(scn, dict(base, **{"deploy.trigger": trigger}), EventLog(), 0.02)
+        try:
+            eg.target_u = x_u * math.cos(ang) + np.cross(axis, x_u) * math.sin(ang)
+            eg.bank0 = d(60.0)
+            return eg.solve(x, 1.0, 1.0, 1.0, shp=shp.copy())
+        finally:
+            eg.close()
+
+    fsw_scn = SCN.with_(deploy_by="fsw")
+    turned = answer(1000.0, fsw_scn, "range")
+    assert turned["turn_rad"] == pytest.approx(0.0, abs=1e-12)            # the other way round: back through 0
+    assert turned["ok"] and abs(turned["miss_m"]) <= base["npc.tol_m"]
+    for beyond_m, scn, trigger in ((-1000.0, fsw_scn, "range"), (1000.0, fsw_scn, "velocity")):
+        kept = answer(beyond_m, scn, trigger)
+        assert math.isnan(kept["turn_rad"]) and not kept["ok"]
+        assert kept["miss_m"] == pytest.approx(-1000.0, abs=base["npc.tol_m"])      # 1 km short of its aim

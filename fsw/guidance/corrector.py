@@ -28,8 +28,10 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
     """Root of a monotonic scalar function z on [x_lo, x_hi]: secant steps warm-started at
     x0; once two points of opposite sign are known, an iterate outside them is replaced by
     their midpoint (so it cannot diverge). Returns (x, z(x), evaluations, converged
-    |z| <= tol). Without a root in the bounds the secant runs into a bound and stops
-    there: the answer is then the point of smallest |z| seen (converged False)."""
+    |z| <= tol). Without a root in the bounds the secant runs into a bound, tries the other
+    bound once (no sign change there either: no root), and stops: the answer is then the
+    point of smallest |z| seen, or of those within tol of it the one nearest x0 (converged
+    False)."""
     pts: list[tuple[float, float]] = []
 
     def ev(x: float) -> float:
@@ -57,9 +59,21 @@ def solve_bank(z, x_lo: float, x_hi: float, x0: float, tol: float, max_iter: int
         else:
             xn = min(max(xn, x_lo), x_hi)
             if any(abs(xn - p[0]) < 1e-12 for p in pts):
-                break              # pushed against a bound already tried: no root inside
+                # pushed against a bound already tried: the other bound once, then no root
+                # inside. Near a bound z can be flat to metres (a bound held for nearly all the
+                # energy to go), and its slope there may point the secant the wrong way
+                other = x_hi if xn == x_lo else x_lo if xn == x_hi else math.nan
+                if math.isnan(other) or any(abs(other - p[0]) < 1e-12 for p in pts):
+                    break
+                xn = other
         ev(xn)
     best = min(pts, key=lambda p: abs(p[1]))
+    if abs(best[1]) > tol:
+        # no root: a point within tol of the smallest |z| is as good an answer, and the one
+        # nearest the warm start (the profile flown) is taken. On a flat z (near the deploy,
+        # or far beyond any reach) the bound the secant ran into differs by metres, and flying
+        # it swings the bank across its range: lift down for a vehicle that is short
+        best = min((p for p in pts if abs(p[1]) <= abs(best[1]) + tol), key=lambda p: abs(p[0] - x1))
     return best[0], best[1], len(pts), abs(best[1]) <= tol
 
 
@@ -158,6 +172,21 @@ def floor_bank(deploy, h_floor_m: float, b_hi: float, h_hi_m: float, b_min: floa
     return (b_ok if not math.isnan(b_ok) else best_b if best_h > h_hi_m else math.nan), n
 
 
+def range_reserve(scenario: Scenario, params: dict) -> float:
+    """How far beyond the target the range solution aims its predicted deploy point [m]:
+    npc.range_reserve_m when this flight software deploys by the range trigger, else 0.
+    The range trigger deploys where the target comes abeam once inside the deploy box, so a
+    vehicle that flies long by less than its stretch from the box entry to the deploy
+    condition still deploys at the target; one that flies short goes on past the deploy
+    condition, descending, until the trigger's altitude floor fires short of it. Aimed at the
+    target, every error that shows late (a final reversal, a shift of the prediction, the
+    lift-up late's range held at the edge of what lift up reaches) lands on the short side;
+    aimed beyond it, the vehicle reaches the target higher and the same error is absorbed."""
+    if scenario.deploy_by == "fsw" and params.get("deploy.trigger") == "range":
+        return float(params["npc.range_reserve_m"])
+    return 0.0
+
+
 class Correction(TypedDict):
     """One answer of the corrector (Corrector.solve): the bank profile to fly from the
     state it answers, and what its prediction says of the deploy."""
@@ -169,7 +198,8 @@ class Correction(TypedDict):
     bank_final_rad: float     # ... and its phi_f (the line clipped to the phi_0 bounds, as predicted)
     floor: bool               # the deploy-altitude floor traded range for altitude
     held: bool                # the range solution holds a phi_0 bound (and no floor trade)
-    miss_m: float             # predicted range miss (NaN: the floor's profile does not reach the deploy)
+    miss_m: float             # predicted range miss, past the aim point (range_reserve beyond the target;
+                              # NaN: the floor's profile does not reach the deploy)
     predictions: int          # predictor runs it took
     turn_rad: float           # the way round for the reversal under way, added to the command (NaN: kept)
     ok: bool                  # a range solution within tolerance, or a floor trade
@@ -208,6 +238,7 @@ class Corrector:
         self.bank_max_rad = math.radians(params["npc.bank_max_deg"])
         self.p_min_rad, self.p_max_rad = profile_span(self.bank_min_rad, self.bank_max_rad, self.bank_final_rad)
         self.target_u = unit_from_latlon(scenario.target_lat_rad, scenario.target_lon_rad)
+        self.reserve_m = range_reserve(scenario, params)
         self.bank0 = abs(scenario.bank_schedule[0][1])   # the range solution's parameter p [rad]
                                          # (bank_profile: phi_0 within the bounds): the next warm start
         self.f_lift_rad = self.bank_final_rad   # the family's phi_f now: lowered by the floor's lift-up
@@ -318,6 +349,7 @@ class Corrector:
         r = math.sqrt(float(x[:3] @ x[:3]))
         e0 = self.mu_m3ps2 / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.radius_m
+        s_aim = s_togo + self.reserve_m          # the aim point: range_reserve beyond the target
         dt = self.params["npc.dt_pred_s"]
         lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
         p_span = profile_span(lo, hi, f)
@@ -325,19 +357,23 @@ class Corrector:
         if math.isfinite(self._p_e0_jpkg) and self.e_deploy_jpkg != self._p_e0_jpkg:
             p_warm = profile_at(p_warm, lo, hi, f, (e0 - self._p_e0_jpkg) / (self.e_deploy_jpkg - self._p_e0_jpkg))
         tol, n_max = self.params["npc.tol_m"], int(self.params["npc.max_iter"])
-        p, zb, n, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
+        p, zb, n, ok = solve_bank(self._z(x, e0, s_aim, sign, f=f), *p_span, p_warm, tol, n_max)
         turn = math.nan
         alt = None
-        if shp is not None and not abs(zb) <= self.params["npc.floor_miss_max_m"]:
+        short = self.reserve_m > 0.0 and zb < -self.reserve_m
+        if shp is not None and (short or not abs(zb) <= self.params["npc.floor_miss_max_m"]):
             alt = reversal_other_way(shp, sign)
         if alt is not None:
             # a reversal in progress whose way round costs more range than the guidance
-            # trades anywhere (npc.floor_miss_max_m): the other way (the reference braked and
-            # turned back, as the shaper would fly it) if that one's answer misses by less.
-            # Not for less: the lateral decision timed the reversal for the way it began, and
-            # turning round delays it, which costs crossrange
+            # trades anywhere (npc.floor_miss_max_m), or, with the range trigger, leaves the
+            # vehicle short of the target itself (beyond the reserve: the trigger's altitude
+            # floor then fires short, while a vehicle turned long still deploys at the target):
+            # the other way (the reference braked and turned back, as the shaper would fly it)
+            # if that one's answer misses by less. Not for less: the lateral decision timed
+            # the reversal for the way it began, and turning round delays it, which costs
+            # crossrange
             self._shp = alt
-            pa, za, na, oka = solve_bank(self._z(x, e0, s_togo, sign, f=f), *p_span, p_warm, tol, n_max)
+            pa, za, na, oka = solve_bank(self._z(x, e0, s_aim, sign, f=f), *p_span, p_warm, tol, n_max)
             n += na
             if abs(za) < abs(zb) - tol:
                 p, zb, ok, turn = pa, za, oka, float(alt[3])
@@ -356,7 +392,7 @@ class Corrector:
             # the range solution deploys too low (or reaches the target only below h_fire, where
             # the trigger's own floor fires short of it): first lift up late, range kept (phi_f
             # lowered, phi_0 solved again for the range: lift down before, lift up at the end)
-            lift = self._lift_late(x, e0, s_togo, sign, h_floor, h_fire, p, tol, n_max)
+            lift = self._lift_late(x, e0, s_aim, sign, h_floor, h_fire, p, tol, n_max)
             n += lift[3]
             if lift[0] is not None:
                 p, f, zb = lift[0], lift[1], lift[2]
@@ -369,7 +405,7 @@ class Corrector:
             # long). In this mode the profile holds phi_0 to the end when phi_0 < phi_f (the
             # fixed phi_f would otherwise take the lift-up away just where it counts), and
             # phi_0 is the largest bank whose predicted deploy altitude reaches the floor
-            b_fl, nh = self._floor_bank(x, e0, s_togo, sign, h_floor, min(p, hi), self._out[O_H_BOX])
+            b_fl, nh = self._floor_bank(x, e0, s_aim, sign, h_floor, min(p, hi), self._out[O_H_BOX])
             n += nh
             if math.isnan(b_fl):        # no trade deploys higher: the range solution's prediction again
                 self._predict(x, b0, bf, e0, sign, self._out)
@@ -377,7 +413,7 @@ class Corrector:
                 floor = True
                 b0, bf = b_fl, min(f, b_fl)
                 self._predict(x, b0, bf, e0, sign, self._out)
-                zb = (central_angle(x[:3], self._out[:3]) * self.radius_m - s_togo if self._out[O_FLAG] == REACHED
+                zb = (central_angle(x[:3], self._out[:3]) * self.radius_m - s_aim if self._out[O_FLAG] == REACHED
                       else math.nan)
                 ok = False
         rf = self._out[:3].copy()

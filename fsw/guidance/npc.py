@@ -53,6 +53,9 @@ PARAMS = [
     Param("npc.h_fire_m", 0.0, 5e4, "m", "predicted altitude at the deploy point (the target) kept above it by "
           "lifting up late, range kept (below it the trigger's altitude floor fires short of the target)",
           ground_settable=False),
+    Param("npc.range_reserve_m", 0.0, 2e4, "m", "range trigger: the range solution aims this far beyond the target "
+          "(a vehicle long by less still deploys at the target; one short by less still reaches it)",
+          ground_settable=False),
     # design bounds of the floor's margin (the unit tests show the rule; the guided campaign sized them)
     Param("npc.floor_margin_k", 0.0, 10.0, "", "floor margin: this many times the measured prediction error",
           ground_settable=False),

@@ -20,22 +20,16 @@ def shaper_accel(phi, phid, target, rate_limit, accel_limit, dt):
     return shaper_accel_braked(phi, phid, target, rate_limit, accel_limit, accel_limit, dt)
 
 
-# The braking curve is aimed at this share of the braking limit: a discrete reference that
-# reaches the curve between two samples can still follow it with its slowing capped at the limit.
-BRAKE_CURVE_SHARE = 0.95
-
-
 @njit(cache=True, nogil=True)
 def shaper_accel_braked(phi, phid, target, rate_limit, accel_limit, brake_limit, dt):
-    """``shaper_accel`` slowing down at b = brake_limit <= accel_limit: every slow-down --
-    braking onto the target on sqrt(2 * 0.95 b |e|), turning round when a new command lies
-    behind it (a reversal commanded while it turns), slowing for a command that moved closer --
-    at most b; it speeds up at the acceleration limit. The last step onto the target (within
-    2 b dt^2 of it) is not capped: it stops there."""
+    """``shaper_accel`` slowing down at b = brake_limit <= accel_limit: braking on
+    sqrt(2 b |e|) onto the target, and turning round at most b while it moves away from the
+    target (a new command behind it, e.g. a reversal commanded while it turns); it speeds up
+    at the acceleration limit."""
     e = target - phi
-    v_des = math.copysign(min(rate_limit, math.sqrt(2.0 * BRAKE_CURVE_SHARE * brake_limit * abs(e)), abs(e) / dt), e)
+    v_des = math.copysign(min(rate_limit, math.sqrt(2.0 * brake_limit * abs(e)), abs(e) / dt), e)
     a = max(-accel_limit, min(accel_limit, (v_des - phid) / dt))
-    if a * phid < 0.0 and abs(e) > 2.0 * brake_limit * dt * dt:     # slowing down
+    if phid * e < 0.0:                 # moving away from the target: turning round
         a = max(-brake_limit, min(brake_limit, a))
     return a
 

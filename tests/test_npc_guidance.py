@@ -385,6 +385,18 @@ def test_predicting_through_the_shaper_once_settled_is_the_law_and_a_slow_revers
     assert r_fast == pytest.approx(r_inst, abs=0.02 * r_inst)
 
 
+def _answer(scn, params, x, target_u, bank0_rad, shp=None) -> tuple[dict, "npc.EntryGuidance"]:
+    """The corrector's answer from the state x for the target target_u, first guess
+    bank0_rad, and the guidance that gave it (closed; its attributes stay readable)."""
+    eg = npc.EntryGuidance(scn, params, EventLog(), 0.02)
+    try:
+        eg.target_u = target_u
+        eg.bank0 = bank0_rad
+        return eg.solve(x, 1.0, 1.0, 1.0, shp=shp), eg
+    finally:
+        eg.close()
+
+
 def test_deploy_altitude_floor_trades_range_for_altitude():
     """From the plant's state 90 s into an entry flown at 90 deg, a target that the range
     solution (phi_0 = 110 deg) reaches entering the deploy box at h_b: with the floor 300 m
@@ -411,13 +423,8 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
     def solve(**over) -> tuple[dict, float]:
         """The corrector's answer from x for the target, first guess 100 deg, with these
         parameters over base; and the bank_final_rad it was configured with."""
-        eg = npc.EntryGuidance(SCN, dict(base, **over), EventLog(), 0.02)
-        try:
-            eg.target_u = target
-            eg.bank0 = math.radians(100.0)
-            return eg.solve(x, 1.0, 1.0, 1.0), eg.bank_final_rad
-        finally:
-            eg.close()
+        ans, eg = _answer(SCN, dict(base, **over), x, target, math.radians(100.0))
+        return ans, eg.bank_final_rad
 
     free, _ = solve(**{"npc.h_floor_m": 0.0})
     assert free["ok"] and not free["floor"] and math.degrees(free["bank0_rad"]) == pytest.approx(110.0, abs=0.5)
@@ -700,13 +707,8 @@ def test_range_trigger_aims_the_deploy_point_the_reserve_beyond_the_target():
     fsw_scn = SCN.with_(deploy_by="fsw")
 
     def answer(scn, trigger):
-        eg = npc.EntryGuidance(scn, dict(base, **{"deploy.trigger": trigger}), EventLog(), 0.02)
-        try:
-            eg.target_u = target
-            eg.bank0 = math.radians(100.0)
-            return eg.solve(x, 1.0, 1.0, 1.0), eg.reserve_m
-        finally:
-            eg.close()
+        ans, eg = _answer(scn, dict(base, **{"deploy.trigger": trigger}), x, target, math.radians(100.0))
+        return ans, eg.reserve_m
 
     rng, reserve = answer(fsw_scn, "range")
     assert reserve == 2000.0 and rng["ok"]
@@ -756,13 +758,8 @@ def test_range_trigger_turns_a_reversal_round_that_leaves_the_vehicle_short_of_t
 
     def answer(beyond_m, scn, trigger):
         ang = (r_cur + beyond_m) / SCN.planet.radius_m
-        eg = npc.EntryGuidance(scn, dict(base, **{"deploy.trigger": trigger}), EventLog(), 0.02)
-        try:
-            eg.target_u = x_u * math.cos(ang) + np.cross(axis, x_u) * math.sin(ang)
-            eg.bank0 = d(60.0)
-            return eg.solve(x, 1.0, 1.0, 1.0, shp=shp.copy())
-        finally:
-            eg.close()
+        return _answer(scn, dict(base, **{"deploy.trigger": trigger}), x,
+                       x_u * math.cos(ang) + np.cross(axis, x_u) * math.sin(ang), d(60.0), shp=shp.copy())[0]
 
     fsw_scn = SCN.with_(deploy_by="fsw")
     turned = answer(1000.0, fsw_scn, "range")

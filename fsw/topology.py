@@ -126,9 +126,8 @@ class Topology:
     def close(self) -> None:
         """Stop the rehearsal's spare's background work (the flying FSW is its owner's to
         close); the rehearsal ends with it. Safe to call twice."""
-        if self.rehearsal is not None:
-            if isinstance(self.executive.clock, RealTimeClock):
-                self.executive.clock.set_rehearsal(None, 0)
+        if self.rehearsal is not None:          # (only ever set on a RealTimeClock)
+            self.executive.clock.set_rehearsal(None, 0)
             self.rehearsal.close()
             self.rehearsal = None
 

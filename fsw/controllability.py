@@ -281,7 +281,9 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
                   f"cancel at qbar {qbar_pa:.0f} Pa (limit {trim_max_deg:g} deg)")
     elif trim_deg > trim_max_deg:
         reason = f"trim offset {trim_deg:.1f} deg needed to absorb {residual:.0f} N m (limit {trim_max_deg:g} deg)"
-    elif min(auth) < authority_min_radps2 or min(auth) <= 0.0:
+    elif min(auth) < authority_min_radps2 or min(auth) <= _TOL_NM / float(np.linalg.norm(Iv)):
+        # an authority within the LP's own tolerance of zero (the torque rows' tolerance over the
+        # inertia about v) is zero: a bias that uses up one way's jets exactly leaves round-off there
         way = "+" if auth[0] < auth[1] else "-"
         reason = (f"bank authority {way}{math.degrees(min(auth)):.2f} deg/s2 below "
                   f"{math.degrees(authority_min_radps2):.2f} deg/s2")

@@ -22,6 +22,7 @@ preallocated ring buffers; percentiles are computed only when asked (telemetry).
 """
 from __future__ import annotations
 
+import heapq
 import time
 from typing import Callable
 
@@ -92,16 +93,18 @@ class RealTimeClock:
     caches cool again): the lead costs its length of a core every period. Its time falls
     before the release, so the cycle's compute time does not include it (an overrun shows as
     release jitter). The lead is ``lead_ns`` or, when the rehearsal has run longer lately
-    (a host busy elsewhere, caches cold from other work), its longest duration over the last
-    ``LEAD_WINDOW`` rehearsals times ``LEAD_MARGIN``, grown to no more than ``LEAD_CAP`` of the
-    period: a fixed lead that the rehearsal outgrows makes every release late by the rest.
+    (caches cold from other work, a host busy elsewhere), the second longest of the last
+    ``LEAD_WINDOW`` rehearsals' durations times ``LEAD_MARGIN``, grown to no more than
+    ``LEAD_CAP`` of the period: a fixed lead that the rehearsal outgrows makes every release
+    late by the rest. The second longest, not the longest: one rehearsal preempted for
+    milliseconds says nothing of the next, and would hold a long spin for the whole window.
     ``now_ns`` and ``sleep_until`` are injectable (tests use a fake clock).
     """
 
     mode = "realtime"
-    LEAD_WINDOW = 32       # rehearsals whose longest duration sizes the lead
+    LEAD_WINDOW = 32       # rehearsals whose second longest duration sizes the lead
     LEAD_MARGIN = 1.25     # the lead over that duration (its spread from one period to the next)
-    LEAD_CAP = 0.5         # the lead's bound, a fraction of the period
+    LEAD_CAP = 0.25        # the lead's bound, a fraction of the period (it is spun: a core's time)
 
     def __init__(self, period_ns: int, *, spin_ns: int = 0,
                  now_ns: Callable[[], int] = time.monotonic_ns,
@@ -140,7 +143,8 @@ class RealTimeClock:
         """Note a rehearsal's duration; the next lead from the last LEAD_WINDOW of them."""
         ring = self.rehearsal_ns
         ring[self.rehearsals % self.LEAD_WINDOW] = took_ns
-        grown = min(int(max(ring) * self.LEAD_MARGIN), int(self.period_ns * self.LEAD_CAP))
+        second = heapq.nlargest(2, ring)[1]
+        grown = min(int(second * self.LEAD_MARGIN), int(self.period_ns * self.LEAD_CAP))
         self.lead_ns = max(self.rehearse_ns, grown)
         if self.lead_ns > self.lead_max_ns:
             self.lead_max_ns = self.lead_ns

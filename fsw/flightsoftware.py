@@ -229,10 +229,9 @@ class FlightSoftware(GroundCommands):
         """Real time, shortly before a release (fsw/topology.py): the compiled kernels the
         rehearsal's spare warms as code run once more on this instance's own data, their
         answers discarded -- the frame check, the jet monitor and navigation on ``frame``
-        (the last frame this instance took), SAMI on a copy of its state with the last
-        cycle's navigation and reference, the allocator's query on its own tables for
-        ``demand_B`` (the spare's demand on that frame) -- and the output record refilled
-        with what it holds. Nothing the next cycle reads changes."""
+        (the record of the last frame this instance took), SAMI on a copy of its state with the last
+        cycle's navigation and reference, and the allocator's query on its own tables for
+        ``demand_B`` (the spare's demand on that frame). Nothing the next cycle reads changes."""
         fv = self._frame_views
         if fv[0] is frame and self.cycles > 0:
             self.monitor.rehearse(frame)
@@ -241,9 +240,6 @@ class FlightSoftware(GroundCommands):
             if self._have_prev:
                 self.control.rehearse(self.nav.state, self.guidance, self.tau_alloc_B)
         self.allocator.rehearse(demand_B)
-        if self.cycles > 0:
-            # the same values again (the record is refilled by every cycle before any reader)
-            self._output.fill(self, self._output.v["jets_cmd"])
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,

@@ -2,7 +2,7 @@
 on the last frame before each release) leaves the flight unchanged, runs only in real time,
 and never rebuilds tables or solves the controllability LP (its FDIR identifies nothing). The
 flying instance's own rehearsal (its allocator's query on its tables, its jet monitor on copies
-of its counters, its frame check, navigation and SAMI on copies, its output record refilled)
+of its counters, its frame check, navigation and SAMI on copies)
 changes nothing either, also through a fault's detection."""
 from __future__ import annotations
 

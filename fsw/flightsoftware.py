@@ -229,11 +229,12 @@ class FlightSoftware(GroundCommands):
         """Real time, shortly before a release (fsw/topology.py): the compiled kernels the
         rehearsal's spare warms as code run once more on this instance's own data, their
         answers discarded -- the frame check, the jet monitor and navigation on ``frame``
-        (the record of the last frame this instance took), SAMI on a copy of its state with the last
-        cycle's navigation and reference, and the allocator's query on its own tables for
-        ``demand_B`` (the spare's demand on that frame). Nothing the next cycle reads changes."""
+        (the record of the last frame this instance took), SAMI on a copy of its state with
+        the last cycle's navigation and reference, and the allocator's query on its own
+        tables for ``demand_B`` (the spare's demand on that frame). Nothing the next cycle
+        reads changes."""
         fv = self._frame_views
-        if fv[0] is frame and self.cycles > 0:
+        if fv[0] is frame:
             self.monitor.rehearse(frame)
             self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), fv[2])
             self.nav.rehearse(fv[1])

@@ -22,6 +22,7 @@ preallocated ring buffers; percentiles are computed only when asked (telemetry).
 """
 from __future__ import annotations
 
+import heapq
 import time
 from typing import Callable
 
@@ -87,15 +88,23 @@ class RealTimeClock:
     whole period behind, the missed releases are skipped (counted in ``missed``) so that
     tick k stays at time t0 + k·period: rate groups keep their phase with time.
     With a rehearsal (``set_rehearsal(fn, lead_ns)``), ``fn()`` runs once before each release
-    at release - lead_ns (- spin_ns if that is longer), when the caller is not already past
+    at release - lead (- spin_ns if that is longer), when the caller is not already past
     that time, and the rest of the lead is spun, not slept (a sleep, however short, lets the
     caches cool again): the lead costs its length of a core every period. Its time falls
     before the release, so the cycle's compute time does not include it (an overrun shows as
-    release jitter).
+    release jitter). The lead is ``lead_ns`` or, when the rehearsal has run longer lately
+    (caches cold from other work, a host busy elsewhere), the second longest of the last
+    ``LEAD_WINDOW`` rehearsals' durations times ``LEAD_MARGIN``, grown to no more than
+    ``LEAD_CAP`` of the period: a fixed lead that the rehearsal outgrows makes every release
+    late by the rest. The second longest, not the longest: one rehearsal preempted for
+    milliseconds says nothing of the next, and would hold a long spin for the whole window.
     ``now_ns`` and ``sleep_until`` are injectable (tests use a fake clock).
     """
 
     mode = "realtime"
+    LEAD_WINDOW = 32       # rehearsals whose second longest duration sizes the lead
+    LEAD_MARGIN = 1.25     # the lead over that duration (its spread from one period to the next)
+    LEAD_CAP = 0.25        # the lead's bound, a fraction of the period (it is spun: a core's time)
 
     def __init__(self, period_ns: int, *, spin_ns: int = 0,
                  now_ns: Callable[[], int] = time.monotonic_ns,
@@ -114,6 +123,9 @@ class RealTimeClock:
         self.rehearse_ns = 0
         self.rehearsals = 0        # rehearsals run
         self.rehearsals_skipped = 0   # releases whose rehearsal time had passed already
+        self.rehearsal_ns = [0] * self.LEAD_WINDOW    # the last rehearsals' durations (a ring)
+        self.lead_ns = 0                 # the lead the next rehearsal starts at
+        self.lead_max_ns = 0             # the longest lead taken since set_rehearsal
 
     def set_rehearsal(self, fn: Callable[[], None] | None, lead_ns: int) -> None:
         """Run ``fn()`` ``lead_ns`` before each release (None or lead_ns 0: no rehearsal)."""
@@ -124,6 +136,18 @@ class RealTimeClock:
             raise TypeError("RealTimeClock.set_rehearsal: fn is not callable")
         self.rehearse = fn if lead_ns > 0 else None
         self.rehearse_ns = lead_ns if fn is not None else 0
+        self.rehearsal_ns = [0] * self.LEAD_WINDOW
+        self.lead_ns = self.lead_max_ns = self.rehearse_ns
+
+    def _size_lead(self, took_ns: int) -> None:
+        """Note a rehearsal's duration; the next lead from the last LEAD_WINDOW of them."""
+        ring = self.rehearsal_ns
+        ring[self.rehearsals % self.LEAD_WINDOW] = took_ns
+        second = heapq.nlargest(2, ring)[1]
+        grown = min(int(second * self.LEAD_MARGIN), int(self.period_ns * self.LEAD_CAP))
+        self.lead_ns = max(self.rehearse_ns, grown)
+        if self.lead_ns > self.lead_max_ns:
+            self.lead_max_ns = self.lead_ns
 
     @classmethod
     def from_params(cls, params: dict, period_ns: int, **kw) -> "RealTimeClock":
@@ -149,12 +173,13 @@ class RealTimeClock:
         else:
             wake = t_rel - self.spin_ns
             if self.rehearse is not None:
-                t_reh = t_rel - max(self.rehearse_ns, self.spin_ns)
+                t_reh = t_rel - max(self.lead_ns, self.spin_ns)
                 if now < t_reh:
-                    self._sleep_to(t_reh, now)
+                    t_reh = self._sleep_to(t_reh, now)
                     self.rehearse()
-                    self.rehearsals += 1
                     now = wake = self.now_ns()   # no sleep between the rehearsal and the release: spin
+                    self._size_lead(now - t_reh)
+                    self.rehearsals += 1
                 else:
                     self.rehearsals_skipped += 1
             now = self._sleep_to(wake, now)

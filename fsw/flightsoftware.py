@@ -227,13 +227,20 @@ class FlightSoftware(GroundCommands):
 
     def rehearse(self, frame, demand_B: np.ndarray) -> None:
         """Real time, shortly before a release (fsw/topology.py): the compiled kernels the
-        rehearsal's spare cannot warm for this instance run on this instance's data, their
-        answers discarded -- the allocator's query on its own tables for ``demand_B`` (the
-        spare's demand on the last frame) and the jet monitor on ``frame``'s chamber
-        pressures. Nothing the next cycle reads changes."""
+        rehearsal's spare warms as code run once more on this instance's own data, their
+        answers discarded -- the frame check, the jet monitor and navigation on ``frame``
+        (the record of the last frame this instance took), SAMI on a copy of its state with
+        the last cycle's navigation and reference, and the allocator's query on its own
+        tables for ``demand_B`` (the spare's demand on that frame). Nothing the next cycle
+        reads changes."""
+        fv = self._frame_views
+        if fv[0] is frame:
+            self.monitor.rehearse(frame)
+            self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), fv[2])
+            self.nav.rehearse(fv[1])
+            if self._have_prev:
+                self.control.rehearse(self.nav.state, self.guidance, self.tau_alloc_B)
         self.allocator.rehearse(demand_B)
-        if self._frame_views[0] is frame:
-            self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), self._frame_views[2])
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,

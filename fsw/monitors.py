@@ -120,6 +120,7 @@ class SensorMonitor:
         self._lims = np.zeros((6, 2))
         self._apply()
         self._out = np.zeros(5)
+        self._r_x = np.zeros(_N_F)     # rehearse's copy of a frame's floats
         self._fviews: tuple = (None, None, None, None)   # (frame, its dtype, float view, k view) of the last frame
         self.counts: dict[str, int] = {r: 0 for r in REASONS}
         self.accepted = 0
@@ -206,6 +207,18 @@ class SensorMonitor:
             self.stale = False
             self.events.emit(t_s, EV.SENSORS_RECOVERED)
         return True
+
+    def rehearse(self, frame) -> None:
+        """Real time, just before a release: the frame check's kernel on a copy of the last
+        checked frame's floats (``frame``, when it is that record) with this monitor's limits,
+        so the next ``check`` finds its data warm. Changes nothing: the frame is not written
+        (bad chamber entries become NaN in the copy), and ``_out`` is scratch that ``check``
+        writes before it reads."""
+        fv = self._fviews
+        if frame is not fv[0] or fv[2] is None:
+            return
+        np.copyto(self._r_x, fv[2])
+        _frame_kernel(self._r_x, self._lims, 5, self._out)
 
     def _report_chamber(self, t_s: float) -> None:
         n_nf, n_out = int(self._out[1]), int(self._out[2])

@@ -114,6 +114,7 @@ class Navigation:
                         float(planet.rho0_kgpm3), float(planet.scale_height_m))
         self.state = NavState()
         self._x = np.zeros(N_IN)            # update's inputs, packed
+        self._r_buf = np.zeros(_S_N)        # rehearse's copy of the state's buffer
 
     def update(self, t_s: float, sigma_BN, omega_BN_B, r_N, v_N, accel_B) -> NavState:
         """The flight condition at t_s from one frame's attitude, rate, position, velocity
@@ -136,3 +137,10 @@ class Navigation:
         (n.V_rel_mps, n.h_m, n.alpha_rad, n.beta_rad, n.bank_rad, n.rho_kgpm3, n.qbar_pa,
          n.mach) = _nav_kernel(x, om, R, model, rho0, H, n.buf)
         return n
+
+    def rehearse(self, x: np.ndarray) -> None:
+        """Real time, just before a release: ``update_packed``'s kernel on ``x`` into a copy
+        of the state's buffer, so the next update finds its data warm. The state is unchanged."""
+        np.copyto(self._r_buf, self.state.buf)
+        om, R, model, rho0, H = self._consts
+        _nav_kernel(x, om, R, model, rho0, H, self._r_buf)

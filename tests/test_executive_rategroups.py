@@ -233,6 +233,57 @@ def test_rehearsal_runs_once_lead_before_each_release_then_spins_to_it():
         clock.set_rehearsal(5, lead)
 
 
+def test_the_rehearsal_lead_grows_to_the_rehearsals_own_duration_and_back():
+    """Rehearsals that outgrow their fixed lead make the release late; the lead is then
+    sized from the rehearsals' measured durations (the second longest of the recent ones
+    times the margin: one outlier moves nothing), bounded below the period, and returns to
+    the set lead once they are short again."""
+    ft = FakeTime(per_read_ns=1_000)
+    period, lead = 20 * MS, 800_000
+    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=ft.sleep_until)
+    cost = {"ns": 1_500_000}                     # each rehearsal takes this long
+
+    def rehearse():
+        ft.t += cost["ns"]
+    clock.set_rehearsal(rehearse, lead)
+    clock.start(ft.t + period)
+    late = []
+    for _ in range(3):
+        _, t_rel = clock.release()
+        late.append(ft.t - t_rel)
+    # the first two rehearsals, started at the set lead, ended ~0.7 ms after their release
+    assert all(700_000 <= d < 710_000 for d in late[:2])
+    took = sorted(clock.rehearsal_ns)[-2]
+    assert 1_500_000 <= took < 1_510_000
+    assert clock.lead_ns == int(took * clock.LEAD_MARGIN) > lead
+    assert 0 <= late[2] < 3_000                           # then released on time: spun to it
+    assert ft.sleeps[-1] == t_rel - clock.lead_ns        # ... from the grown lead
+    # rehearsals short again: the grown lead holds for LEAD_WINDOW of them, then the set lead
+    cost["ns"] = 100_000
+    for _ in range(clock.LEAD_WINDOW - 2):       # two of the three long ones still in the window
+        clock.release()
+    assert clock.lead_ns > lead
+    clock.release()
+    assert clock.lead_ns == lead and clock.lead_max_ns == int(took * clock.LEAD_MARGIN)
+    # (short rehearsals never shorten the set lead); one preempted for 9 ms moves nothing
+    cost["ns"] = 9 * MS
+    clock.release()
+    assert clock.lead_ns == lead
+    cost["ns"] = 100_000
+    clock.release()
+    assert clock.lead_ns == lead
+    # two such: the lead stops at LEAD_CAP of the period, and a release already inside that
+    # lead is not rehearsed (counted)
+    cost["ns"] = 9 * MS
+    clock.release()
+    assert clock.lead_ns == int(period * clock.LEAD_CAP)
+    _, t_rel = clock.release()
+    ft.t = t_rel + period - clock.lead_ns + 1_000
+    n = clock.rehearsals
+    clock.release()
+    assert clock.rehearsals == n and clock.rehearsals_skipped == 1 and clock.missed == 0
+
+
 def test_real_clock_releases_are_absolute_and_never_drift():
     period = 2 * MS
     clock = RealTimeClock(period)

@@ -2,7 +2,8 @@
 on the last frame before each release) leaves the flight unchanged, runs only in real time,
 and never rebuilds tables or solves the controllability LP (its FDIR identifies nothing). The
 flying instance's own rehearsal (its allocator's query on its tables, its jet monitor on copies
-of its counters) changes nothing either, also through a fault's detection."""
+of its counters, its frame check, navigation and SAMI on copies)
+changes nothing either, also through a fault's detection."""
 from __future__ import annotations
 
 import numpy as np
@@ -96,6 +97,37 @@ def test_the_flying_instances_rehearsal_changes_nothing_through_a_detection():
     for a, b in zip(outs, ref_outs):
         for name in ("u_cal_B", "tau_alloc_B", "health", "eta_hat", "theta_hat", "jets_cmd"):
             np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def test_the_flying_instances_own_rehearsals_change_nothing_and_compute_what_the_cycle_does():
+    """FlightSoftware.rehearse on a fresh frame with an out-of-range chamber entry: the frame,
+    the monitor's counts, the navigation and SAMI states and the output record are unchanged;
+    the copies hold what the real calls then compute (navigation on the frame, the frame
+    check's NaN) or what ``update`` computes on the same inputs (SAMI)."""
+    import copy
+    scn = load_scenario("nominal")
+    plant = Plant(scn, scn.seed)
+    fsw = FlightSoftware(scn, EventLog())
+    frame = plant.sensors
+    for _ in range(30):
+        frame = plant.step(fsw.control_step(frame))
+    assert frame is plant.sensors and fsw._frame_views[0] is frame    # one record, refilled
+    frame["chamber"][2] = 50.0                      # above fdir.chamber_hi: NaN for the check
+    before = {"frame": frame.copy(), "nav": fsw.nav.state.buf.copy(), "sami": fsw.control._sb.copy(),
+              "counts": dict(fsw.monitor.counts), "out": fsw.output.copy()}
+    sami = copy.deepcopy(fsw.control)
+    sami.update(fsw.nav.state, fsw.guidance, fsw.tau_alloc_B)
+    fsw.rehearse(frame, fsw.u_cal_B.copy())
+    assert frame.tobytes() == before["frame"].tobytes()
+    np.testing.assert_array_equal(fsw.nav.state.buf, before["nav"])
+    np.testing.assert_array_equal(fsw.control._sb, before["sami"])
+    assert fsw.monitor.counts == before["counts"]
+    assert fsw.output.tobytes() == before["out"].tobytes()
+    np.testing.assert_array_equal(fsw.control._rb, sami._sb)          # SAMI's update, on the copy
+    assert np.isnan(fsw.monitor._r_x[15 + 2]) and np.isnan(fsw.monitor._r_x[15:]).sum() == 1
+    fsw.control_step(frame)
+    np.testing.assert_array_equal(fsw.nav._r_buf, fsw.nav.state.buf)  # navigation on this frame
+    assert np.isnan(frame["chamber"][2]) and fsw.monitor.counts["chamber_range"] == 1
 
 
 def test_fdir_rehearse_computes_the_next_update_on_copies():

@@ -53,24 +53,30 @@ def test_the_row_passes_only_with_every_command_answered_in_time(watch):
 def test_one_command_at_a_time_each_ack_its_own_and_no_burst_after_a_stall(watch):
     watch.pace()
     period = 1.0 / watch.pace_hz
-    watch._send_due(100.0)
-    watch._send_due(100.0 + period)                      # due, but the first is unanswered
+    now = [0.0]
+    watch.clock = lambda: now[0]
+
+    def send_due(t: float) -> None:
+        now[0] = t
+        watch._send_due()
+    send_due(100.0)
+    send_due(100.0 + period)                             # due, but the first is unanswered
     assert len(watch.sent_t) == 1
     watch._answered(100.25)
-    watch._send_due(100.25)                              # answered: the second goes
+    send_due(100.25)                                     # answered: the second goes
     watch._answered(100.3)
-    watch._send_due(100.3)                               # not due before 100.4
-    watch._send_due(100.0 + 2 * period)
+    send_due(100.3)                                      # not due before 100.4
+    send_due(100.0 + 2 * period)
     assert watch.sent_t == [100.0, 100.25, 100.0 + 2 * period]
-    watch._send_due(100.0 + 2 * period + ANSWER_WAIT_S - 0.01)   # the third, unanswered, still waits
-    watch._send_due(100.0 + 2 * period + ANSWER_WAIT_S)          # ... given up: the fourth goes
+    send_due(100.0 + 2 * period + ANSWER_WAIT_S - 0.01)  # the third, unanswered, still waits
+    send_due(100.0 + 2 * period + ANSWER_WAIT_S)         # ... given up: the fourth goes
     assert len(watch.sent_t) == 4
     watch._answered(101.45)                              # the fourth's
     watch._answered(101.46)                              # no command waiting
-    watch._send_due(200.0)                               # after a stall of this thread: one command ...
+    send_due(200.0)                                      # after a stall of this thread: one command ...
     watch._answered(200.01)
-    watch._send_due(200.01)                              # ... and the next a period later, not at once
-    watch._send_due(200.0 + period)
+    send_due(200.01)                                     # ... and the next a period later, not at once
+    send_due(200.0 + period)
     assert watch.sent_t[4:] == [200.0, 200.0 + period]
     watch._answered(200.0 + period + 0.1)
     watch.last_rx_t = 300.0

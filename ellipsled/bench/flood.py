@@ -334,6 +334,7 @@ class GroundWatch:
         self.ack_t: list[float | None] = []
         self.last_rx_t = 0.0
         self.stale_acks = 0
+        self.clock = time.time                                # Unix time (tests set their own)
         self._next_t = 0.0
         if pace_hz:
             self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
@@ -345,19 +346,21 @@ class GroundWatch:
         """Start sending the paced commands (after the run's warm-up)."""
         self._pacing.set()
 
-    def _send_due(self, now: float) -> None:
-        """Send the next PROBE if its time (Unix ``now``) has come and no command is waiting
-        for its ACK (one that waited ANSWER_WAIT_S is given up: missing)."""
+    def _send_due(self) -> None:
+        """Send the next PROBE if its time has come and no command is waiting for its ACK
+        (one that waited ANSWER_WAIT_S is given up: missing)."""
+        now = self.clock()
         if not self._pacing.is_set() or now < self._next_t:
             return
         if self.ack_t and self.ack_t[-1] is None and now - self.sent_t[-1] < ANSWER_WAIT_S:
             return
         period = 1.0 / self.pace_hz
         self._next_t = self._next_t + period if self._next_t + period > now else now + period
-        self.sent_t.append(now)
+        frame = self.signer.pack(PROBE)
+        self.sent_t.append(self.clock())                  # as it goes
         self.ack_t.append(None)
         try:
-            self.sock.sendto(self.signer.pack(PROBE), self.vehicle)
+            self.sock.sendto(frame, self.vehicle)
         except OSError:
             pass
 
@@ -397,7 +400,7 @@ class GroundWatch:
         st = self.client.state
         while not self._stop.is_set():
             if self.pace_hz:
-                self._send_due(time.time())
+                self._send_due()
             try:
                 data, anc, _, addr = self.sock.recvmsg(65536, 64)
             except (socket.timeout, InterruptedError):

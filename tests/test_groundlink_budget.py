@@ -284,7 +284,7 @@ def test_what_receiving_takes_past_the_intakes_budget_is_taken_from_its_next_sha
     gl.rx_tail = RecentCost()
     given, poll = [], gl.intake.poll
 
-    def late_poll(handle, budget_ns=None):
+    def late_poll(handle, budget_ns=None, least=True):
         given.append(budget_ns)
         clock.t += budget_ns + 40_000
         return poll(handle, 0)

@@ -309,7 +309,7 @@ def test_a_call_begins_its_first_frame_however_little_its_socket_read_left():
     """Frames costing 100 us, known to the estimate; a call of 120 us whose socket read takes
     110 us has 10 us left, less than a frame's estimate: it begins that frame all the same
     (the budget bounds what follows: the next datagram waits), and a call of no budget reads
-    nothing."""
+    nothing; a call that only reads on (``least=False``) keeps to its budget alone."""
     b, h = _priced_bench([100_000])
     try:
         for _ in range(4):
@@ -325,6 +325,10 @@ def test_a_call_begins_its_first_frame_however_little_its_socket_read_left():
         assert h.t - t0 == 110_000 + 100_000
         assert b.intake.poll(h, 0) == 0 and h.n == 5        # no budget: nothing read
         assert b.intake.poll(h, 1) == 1 and h.n == 6        # the next call: the next datagram
+        b.send(b.ground.pack(ARM))
+        time.sleep(0.02)
+        assert b.intake.poll(h, 120_000, least=False) == 1 and h.n == 6   # read, not begun: it waits
+        assert b.intake.poll(h, 1) == 0 and h.n == 7        # ... and is the next call's first
     finally:
         b.close()
 

@@ -234,7 +234,7 @@ class GroundLink:
             t_more = b.elapsed_ns()
             left = b.left_ns() - self.rx_tail.ns
             if self.intake.stats["budget_hits"] != hits and left > self.intake.frame_estimate_ns(left * 4):
-                self._receive(left)          # the intake stopped on its budget: more, in what sending left
+                self._receive(left, False)   # the intake stopped on its budget: more, in what sending left
             # what receiving leaves the send side: what it wanted (sent, and what the budget
             # deferred), and its cost besides the streams, peaks decaying x0.9 a tick (one
             # outlier is forgotten within seconds)
@@ -247,12 +247,12 @@ class GroundLink:
             self.in_tick = False
         b.finish()
 
-    def _receive(self, given_ns: int) -> None:
+    def _receive(self, given_ns: int, least: bool = True) -> None:
         """Poll within ``given_ns``. The intake's budget ends at its last frame's start; what
         follows (that frame past its estimate, the refusal reports, the link's counters) is
         measured (``rx_tail``) and taken from the next shares (at most half of one)."""
         t = self.budget.elapsed_ns()
-        self.poll(given_ns)
+        self.poll(given_ns, least)
         self.rx_tail.add(max(0, self.budget.elapsed_ns() - t - given_ns))
 
     def warm_up(self, spare_fsw, sensors=None) -> None:
@@ -281,10 +281,10 @@ class GroundLink:
              self.streams.mode_sent) = saved
             self._pack_only = False
 
-    def poll(self, budget_ns: int | None = None) -> int:
+    def poll(self, budget_ns: int | None = None, least: bool = True) -> int:
         """Receive within the tick's budget (or ``budget_ns``, if less) without blocking;
-        returns the datagrams read."""
-        n = self.intake.poll(self._handle_one, budget_ns)
+        returns the datagrams read. ``least``: as DatagramIntake.poll's."""
+        n = self.intake.poll(self._handle_one, budget_ns, least)
         st, ist = self.stats, self.intake.stats
         st["rx_datagrams"], st["rx_bytes"] = ist["datagrams"], ist["bytes"]
         st["refused_early"], st["kernel_drops"] = ist["refused_early"], ist["kernel_drops"]

@@ -189,10 +189,13 @@ class DatagramIntake:
             self.frame_ns.append(clock() - t)
         return None
 
-    def poll(self, handle: Callable[[object, tuple[str, int]], None], budget_ns: int | None = None) -> int:
+    def poll(self, handle: Callable[[object, tuple[str, int]], None], budget_ns: int | None = None,
+             least: bool = True) -> int:
         """Read and pass on what the budget allows; ``handle(msg, addr)`` gets every
         verified, decoded message. ``budget_ns``: this call's time, if less than the
-        configured budget (the caller's slack). Returns the number of datagrams read."""
+        configured budget (the caller's slack). ``least``: the call's first datagram and
+        frame are taken up whatever the budget leaves (False: a call that only reads on
+        after another, within its budget alone). Returns the number of datagrams read."""
         t0 = self.clock_ns()
         budget = self.budget_ns if budget_ns is None else min(self.budget_ns, int(budget_ns))
         n = 0
@@ -216,8 +219,8 @@ class DatagramIntake:
         # left) and begins its first frame to verify, however little time is left by then:
         # a budget smaller than a socket read and a frame must not keep a command waiting
         # call after call
-        first = budget > 0
-        begun = False
+        first = least and budget > 0
+        begun = not least
 
         def fits() -> bool:
             """A frame to verify is begun: the call's first always, a later one when its

@@ -210,8 +210,9 @@ def rows(res: dict) -> list[Row]:
                        f"({fmt(a.get('pace_hz'))}/s after warm-up): in time / sent",
                        f"{fmt(a.get('in_time'))} / {fmt(judged)}",
                        f"late {fmt(a.get('late'))}, missing {fmt(a.get('missing'))}; answer p99 / max "
-                       f"{fmt(a.get('latency_p99_ms'))} / {fmt(a.get('latency_max_ms'))} ms; slips {fmt(a.get('slips'))}; "
-                       f"one command at a time, longest gap {fmt(a.get('send_gap_max_ms'))} ms",
+                       f"{fmt(a.get('latency_p99_ms'))} / {fmt(a.get('latency_max_ms'))} ms; slips {fmt(a.get('slips'))}"
+                       + (f"; one command at a time, longest gap {fmt(a['send_gap_max_ms'])} ms"
+                          if "send_gap_max_ms" in a else ""),
                        f"in time: ACK within {fmt(1e3 * a['in_time_s']) if a.get('in_time_s') else 'n/m'} ms",
                        "0 late, 0 missing", ok))
     return out

@@ -21,7 +21,7 @@ import pytest
 from fsw.groundlink.schedule import COST_SAMPLES, DUE_SLACK, END_RESERVE, RecentCost, StreamSchedule, TickBudget
 from fsw.groundlink.streams import ATTITUDE_GROUP, ATTITUDE_UNITS
 from interfaces.event_catalogue import EV
-from tests.rig import ACCEPTED, flown
+from tests.rig import ACCEPTED, PricedReads, flown
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing.sign import Signer
 
@@ -389,20 +389,6 @@ def test_the_most_overdue_unit_goes_whatever_is_left_the_next_overdue_one_only_i
     assert turns == Counter({"SYSTEM_TIME": 1})
 
 
-class _PricedReads:
-    """The intake's socket with each read costing ``read_ns`` on the FrameClock."""
-
-    def __init__(self, sock, clock: FrameClock, read_ns: int):
-        self.sock, self.clock, self.read_ns = sock, clock, read_ns
-
-    def recvfrom_into(self, *args):
-        self.clock.t += self.read_ns
-        return self.sock.recvfrom_into(*args)
-
-    def __getattr__(self, name):
-        return getattr(self.sock, name)
-
-
 def test_a_signed_command_is_answered_in_its_tick_when_the_socket_read_takes_all_of_receivings_share(priced):
     """Every stream at its fastest and falling overdue (receiving keeps only its floor), each
     socket read costing a whole budget: the intake reads the command and, out of time, begins
@@ -411,7 +397,7 @@ def test_a_signed_command_is_answered_in_its_tick_when_the_socket_read_takes_all
     gl = rig.gl
     gl.intake.clock_ns = clock
     gl.budget.budget_ns = 8 * FRAME_NS
-    gl.intake.sock = _PricedReads(gl.intake.sock, clock, gl.budget.budget_ns)
+    gl.intake.sock = PricedReads(gl.intake.sock, clock, gl.budget.budget_ns)
     for k in range(10):
         pc = rig.gcs.start_command(mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1, timeout_s=60.0, retries=0)
         time.sleep(0.002)                                 # loopback delivery

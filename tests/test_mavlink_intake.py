@@ -17,6 +17,7 @@ from interfaces.mavlink.signing.keys import SigningKey
 from interfaces.mavlink.signing.link import SignedLink
 from interfaces.mavlink.signing.sign import Signer
 from interfaces.mavlink.signing.verify import Reject
+from tests.rig import PricedReads
 
 ACCEPT = {mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_PARAM_SET}
 ARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 1, 0, 0, 0, 0, 0, 0)
@@ -291,20 +292,6 @@ def test_one_slow_command_moves_neither_the_estimate_nor_the_reading():
         b.close()
 
 
-class PricedSocket:
-    """The intake's socket with each read costing ``read_ns`` on the PricedHandle's clock."""
-
-    def __init__(self, sock, h: PricedHandle, read_ns: int):
-        self.sock, self.h, self.read_ns = sock, h, read_ns
-
-    def recvfrom_into(self, *args):
-        self.h.t += self.read_ns
-        return self.sock.recvfrom_into(*args)
-
-    def __getattr__(self, name):
-        return getattr(self.sock, name)
-
-
 def test_a_call_begins_its_first_frame_however_little_its_socket_read_left():
     """Frames costing 100 us, known to the estimate; a call of 120 us whose socket read takes
     110 us has 10 us left, less than a frame's estimate: it begins that frame all the same
@@ -316,7 +303,7 @@ def test_a_call_begins_its_first_frame_however_little_its_socket_read_left():
             b.send(b.ground.pack(ARM))
         time.sleep(0.02)
         assert _priced_polls(b, h, 1)[0][0] == 4            # the estimate: 100 us a frame
-        b.intake.sock = PricedSocket(b.rx, h, 110_000)
+        b.intake.sock = PricedReads(b.rx, h, 110_000)
         for _ in range(2):
             b.send(b.ground.pack(ARM))
         time.sleep(0.02)

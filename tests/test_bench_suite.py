@@ -334,7 +334,16 @@ def test_real_time_sections_are_measured_after_a_settle_phase_recorded_beside_th
     assert "settle" not in res["codec"]
     assert res["jitter"]["settle"]["probes_us"] == [300.0, 110.0, 105.0] and res["jitter"]["settle"]["settled"]
     assert res["flood"]["settle"]["probes_us"] == [90.0, 95.0]
+    assert all("steal_share_in_section" in res[n]["settle"] for n in ("jitter", "flood"))
     assert [x for x in order if not x.startswith("bench: host")] == ["codec", "jitter", "flood"]
     assert order.index("jitter") > next(i for i, x in enumerate(order) if x.startswith("bench: host settled"))
     row = next(r for r in suite.rows(res) if r[0].startswith("host state"))
     assert row[3] == "not settled: none"
+
+
+def test_the_hosts_steal_share_is_what_it_took_of_the_cpu_time_between_two_readings():
+    from ellipsled.bench import settle
+    assert settle.steal_share((1000, 10), (1400, 30)) == pytest.approx(0.05)
+    assert settle.steal_share(None, (1400, 30)) is None and settle.steal_share((1400, 30), (1400, 30)) is None
+    now = settle.cpu_ticks()
+    assert now is None or (now[0] >= now[1] >= 0)

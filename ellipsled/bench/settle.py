@@ -56,6 +56,25 @@ def probe_us(samples: int = SAMPLES, sleep: Callable[[float], None] = time.sleep
     return statistics.median(t) * 1e-3
 
 
+def cpu_ticks() -> tuple[int, int] | None:
+    """(all, stolen) CPU time of the machine so far [clock ticks], from /proc/stat's first
+    line (steal: time the host ran something else while a vCPU wanted to run); None where
+    there is none."""
+    try:
+        with open("/proc/stat") as f:
+            v = [int(x) for x in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    return (sum(v[:8]), v[7]) if len(v) >= 8 else None
+
+
+def steal_share(before: tuple[int, int] | None, after: tuple[int, int] | None) -> float | None:
+    """The share of the machine's CPU time the host stole between two ``cpu_ticks``."""
+    if before is None or after is None or after[0] <= before[0]:
+        return None
+    return (after[1] - before[1]) / (after[0] - before[0])
+
+
 def baseline(probe: Callable[[], float] = probe_us, n: int = 3) -> dict:
     """The run's reference: the median of ``n`` probes at its start."""
     got = [probe() for _ in range(n)]
@@ -65,8 +84,9 @@ def baseline(probe: Callable[[], float] = probe_us, n: int = 3) -> dict:
 def settle(base_us: float, max_wait_s: float, probe: Callable[[], float] = probe_us,
            clock: Callable[[], float] = time.monotonic) -> dict:
     """Probe until SETTLED_PROBES probes running are within TOLERANCE of ``base_us``, or
-    ``max_wait_s`` has passed: how long it waited, whether it settled, each probe [us]."""
-    t0 = clock()
+    ``max_wait_s`` has passed: how long it waited, whether it settled, each probe [us], the
+    host's steal share meanwhile."""
+    t0, ticks0 = clock(), cpu_ticks()
     got, run = [], 0
     while True:
         p = probe()
@@ -76,7 +96,7 @@ def settle(base_us: float, max_wait_s: float, probe: Callable[[], float] = probe
         if run >= SETTLED_PROBES or waited >= max_wait_s:
             return {"settled": run >= SETTLED_PROBES, "waited_s": waited, "baseline_us": base_us,
                     "last_over_baseline": p / base_us, "probes_us": got, "tolerance": TOLERANCE,
-                    "max_wait_s": max_wait_s}
+                    "max_wait_s": max_wait_s, "steal_share": steal_share(ticks0, cpu_ticks())}
 
 
 def rows(res: dict) -> list[Row]:

@@ -257,9 +257,10 @@ def run_suite(quick: bool, out: Path | None = None, only: list[str] | None = Non
             say(f"bench: host {'settled' if st['settled'] else 'NOT settled'} after {st['waited_s']:.1f} s "
                 f"(probe {st['last_over_baseline']:.2f}x the run's start)")
         say(f"bench: {name} ...")
+        ticks = settle.cpu_ticks()
         res[name] = run_section(name, sections[name], quick)
         if st is not None:
-            res[name]["settle"] = st
+            res[name]["settle"] = {**st, "steal_share_in_section": settle.steal_share(ticks, settle.cpu_ticks())}
         say(f"bench: {name} done in {res[name]['section_wall_s']:.1f} s"
             + (f" (FAILED: {res[name]['error']})" if "error" in res[name] else ""))
         if out is not None:

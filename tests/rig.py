@@ -2,7 +2,8 @@
 scenario (case1 by default) with its scheduled faults removed (the tests inject from the
 ground), the plant from sim.plant, a GroundLink on an ephemeral port with a fake scheduling
 clock, and a GroundClient with a key file written in tmp_path; stepped by the test. Beside
-it, ``Keyless``: a ground station without the key on a port of its own (fixture ``station``).
+it, ``Keyless``: a ground station without the key on a port of its own (fixture ``station``),
+and ``PricedReads``: a socket whose reads cost time on an injected clock.
 """
 from __future__ import annotations
 
@@ -31,6 +32,21 @@ class Clock:
 
     def __call__(self) -> float:
         return self.t
+
+
+class PricedReads:
+    """A socket whose each read costs ``read_ns`` on ``clock`` (anything with a ns ``t``):
+    an injected clock's price for the intake's socket read."""
+
+    def __init__(self, sock, clock, read_ns: int):
+        self.sock, self.clock, self.read_ns = sock, clock, read_ns
+
+    def recvfrom_into(self, *args):
+        self.clock.t += self.read_ns
+        return self.sock.recvfrom_into(*args)
+
+    def __getattr__(self, name):
+        return getattr(self.sock, name)
 
 
 def write_key(tmp_path, name: str = "ground.key") -> SigningKey:

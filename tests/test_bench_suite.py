@@ -283,3 +283,67 @@ def test_the_rehearsal_row_sets_the_run_without_it_beside_the_idle_run():
     r = [x for x in sil.realtime_rows(res) if "--no-rehearse" in x[0]]
     assert len(r) == 1 and r[0][1] == "920.0 / 1200" and r[0][2] == "rehearsal on 800.0 / 1100"
     assert r[0][3].startswith("1.15x")
+
+
+def test_settle_waits_for_the_probe_back_at_the_baseline_and_gives_up_at_its_bound():
+    from ellipsled.bench import settle
+    t = [0.0]
+
+    def probe_of(values):
+        it = iter(values)
+
+        def probe():
+            t[0] += 1.0                                    # each probe takes a second
+            return next(it)
+        return probe
+    # slow, then two running within the tolerance (one in between is not enough)
+    st = settle.settle(100.0, 30.0, probe_of([200.0, 120.0, 190.0, 110.0, 125.0, 500.0]), clock=lambda: t[0])
+    assert st["settled"] and st["probes_us"] == [200.0, 120.0, 190.0, 110.0, 125.0] and st["waited_s"] == 5.0
+    t[0] = 0.0
+    st = settle.settle(100.0, 3.0, probe_of([200.0] * 10), clock=lambda: t[0])
+    assert not st["settled"] and st["waited_s"] == 3.0 and st["last_over_baseline"] == 2.0
+
+
+def test_the_probe_times_its_piece_right_after_each_sleep():
+    from ellipsled.bench import settle
+    log, t = [], [0]
+
+    def sleep(s):
+        log.append(("sleep", s))
+        t[0] += 1_000_000_000
+
+    prices = iter([999_000, 50_000, 90_000, 60_000])     # ns; the first call is not timed
+
+    def piece():
+        log.append("piece")
+        t[0] += next(prices)
+    p = settle.probe_us(3, sleep=sleep, clock_ns=lambda: t[0], piece=piece)
+    assert log == ["piece"] + [("sleep", settle.SLEEP_S), "piece"] * 3
+    assert p == 60.0                                     # the p50 of 50, 90, 60 us: the sleeps not in it
+
+
+def test_real_time_sections_are_measured_after_a_settle_phase_recorded_beside_them(tmp_path):
+    probes = iter([100.0, 100.0, 100.0, 300.0, 110.0, 105.0, 90.0, 95.0])
+    order = []
+    res = suite.run_suite(True, None, sections={
+        "codec": lambda q: order.append("codec") or {},
+        "jitter": lambda q: order.append("jitter") or {},
+        "flood": lambda q: order.append("flood") or {},
+    }, say=lambda m: order.append(m) if "settled" in m else None, probe=lambda: next(probes))
+    assert res["settle_baseline"]["probe_us"] == 100.0
+    assert "settle" not in res["codec"]
+    assert res["jitter"]["settle"]["probes_us"] == [300.0, 110.0, 105.0] and res["jitter"]["settle"]["settled"]
+    assert res["flood"]["settle"]["probes_us"] == [90.0, 95.0]
+    assert all("steal_share_in_section" in res[n]["settle"] for n in ("jitter", "flood"))
+    assert [x for x in order if not x.startswith("bench: host")] == ["codec", "jitter", "flood"]
+    assert order.index("jitter") > next(i for i, x in enumerate(order) if x.startswith("bench: host settled"))
+    row = next(r for r in suite.rows(res) if r[0].startswith("host state"))
+    assert row[3] == "not settled: none"
+
+
+def test_the_hosts_steal_share_is_what_it_took_of_the_cpu_time_between_two_readings():
+    from ellipsled.bench import settle
+    assert settle.steal_share((1000, 10), (1400, 30)) == pytest.approx(0.05)
+    assert settle.steal_share(None, (1400, 30)) is None and settle.steal_share((1400, 30), (1400, 30)) is None
+    now = settle.cpu_ticks()
+    assert now is None or (now[0] >= now[1] >= 0)

@@ -8,7 +8,9 @@ half the budget, and the cost of the streams a period overdue, keeping a quarter
 first; a signed command sent before each tick is answered in that tick however much the
 streams owe; the cycle's deadline shortens the budget; receiving is given its share less what
 the tick spent before it and what it recently took past the intake's budget; a unit needs
-room for its estimate and the units' recent estimate misses."""
+room for its estimate and the units' recent estimate misses; a command is answered in the tick
+it arrived before even when the socket read takes all of receiving's share, and the second
+tick running with no time to receive still reads one frame."""
 from __future__ import annotations
 
 import time
@@ -19,7 +21,7 @@ import pytest
 from fsw.groundlink.schedule import COST_SAMPLES, DUE_SLACK, END_RESERVE, RecentCost, StreamSchedule, TickBudget
 from fsw.groundlink.streams import ATTITUDE_GROUP, ATTITUDE_UNITS
 from interfaces.event_catalogue import EV
-from tests.rig import ACCEPTED, flown
+from tests.rig import ACCEPTED, PricedReads, flown
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing.sign import Signer
 
@@ -282,7 +284,7 @@ def test_what_receiving_takes_past_the_intakes_budget_is_taken_from_its_next_sha
     gl.rx_tail = RecentCost()
     given, poll = [], gl.intake.poll
 
-    def late_poll(handle, budget_ns=None):
+    def late_poll(handle, budget_ns=None, least=True):
         given.append(budget_ns)
         clock.t += budget_ns + 40_000
         return poll(handle, 0)
@@ -385,3 +387,61 @@ def test_the_most_overdue_unit_goes_whatever_is_left_the_next_overdue_one_only_i
     turns.clear()
     _ticks(rig, 1)
     assert turns == Counter({"SYSTEM_TIME": 1})
+
+
+def test_a_signed_command_is_answered_in_its_tick_when_the_socket_read_takes_all_of_receivings_share(priced):
+    """Every stream at its fastest and falling overdue (receiving keeps only its floor), each
+    socket read costing a whole budget: the intake reads the command and, out of time, begins
+    it all the same; it is answered in the tick it arrived before, every tick."""
+    rig, clock, turns = priced
+    gl = rig.gl
+    gl.intake.clock_ns = clock
+    gl.budget.budget_ns = 8 * FRAME_NS
+    gl.intake.sock = PricedReads(gl.intake.sock, clock, gl.budget.budget_ns)
+    for k in range(10):
+        pc = rig.gcs.start_command(mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1, timeout_s=60.0, retries=0)
+        time.sleep(0.002)                                 # loopback delivery
+        _ticks(rig, 1)
+        rig.gcs.poll(0.05)
+        assert pc.result == ACCEPTED, f"command {k} not answered in its tick"
+    assert gl.stats["tx_deferred"] > 0
+
+
+def test_the_second_tick_running_with_no_time_to_receive_reads_one_frame(priced):
+    """The streams' schedule pass taking a whole budget before receiving (as a stalled host
+    does): the first such tick reads nothing (counted), the next reads the command and answers
+    it, and so on in turn; with the cycle's deadline already past no tick reads."""
+    rig, clock, turns = priced
+    gl = rig.gl
+    gl.intake.clock_ns = clock
+    overdue_ns = gl.streams.overdue_ns
+
+    def stalled(now):
+        clock.t += gl.budget.budget_ns
+        return overdue_ns(now)
+    gl.streams.overdue_ns = stalled
+    _ticks(rig, 1)                                        # the tick before: nothing to read, no time
+    for k in range(3):
+        deferred0 = gl.stats["rx_deferred"]
+        pc = rig.gcs.start_command(mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1, timeout_s=60.0, retries=0)
+        time.sleep(0.002)
+        _ticks(rig, 1)                                    # the second tick with no time: reads one
+        rig.gcs.poll(0.05)
+        assert pc.result == ACCEPTED and gl.stats["rx_deferred"] == deferred0, f"command {k}"
+        pc = rig.gcs.start_command(mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1, timeout_s=60.0, retries=0)
+        time.sleep(0.002)
+        _ticks(rig, 1)                                    # a first tick with no time: reads nothing
+        rig.gcs.poll(0.05)
+        assert pc.result is None and gl.stats["rx_deferred"] == deferred0 + 1
+        _ticks(rig, 1)                                    # ... and the next one answers it
+        rig.gcs.poll(0.05)
+        assert pc.result == ACCEPTED
+        _ticks(rig, 1)                                    # (the next pair begins with a skip)
+    gl.streams.overdue_ns = overdue_ns
+    pc = rig.gcs.start_command(mav.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1, timeout_s=60.0, retries=0)
+    time.sleep(0.002)
+    deferred0 = gl.stats["rx_deferred"]
+    for _ in range(2):
+        gl.tick(rig.frame, deadline_ns=time.monotonic_ns())   # no time before the deadline
+    rig.gcs.poll(0.05)
+    assert pc.result is None and gl.stats["rx_deferred"] == deferred0 + 2

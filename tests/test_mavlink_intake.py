@@ -17,6 +17,7 @@ from interfaces.mavlink.signing.keys import SigningKey
 from interfaces.mavlink.signing.link import SignedLink
 from interfaces.mavlink.signing.sign import Signer
 from interfaces.mavlink.signing.verify import Reject
+from tests.rig import PricedReads
 
 ACCEPT = {mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_PARAM_SET}
 ARM = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 1, 0, 0, 0, 0, 0, 0)
@@ -287,5 +288,58 @@ def test_one_slow_command_moves_neither_the_estimate_nor_the_reading():
         h.prices = [1_000]
         n, ns = _priced_polls(b, h, 1)[0]
         assert n >= 1 and ns <= 1_000_000
+    finally:
+        b.close()
+
+
+def test_a_call_begins_its_first_frame_however_little_its_socket_read_left():
+    """Frames costing 100 us, known to the estimate; a call of 120 us whose socket read takes
+    110 us has 10 us left, less than a frame's estimate: it begins that frame all the same
+    (the budget bounds what follows: the next datagram waits), and a call of no budget reads
+    nothing; a call that only reads on (``least=False``) keeps to its budget alone."""
+    b, h = _priced_bench([100_000])
+    try:
+        for _ in range(4):
+            b.send(b.ground.pack(ARM))
+        time.sleep(0.02)
+        assert _priced_polls(b, h, 1)[0][0] == 4            # the estimate: 100 us a frame
+        b.intake.sock = PricedReads(b.rx, h, 110_000)
+        for _ in range(2):
+            b.send(b.ground.pack(ARM))
+        time.sleep(0.02)
+        t0 = h.t
+        assert b.intake.poll(h, 120_000) == 1 and h.n == 5  # read, begun and handled: one frame
+        assert h.t - t0 == 110_000 + 100_000
+        assert b.intake.poll(h, 0) == 0 and h.n == 5        # no budget: nothing read
+        assert b.intake.poll(h, 1) == 1 and h.n == 6        # the next call: the next datagram
+        b.send(b.ground.pack(ARM))
+        time.sleep(0.02)
+        assert b.intake.poll(h, 120_000, least=False) == 1 and h.n == 6   # read, not begun: it waits
+        assert b.intake.poll(h, 1) == 0 and h.n == 7        # ... and is the next call's first
+    finally:
+        b.close()
+
+
+def test_frames_a_call_left_are_begun_first_in_the_next_call_whatever_its_budget():
+    """Three frames in one datagram, each costing 100 us, the clock moving 1 us at each
+    reading besides, calls of 1 ns: each call begins one frame (the first of the datagram,
+    then those left, in order), none is lost."""
+    b, h = _priced_bench([100_000])
+    priced = h.clock_ns
+
+    def clock_ns():
+        h.t += 1_000
+        return priced()
+    b.intake.clock_ns = clock_ns
+    try:
+        b.send(b"".join(b.ground.pack(mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, k,
+                                                                        0, 0, 0, 0, 0, 0)) for k in range(3)))
+        time.sleep(0.02)
+        got = []
+        for _ in range(3):
+            b.intake.poll(lambda msg, addr: (h(msg, addr), got.append(msg.param1)), 1)
+            assert len(got) == h.n
+        assert got == [0.0, 1.0, 2.0] and b.intake.stats["frames_deferred"] == 2
+        assert not b.link.counts[Reject.REPLAY]
     finally:
         b.close()

@@ -309,8 +309,11 @@ class GroundWatch:
     it also gives the vehicle's HEARTBEATs, as sniffed off the link, to the flood's reflect
     pool. With ``pace_hz`` and once ``pace()`` is called, it also sends a signed read-only
     command (PROBE: the protocol version, answered ACK + PROTOCOL_VERSION, changing nothing)
-    to ``vehicle`` at that pace from the same port, and notes when each was sent and when
-    each COMMAND_ACK came back."""
+    to ``vehicle`` at that pace from the same port, one at a time: the next waits for the
+    last one's COMMAND_ACK, or ANSWER_WAIT_S without one (then it is missing), so each ACK
+    is known to be its command's even when one is lost; it notes when each was sent and
+    when its ACK came back. After a stall of this thread the pace resumes a period later,
+    never with two commands at once."""
 
     def __init__(self, key: SigningKey, port: int, flood: Flood | None, pace_hz: float = 0.0,
                  vehicle: tuple[str, int] | None = None):
@@ -324,12 +327,14 @@ class GroundWatch:
         self.offsets_s: list[float] = []                      # Unix time - mission time, per SYSTEM_TIME
         self.pace_hz, self.vehicle = float(pace_hz), vehicle
         self.signer = Signer(key, system_id=255, component_id=190, link_id=2) if pace_hz else None
-        # Unix time [s] of each PROBE sent, of each of its COMMAND_ACKs as the kernel stamped
-        # its arrival (SO_TIMESTAMPNS: not when this thread, on a busy host, got to it), and
-        # of the vehicle's last frame
+        # Unix time [s] of each PROBE sent, of its COMMAND_ACK as the kernel stamped its
+        # arrival (SO_TIMESTAMPNS: not when this thread, on a busy host, got to it; None
+        # while unanswered), and of the vehicle's last frame; ACKs of no command waiting
         self.sent_t: list[float] = []
-        self.ack_t: list[float] = []
+        self.ack_t: list[float | None] = []
         self.last_rx_t = 0.0
+        self.stale_acks = 0
+        self.clock = time.time                                # Unix time (tests set their own)
         self._next_t = 0.0
         if pace_hz:
             self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
@@ -341,31 +346,47 @@ class GroundWatch:
         """Start sending the paced commands (after the run's warm-up)."""
         self._pacing.set()
 
-    def _send_due(self, now: float) -> None:
+    def _send_due(self) -> None:
+        """Send the next PROBE if its time has come and no command is waiting for its ACK
+        (one that waited ANSWER_WAIT_S is given up: missing)."""
+        now = self.clock()
         if not self._pacing.is_set() or now < self._next_t:
             return
-        self._next_t = max(self._next_t + 1.0 / self.pace_hz, now)   # a steady pace, never a burst
+        if self.ack_t and self.ack_t[-1] is None and now - self.sent_t[-1] < ANSWER_WAIT_S:
+            return
+        period = 1.0 / self.pace_hz
+        self._next_t = self._next_t + period if self._next_t + period > now else now + period
+        frame = self.signer.pack(PROBE)
+        self.sent_t.append(self.clock())                  # as it goes
+        self.ack_t.append(None)
         try:
-            frame = self.signer.pack(PROBE)
-            self.sent_t.append(time.time())
             self.sock.sendto(frame, self.vehicle)
         except OSError:
             pass
 
+    def _answered(self, arrived: float) -> None:
+        """A PROBE's COMMAND_ACK arrived (Unix time): the waiting command's."""
+        if self.ack_t and self.ack_t[-1] is None:
+            self.ack_t[-1] = arrived
+        else:
+            self.stale_acks += 1
+
     def answers(self) -> dict:
         """The paced commands sent ANSWER_WAIT_S or more before the vehicle's last frame
         (the link still ticked): how many, answered in time (ANSWER_IN_TIME_S), late,
-        missing; the answer latency [ms]. ACKs match the commands in order (one command in
-        flight at a time at this pace)."""
+        missing; the answer latency [ms]; ACKs of no waiting command; the longest time
+        between two commands sent [ms] (this thread's own stalls show there)."""
         import numpy as np
-        judged = [t for t in self.sent_t if t < self.last_rx_t - ANSWER_WAIT_S]
-        lat = [a - s for s, a in zip(judged, self.ack_t)]
+        judged = [(s, a) for s, a in zip(self.sent_t, self.ack_t) if s < self.last_rx_t - ANSWER_WAIT_S]
+        lat = [a - s for s, a in judged if a is not None]
         in_time = sum(x <= ANSWER_IN_TIME_S for x in lat)
         a = np.asarray(lat or [np.nan]) * 1e3
+        gaps = np.diff([s for s, _ in judged]) * 1e3
         return {"pace_hz": self.pace_hz, "in_time_s": ANSWER_IN_TIME_S, "sent": len(judged), "in_time": int(in_time),
                 "late": len(lat) - int(in_time), "missing": len(judged) - len(lat),
                 "latency_p50_ms": float(np.percentile(a, 50)), "latency_p99_ms": float(np.percentile(a, 99)),
-                "latency_max_ms": float(np.max(a))}
+                "latency_max_ms": float(np.max(a)), "stale_acks": self.stale_acks,
+                "send_gap_max_ms": float(gaps.max()) if gaps.size else None}
 
     def start(self) -> None:
         self._thread.start()
@@ -379,7 +400,7 @@ class GroundWatch:
         st = self.client.state
         while not self._stop.is_set():
             if self.pace_hz:
-                self._send_due(time.monotonic())
+                self._send_due()
             try:
                 data, anc, _, addr = self.sock.recvmsg(65536, 64)
             except (socket.timeout, InterruptedError):
@@ -395,7 +416,7 @@ class GroundWatch:
             if fed:
                 self.last_rx_t = arrived
             if st.rx_counts.get("COMMAND_ACK", 0) != n_ack and st.acks[-1].command == PROBE.command:
-                self.ack_t.append(arrived)
+                self._answered(arrived)
             if fed and self.flood is not None:
                 hdr = parse_header(data)
                 if hdr is not None and hdr.msgid == mav.MAVLINK_MSG_ID_HEARTBEAT and vehicle_signed(data):

@@ -15,7 +15,8 @@ And every command answered: the real-time SIL (``ellipsled run case1 --realtime`
 and at 200 Hz (``--dt-control``), a ground station with the key sending a signed read-only
 command at ANSWER_PACE_HZ from the first jet command on (the warm-up over), counting the
 answers: in time when the COMMAND_ACK is back within flood.ANSWER_IN_TIME_S (two link ticks),
-late, or missing (a command sent a second or more before the vehicle's last frame).
+late, or missing (a command sent a second or more before the vehicle's last frame); one
+command at a time, so each ACK is its own command's (flood.GroundWatch).
 """
 from __future__ import annotations
 
@@ -209,7 +210,9 @@ def rows(res: dict) -> list[Row]:
                        f"({fmt(a.get('pace_hz'))}/s after warm-up): in time / sent",
                        f"{fmt(a.get('in_time'))} / {fmt(judged)}",
                        f"late {fmt(a.get('late'))}, missing {fmt(a.get('missing'))}; answer p99 / max "
-                       f"{fmt(a.get('latency_p99_ms'))} / {fmt(a.get('latency_max_ms'))} ms; slips {fmt(a.get('slips'))}",
+                       f"{fmt(a.get('latency_p99_ms'))} / {fmt(a.get('latency_max_ms'))} ms; slips {fmt(a.get('slips'))}"
+                       + (f"; one command at a time, longest gap {fmt(a['send_gap_max_ms'])} ms"
+                          if "send_gap_max_ms" in a else ""),
                        f"in time: ACK within {fmt(1e3 * a['in_time_s']) if a.get('in_time_s') else 'n/m'} ms",
                        "0 late, 0 missing", ok))
     return out

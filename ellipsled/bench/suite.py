@@ -10,9 +10,10 @@ interrupted run keeps what it measured.
 Sections (ellipsled/bench/<name>.py, each ``run(quick) -> dict``): machine, codec,
 allocator, plant, cycle, batch, groundlink, latency, jitter, sil_lockstep, sil_realtime,
 sil_router (ellipsled/bench/router.py), flood (a ground flood at the real-time SIL),
-bridge; ``rt`` (real-time hygiene) is read from the jitter loop. Each section module
-declares its TARGETS and builds its own table rows from them (``rows(res)``); this module
-only orders them (ROWS).
+bridge; ``rt`` (real-time hygiene) is read from the jitter loop. The real-time sections
+each begin after a settle phase (settle.py: the host back at the run's start). Each
+section module declares its TARGETS and builds its own table rows from them
+(``rows(res)``); this module only orders them (ROWS).
 """
 from __future__ import annotations
 
@@ -233,7 +234,11 @@ def _derive(res: dict, quick: bool) -> None:
 
 def run_suite(quick: bool, out: Path | None = None, only: list[str] | None = None,
               sections: dict[str, Callable[[bool], dict]] | None = None,
-              say: Callable[[str], None] = print) -> dict:
+              say: Callable[[str], None] = print, probe: Callable[[], float] | None = None) -> dict:
+    """Run ``sections`` (default: every one, in ORDER), the real-time ones
+    (settle.REALTIME_SECTIONS) each after a settle phase against the host's state at the
+    start of the run (settle.py; ``probe``: its machine-speed probe, tests pass their own)."""
+    from . import settle
     sections = SECTIONS if sections is None else sections
     names = [n for n in (ORDER if sections is SECTIONS else list(sections)) if only is None or n in only]
     if only is not None:
@@ -242,9 +247,20 @@ def run_suite(quick: bool, out: Path | None = None, only: list[str] | None = Non
             raise ValueError(f"bench: unknown section(s) {', '.join(unknown)} (known: {', '.join(sections)})")
     res: dict = {"quick": bool(quick), "sections": names}
     t0 = time.perf_counter()
+    probe = probe or settle.probe_us
+    if any(n in settle.REALTIME_SECTIONS for n in names):
+        res["settle_baseline"] = settle.baseline(probe)
     for name in names:
+        st = None
+        if name in settle.REALTIME_SECTIONS:
+            st = settle.settle(res["settle_baseline"]["probe_us"], settle.MAX_WAIT_S[bool(quick)], probe)
+            say(f"bench: host {'settled' if st['settled'] else 'NOT settled'} after {st['waited_s']:.1f} s "
+                f"(probe {st['last_over_baseline']:.2f}x the run's start)")
         say(f"bench: {name} ...")
+        ticks = settle.cpu_ticks()
         res[name] = run_section(name, sections[name], quick)
+        if st is not None:
+            res[name]["settle"] = {**st, "steal_share_in_section": settle.steal_share(ticks, settle.cpu_ticks())}
         say(f"bench: {name} done in {res[name]['section_wall_s']:.1f} s"
             + (f" (FAILED: {res[name]['error']})" if "error" in res[name] else ""))
         if out is not None:
@@ -270,7 +286,7 @@ def _write_json(res: dict, out: Path) -> None:
 # declares (ellipsled/bench/rows.py); imported only when a table is made.
 ROWS = (("allocator", "rows"), ("reconfig", "rows"), ("cycle", "rows"), ("jitter", "rows"), ("sil", "realtime_rows"), ("router", "rows"),
         ("flood", "rows"), ("latency", "rows"), ("sil", "lockstep_rows"), ("batch", "rows"), ("guidance", "rows"), ("plant", "rows"),
-        ("bridge", "rows"), ("codec", "rows"), ("groundlink", "rows"), ("jitter", "rt_rows"))
+        ("bridge", "rows"), ("codec", "rows"), ("groundlink", "rows"), ("jitter", "rt_rows"), ("settle", "rows"))
 
 
 def rows(res: dict) -> list[Row]:

@@ -57,14 +57,12 @@ from interfaces.mavlink.signing.link import SignedLink
 from interfaces.mavlink.signing.verify import Reject, Rejection
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, CommandResult, Severity, parse_udp
 
-from . import metadata, policy
+from . import ftp, metadata, policy
 from . import telemetry as tm
 from .commands import CommandTranslator, InjectFn, ParamProtocol
-from . import ftp
 from .ftp import FtpServer
 from .senders import Peers, ReadBudgets
-from .services import COMMANDS as LINK_COMMANDS
-from .services import LinkServices
+from .services import COMMANDS as LINK_COMMANDS, LinkServices
 from .schedule import TICK_BUDGET_FRAC, RecentCost, StreamSchedule, TickBudget
 from .streams import MAX_RATE_HZ, TelemetryStreams, check_rates
 
@@ -126,9 +124,7 @@ class GroundLink:
             raise TypeError("key must be a SigningKey (interfaces.mavlink.signing)")
         if not int(max_tx_per_tick) > EVENT_SHARE:
             raise ValueError(f"max_tx_per_tick must be > {EVENT_SHARE} (the events' share), got {max_tx_per_tick}")
-        self.fsw = fsw
-        self.clock = clock
-        self.wall_clock = wall_clock
+        self.fsw, self.clock, self.wall_clock = fsw, clock, wall_clock
         self.max_rx_per_tick = int(max_rx_per_tick)
         self.max_tx_per_tick = int(max_tx_per_tick)
         self.refusal_event_interval_s = refusal_event_interval_s
@@ -178,9 +174,9 @@ class GroundLink:
         self.commands: dict[int, int] = {}                               # MAV_RESULT -> count
         self.stats = dict.fromkeys(STAT_NAMES, 0)
         self.stats["rx_poll_max_us"] = 0.0
-        self.send_ns_peak = 0
-        self.send_overhead_ns = 0
+        self.send_ns_peak = self.send_overhead_ns = 0
         self.rx_tail = RecentCost()                    # what receiving takes past the intake's budget [ns]
+        self._rx_skipped = False                       # the last tick had no time to receive
 
     # -------------------------------------------------------------- configuration
     @property
@@ -212,11 +208,14 @@ class GroundLink:
     # -------------------------------------------------------------- the tick
     def tick(self, sensors=None, deadline_ns: int | None = None) -> None:
         """Call from RG2: receive and answer, then send what is due, within the tick's budget
-        (schedule.py); when the intake stopped on its budget, receive more in what sending left. ``sensors``: the latest SENSORS record (for "firing" from the chamber
-        pressures). ``deadline_ns`` (time.monotonic_ns): the cycle's deadline; the budget
-        then also ends SEND_MARGIN_NS before it: whatever ran late before the link in this
-        cycle, the ground's datagrams wait in the socket rather than push the cycle past its
-        deadline. A tick left no time to receive reads nothing (counted: rx_deferred)."""
+        (schedule.py); when the intake stopped on its budget, receive more in what sending
+        left. ``sensors``: the latest SENSORS record (for "firing" from the chamber pressures).
+        ``deadline_ns`` (time.monotonic_ns): the cycle's deadline; the budget then also ends
+        SEND_MARGIN_NS before it: whatever ran late before the link in this cycle, the ground's
+        datagrams wait in the socket rather than push the cycle past its deadline. A tick left
+        no time to receive reads nothing (counted: rx_deferred); the next one left none takes
+        up one datagram and its first frame (the intake's least) if the deadline leaves the
+        link any time: a command waits at most one tick past the one it arrived before."""
         b = self.budget
         b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
         self.in_tick = True
@@ -224,17 +223,18 @@ class GroundLink:
             overdue = self.streams.overdue_ns(self.clock())      # the streams owed, with what sending costs besides
             rx_ns = b.receive_ns(self.send_ns_peak, overdue + self.send_overhead_ns if overdue else 0)
             hits = self.intake.stats["budget_hits"]
-            if rx_ns > 0:
-                self._receive(rx_ns - min(self.rx_tail.ns, rx_ns // 2))
-            else:
+            self._rx_skipped = not (rx_ns > 0 or self._rx_skipped and b.limit_ns > 0)
+            if self._rx_skipped:
                 self.stats["rx_deferred"] += 1
+            else:                                # a second tick running with no time: one frame (intake.py)
+                self._receive(rx_ns - min(self.rx_tail.ns, rx_ns // 2) if rx_ns > 0 else 1)
             t_send = b.elapsed_ns()
             self.streams.sample_allocator()
             self.send_due(sensors)
             t_more = b.elapsed_ns()
             left = b.left_ns() - self.rx_tail.ns
             if self.intake.stats["budget_hits"] != hits and left > self.intake.frame_estimate_ns(left * 4):
-                self._receive(left)          # the intake stopped on its budget: more, in what sending left
+                self._receive(left, False)   # the intake stopped on its budget: more, in what sending left
             # what receiving leaves the send side: what it wanted (sent, and what the budget
             # deferred), and its cost besides the streams, peaks decaying x0.9 a tick (one
             # outlier is forgotten within seconds)
@@ -247,12 +247,12 @@ class GroundLink:
             self.in_tick = False
         b.finish()
 
-    def _receive(self, given_ns: int) -> None:
+    def _receive(self, given_ns: int, least: bool = True) -> None:
         """Poll within ``given_ns``. The intake's budget ends at its last frame's start; what
         follows (that frame past its estimate, the refusal reports, the link's counters) is
         measured (``rx_tail``) and taken from the next shares (at most half of one)."""
         t = self.budget.elapsed_ns()
-        self.poll(given_ns)
+        self.poll(given_ns, least)
         self.rx_tail.add(max(0, self.budget.elapsed_ns() - t - given_ns))
 
     def warm_up(self, spare_fsw, sensors=None) -> None:
@@ -281,10 +281,10 @@ class GroundLink:
              self.streams.mode_sent) = saved
             self._pack_only = False
 
-    def poll(self, budget_ns: int | None = None) -> int:
+    def poll(self, budget_ns: int | None = None, least: bool = True) -> int:
         """Receive within the tick's budget (or ``budget_ns``, if less) without blocking;
-        returns the datagrams read."""
-        n = self.intake.poll(self._handle_one, budget_ns)
+        returns the datagrams read. ``least``: as DatagramIntake.poll's."""
+        n = self.intake.poll(self._handle_one, budget_ns, least)
         st, ist = self.stats, self.intake.stats
         st["rx_datagrams"], st["rx_bytes"] = ist["datagrams"], ist["bytes"]
         st["refused_early"], st["kernel_drops"] = ist["refused_early"], ist["kernel_drops"]

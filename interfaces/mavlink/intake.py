@@ -26,8 +26,11 @@ that passes the early refusals (verified, decoded and handled: what costs) is be
 when the call's time left covers what such a frame costs: a high percentile
 (``FRAME_COST_QUANTILE``) of the last ``FRAME_COST_RING`` such frames, at most a quarter
 of the call's budget, so the last frame does not carry the call past its budget, while a
-few slow frames (a command that reconfigures) do not move the estimate, and capped it
-never stops the reading: a frame kept for the next call is the first it takes up.
+few slow frames (a command that reconfigures) do not move the estimate. A call with any
+budget always takes up its first datagram (or what the last call left: a frame kept for
+the next call is the first it takes up) and begins its first frame to verify, whatever is
+left of its budget by then: the budget bounds what follows that frame, it never keeps a
+command waiting call after call.
 
 Refusals are also counted per sender address (``refused_by_sender``: the last
 ``max_senders`` senders refused; the others' refusals together in ``refused_other_senders``).
@@ -186,10 +189,13 @@ class DatagramIntake:
             self.frame_ns.append(clock() - t)
         return None
 
-    def poll(self, handle: Callable[[object, tuple[str, int]], None], budget_ns: int | None = None) -> int:
+    def poll(self, handle: Callable[[object, tuple[str, int]], None], budget_ns: int | None = None,
+             least: bool = True) -> int:
         """Read and pass on what the budget allows; ``handle(msg, addr)`` gets every
         verified, decoded message. ``budget_ns``: this call's time, if less than the
-        configured budget (the caller's slack). Returns the number of datagrams read."""
+        configured budget (the caller's slack). ``least``: the call's first datagram and
+        frame are taken up whatever the budget leaves (False: a call that only reads on
+        after another, within its budget alone). Returns the number of datagrams read."""
         t0 = self.clock_ns()
         budget = self.budget_ns if budget_ns is None else min(self.budget_ns, int(budget_ns))
         n = 0
@@ -209,13 +215,24 @@ class DatagramIntake:
             return self.clock_ns() - t0 >= budget
 
         estimate = self.frame_estimate_ns(budget)
+        # a call with any budget takes up its first datagram (or the frames the last call
+        # left) and begins its first frame to verify, however little time is left by then:
+        # a budget smaller than a socket read and a frame must not keep a command waiting
+        # call after call
+        first = least and budget > 0
+        begun = not least
 
         def fits() -> bool:
-            """A frame to verify has its estimated cost left in the budget (at the start
-            of a call it always has: the estimate is at most a quarter of it)."""
+            """A frame to verify is begun: the call's first always, a later one when its
+            estimated cost is left in the budget."""
+            nonlocal begun
+            if not begun:
+                begun = True
+                return True
             return self.clock_ns() - t0 + estimate <= budget
 
         if self._rest is not None and budget > 0:
+            first = False
             rest, addr = self._rest
             self._rest = None
             at = self._frames(memoryview(rest), len(rest), addr, handle, refuse, over_budget, fits)
@@ -223,9 +240,10 @@ class DatagramIntake:
                 self._rest = (rest[at:], addr)
                 st["frames_deferred"] += 1
         while True:
-            if self._rest is not None or n >= self.max_datagrams or over_budget():
+            if self._rest is not None or n >= self.max_datagrams or (not first and over_budget()):
                 st["budget_hits"] += 1
                 break
+            first = False
             try:
                 # MSG_TRUNC: the datagram's real length, however much of it fits the buffer
                 size, addr = self.sock.recvfrom_into(buf, 0, socket.MSG_TRUNC)

@@ -18,8 +18,8 @@ import numpy as np
 
 from common.model import Scenario
 from .geometry import central_angle, crossrange, unit_from_latlon
-from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_H_BOX, O_T, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict,
-                        predict_shaped, predictor_constants)
+from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_H_BOX, O_R_TRIG, O_T, REACHED, SKIPPED, TIMEOUT,
+                        deploy_energy, predict, predict_shaped, predictor_constants)
 from .shaper import reversal_other_way
 
 
@@ -350,7 +350,6 @@ class Corrector:
         e0 = self.mu_m3ps2 / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.radius_m
         s_aim = s_togo + self.reserve_m          # the aim point: range_reserve beyond the target
-        dt = self.params["npc.dt_pred_s"]
         lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
         p_span = profile_span(lo, hi, f)
         p_warm = self.bank0
@@ -429,14 +428,19 @@ class Corrector:
             # bank switching at once (the reversal at its shaped transition's mid-point) and
             # this phi_0: a pair flown through the shaper, the reversed one re-solved, would
             # decide the final reversal at the first reversal, where the load limit's lift-up
-            # sends the swing through lift up, and fly far long
-            predict(x, c, b0, bf, e0, self.e_deploy_jpkg, sign, dt, self._out, 0.0)
+            # sends the swing through lift up, and fly far long. Their crossranges are those
+            # where the deploy trigger fires (O_R_TRIG): with the range trigger where the target
+            # comes abeam, not where the prediction ends (the aim point, range_reserve and the
+            # box's stretch further on, where a deploy crossrange nulled leaves the vehicle
+            # abeam the target off by its heading's angle to the line times that stretch)
+            dt, ef, out = self.params["npc.dt_pred_s"], self.e_deploy_jpkg, self._out
+            predict(x, c, b0, bf, e0, ef, sign, dt, out, 0.0)
             res["predictions"] += 1
-            if self._out[O_FLAG] == REACHED:
-                res["xr_keep_m"] = crossrange(x[:3], self.target_u, self._out[:3], self.radius_m)
-                predict(x, c, b0, bf, e0, self.e_deploy_jpkg, -sign, dt, self._out, t_flip)
+            if out[O_FLAG] == REACHED:
+                res["xr_keep_m"] = crossrange(x[:3], self.target_u, out[O_R_TRIG:O_R_TRIG + 3], self.radius_m)
+                predict(x, c, b0, bf, e0, ef, -sign, dt, out, t_flip)
                 res["predictions"] += 1
-                if self._out[O_FLAG] == REACHED:
-                    res["xr_rev_m"] = crossrange(x[:3], self.target_u, self._out[:3], self.radius_m)
+                if out[O_FLAG] == REACHED:
+                    res["xr_rev_m"] = crossrange(x[:3], self.target_u, out[O_R_TRIG:O_R_TRIG + 3], self.radius_m)
         res["compute_ns"] = time.perf_counter_ns() - t0
         return res

@@ -62,8 +62,10 @@ O_H_BOX = 9                     # altitude where the deploy box is entered [m] (
                                 # or when the box is not entered before the deploy condition)
 O_R_TRIG = 10                   # 3: where the range trigger fires, planet-fixed [m]: the first point inside
                                 # the deploy box with the target abeam or behind (the final position when
-                                # C_TRIG is 0, or the target is still ahead at the deploy condition)
-N_O = 13
+                                # C_TRIG is 0, or the target is still ahead at the deploy condition) ...
+O_XR_TRIG = 13                  # ... and the crossrange there [m, + the vehicle left of the target]: the
+                                # target's distance off the track, across it (NaN when C_TRIG is 0)
+N_O = 14
 REACHED, SKIPPED, GROUND, TIMEOUT = 0, 1, 2, 3
 T_PRED_MAX_S = 1500.0           # a prediction longer than this is a skip-out
 SUTTON_GRAVES_MARS = 1.9027e-4  # k of q = k sqrt(rho / R_n) V^3 [SI] (docs/fsw/entry-guidance.md)
@@ -177,6 +179,19 @@ def _ahead(x, c):
 
 
 @njit(cache=True, nogil=True)
+def _across(x, c):
+    """The crossrange at x [m]: the target's offset across the track (along the local
+    horizontal normal to the velocity), positive when the vehicle is left of the target. At
+    the target abeam it is the deploy miss, signed."""
+    r = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    ux, uy, uz = x[0] / r, x[1] / r, x[2] / r
+    lx, ly, lz = uy * x[5] - uz * x[4], uz * x[3] - ux * x[5], ux * x[4] - uy * x[3]     # up x v: left
+    ln = math.sqrt(lx * lx + ly * ly + lz * lz)
+    d = (c[C_TGT] - ux) * lx + (c[C_TGT + 1] - uy) * ly + (c[C_TGT + 2] - uz) * lz
+    return -d / ln * c[C_RE]
+
+
+@njit(cache=True, nogil=True)
 def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     """Fly the 3-DOF model from x0 (planet-fixed [r, v_rel], m and m/s) until the deploy
     condition (or skip, ground, timeout). c: the constants (predictor_constants, indices
@@ -187,7 +202,8 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     [m, planet-fixed], time of flight [s], peak load [g], peak heat rate [W/m^2], final
     altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT), the altitude where
     the deploy box was entered [m] (O_H_BOX: the highest the trigger can deploy), where the range
-    trigger fires (O_R_TRIG, 3; interpolated to the target abeam). The last step is
+    trigger fires (O_R_TRIG, 3; interpolated to the target abeam) and the crossrange there
+    (O_XR_TRIG). The last step is
     cut back linearly to the deploy condition. The law's bank is flown from the start."""
     _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, np.empty(0), 0)
 
@@ -222,7 +238,7 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     """The integration of ``predict`` and ``predict_shaped`` (tab: the transition's bank every
     dt/2, n_tab samples; 0: none)."""
     x = x0.copy()
-    xp = np.empty(6)
+    xp = x0.copy()                  # the state a step back (a prediction of no step ends at x0)
     k1 = np.empty(6)
     k2 = np.empty(6)
     k3 = np.empty(6)
@@ -270,20 +286,24 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
         r = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
         h = r - c[C_RE]
         V = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+        w_box = 0.0                     # where in this step the box was entered (fraction)
         if math.isnan(h_box) and c[C_BOX_MACH] > 0.0:
             b = _box_metric(h, V, c)
             if b <= 0.0:
-                h_box = h_prev + (b_prev / (b_prev - b) if b_prev > b else 1.0) * (h - h_prev)
+                w_box = b_prev / (b_prev - b) if b_prev > b else 1.0
+                h_box = h_prev + w_box * (h - h_prev)
             b_prev = b
         h_prev = h
         if trig and not fired:
             g = _ahead(x, c)
             if g <= 0.0 and (c[C_BOX_MACH] <= 0.0 or not math.isnan(h_box)):
-                # the trigger fires here: at the target abeam, interpolated within the step
-                # (or at the step the box is entered, when the target was passed above it)
-                w = g_prev / (g_prev - g) if g_prev > 0.0 else 1.0
-                for i in range(3):
-                    out[O_R_TRIG + i] = xp[i] + w * (x[i] - xp[i])
+                # the trigger fires here: at the target abeam, interpolated within the step,
+                # or where the box is entered when the target was passed above it
+                w = max(g_prev / (g_prev - g) if g_prev > 0.0 else 0.0, w_box)
+                for i in range(6):
+                    xt[i] = xp[i] + w * (x[i] - xp[i])
+                out[O_R_TRIG], out[O_R_TRIG + 1], out[O_R_TRIG + 2] = xt[0], xt[1], xt[2]
+                out[O_XR_TRIG] = _across(xt, c)
                 fired = True
             g_prev = g
         m = _end_metric(h, V, c)
@@ -311,6 +331,7 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     out[O_H_BOX] = out[O_H] if math.isnan(h_box) else h_box
     if not fired:
         out[O_R_TRIG], out[O_R_TRIG + 1], out[O_R_TRIG + 2] = x[0], x[1], x[2]
+        out[O_XR_TRIG] = _across(x, c) if trig else math.nan
 
 
 def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:

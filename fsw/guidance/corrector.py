@@ -18,8 +18,8 @@ import numpy as np
 
 from common.model import Scenario
 from .geometry import central_angle, crossrange, unit_from_latlon
-from .predictor import (C_KLD, C_KRHO, C_TGT, C_TRIG, N_O, O_FLAG, O_H, O_H_BOX, O_T, O_XR_TRIG, REACHED, SKIPPED,
-                        TIMEOUT, deploy_energy, predict, predict_shaped, predictor_constants)
+from .predictor import (C_KLD, C_KRHO, C_TGT, C_TRIG, N_O, O_FLAG, O_H, O_H_BOX, O_R_TRIG, O_T, O_XR_TRIG, REACHED,
+                        SKIPPED, TIMEOUT, deploy_energy, predict, predict_shaped, predictor_constants)
 from .shaper import reversal_other_way
 
 
@@ -338,9 +338,16 @@ class Corrector:
     def _deploy_crossrange(self, x: np.ndarray, out: np.ndarray) -> float:
         """The predicted deploy crossrange [m, + left] of the prediction out from x: with the range
         trigger across the track where it fires (O_XR_TRIG: the deploy miss when the target
-        comes abeam), else off the great circle from x to the target at the prediction's end."""
-        if self.constants[C_TRIG] != 0.0:
-            return float(out[O_XR_TRIG])
+        comes abeam), else off the great circle from x to the target at the prediction's end.
+        The trigger's figure counts only where that point lies within the range reserve of the
+        target along the track: a track that turns more than 90 deg off the target's bearing
+        before the box passes it "abeam" far out (the box entry then, the target behind), and
+        one that ends short by more has its crossrange still to fly."""
+        xr = float(out[O_XR_TRIG])
+        if self.constants[C_TRIG] != 0.0 and math.isfinite(xr):
+            d = central_angle(out[O_R_TRIG:O_R_TRIG + 3], self.target_u) * self.radius_m
+            if d * d - xr * xr <= self.reserve_m * self.reserve_m:
+                return xr
         return crossrange(x[:3], self.target_u, out[:3], self.radius_m)
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,

@@ -861,3 +861,38 @@ def test_lateral_pair_judges_the_range_trigger_by_its_miss_abeam_the_target():
     end = _unit(got["velocity"])
     assert got["velocity"]["xr_keep_m"] == pytest.approx(geometry.crossrange(x0[:3], target, end, R), abs=1.0)
     assert abs(got["velocity"]["xr_keep_m"] - got["range"]["xr_keep_m"]) > 300.0
+
+
+def test_trigger_crossrange_counts_only_within_the_reserve_of_the_target():
+    """Corrector._deploy_crossrange on constructed predictions: the trigger's crossrange
+    (O_XR_TRIG) is the answer when its point lies within the range reserve (2 km) of the
+    target along the track (1.5 km past it, 0.3 km across); at the box entry 20 km past a
+    target the track turned away from, the end's offset off the great circle to the target
+    instead (here 4.3 km), as for the velocity trigger."""
+    x0, _, _, _, _, _, E, target = _abeam_case()
+    R = SCN.planet.radius_m
+    eg = npc.EntryGuidance(SCN.with_(deploy_by="fsw"), dict(PARAMS, **{"deploy.trigger": "range",
+                                                                       "npc.range_reserve_m": 2000.0}),
+                           EventLog(), 0.02)
+    try:
+        eg.target_u = target
+        assert eg.constants[predictor.C_TRIG] == 1.0 and eg.reserve_m == 2000.0
+        up = target
+        east = np.cross([0.0, 0.0, 1.0], up)
+        east /= np.linalg.norm(east)
+        north = np.cross(up, east)
+
+        def at(d_north_m, d_east_m):        # a point near the target, the track northwards
+            p = up + (d_north_m * north + d_east_m * east) / R
+            return p / np.linalg.norm(p) * R
+        end = at(3000.0, 7000.0)
+        out = np.zeros(predictor.N_O)
+        out[:3] = end
+        out[predictor.O_XR_TRIG] = -300.0
+        out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3] = at(1500.0, 300.0)
+        assert eg._deploy_crossrange(x0, out) == -300.0
+        out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3] = at(20e3, 300.0)
+        off = eg._deploy_crossrange(x0, out)
+        assert off == geometry.crossrange(x0[:3], target, end, R) and abs(off) > 3000.0
+    finally:
+        eg.close()

@@ -372,7 +372,7 @@ def test_predicting_through_the_shaper_once_settled_is_the_law_and_a_slow_revers
     ref, out = np.zeros(predictor.N_O), np.zeros(predictor.N_O)
     predictor.predict(x, c, b0, bf, e0, ef, 1.0, dt, ref, 0.0)
     predictor.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, np.array([b0, 0.0, 1.0, 0.0, 0.1, 0.01, 0.02, b0]), 0.0)
-    assert np.array_equal(out, ref)
+    assert np.array_equal(out, ref, equal_nan=True)
 
     def range_km(accel_dps2):
         shp = np.array([-b0, 0.0, -1.0, 0.0, math.radians(8.0), math.radians(accel_dps2), 0.02, b0])
@@ -769,3 +769,130 @@ def test_range_trigger_turns_a_reversal_round_that_leaves_the_vehicle_short_of_t
         kept = answer(beyond_m, scn, trigger)
         assert math.isnan(kept["turn_rad"]) and not kept["ok"]
         assert kept["miss_m"] == pytest.approx(-1000.0, abs=base["npc.tol_m"])      # 1 km short of its aim
+
+
+def _abeam_case():
+    """A prediction (120 deg to phi_f 60 deg from the entry interface) and its independent truth:
+    P, where the same prediction ended at Mach 2.15 (inside the deploy box) ends, and a target
+    1 km left of the track at P (the vehicle passes it abeam at P, 1 km to its right)."""
+    x0 = geometry.planet_fixed(*_initial_state(), 0.0, SCN.planet.omega_radps)
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x0[:3]) - 0.5 * float(x0[3:] @ x0[3:])
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    c = predictor.predictor_constants(SCN.with_(deploy_by="fsw"), dict(PARAMS, **{"deploy.trigger": "range"}))
+    b, bf = math.radians(120.0), math.radians(60.0)
+    end, at = np.zeros(predictor.N_O), np.zeros(predictor.N_O)
+    predictor.predict(x0, c, b, bf, e0, ef, 1.0, 0.5, end, 0.0)
+    c_p = c.copy()
+    c_p[predictor.C_MACH_F] = 2.15
+    predictor.predict(x0, c_p, b, bf, e0, ef, 1.0, 0.5, at, 0.0)
+    P, E = at[:3].copy(), end[:3].copy()
+    up = P / np.linalg.norm(P)
+    track = (E - P) - float((E - P) @ up) * up
+    left = np.cross(up, track / np.linalg.norm(track))
+    target = up + 1000.0 / SCN.planet.radius_m * left
+    return x0, e0, ef, c, (b, bf), P, E, target / np.linalg.norm(target)
+
+
+def test_predicted_range_trigger_point_is_where_the_target_comes_abeam():
+    """O_R_TRIG and O_XR_TRIG, where the range trigger fires and the crossrange there, against
+    their truth (_abeam_case: P, and the target 1 km left of the track at P): at P within a few
+    tens of metres and -1 km (the vehicle right of the target). The prediction's end lies 2.9 km
+    further on, and its offset off the great circle from the state to the target is no measure of
+    that miss (the track meets the circle at an angle): 2.7 km. A target passed above the box's
+    Mach: the trigger fires where the box is entered (the same prediction ended at the box's Mach
+    maximum). Without the range trigger (C_TRIG 0) the prediction's end and NaN."""
+    x0, e0, ef, c, (b, bf), P, E, target = _abeam_case()
+    R = SCN.planet.radius_m
+    c[predictor.C_TGT:predictor.C_TGT + 3] = target
+    out = np.zeros(predictor.N_O)
+    predictor.predict(x0, c, b, bf, e0, ef, 1.0, 0.5, out, 0.0)
+    trig = out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3]
+    assert np.linalg.norm(trig - P) < 50.0
+    assert out[predictor.O_XR_TRIG] == pytest.approx(-1000.0, abs=20.0)
+    assert np.array_equal(out[:3], E) and np.linalg.norm(E - P) > 2500.0
+    assert abs(geometry.crossrange(x0[:3], target, E, R)) > 2000.0      # the end's offset: not the miss
+    # a target passed above the box: the box entry
+    c_q, c_box = c.copy(), c.copy()
+    c_q[predictor.C_MACH_F], c_box[predictor.C_MACH_F] = 2.6, SCN.vehicle.deploy_box.mach_max
+    passed, entry = np.zeros(predictor.N_O), np.zeros(predictor.N_O)
+    predictor.predict(x0, c_q, b, bf, e0, ef, 1.0, 0.5, passed, 0.0)
+    predictor.predict(x0, c_box, b, bf, e0, ef, 1.0, 0.5, entry, 0.0)
+    c[predictor.C_TGT:predictor.C_TGT + 3] = passed[:3] / np.linalg.norm(passed[:3])
+    predictor.predict(x0, c, b, bf, e0, ef, 1.0, 0.5, out, 0.0)
+    assert np.linalg.norm(out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3] - entry[:3]) < 50.0
+    c[predictor.C_TRIG] = 0.0
+    predictor.predict(x0, c, b, bf, e0, ef, 1.0, 0.5, out, 0.0)
+    assert np.array_equal(out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3], out[:3])
+    assert math.isnan(out[predictor.O_XR_TRIG])
+
+
+def test_lateral_pair_judges_the_range_trigger_by_its_miss_abeam_the_target():
+    """The corrector's deploy crossranges for the lateral logic (_abeam_case's target): with the
+    range trigger, the miss where the target comes abeam. Truth by brute force: the answer's
+    profile flown by the predictor to a sweep of end Mach numbers inside the box, the closest
+    of those points to the target (the vehicle passes right of it: the miss negative). With the
+    velocity trigger (which deploys at its Mach wherever the target is) the offset of the
+    deploy point off the great circle to the target, as before, and that is another figure."""
+    x0, e0, ef, _, _, _, _, target = _abeam_case()
+    R = SCN.planet.radius_m
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.range_reserve_m": 2000.0})
+    fsw_scn = SCN.with_(deploy_by="fsw")
+    got = {}
+    for trigger in ("range", "velocity"):
+        eg = npc.EntryGuidance(fsw_scn, dict(base, **{"deploy.trigger": trigger}), EventLog(), 0.02)
+        try:
+            eg.target_u, eg.bank0 = target, math.radians(120.0)
+            res = eg.solve(x0, 1.0, 1.0, 1.0, t_flip=20.0)
+            c = eg.constants.copy()
+        finally:
+            eg.close()
+        assert res["ok"] and math.isfinite(res["xr_rev_m"])
+        got[trigger] = res
+        if trigger == "range":
+            out, dist = np.zeros(predictor.N_O), []
+            for mach in np.arange(2.3, 1.999, -0.002):
+                c[predictor.C_MACH_F] = mach
+                predictor.predict(x0, c, res["bank_line_rad"], res["bank_final_rad"], e0, ef, 1.0,
+                                  base["npc.dt_pred_s"], out, 0.0)
+                dist.append(geometry.central_angle(out[:3], target) * R)
+            i_min = int(np.argmin(dist))
+            assert 0 < i_min < len(dist) - 1                        # abeam inside the sweep
+            assert res["xr_keep_m"] == pytest.approx(-dist[i_min], abs=30.0)
+    end = _unit(got["velocity"])
+    assert got["velocity"]["xr_keep_m"] == pytest.approx(geometry.crossrange(x0[:3], target, end, R), abs=1.0)
+    assert abs(got["velocity"]["xr_keep_m"] - got["range"]["xr_keep_m"]) > 300.0
+
+
+def test_trigger_crossrange_counts_only_within_the_reserve_of_the_target():
+    """Corrector._deploy_crossrange on constructed predictions: the trigger's crossrange
+    (O_XR_TRIG) is the answer when its point lies within the range reserve (2 km) of the
+    target along the track (1.5 km past it, 0.3 km across); at the box entry 20 km past a
+    target the track turned away from, the end's offset off the great circle to the target
+    instead (here 4.3 km), as for the velocity trigger."""
+    x0, _, _, _, _, _, E, target = _abeam_case()
+    R = SCN.planet.radius_m
+    eg = npc.EntryGuidance(SCN.with_(deploy_by="fsw"), dict(PARAMS, **{"deploy.trigger": "range",
+                                                                       "npc.range_reserve_m": 2000.0}),
+                           EventLog(), 0.02)
+    try:
+        eg.target_u = target
+        assert eg.constants[predictor.C_TRIG] == 1.0 and eg.reserve_m == 2000.0
+        up = target
+        east = np.cross([0.0, 0.0, 1.0], up)
+        east /= np.linalg.norm(east)
+        north = np.cross(up, east)
+
+        def at(d_north_m, d_east_m):        # a point near the target, the track northwards
+            p = up + (d_north_m * north + d_east_m * east) / R
+            return p / np.linalg.norm(p) * R
+        end = at(3000.0, 7000.0)
+        out = np.zeros(predictor.N_O)
+        out[:3] = end
+        out[predictor.O_XR_TRIG] = -300.0
+        out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3] = at(1500.0, 300.0)
+        assert eg._deploy_crossrange(x0, out) == -300.0
+        out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3] = at(20e3, 300.0)
+        off = eg._deploy_crossrange(x0, out)
+        assert off == geometry.crossrange(x0[:3], target, end, R) and abs(off) > 3000.0
+    finally:
+        eg.close()

@@ -18,8 +18,8 @@ import numpy as np
 
 from common.model import Scenario
 from .geometry import central_angle, crossrange, unit_from_latlon
-from .predictor import (C_KLD, C_KRHO, N_O, O_FLAG, O_H, O_H_BOX, O_T, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict,
-                        predict_shaped, predictor_constants)
+from .predictor import (C_KLD, C_KRHO, C_TGT, C_TRIG, N_O, O_FLAG, O_H, O_H_BOX, O_R_TRIG, O_T, O_XR_TRIG, REACHED,
+                        SKIPPED, TIMEOUT, deploy_energy, predict, predict_shaped, predictor_constants)
 from .shaper import reversal_other_way
 
 
@@ -209,7 +209,8 @@ class Correction(TypedDict):
     h_final_m: float          # predicted deploy altitude (at the deploy condition) ...
     h_box_m: float            # ... and where the deploy box is entered: the floor's (the highest deploy)
     t_go_s: float             # predicted time to deploy, from the state answered
-    xr_keep_m: float          # predicted deploy crossrange (+ left), sign kept (NaN: not predicted) ...
+    xr_keep_m: float          # predicted deploy crossrange (+ left; _deploy_crossrange), sign kept (NaN: not
+                              # predicted) ...
     xr_rev_m: float           # ... and reversed t_flip from now
     compute_ns: int           # the correction's wall time
     t_s: NotRequired[float]   # release time of the cycle it answers (added by the worker)
@@ -334,6 +335,21 @@ class Corrector:
             f = 0.5 * (f_ok + f_bad)
         return (best[0], best[1], best[2], n)
 
+    def _deploy_crossrange(self, x: np.ndarray, out: np.ndarray) -> float:
+        """The predicted deploy crossrange [m, + left] of the prediction out from x: with the range
+        trigger across the track where it fires (O_XR_TRIG: the deploy miss when the target
+        comes abeam), else off the great circle from x to the target at the prediction's end.
+        The trigger's figure counts only where that point lies within the range reserve of the
+        target along the track: a track that turns more than 90 deg off the target's bearing
+        before the box passes it "abeam" far out (the box entry then, the target behind), and
+        one that ends short by more has its crossrange still to fly."""
+        xr = float(out[O_XR_TRIG])
+        if self.constants[C_TRIG] != 0.0 and math.isfinite(xr):
+            d = central_angle(out[O_R_TRIG:O_R_TRIG + 3], self.target_u) * self.radius_m
+            if d * d - xr * xr <= self.reserve_m * self.reserve_m:
+                return xr
+        return crossrange(x[:3], self.target_u, out[:3], self.radius_m)
+
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
               shp: np.ndarray | None = None, h_floor_m: float | None = None) -> Correction:
         """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
@@ -346,11 +362,11 @@ class Corrector:
         self._shp = shp
         c = self.constants
         c[C_KRHO], c[C_KLD] = k_rho, k_ld
+        c[C_TGT:C_TGT + 3] = self.target_u          # the range trigger's point (O_XR_TRIG) is judged on it
         r = math.sqrt(float(x[:3] @ x[:3]))
         e0 = self.mu_m3ps2 / r - 0.5 * float(x[3:] @ x[3:])
         s_togo = central_angle(x[:3], self.target_u) * self.radius_m
         s_aim = s_togo + self.reserve_m          # the aim point: range_reserve beyond the target
-        dt = self.params["npc.dt_pred_s"]
         lo, hi, f = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
         p_span = profile_span(lo, hi, f)
         p_warm = self.bank0
@@ -429,14 +445,19 @@ class Corrector:
             # bank switching at once (the reversal at its shaped transition's mid-point) and
             # this phi_0: a pair flown through the shaper, the reversed one re-solved, would
             # decide the final reversal at the first reversal, where the load limit's lift-up
-            # sends the swing through lift up, and fly far long
-            predict(x, c, b0, bf, e0, self.e_deploy_jpkg, sign, dt, self._out, 0.0)
+            # sends the swing through lift up, and fly far long. Their crossranges are the
+            # deploy's (_deploy_crossrange): with the range trigger the miss where the target
+            # comes abeam, not the offset of where the prediction ends (the aim point,
+            # range_reserve and the box's stretch further on) off the great circle to the target:
+            # a track that meets that circle at an angle nulls one and not the other
+            dt, ef, out = self.params["npc.dt_pred_s"], self.e_deploy_jpkg, self._out
+            predict(x, c, b0, bf, e0, ef, sign, dt, out, 0.0)
             res["predictions"] += 1
-            if self._out[O_FLAG] == REACHED:
-                res["xr_keep_m"] = crossrange(x[:3], self.target_u, self._out[:3], self.radius_m)
-                predict(x, c, b0, bf, e0, self.e_deploy_jpkg, -sign, dt, self._out, t_flip)
+            if out[O_FLAG] == REACHED:
+                res["xr_keep_m"] = self._deploy_crossrange(x, out)
+                predict(x, c, b0, bf, e0, ef, -sign, dt, out, t_flip)
                 res["predictions"] += 1
-                if self._out[O_FLAG] == REACHED:
-                    res["xr_rev_m"] = crossrange(x[:3], self.target_u, self._out[:3], self.radius_m)
+                if out[O_FLAG] == REACHED:
+                    res["xr_rev_m"] = self._deploy_crossrange(x, out)
         res["compute_ns"] = time.perf_counter_ns() - t0
         return res

@@ -49,7 +49,9 @@ C_NLIM, C_QLIM = 19, 20         # path limits: load factor [g], heat rate [W/m^2
 C_HTAU, C_HGAIN = 21, 22        # path-limit feedback: closing time [s], gain [s/m]
 C_BLO, C_BHI = 23, 24           # the law's bank magnitude clipped to the phi_0 bounds [rad] (bank_profile)
 C_BOX_MACH, C_BOX_QBAR = 25, 26 # the deploy box's Mach and dynamic-pressure maxima [-, Pa] (0: no box)
-N_C = 27
+C_TGT = 27                      # 3: the target's unit position vector, planet-fixed (O_R_TRIG) ...
+C_TRIG = 30                     # ... and 1 when the range trigger deploys (O_R_TRIG is then where it fires)
+N_C = 31
 # The predictor's outputs, indexed likewise
 O_R = 0                         # 3: final position, planet-fixed [m]
 O_T = 3                         # time of flight [s]
@@ -58,7 +60,12 @@ O_H, O_V = 6, 7                 # final altitude [m] and speed [m/s]
 O_FLAG = 8                      # how it ended: REACHED, SKIPPED, GROUND or TIMEOUT
 O_H_BOX = 9                     # altitude where the deploy box is entered [m] (the final one without a box,
                                 # or when the box is not entered before the deploy condition)
-N_O = 10
+O_R_TRIG = 10                   # 3: where the range trigger fires, planet-fixed [m]: the first point inside
+                                # the deploy box with the target abeam or behind (the final position when
+                                # C_TRIG is 0, or the target is still ahead at the deploy condition) ...
+O_XR_TRIG = 13                  # ... and the crossrange there [m, + the vehicle left of the target]: the
+                                # target's distance off the track, across it (NaN when C_TRIG is 0)
+N_O = 14
 REACHED, SKIPPED, GROUND, TIMEOUT = 0, 1, 2, 3
 T_PRED_MAX_S = 1500.0           # a prediction longer than this is a skip-out
 SUTTON_GRAVES_MARS = 1.9027e-4  # k of q = k sqrt(rho / R_n) V^3 [SI] (docs/fsw/entry-guidance.md)
@@ -160,6 +167,31 @@ def _box_metric(h, V, c):
 
 
 @njit(cache=True, nogil=True)
+def _ahead(x, c):
+    """Along-track distance to the target, to first order [m^2/s]: the velocity's component
+    along the target's direction in the local horizontal, times the distance (positive while
+    the target is ahead; the range trigger's range to go, whose sign it has)."""
+    r = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    ux, uy, uz = x[0] / r, x[1] / r, x[2] / r
+    tu = c[C_TGT] * ux + c[C_TGT + 1] * uy + c[C_TGT + 2] * uz
+    hv = ux * x[3] + uy * x[4] + uz * x[5]
+    return (c[C_TGT] * x[3] + c[C_TGT + 1] * x[4] + c[C_TGT + 2] * x[5] - tu * hv) * r
+
+
+@njit(cache=True, nogil=True)
+def _across(x, c):
+    """The crossrange at x [m]: the target's offset across the track (along the local
+    horizontal normal to the velocity), positive when the vehicle is left of the target. At
+    the target abeam it is the deploy miss, signed."""
+    r = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    ux, uy, uz = x[0] / r, x[1] / r, x[2] / r
+    lx, ly, lz = uy * x[5] - uz * x[4], uz * x[3] - ux * x[5], ux * x[4] - uy * x[3]     # up x v: left
+    ln = math.sqrt(lx * lx + ly * ly + lz * lz)
+    d = (c[C_TGT] - ux) * lx + (c[C_TGT + 1] - uy) * ly + (c[C_TGT + 2] - uz) * lz
+    return -d / ln * c[C_RE]
+
+
+@njit(cache=True, nogil=True)
 def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     """Fly the 3-DOF model from x0 (planet-fixed [r, v_rel], m and m/s) until the deploy
     condition (or skip, ground, timeout). c: the constants (predictor_constants, indices
@@ -169,7 +201,9 @@ def predict(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip=0.0):
     effect then: the lateral mid-point of the shaped transition). out: final position (3)
     [m, planet-fixed], time of flight [s], peak load [g], peak heat rate [W/m^2], final
     altitude [m] and speed [m/s], flag (REACHED/SKIPPED/GROUND/TIMEOUT), the altitude where
-    the deploy box was entered [m] (O_H_BOX: the highest the trigger can deploy). The last step is
+    the deploy box was entered [m] (O_H_BOX: the highest the trigger can deploy), where the range
+    trigger fires (O_R_TRIG, 3; interpolated to the target abeam) and the crossrange there
+    (O_XR_TRIG). The last step is
     cut back linearly to the deploy condition. The law's bank is flown from the start."""
     _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, np.empty(0), 0)
 
@@ -204,7 +238,7 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     """The integration of ``predict`` and ``predict_shaped`` (tab: the transition's bank every
     dt/2, n_tab samples; 0: none)."""
     x = x0.copy()
-    xp = np.empty(6)
+    xp = x0.copy()                  # the state a step back (a prediction of no step ends at x0)
     k1 = np.empty(6)
     k2 = np.empty(6)
     k3 = np.empty(6)
@@ -221,6 +255,9 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     h_box = math.nan
     flag = TIMEOUT
     frac = 1.0
+    trig = c[C_TRIG] != 0.0
+    g_prev = _ahead(x, c) if trig else 0.0
+    fired = False
     while t < c[C_T_MAX]:
         xp[:] = x
         sg = -sign if t < t_flip else sign
@@ -249,12 +286,26 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
         r = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
         h = r - c[C_RE]
         V = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+        w_box = 0.0                     # where in this step the box was entered (fraction)
         if math.isnan(h_box) and c[C_BOX_MACH] > 0.0:
             b = _box_metric(h, V, c)
             if b <= 0.0:
-                h_box = h_prev + (b_prev / (b_prev - b) if b_prev > b else 1.0) * (h - h_prev)
+                w_box = b_prev / (b_prev - b) if b_prev > b else 1.0
+                h_box = h_prev + w_box * (h - h_prev)
             b_prev = b
         h_prev = h
+        if trig and not fired:
+            g = _ahead(x, c)
+            if g <= 0.0 and (c[C_BOX_MACH] <= 0.0 or not math.isnan(h_box)):
+                # the trigger fires here: at the target abeam, interpolated within the step,
+                # or where the box is entered when the target was passed above it
+                w = max(g_prev / (g_prev - g) if g_prev > 0.0 else 0.0, w_box)
+                for i in range(6):
+                    xt[i] = xp[i] + w * (x[i] - xp[i])
+                out[O_R_TRIG], out[O_R_TRIG + 1], out[O_R_TRIG + 2] = xt[0], xt[1], xt[2]
+                out[O_XR_TRIG] = _across(xt, c)
+                fired = True
+            g_prev = g
         m = _end_metric(h, V, c)
         if m <= 0.0:
             frac = m_prev / (m_prev - m) if m_prev > m else 1.0
@@ -278,6 +329,9 @@ def _fly(x0, c, b0, bf, e0, ef, sign, dt, out, t_flip, tab, n_tab):
     out[O_V] = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
     out[O_FLAG] = flag
     out[O_H_BOX] = out[O_H] if math.isnan(h_box) else h_box
+    if not fired:
+        out[O_R_TRIG], out[O_R_TRIG + 1], out[O_R_TRIG + 2] = x[0], x[1], x[2]
+        out[O_XR_TRIG] = _across(x, c) if trig else math.nan
 
 
 def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:
@@ -305,6 +359,10 @@ def predictor_constants(scenario: Scenario, params: dict) -> np.ndarray:
     box = veh.deploy_box
     if box is not None:
         c[C_BOX_MACH], c[C_BOX_QBAR] = box.mach_max, box.qbar_max_pa
+    if scenario.target_lat_rad is not None:
+        lat, lon = scenario.target_lat_rad, scenario.target_lon_rad
+        c[C_TGT:C_TGT + 3] = math.cos(lat) * math.cos(lon), math.cos(lat) * math.sin(lon), math.sin(lat)
+        c[C_TRIG] = float(scenario.deploy_by == "fsw" and params.get("deploy.trigger") == "range")
     return c
 
 

@@ -36,8 +36,8 @@ def _params(scenario: str | None) -> dict:
 
 
 def _health_without_roll_pairs() -> JetHealth:
-    """A campaign run's faults (guided 2718 run 12): jets 11, 14, 16, 18 failed off, 4 and 10
-    stuck on -- no pair of jets left whose pitch and yaw cancel while their roll adds."""
+    """Jets 11, 14, 16, 18 failed off, 4 and 10 stuck on (a dispersed guided run's faults): no
+    pair of jets left whose pitch and yaw cancel while their roll adds."""
     h = JetHealth()
     for j in (11, 14, 16, 18):
         h.set(j, FAILED_OFF)
@@ -64,7 +64,7 @@ def test_paper_weights_stay_below_it():
 
 @pytest.mark.parametrize("demand", [[-210.0, 0.0, 0.0], [-210.0, -19.0, -82.0], [-196.0, 28.0, -113.0]])
 def test_guided_weights_give_the_bank_axis_the_small_jets(demand):
-    """Demands of the campaign's slow bank braking: the guided weights' exact answer (checked
+    """Demands of a slow braking reversal with these faults: the guided weights' exact answer (checked
     against the enumeration) turns the vehicle about the bank axis at least as hard as the
     paper's weights, and harder on the pure roll demand."""
     health = _health_without_roll_pairs()

@@ -27,6 +27,8 @@ from interfaces.keys import Keys
 # Connection retry while the listening process is not up yet (zenoh's default starts at 1 s).
 CONNECT_RETRY = {"period_init_ms": 20, "period_max_ms": 500, "period_increase_factor": 2}
 CONNECT_TIMEOUT_MS = 200
+# Zenoh's lease: a peer silent this long is dropped (bounds any stall on a frozen peer).
+LEASE_MS = 10_000
 
 
 def default_config(role: str, listen: list[str] | None, connect: list[str] | None,
@@ -41,14 +43,17 @@ def default_config(role: str, listen: list[str] | None, connect: list[str] | Non
         "connect": {"endpoints": list(connect or []), "timeout_ms": CONNECT_TIMEOUT_MS,
                     "exit_on_failure": False, "retry": dict(CONNECT_RETRY)},
     }
+    # Zenoh's lease (its default, made explicit): a peer silent this long is dropped.
+    cfg["transport"] = {"link": {"tx": {"lease": LEASE_MS, "keep_alive": 4}}}
     if lowlatency:
         # saves ~30-60 us per hop here; both ends must agree; excludes QoS (
-        # docs/interfaces/index.md). Measured (zenoh 1.x): a low-latency publisher whose subscriber is
-        # frozen (SIGSTOP, a debugger) blocks in put() for good once the socket buffers
-        # (~3.5 MB on loopback) are full, whatever its congestion control; Zenoh's lease
-        # (10 s) drops a frozen peer first when less than ~350 kB/s goes to it, as in the
-        # real-time SIL (< 50 kB/s per key). tests/test_transport_loopback.py holds both.
-        cfg["transport"] = {"unicast": {"lowlatency": True, "qos": {"enabled": False}}}
+        # docs/interfaces/index.md). A low-latency put writes to the socket itself, whatever
+        # its congestion control: once a frozen subscriber's (SIGSTOP, a debugger) socket
+        # buffers are full, put() blocks until the lease drops that peer. Seen: ~20 MB
+        # absorbed on one machine; a block for the whole lease right at the freeze on another
+        # (CI, 120 kB/s). docs/sil.md says so; the standard transport with DROP never blocks.
+        # tests/test_transport_loopback.py holds both.
+        cfg["transport"]["unicast"] = {"lowlatency": True, "qos": {"enabled": False}}
     return cfg
 
 

@@ -206,13 +206,14 @@ time.sleep(600)
 """
 
 
-def test_a_frozen_subscriber_never_stalls_a_real_time_publisher():
-    """A stopped viewer or peer (SIGSTOP, a debugger) must not stall a real-time loop. On the
-    default low-latency transport: at 200 samples/s of 600 B (4x the SIL's busiest real-time
-    key) no put blocks, and Zenoh's lease drops the frozen peer after ~10 s. (At ~1 MB/s the
-    socket buffers fill before the lease and put() then blocks for good, DROP or not: the
-    bound is the data rate, measured while choosing the transport.) The standard transport
-    with DROP never blocks at any rate."""
+def test_a_frozen_subscriber_holds_a_real_time_publisher_at_most_for_the_lease():
+    """A stopped viewer or peer (SIGSTOP, a debugger). The standard transport with DROP never
+    blocks, at any rate. The low-latency transport writes to the socket in put() itself: once
+    the frozen peer's socket buffers are full, put() blocks until Zenoh's lease drops the peer
+    (how much the buffers absorb is the kernel's: ~20 MB on one machine, nothing on another),
+    so at 200 samples/s of 600 B no put blocks longer than the lease, the peer is dropped,
+    and after the drop every put returns at once."""
+    lease_s = T.LEASE_MS / 1000.0
     for lowlatency, rate, n in ((True, 200.0, 2_600), (False, None, 40_000)):
         port = T.free_port()
         s = T.open_session("fsw", [T.loopback(port)], None, lowlatency=lowlatency)
@@ -233,9 +234,18 @@ def test_a_frozen_subscriber_never_stalls_a_real_time_publisher():
                 worst = max(worst, time.monotonic() - a)
                 if rate:
                     time.sleep(max(0.0, t0 + (i + 1) / rate - time.monotonic()))
-            assert worst < 0.5, (lowlatency, worst)
-            if lowlatency:                         # 13 s of puts: the lease has dropped the peer
-                assert not pub.matching_status.matching
+            if not lowlatency:
+                assert worst < 0.5, worst
+                continue
+            assert worst < lease_s + 2.0, worst       # the lease bounds the stall
+            assert time.monotonic() - t0 > lease_s + 2.0
+            assert not pub.matching_status.matching    # the lease has dropped the peer
+            after = 0.0
+            for _ in range(400):                       # dropped: nothing left to block on
+                a = time.monotonic()
+                pub.put(payload)
+                after = max(after, time.monotonic() - a)
+            assert after < 0.5, after
         finally:
             child.kill()                          # SIGKILL works on a stopped process
             child.wait(10)

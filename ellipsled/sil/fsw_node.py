@@ -118,6 +118,9 @@ class FswNode:
         self.next_k = 0
         self.lock_source = None     # the plant whose steps the real-time ticks are locked to
         self.jitter_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)   # every tick, whole run
+        # every tick's control task time (-1: not run), whole run: the executive's statistics
+        # keep only its recent cycles, and the latency it is a share of covers the whole run
+        self.control_ns = np.full(len(self.history.a["k"]), -1, dtype=np.int64)
         # real time: how long after the plant published it each frame reached this loop
         self.frame_age_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
         self.n_frames = 0
@@ -130,6 +133,7 @@ class FswNode:
         self.topo = Topology(self.fsw, clock,
                              frame_source=self._newest_frame if args.mode == "realtime" else None)
         self.topo.add(1, "publish", self._publish)
+        self._control_col = self.topo.executive._names.index("control")   # its column in the statistics
         self.topo.add(2, "events", self._publish_events)
         self.link = self._ground_link()
         if self.link is not None:
@@ -304,7 +308,11 @@ class FswNode:
                 input_off_cpu_us=_off_cpu_us(self._taken_wall_ns - self._input_wall_ns, self._input_ru, ru0))
         if self.ticks >= len(self.jitter_ns):
             self.jitter_ns = np.concatenate((self.jitter_ns, np.zeros_like(self.jitter_ns)))
+            self.control_ns = np.concatenate((self.control_ns, np.full_like(self.control_ns, -1)))
         self.jitter_ns[self.ticks] = cyc.t_start_ns - cyc.t_release_ns
+        st = ex.stats
+        if st is not None and st.n:
+            self.control_ns[self.ticks] = st.task_ns[(st.n - 1) % st.capacity, self._control_col]
         self.ticks += 1
         if not self.topo.got_frame:
             return
@@ -399,7 +407,8 @@ class FswNode:
     def run(self) -> int:
         a = self.args
         if a.mode == "realtime":    # the arrays the loop fills: no first-touch page fault in flight
-            rt.prefault(self.history.truth_rows, self.history.fsw_rows, self.jitter_ns, self.frame_age_ns)
+            rt.prefault(self.history.truth_rows, self.history.fsw_rows, self.jitter_ns, self.frame_age_ns,
+                       self.control_ns)
         rt.gc_out_of_cycle()
         say(ROLE, f"{self.scn.name}, {a.mode}; waiting for the plant")
         if not transport.wait_for_alive(self.session, self.K.alive_sim, a.wait_peers):
@@ -420,8 +429,10 @@ class FswNode:
         out = Path(self.args.out)
         out.mkdir(parents=True, exist_ok=True)
         self.history.save(out / "fsw_history.npz")
-        # every tick's release jitter and every frame's age, raw (ellipsled/node_reports.py sums them up)
+        # every tick's release jitter and control task time and every frame's age, raw (the launcher
+        # and ellipsled/node_reports.py sum them up)
         np.savez_compressed(out / "fsw_timing.npz", jitter_ns=self.jitter_ns[: self.ticks],
+                            control_ns=self.control_ns[: self.ticks],
                             frame_age_ns=self.frame_age_ns[: self.n_frames])
         rep = fsw_report(self.fsw, self.topo.executive.slips, self.samples)
         ex = self.topo.executive.telemetry()

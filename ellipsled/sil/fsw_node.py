@@ -33,7 +33,7 @@ from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_KINDS, HEALTH_NAMES, NOMINAL  # noqa: E402
 
 from .common import DecodeRehearsal, Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
-from .frame_timing import due_step, phase_origin_ns, take_due_frame  # noqa: E402
+from .frame_timing import due_step, phase_origin_ns, phase_steady, take_due_frame  # noqa: E402
 from .fsw_report import alloc_sample, fsw_report  # noqa: E402
 from .history import History, record_fsw  # noqa: E402
 from .variant import prepare_args  # noqa: E402
@@ -361,6 +361,7 @@ class FswNode:
         return None
 
     LOCK_FRAMES = 10        # real time: frames the phase lock takes the plant's schedule from
+    LOCK_WAIT_S = 2.0       # ... waiting at most this much longer for them to keep one schedule
 
     def run_realtime(self) -> None:
         # warm up on the plant's first frame (it offers that frame until we say ready, then
@@ -382,13 +383,17 @@ class FswNode:
         # the plant's schedule: step k published at origin + k * period, never earlier, often
         # later in its first steps (its own first-call costs: step 1 came 32 ms late, step 2
         # 13 ms, then on time) — so the earliest origin over LOCK_FRAMES frames, not the first
+        # frames, and until the last of them keep one schedule (phase_steady: not a catch-up
+        # burst), at most LOCK_WAIT_S more; the origin from the last LOCK_FRAMES
         frames = [(lock, self.dec_sensors.last_t_pub_ns)]
-        for _ in range(self.LOCK_FRAMES - 1):
+        most = self.LOCK_FRAMES + int(self.LOCK_WAIT_S * 1e9 // period)
+        while len(frames) < self.LOCK_FRAMES or (not phase_steady(frames, period) and len(frames) < most):
             k = self._next_good_frame()
             if k is None:
                 return
             frames.append((k, self.dec_sensors.last_t_pub_ns))
             lock = k
+        frames = frames[-self.LOCK_FRAMES:]
         origin = phase_origin_ns(frames, period)
         say(ROLE, f"phase lock on step {lock}: plant's publications "
                   f"{[round((t - k * period - origin) / 1e3) for k, t in frames]} us after the earliest")

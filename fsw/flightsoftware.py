@@ -38,7 +38,8 @@ from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
 from .params import Param, ParamRegistry, periods
 from . import executive
 
-COMMAND_RING_S = 1.28   # answers kept for FDIR (64 at 50 Hz, 256 at 200 Hz): a command held longer is not judged
+COMMAND_RING_S = 1.28
+_ZERO3 = (0.0, 0.0, 0.0)   # answers kept for FDIR (64 at 50 Hz, 256 at 200 Hz): a command held longer is not judged
 
 
 def declarations() -> tuple[tuple[str, list[Param]], ...]:
@@ -136,8 +137,9 @@ class FlightSoftware(GroundCommands):
         # gave over it: the mean of the interval's RG1 commands (the allocator's torque changes
         # from cycle to cycle; one cycle's sample misstates it). Each cycle adds the torque of
         # the cycle before it (the one that acted up to this frame); jets held off add zero.
-        self._tau_last = np.zeros(3)
-        self._tau_sum = np.zeros(3)
+        # (Python floats: the same additions as on arrays, a fraction of their per-call cost)
+        self._tau_last = _ZERO3
+        self._tau_sum = _ZERO3
         self._tau_n = 0
         self._tau_mean = np.zeros(3)
         self._have_prev = False
@@ -152,7 +154,7 @@ class FlightSoftware(GroundCommands):
         # older one than the last sent (a late answer: the plant held the one before)
         self._ring = periods(COMMAND_RING_S, self.dt_s)
         self._sent = np.zeros((self._ring, self.driver.n), dtype=np.uint8)
-        self._sent_k = np.full(self._ring, -2, dtype=np.int64)
+        self._sent_k = [-2] * self._ring       # the frame index of each slot's answer
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self.realtime = realtime
@@ -220,9 +222,8 @@ class FlightSoftware(GroundCommands):
             self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
         if self.allocator.degraded:
             self.events.emit(t_s, EV.ALLOC_DEGRADED)
-        self._check_bank_shortfall(t_s)
+        self._tau_last = self._check_bank_shortfall(t_s)       # this cycle's torque, as floats
         self._have_prev = True
-        self._tau_last[:] = self.tau_alloc_B
         return self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))
 
     def rehearse(self, frame, demand_B: np.ndarray) -> None:
@@ -266,11 +267,12 @@ class FlightSoftware(GroundCommands):
         i = u_k % self._ring
         return self._sent[i] if self._sent_k[i] == u_k else None
 
-    def _check_bank_shortfall(self, t_s: float) -> None:
+    def _check_bank_shortfall(self, t_s: float) -> tuple[float, float, float]:
+        """Note whether the bank axis fell short this cycle; returns tau_alloc_B as floats."""
         # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
         a0, a1, a2 = self._bank_axis
         u0, u1, u2 = self.u_cal_B.tolist()
-        t0, t1, t2 = self.tau_alloc_B.tolist()
+        tau = t0, t1, t2 = tuple(self.tau_alloc_B.tolist())
         d = a0 * u0 + a1 * u1 + a2 * u2
         got = a0 * t0 + a1 * t1 + a2 * t2
         self.alloc_short = (abs(d) > self._bank_short_min_Nm
@@ -278,6 +280,7 @@ class FlightSoftware(GroundCommands):
         if self.alloc_short:
             self.alloc_short_cycles += 1
             self.events.emit(t_s, EV.ALLOC_SHORT)
+        return tau
 
     def no_frame(self, t_s: float) -> np.ndarray:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards
@@ -289,7 +292,7 @@ class FlightSoftware(GroundCommands):
     def _run_no_frame(self, t_s: float) -> np.ndarray:
         self.cycles += 1
         self._count_torque()
-        self._tau_last[:] = 0.0
+        self._tau_last = _ZERO3
         self.t_s = t_s
         self.monitor.tick(t_s, got_frame=False)
         # no frame, so no answer is sent and none is noted (stale or not): the plant still
@@ -299,7 +302,8 @@ class FlightSoftware(GroundCommands):
         return self.driver.command(self._zero_u, False)
 
     def _count_torque(self) -> None:
-        self._tau_sum += self._tau_last
+        s, last = self._tau_sum, self._tau_last
+        self._tau_sum = (s[0] + last[0], s[1] + last[1], s[2] + last[2])
         self._tau_n += 1
 
     def _hold_off(self, t_s: float) -> np.ndarray:
@@ -308,7 +312,7 @@ class FlightSoftware(GroundCommands):
         self.u_cal_B[:] = 0.0
         self.dutycycle.reset()
         self.tau_alloc_B[:] = 0.0
-        self._tau_last[:] = 0.0
+        self._tau_last = _ZERO3
         self.alloc_short = False
         return self.driver.command(self._zero_u, False)
 
@@ -322,7 +326,7 @@ class FlightSoftware(GroundCommands):
                                      self._tau_mean, self.control.aero_torque_est(nav),
                                      self.control.inertia_hat())
         self._omega_prev[:] = nav.omega_BN_B
-        self._tau_sum[:] = 0.0
+        self._tau_sum = _ZERO3
         self._tau_n = 0
         self._residual_ready = True
 

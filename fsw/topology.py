@@ -13,7 +13,7 @@ slips when the control task has run, the compute time when the tick has ended.
 Real time (executive.rehearse_us > 0): a period asleep leaves the control task's code and
 the interpreter's paths through it out of the caches, and the first cycle after it runs
 several times slower than the same cycle run back to back. A spare FlightSoftware (the
-rehearsal) runs the control cycle on the last frame shortly before each release
+rehearsal) runs the control cycle on a copy of the last frame shortly before each release
 (RealTimeClock.set_rehearsal), so the flying one finds the code warm. The spare is the same
 code, not a copy of it; its outputs go nowhere, and its FDIR identifies nothing (mode
 oracle without a fault log), so it never rebuilds tables or solves the controllability LP
@@ -63,6 +63,7 @@ class Topology:
         self.rehearsal: FlightSoftware | None = None
         self.rehearsal_errors = 0
         self._last_frame = None
+        self._rehearsal_frame = None     # the spare's own copy of the last frame (made once)
         lead_ns = int(round(fsw.params["executive.rehearse_us"] * 1e3))
         if isinstance(clock, RealTimeClock) and lead_ns > 0:
             if lead_ns >= period_ns:
@@ -73,13 +74,24 @@ class Topology:
             clock.set_rehearsal(self._rehearse, lead_ns)
 
     def _rehearse(self) -> None:
-        """The control cycle of the spare on the last frame the flying FSW took (never raises:
-        a failing rehearsal is counted, the flight goes on)."""
-        if self._last_frame is None:
+        """The control cycle of the spare on a copy of the last frame the flying FSW took (never
+        raises: a failing rehearsal is counted, the flight goes on)."""
+        frame = self._last_frame
+        if frame is None:
             return
         try:
-            self.rehearsal.control_step(self._last_frame)
-            self.fsw.rehearse(self._last_frame, self.rehearsal.u_cal_B)
+            # the spare's frame check writes NaN into bad chamber entries, in place: it works on
+            # its own copy, for the record the flying instance took may already hold the next
+            # frame (a source that refills one record), which the flying check must see as sent
+            mine = self._rehearsal_frame
+            if not isinstance(frame, np.ndarray):
+                mine = frame                     # not a record: refused by the check, not written
+            elif mine is None or mine.dtype != frame.dtype or mine.shape != frame.shape:
+                mine = self._rehearsal_frame = frame.copy()
+            else:
+                np.copyto(mine, frame)
+            self.rehearsal.control_step(mine)
+            self.fsw.rehearse(frame, self.rehearsal.u_cal_B)
         except Exception:
             self.rehearsal_errors += 1
 

@@ -4,7 +4,7 @@ its first publications, each tick flies its own step, and one frame that comes a
 tick's wait costs that tick only."""
 from __future__ import annotations
 
-from ellipsled.sil.frame_timing import due_step, phase_origin_ns, take_due_frame
+from ellipsled.sil.frame_timing import due_step, phase_origin_ns, phase_steady, take_due_frame
 
 MS = 1_000_000
 PERIOD = 20 * MS
@@ -41,6 +41,24 @@ def test_the_lock_takes_the_earliest_origin_not_the_first_frames():
     frames = [(k, origin + k * PERIOD + late.get(k, 0) + (k % 3) * 10_000) for k in range(1, 11)]
     assert phase_origin_ns(frames, PERIOD) == origin                       # steps 3, 6, 9: on time
     assert phase_origin_ns(frames[:1], PERIOD) == origin + 32 * MS + 10_000  # the first alone: late
+
+
+def test_a_catch_up_burst_is_not_a_schedule_the_frames_after_it_are():
+    """A plant stalled about 200 ms publishes its backlog (steps 1-10) at once, then keeps its
+    schedule: the burst's frames imply origins a period apart, so no lock on them (the earliest
+    of them is 10 ms late: every release would be); once five frames keep one schedule, the
+    last ten give the true origin."""
+    origin = 5 * MS
+    burst = [(k, origin + 210 * MS + k * 1_000) for k in range(1, 11)]     # all at ~t = 215 ms
+    assert not phase_steady(burst, PERIOD)
+    assert phase_origin_ns(burst, PERIOD) == origin + 10 * MS + 10_000    # a lock here: 10 ms late
+    after = burst + [(k, origin + k * PERIOD + (k % 3) * 10_000) for k in range(11, 16)]
+    assert phase_steady(after, PERIOD) and not phase_steady(after[:-1], PERIOD)
+    assert phase_origin_ns(after[-10:], PERIOD) == origin
+    # the usual start (first steps late by their first calls, then on time) is steady at once
+    late = {1: 32 * MS, 2: 13 * MS}
+    start = [(k, origin + k * PERIOD + late.get(k, 0) + (k % 3) * 10_000) for k in range(1, 11)]
+    assert phase_steady(start, PERIOD)
 
 
 def test_a_release_takes_the_frame_due_when_it_comes_within_the_wait():

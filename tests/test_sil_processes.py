@@ -105,6 +105,11 @@ def test_lockstep_sil_equals_batch_bit_for_bit(tmp_path):
     assert s_sil["allocator"]["solves"] == s_bat["allocator"]["solves"]
     # lockstep: the frame comes with the tick; no input task waiting for frames (it cost 3 ms a step)
     assert "input" not in _json(out / "fsw.json")["tasks_us"]
+    # the control task's time of every tick is saved, and sil.json's figure covers them all
+    with np.load(out / "fsw_timing.npz") as z:
+        control_ns = z["control_ns"]
+    assert len(control_ns) == _json(out / "fsw.json")["ticks"] == h_bat["k"].shape[0]
+    assert (control_ns > 0).all() and _json(out / "sil.json")["fsw_control_us"]["runs"] == len(control_ns)
     assert [d["jet"] for d in s_sil["fdir"]["detections"]] == [2, 17, 18, 1] or \
         sorted(d["jet"] for d in s_sil["fdir"]["detections"]) == [1, 2, 17, 18]
 

@@ -190,3 +190,20 @@ def test_no_rehearsal_in_lockstep_and_a_lead_of_a_period_refused():
                                                             "executive.rg2_period_s": 0.1})
     with pytest.raises(ValueError, match="executive.rehearse_us = 2000 us: not shorter than the control period"):
         Topology(fsw, RealTimeClock(2 * MS))
+
+
+def test_the_spare_rehearses_on_a_copy_so_the_next_frame_in_a_refilled_record_reaches_the_flying_check_as_sent():
+    """The bench's loop (and any source that refills one record) holds the NEXT frame in the
+    record the flying instance took by the time the rehearsal runs. A chamber entry out of range
+    in that frame must reach the flying frame check as sent (counted out of range, then NaN),
+    not already NaN from the spare's check (which would count it non-finite)."""
+    topo, _, _, _ = _fly(800.0, n=30)
+    ref_topo, _, _, _ = _fly(0.0, n=30)
+    for t in (topo, ref_topo):
+        t.frame_source()["chamber"][2] = 50.0         # the next frame: above fdir.chamber_hi
+        t.tick()
+    assert topo.rehearsal.cycles == 30 and topo.rehearsal_errors == 0      # it ran on that frame
+    counts = topo.fsw.monitor.counts
+    assert counts["chamber_range"] == 1 and counts["chamber_nonfinite"] == 0
+    assert counts == ref_topo.fsw.monitor.counts
+    assert topo.rehearsal.monitor.counts["chamber_range"] == 1              # the spare saw the value too

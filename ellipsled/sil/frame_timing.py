@@ -13,6 +13,17 @@ def phase_origin_ns(frames: Iterable[tuple[int, int]], period_ns: int) -> int:
     return min(t_pub_ns - k * period_ns for k, t_pub_ns in frames)
 
 
+def phase_steady(frames: list[tuple[int, int]], period_ns: int, n: int = 5) -> bool:
+    """Whether the last ``n`` of (step, publication time [ns]) pairs keep one schedule: the
+    origins they imply agree within a quarter period. A plant catching up after a stall
+    publishes its backlog in a burst, each frame a period later on its schedule than the next;
+    an origin taken from the burst alone would put every release up to a period late."""
+    if len(frames) < n:
+        return False
+    origins = [t_pub_ns - k * period_ns for k, t_pub_ns in frames[-n:]]
+    return max(origins) - min(origins) <= period_ns // 4
+
+
 def due_step(next_k: int, cycle_k: int, locked_plant: bool) -> int:
     """The plant step a release waits for. While the plant is the one the ticks are locked
     to, tick k flies step k: a frame that came after its tick's wait must not make every

@@ -33,7 +33,7 @@ from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_KINDS, HEALTH_NAMES, NOMINAL  # noqa: E402
 
 from .common import DecodeRehearsal, Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
-from .frame_timing import due_step, phase_origin_ns, take_due_frame  # noqa: E402
+from .frame_timing import due_step, phase_origin_ns, phase_steady, take_due_frame  # noqa: E402
 from .fsw_report import alloc_sample, fsw_report  # noqa: E402
 from .history import History, record_fsw  # noqa: E402
 from .variant import prepare_args  # noqa: E402
@@ -118,6 +118,9 @@ class FswNode:
         self.next_k = 0
         self.lock_source = None     # the plant whose steps the real-time ticks are locked to
         self.jitter_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)   # every tick, whole run
+        # every tick's control task time (-1: not run), whole run: the executive's statistics
+        # keep only its recent cycles, and the latency it is a share of covers the whole run
+        self.control_ns = np.full(len(self.history.a["k"]), -1, dtype=np.int64)
         # real time: how long after the plant published it each frame reached this loop
         self.frame_age_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
         self.n_frames = 0
@@ -130,6 +133,7 @@ class FswNode:
         self.topo = Topology(self.fsw, clock,
                              frame_source=self._newest_frame if args.mode == "realtime" else None)
         self.topo.add(1, "publish", self._publish)
+        self._control_col = self.topo.executive._names.index("control")   # its column in the statistics
         self.topo.add(2, "events", self._publish_events)
         self.link = self._ground_link()
         if self.link is not None:
@@ -304,7 +308,11 @@ class FswNode:
                 input_off_cpu_us=_off_cpu_us(self._taken_wall_ns - self._input_wall_ns, self._input_ru, ru0))
         if self.ticks >= len(self.jitter_ns):
             self.jitter_ns = np.concatenate((self.jitter_ns, np.zeros_like(self.jitter_ns)))
+            self.control_ns = np.concatenate((self.control_ns, np.full_like(self.control_ns, -1)))
         self.jitter_ns[self.ticks] = cyc.t_start_ns - cyc.t_release_ns
+        st = ex.stats
+        if st is not None and st.n:
+            self.control_ns[self.ticks] = st.task_ns[(st.n - 1) % st.capacity, self._control_col]
         self.ticks += 1
         if not self.topo.got_frame:
             return
@@ -353,6 +361,7 @@ class FswNode:
         return None
 
     LOCK_FRAMES = 10        # real time: frames the phase lock takes the plant's schedule from
+    LOCK_WAIT_S = 2.0       # ... waiting at most this much longer for them to keep one schedule
 
     def run_realtime(self) -> None:
         # warm up on the plant's first frame (it offers that frame until we say ready, then
@@ -374,13 +383,17 @@ class FswNode:
         # the plant's schedule: step k published at origin + k * period, never earlier, often
         # later in its first steps (its own first-call costs: step 1 came 32 ms late, step 2
         # 13 ms, then on time) — so the earliest origin over LOCK_FRAMES frames, not the first
+        # frames, and until the last of them keep one schedule (phase_steady: not a catch-up
+        # burst), at most LOCK_WAIT_S more; the origin from the last LOCK_FRAMES
         frames = [(lock, self.dec_sensors.last_t_pub_ns)]
-        for _ in range(self.LOCK_FRAMES - 1):
+        most = self.LOCK_FRAMES + int(self.LOCK_WAIT_S * 1e9 // period)
+        while len(frames) < self.LOCK_FRAMES or (not phase_steady(frames, period) and len(frames) < most):
             k = self._next_good_frame()
             if k is None:
                 return
             frames.append((k, self.dec_sensors.last_t_pub_ns))
             lock = k
+        frames = frames[-self.LOCK_FRAMES:]
         origin = phase_origin_ns(frames, period)
         say(ROLE, f"phase lock on step {lock}: plant's publications "
                   f"{[round((t - k * period - origin) / 1e3) for k, t in frames]} us after the earliest")
@@ -399,7 +412,8 @@ class FswNode:
     def run(self) -> int:
         a = self.args
         if a.mode == "realtime":    # the arrays the loop fills: no first-touch page fault in flight
-            rt.prefault(self.history.truth_rows, self.history.fsw_rows, self.jitter_ns, self.frame_age_ns)
+            rt.prefault(self.history.truth_rows, self.history.fsw_rows, self.jitter_ns, self.frame_age_ns,
+                       self.control_ns)
         rt.gc_out_of_cycle()
         say(ROLE, f"{self.scn.name}, {a.mode}; waiting for the plant")
         if not transport.wait_for_alive(self.session, self.K.alive_sim, a.wait_peers):
@@ -420,8 +434,10 @@ class FswNode:
         out = Path(self.args.out)
         out.mkdir(parents=True, exist_ok=True)
         self.history.save(out / "fsw_history.npz")
-        # every tick's release jitter and every frame's age, raw (ellipsled/node_reports.py sums them up)
+        # every tick's release jitter and control task time and every frame's age, raw (the launcher
+        # and ellipsled/node_reports.py sum them up)
         np.savez_compressed(out / "fsw_timing.npz", jitter_ns=self.jitter_ns[: self.ticks],
+                            control_ns=self.control_ns[: self.ticks],
                             frame_age_ns=self.frame_age_ns[: self.n_frames])
         rep = fsw_report(self.fsw, self.topo.executive.slips, self.samples)
         ex = self.topo.executive.telemetry()

@@ -1,0 +1,29 @@
+"""ellipsled/sil/launcher.py control_task_us: sil.json's control task figure is taken over every
+tick the FSW node saved (fsw_timing.npz), not over the executive's ring of recent cycles."""
+from __future__ import annotations
+
+import numpy as np
+
+from ellipsled.sil.launcher import control_task_us
+
+
+def test_the_control_task_figure_covers_every_tick_saved_and_skips_ticks_without_it(tmp_path):
+    # 10,000 ticks (more than the executive's 4,096-cycle ring): the slow ones all early
+    c = np.full(10_000, 50_000, dtype=np.int64)
+    c[:200] = 900_000                      # the first 2 %: 900 us
+    c[5] = -1                              # a tick whose control task did not run
+    np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(10_000, np.int64), control_ns=c,
+                        frame_age_ns=np.zeros(0, np.int64))
+    f = control_task_us(tmp_path)
+    assert f["runs"] == 9_999 and f["p50"] == 50.0 and f["max"] == 900.0
+    assert f["p99"] == 900.0               # the early slow ticks count (the ring's last 4,096 hold none)
+
+
+def test_no_figure_without_saved_control_times(tmp_path):
+    assert control_task_us(tmp_path) is None                       # no file
+    np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(3, np.int64),
+                        frame_age_ns=np.zeros(0, np.int64))
+    assert control_task_us(tmp_path) is None                       # an older node's file
+    np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(3, np.int64),
+                        control_ns=np.full(3, -1, np.int64), frame_age_ns=np.zeros(0, np.int64))
+    assert control_task_us(tmp_path) is None                       # no tick ran it

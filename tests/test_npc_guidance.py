@@ -678,6 +678,42 @@ def test_floor_margin_carries_a_falling_prediction_over_the_cycles_to_go():
     assert margins["rising"] < 10.0
 
 
+
+def _answer(t_s, sign, h_box_m, turn_rad=math.nan):
+    """A corrector's answer (Correction) with only what EntryGuidance._apply reads."""
+    return dict(t_s=t_s, sign=sign, predictions=3, compute_ns=0, bank0_rad=1.0, miss_m=0.0, p_range_rad=1.0,
+                e0_jpkg=math.nan, f_family_rad=1.0, bank_line_rad=1.0, bank_final_rad=1.0, floor=False, held=False,
+                ok=True, lat_rad=0.0, lon_rad=0.0, h_final_m=h_box_m - 1500.0, h_box_m=h_box_m, t_go_s=100.0,
+                turn_rad=turn_rad, xr_keep_m=math.nan, xr_rev_m=math.nan)
+
+
+def test_floor_margin_does_not_count_a_reversal_as_prediction_error():
+    """The margin measures what a prediction failed to foresee. A prediction steady to 10 m a
+    cycle, then a drop of 2.5 km: made by the answer for the other bank sign (a reversal, which
+    through lift down does deploy lower) or by a reversal turned round, the margin stays what
+    the steady part gives; the same drop with the sign and the way kept is an error, and the
+    margin grows by about its share (sqrt(0.2) x 2.5 km x sqrt(100 cycles to go), clipped)."""
+    p = dict(PARAMS, **{"npc.floor_margin_k": 1.0, "npc.floor_margin_min_m": 0.0, "npc.floor_margin_max_m": 1e5})
+    margins = {}
+    for case in ("steady", "reversed", "turned", "kept"):
+        eg = npc.EntryGuidance(SCN, p, EventLog(), 0.02)
+        try:
+            h = 12000.0
+            for i in range(60):
+                h += 10.0 * (-1) ** i
+                eg._apply(_answer(float(i), 1.0, h))
+            if case != "steady":
+                sign = -1.0 if case == "reversed" else 1.0
+                turn = 0.5 if case == "turned" else math.nan
+                eg._apply(_answer(60.0, sign, h - 2500.0, turn))
+                eg._apply(_answer(61.0, sign, h - 2510.0))
+            margins[case] = eg.floor_margin_m
+        finally:
+            eg.close()
+    assert margins["steady"] < 200.0
+    assert margins["reversed"] < 200.0 and margins["turned"] < 200.0
+    assert margins["kept"] > 5000.0
+
 def _unit(res):
     """The predicted deploy point of a corrector's answer, a unit vector (planet-fixed)."""
     return geometry.unit_from_latlon(res["lat_rad"], res["lon_rad"])

@@ -53,6 +53,8 @@ PARAMS = [
     Param("npc.h_fire_m", 0.0, 5e4, "m", "predicted altitude at the deploy point (the target) kept above it by "
           "lifting up late, range kept (below it the trigger's altitude floor fires short of the target)",
           ground_settable=False),
+    Param("npc.lift_final_min_deg", 0.0, 90.0, "deg", "lifting up late lowers phi_f no further (the lateral lift "
+          "left at the end for the final reversal)", ground_settable=False),
     Param("npc.range_reserve_m", 0.0, 2e4, "m", "range trigger: the range solution aims this far beyond the target "
           "(a vehicle long by less still deploys at the target; one short by less still reaches it)",
           ground_settable=False),

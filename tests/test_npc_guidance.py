@@ -401,7 +401,8 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
     """From the plant's state 90 s into an entry flown at 90 deg, a target that the range
     solution (phi_0 = 110 deg) reaches entering the deploy box at h_b: with the floor 300 m
     above h_b the corrector lifts up late, range kept (phi_f lowered, phi_0 solved again: more
-    lift down before, the box entered at the floor); with the floor 500 m above h_b, beyond
+    lift down before, the box entered at the floor), and with phi_f's lowest for that
+    (npc.lift_final_min_deg) just below phi_f it trades range instead; with the floor 500 m above h_b, beyond
     what lifting up late reaches, it gives up range (more lift up: the deploy point long) for a
     predicted box-entry altitude at the floor (within the corrector's tolerance); with the
     floor below h_b the answer is the range solution; with the trade bounded, it stops at the bound. (From the entry interface the deploy altitude barely
@@ -449,6 +450,13 @@ def test_deploy_altitude_floor_trades_range_for_altitude():
     assert res["h_box_m"] < free["h_box_m"] + 500.0 - PARAMS["npc.tol_m"]
     assert free["bank0_rad"] >= res["bank0_rad"] > res_binds["bank0_rad"] and abs(res["miss_m"]) <= 0.5 * traded
     assert res["floor"] == (res["bank0_rad"] < free["bank0_rad"])      # a trade is flagged; none is the range solution
+    # the lift-up late lowers phi_f no further than npc.lift_final_min_deg (the lateral lift left at the
+    # end): that bound just below phi_f, it has nothing to give, and the floor trades range instead
+    assert lift["bank_final_rad"] >= math.radians(PARAMS["npc.lift_final_min_deg"])
+    held, _ = solve(**{"npc.h_floor_m": free["h_box_m"] + 300.0,
+                       "npc.lift_final_min_deg": math.degrees(bank_final_rad) - 0.1})
+    assert held["floor"] and held["f_family_rad"] == bank_final_rad and held["miss_m"] > PARAMS["npc.tol_m"]
+    assert held["h_box_m"] >= free["h_box_m"] + 300.0 - PARAMS["npc.tol_m"]
 
 
 def test_deploy_altitude_floor_without_a_higher_deploy_keeps_the_range_solution():
@@ -677,6 +685,42 @@ def test_floor_margin_carries_a_falling_prediction_over_the_cycles_to_go():
     assert 300.0 - 15.0 <= margins["noise"] <= 400.0      # the low-passed mean of +-30 m still wobbles a little
     assert margins["rising"] < 10.0
 
+
+
+def _correction(t_s, sign, h_box_m, turn_rad=math.nan):
+    """A corrector's answer (Correction) with only what EntryGuidance._apply reads."""
+    return dict(t_s=t_s, sign=sign, predictions=3, compute_ns=0, bank0_rad=1.0, miss_m=0.0, p_range_rad=1.0,
+                e0_jpkg=math.nan, f_family_rad=1.0, bank_line_rad=1.0, bank_final_rad=1.0, floor=False, held=False,
+                ok=True, lat_rad=0.0, lon_rad=0.0, h_final_m=h_box_m - 1500.0, h_box_m=h_box_m, t_go_s=100.0,
+                turn_rad=turn_rad, xr_keep_m=math.nan, xr_rev_m=math.nan)
+
+
+def test_floor_margin_does_not_count_a_reversal_as_prediction_error():
+    """The margin measures what a prediction failed to foresee. A prediction steady to 10 m a
+    cycle, then a drop of 2.5 km: made by the answer for the other bank sign (a reversal, which
+    through lift down does deploy lower) or by a reversal turned round, the margin stays what
+    the steady part gives; the same drop with the sign and the way kept is an error, and the
+    margin grows by about its share (sqrt(0.2) x 2.5 km x sqrt(100 cycles to go), clipped)."""
+    p = dict(PARAMS, **{"npc.floor_margin_k": 1.0, "npc.floor_margin_min_m": 0.0, "npc.floor_margin_max_m": 1e5})
+    margins = {}
+    for case in ("steady", "reversed", "turned", "kept"):
+        eg = npc.EntryGuidance(SCN, p, EventLog(), 0.02)
+        try:
+            h = 12000.0
+            for i in range(60):
+                h += 10.0 * (-1) ** i
+                eg._apply(_correction(float(i), 1.0, h))
+            if case != "steady":
+                sign = -1.0 if case == "reversed" else 1.0
+                turn = 0.5 if case == "turned" else math.nan
+                eg._apply(_correction(60.0, sign, h - 2500.0, turn))
+                eg._apply(_correction(61.0, sign, h - 2510.0))
+            margins[case] = eg.floor_margin_m
+        finally:
+            eg.close()
+    assert margins["steady"] < 200.0
+    assert margins["reversed"] < 200.0 and margins["turned"] < 200.0
+    assert margins["kept"] > 5000.0
 
 def _unit(res):
     """The predicted deploy point of a corrector's answer, a unit vector (planet-fixed)."""

@@ -304,19 +304,27 @@ class Corrector:
 
     LIFT_STEPS = 4                        # _lift_late's bisection on phi_f
 
+    def _lift_min(self) -> float:
+        """The lowest phi_f a lift-up late flies [rad]: phi_0's lower bound, or
+        npc.lift_final_min_deg above it. The bank's sine at the end of the entry is the lateral
+        lift the final reversal has left to null the crossrange with; lowered to the bound the
+        vehicle deploys high and off to the side by what the last minute drifted."""
+        return max(self.bank_min_rad, math.radians(self.params["npc.lift_final_min_deg"]))
+
     def _lift_late(self, x, e0, s_togo, sign, h_floor, h_fire, p_warm, tol, n_max):
         """(p, phi_f, miss, predictions): the range solution of the family with phi_f lowered
-        towards phi_0's lower bound (lift up at the end of the entry, which deploys higher)
+        towards _lift_min (lift up at the end of the entry, which deploys higher)
         whose predicted box-entry altitude reaches h_floor and whose predicted deploy altitude
         (at the target: where the range trigger fires) reaches h_fire, phi_f the largest found
-        that does (least change). p None when even phi_f at the bound does not reach h_floor
-        with the range solved (then only a range trade can: the floor's); phi_f at the bound
+        that does (least change). p None when even phi_f at its lowest does not reach h_floor
+        with the range solved (then only a range trade can: the floor's); phi_f at its lowest
         when that reaches h_floor but not h_fire (the most a lift-up late gives). Bisection on
         phi_f, each a range solution warm-started at the last."""
         lo, hi, f_nom = self.bank_min_rad, self.bank_max_rad, self.f_lift_rad
         out, n = self._out, 0
-        f_ok, f_bad, best = lo, f_nom, None
-        f = lo
+        f_lo = self._lift_min()
+        f_ok, f_bad, best = f_lo, f_nom, None
+        f = f_lo
         for i in range(self.LIFT_STEPS + 1):
             p_lo, p_hi = profile_span(lo, hi, f)
             p, zb, k, ok = solve_bank(self._z(x, e0, s_togo, sign, f=f), p_lo, p_hi, p_warm, tol, n_max)
@@ -328,7 +336,7 @@ class Corrector:
             if box_ok and out[O_H] >= h_fire:
                 best, f_ok, p_warm = (p, f, zb), f, p
             elif i == 0:
-                # at the bound: the floor unreachable (range to trade) or the most lift-up late gives
+                # at the lowest: the floor unreachable (range to trade) or the most lift-up late gives
                 return (p, f, zb, n) if box_ok else (None, f, zb, n)
             else:
                 f_bad = f
@@ -403,7 +411,7 @@ class Corrector:
         floor = False
         h_floor = self.params["npc.h_floor_m"] if h_floor_m is None else h_floor_m
         h_fire = self.params["npc.h_fire_m"] if h_floor > 0.0 else 0.0
-        if (h_floor > 0.0 and self._out[O_FLAG] == REACHED and f > lo
+        if (h_floor > 0.0 and self._out[O_FLAG] == REACHED and f > self._lift_min()
                 and (self._out[O_H_BOX] < h_floor or self._out[O_H] < h_fire)):
             # the range solution deploys too low (or reaches the target only below h_fire, where
             # the trigger's own floor fires short of it): first lift up late, range kept (phi_f

@@ -53,6 +53,8 @@ PARAMS = [
     Param("npc.h_fire_m", 0.0, 5e4, "m", "predicted altitude at the deploy point (the target) kept above it by "
           "lifting up late, range kept (below it the trigger's altitude floor fires short of the target)",
           ground_settable=False),
+    Param("npc.lift_final_min_deg", 0.0, 90.0, "deg", "lifting up late lowers phi_f no further (the lateral lift "
+          "left at the end for the final reversal)", ground_settable=False),
     Param("npc.range_reserve_m", 0.0, 2e4, "m", "range trigger: the range solution aims this far beyond the target "
           "(a vehicle long by less still deploys at the target; one short by less still reaches it)",
           ground_settable=False),
@@ -115,6 +117,7 @@ class EntryGuidance(Corrector):
         # predicted deploy altitude from one answer to the next (what the prediction did not
         # foresee: density, L/D, the state), a random walk over the cycles still to fly
         self._h_pred_prev = math.nan
+        self._sign_prev = math.nan       # bank sign the last answer was solved for
         self._dh_var = math.nan          # low-passed square of that change [m^2] ...
         self._dh_mean = 0.0              # ... and its low-passed mean [m]
         self._period_s = 1.0             # guidance cycle period
@@ -211,7 +214,11 @@ class EntryGuidance(Corrector):
         self.held_cycles += bool(res["held"])
         self.miss_m = res["miss_m"]
         self.pred_impact[:] = (res["lat_rad"], res["lon_rad"])
-        self._measure_prediction(res["h_box_m"], res["t_go_s"])
+        # an answer for another bank sign than the last one, or with a reversal turned round,
+        # predicts another flight: its change is the decision's, not a prediction error
+        decided = res["sign"] != self._sign_prev or math.isfinite(res["turn_rad"])
+        self._sign_prev = res["sign"]
+        self._measure_prediction(res["h_box_m"], res["t_go_s"], decided)
         self.pred_h_m = res["h_final_m"]
         self.t_go_s, self._t_answer = res["t_go_s"], res["t_s"]
         if self.shaper.turn_round(res["turn_rad"], res["sign"]):
@@ -228,16 +235,22 @@ class EntryGuidance(Corrector):
     DH_WEIGHT = 0.2                      # low-pass weight of one new change of the prediction
     DH_DRIFT_WEIGHT = 0.05               # ... and of its mean (a drift shows over tens of cycles)
 
-    def _measure_prediction(self, h_m: float, t_go_s: float) -> None:
+    def _measure_prediction(self, h_m: float, t_go_s: float, decided: bool = False) -> None:
         """The floor's margin from the measured change per cycle of the predicted box-entry
         altitude, npc.floor_margin_k times: its downward drift (low-passed mean) carried over
         the cycles to the deploy (the part of the mean its own noise does not explain), plus the
         rest of it (low-passed RMS about that mean) as a random walk (sqrt of their number),
         within [floor_margin_min_m, floor_margin_max_m].
         A prediction that keeps falling (a density profile or L/D the estimates lag) is a bias,
-        not noise: over n cycles it costs n times the drift, not sqrt(n) times."""
+        not noise: over n cycles it costs n times the drift, not sqrt(n) times.
+        decided: the answer predicts another flight than the last one (another bank sign, a
+        reversal turned round). Its change is the decision's (a reversal through lift down
+        deploys kilometres lower, and is flown so), not what the last prediction failed to
+        foresee: not measured, the next change is measured from it. Counted as error, one such
+        jump holds the margin at its maximum for many cycles after a reversal, and the lift-up
+        late it sets off leaves the final reversal too little bank to null the crossrange with."""
         p = self.params
-        if math.isfinite(h_m) and math.isfinite(self._h_pred_prev):
+        if math.isfinite(h_m) and math.isfinite(self._h_pred_prev) and not decided:
             d = h_m - self._h_pred_prev
             if not math.isfinite(self._dh_var):
                 self._dh_var, self._dh_mean = d * d, 0.0

@@ -52,6 +52,51 @@ def shaper_branch(phi, sign_now, turn, bank_signed):
     return sign_now, turn
 
 
+@njit(cache=True, nogil=True)
+def arrival_s(dist, speed, rate_limit, accel_limit, brake_limit):
+    """Time [s] for the law to come to rest at a target dist [rad] ahead, from the speed
+    [rad/s] towards it (negative: moving away), speeding up at the acceleration limit and
+    braking at the braking limit, within the rate limit. Moving away it first turns round
+    (|speed|/b, v^2/2b further off); too fast to stop on the target it runs past, stops and
+    comes back from rest."""
+    w, a, b = rate_limit, accel_limit, brake_limit
+    if w <= 0.0 or a <= 0.0 or b <= 0.0:
+        return math.inf
+    t = 0.0
+    v = min(speed, w)
+    if v < 0.0:                          # turn round first
+        t = -v / b
+        dist += v * v / (2.0 * b)
+        v = 0.0
+    stop = v * v / (2.0 * b)
+    if stop > dist:                      # past the target, to rest, then back from there
+        t += v / b
+        dist, v = stop - dist, 0.0
+    # speed up from v to the peak: (peak^2 - v^2)/2a + peak^2/2b = dist, within the rate limit
+    peak = math.sqrt((dist + v * v / (2.0 * a)) / (1.0 / (2.0 * a) + 1.0 / (2.0 * b)))
+    if peak <= w:
+        return t + (peak - v) / a + peak / b
+    cruise = dist - (w * w - v * v) / (2.0 * a) - w * w / (2.0 * b)
+    return t + (w - v) / a + cruise / w + w / b
+
+
+@njit(cache=True, nogil=True)
+def shaper_branch_moving(phi, phid, sign_now, turn, bank_signed, rate_limit, accel_limit, brake_limit):
+    """``shaper_branch`` for a reference moving at phid: when its target lies behind it (a
+    command that reverses its motion) and going on by a full turn arrives sooner than turning
+    round at the braking limit, it goes on (the turn one 2 pi further the way it moves). With
+    a weak braking way turning round is long: a reversal at the rate limit caught by a
+    reconfiguration would brake over v^2/2b, often through lift down, and come all the way
+    back. At rest, or moving towards the target, the branch is shaper_branch's."""
+    s, turn = shaper_branch(phi, sign_now, turn, bank_signed)
+    e = bank_signed + turn - phi
+    if phid * e < 0.0:
+        back = arrival_s(abs(e), -abs(phid), rate_limit, accel_limit, brake_limit)
+        if arrival_s(2.0 * math.pi - abs(e), abs(phid), rate_limit, accel_limit, brake_limit) < back:
+            turn += math.copysign(2.0 * math.pi, phid)
+    return s, turn
+
+
 # a shaped transition longer than this is not modelled past it (the law takes over)
 N_TRANSITION = 256
 
@@ -72,11 +117,11 @@ def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
     phi, phid, s_now, turn = shp[0], shp[1], shp[2], shp[3]
     rate, accel, dtc, mag_now = shp[4], shp[5], shp[6], shp[7]
     brake = _brake_of(shp)
-    s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_a))
+    s_now, turn = shaper_branch_moving(phi, phid, s_now, turn, math.copysign(mag_now, bank_a), rate, accel, brake)
     target = bank_a + turn
     switched = t_switch <= 0.0
     if switched:
-        s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+        s_now, turn = shaper_branch_moving(phi, phid, s_now, turn, math.copysign(mag_now, bank_b), rate, accel, brake)
         target = bank_b + turn
     per = max(1, int(round(t_sample / dtc)))
     n = 0
@@ -84,7 +129,8 @@ def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
     while n < tab.shape[0]:
         if not switched and k * dtc >= t_switch - 1e-9:
             switched = True
-            s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+            s_now, turn = shaper_branch_moving(phi, phid, s_now, turn, math.copysign(mag_now, bank_b), rate, accel,
+                                               brake)
             target = bank_b + turn
         if k % per == 0:
             tab[n] = phi
@@ -157,7 +203,9 @@ class BankShaper:
         self.governed_cycles = 0    # control cycles whose acceleration the governor changed
 
     def command(self, bank_signed_rad: float) -> None:
-        self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
+        self._sign, self._turn = shaper_branch_moving(self.phi, self.phid, self._sign, self._turn,
+                                                      float(bank_signed_rad), self.rate_limit_radps,
+                                                      self.accel_limit_radps2, self.brake_limit_radps2)
         self.target = bank_signed_rad + self._turn
 
     def state(self, mag_rad: float) -> np.ndarray:

@@ -80,20 +80,51 @@ def arrival_s(dist, speed, rate_limit, accel_limit, brake_limit):
     return t + (w - v) / a + cruise / w + w / b
 
 
+# going on by a full turn must spare at least this much time with the lift down [s]: between
+# nearly equal ways the one the branch rule gives is kept (no flip of the branch, and so of the
+# predicted miss, from one cycle to the next)
+GO_ON_MARGIN_S = 2.0
+# the step [s] at which the two ways are flown to compare their time with the lift down
+_WAY_STEP_S = 0.1
+
+
+@njit(cache=True, nogil=True)
+def lift_down_s(phi, phid, target, rate_limit, accel_limit, brake_limit):
+    """Time [s] the law spends with the lift down (cos phi < 0) on its way from (phi, phid) to
+    rest on target, flown at a coarse step (a comparison of ways, not a prediction); at most
+    10 min."""
+    dt, t_down = _WAY_STEP_S, 0.0
+    for _ in range(int(600.0 / dt)):
+        if abs(target - phi) < 1e-3 and abs(phid) < 1e-3:
+            break
+        a = shaper_accel_braked(phi, phid, target, rate_limit, accel_limit, brake_limit, dt)
+        phi += phid * dt + 0.5 * a * dt * dt
+        phid += a * dt
+        if math.cos(phi) < 0.0:
+            t_down += dt
+    return t_down
+
+
 @njit(cache=True, nogil=True)
 def shaper_branch_moving(phi, phid, sign_now, turn, bank_signed, rate_limit, accel_limit, brake_limit):
     """``shaper_branch`` for a reference moving at phid: when its target lies behind it (a
-    command that reverses its motion) and going on by a full turn arrives sooner than turning
-    round at the braking limit, it goes on (the turn one 2 pi further the way it moves). With
-    a weak braking way turning round is long: a reversal at the rate limit caught by a
-    reconfiguration would brake over v^2/2b, often through lift down, and come all the way
-    back. At rest, or moving towards the target, the branch is shaper_branch's."""
+    command that reverses its motion), it goes on by a full turn (the turn one 2 pi further the
+    way it moves) when that arrives sooner than turning round at the braking limit and spends
+    GO_ON_MARGIN_S less with the lift down. With a weak braking way turning round is long: a
+    reversal at the rate limit caught by a reconfiguration, then commanded back to lift up,
+    would brake over v^2/2b through lift down and come all the way back. At rest, or moving
+    towards the target, the branch is shaper_branch's."""
     s, turn = shaper_branch(phi, sign_now, turn, bank_signed)
-    e = bank_signed + turn - phi
+    target = bank_signed + turn
+    e = target - phi
     if phid * e < 0.0:
-        back = arrival_s(abs(e), -abs(phid), rate_limit, accel_limit, brake_limit)
-        if arrival_s(2.0 * math.pi - abs(e), abs(phid), rate_limit, accel_limit, brake_limit) < back:
-            turn += math.copysign(2.0 * math.pi, phid)
+        ahead = 2.0 * math.pi - abs(e)
+        if arrival_s(ahead, abs(phid), rate_limit, accel_limit, brake_limit) < \
+                arrival_s(abs(e), -abs(phid), rate_limit, accel_limit, brake_limit):
+            on = target + math.copysign(2.0 * math.pi, phid)
+            if lift_down_s(phi, phid, on, rate_limit, accel_limit, brake_limit) + GO_ON_MARGIN_S < \
+                    lift_down_s(phi, phid, target, rate_limit, accel_limit, brake_limit):
+                turn += math.copysign(2.0 * math.pi, phid)
     return s, turn
 
 

@@ -80,10 +80,11 @@ def arrival_s(dist, speed, rate_limit, accel_limit, brake_limit):
     return t + (w - v) / a + cruise / w + w / b
 
 
-# going on by a full turn must spare at least this much time with the lift down [s]: between
-# nearly equal ways the one the branch rule gives is kept (no flip of the branch, and so of the
-# predicted miss, from one cycle to the next)
-GO_ON_MARGIN_S = 2.0
+# going on by a full turn must spare at least this much time with the lift down [s]: it commits
+# the reference to a turn through the other side, so between ways that differ by a few seconds
+# (a turn round at the nominal braking limit) the one the branch rule gives is kept; the long
+# turn round of a weak braking way after a reconfiguration costs tens of seconds
+GO_ON_MARGIN_S = 10.0
 # the step [s] at which the two ways are flown to compare their time with the lift down
 _WAY_STEP_S = 0.1
 

@@ -5,8 +5,9 @@ only the simulation knows: the faults the plant applied (its fault log, with the
 thrust factors), the truth inertia and aerodynamic derivatives, and the truth dynamic pressure
 of the flight. The trim is judged at the lowest dynamic pressure flown after the fault (where a
 bias the jets cannot cancel needs the largest alpha/beta offset), the authority against what the
-bank schedule still needs after the fault. A run labelled not controllable is out of reach of
-any controller of these jets; the campaign reports success over all runs and over the others.
+bank schedule still needs after the fault (a guided entry: at least what a turn from lift down
+to lift up needs, fsw/controllability.py ``guided_accel_need_radps2``). A run labelled not
+controllable is out of reach of any controller of these jets; the campaign reports success over all runs and over the others.
 """
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ import math
 import numpy as np
 
 from common.model import Scenario, inertia_matrix, inertia_vector
-from fsw.controllability import aero_moment_per_rad, controllability, schedule_accel_need_radps2, velocity_dir_B
+from fsw.controllability import (aero_moment_per_rad, controllability, guided_accel_need_radps2,
+                                 schedule_accel_need_radps2, velocity_dir_B)
 from fsw.health import JetHealth
 from interfaces.vocabulary import FAULT_HEALTH
 
@@ -45,7 +47,7 @@ def truth_controllability(scn: Scenario, faults_applied: list, t_s: np.ndarray, 
     A = aero_moment_per_rad(q, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta * tr.C_lbeta_scale,
                             a.C_malpha * tr.C_malpha_scale, a.C_nbeta * tr.C_nbeta_scale)
     I_truth = inertia_matrix(inertia_vector(veh.inertia_kgm2) * tr.inertia_scale)
-    need = schedule_accel_need_radps2(scn.bank_schedule, t_fault)
+    need = max(schedule_accel_need_radps2(scn.bank_schedule, t_fault), guided_accel_need_radps2(scn.guidance_mode))
     r = controllability(veh.torque_matrix_Nm, truth_health(scn, faults_applied), I_truth,
                         velocity_dir_B(a.alpha_trim_rad), A, trim_max_deg, need, q)
 

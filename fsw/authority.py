@@ -21,8 +21,8 @@ from common.events import EventLog
 from common.model import Scenario
 from interfaces.event_catalogue import EV
 
-from .controllability import (Controllability, aero_moment_per_rad, controllability, velocity_dir_B,
-                              schedule_accel_need_radps2)
+from .controllability import (Controllability, aero_moment_per_rad, controllability, guided_accel_need_radps2,
+                              schedule_accel_need_radps2, velocity_dir_B)
 from .health import JetHealth
 from .jobs import IN_PLACE, REALTIME, BackgroundJob
 from .params import Param
@@ -89,7 +89,8 @@ class AuthoritySupervisor:
 
     # ---------------------------------------------------------------- the LP
     def lp_problem(self, t_s: float, held_trim_rad=None) -> tuple:
-        """(schedule's need, arguments of controllability()) for the health the allocator uses;
+        """(schedule's need, arguments of controllability()) for the health the allocator uses (the
+        verdict asked against the schedule's need and, for a guided entry, what it needs);
         the authority promised for every inertia within the vehicle's stated uncertainty about
         its nominal inertia (the box known to hold the truth). SAMI's inertia estimate is not
         used as that knowledge: with the dead zone it stays at nominal or drifts along what the
@@ -105,8 +106,10 @@ class AuthoritySupervisor:
         A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta * d[0], a.C_malpha * d[1],
                                 a.C_nbeta * d[2])
         need = schedule_accel_need_radps2(self.scenario.bank_schedule, t_s)
+        # the verdict also asks what a guided entry needs; the reference's floor stays the schedule's
+        verdict_need = max(need, guided_accel_need_radps2(self.scenario.guidance_mode))
         args = (veh.torque_matrix_Nm, self.health().copy(), veh.inertia_kgm2, v_B, A,
-                self.params["guidance.trim_max_deg"], need, float(nav.qbar_pa), veh.inertia_uncertainty_frac,
+                self.params["guidance.trim_max_deg"], verdict_need, float(nav.qbar_pa), veh.inertia_uncertainty_frac,
                 held_trim_rad)
         return need, args
 

@@ -23,7 +23,8 @@ at d = 1 and form the bias b. Three questions are asked of it, each a small LP (
    flies beta_r = 0); each way's own maximum is then solved with that trim held.
 3. The verdict: controllable when a trim exists within ``trim_max_deg`` and both authorities
    are above zero and reach ``authority_min_radps2`` (``schedule_accel_need_radps2``: what the
-   bank schedule still needs); else the reason.
+   bank schedule still needs; for a guided entry at least ``guided_accel_need_radps2``); else
+   the reason.
 
 Inputs are plain arrays, so the FSW (its nominal inertia estimate, its own density and
 derivatives, its FDIR health) and the Monte Carlo (the plant's true inertia, aerodynamics and
@@ -81,6 +82,20 @@ class Controllability:
     def text(self) -> str:
         """Its event line as the catalogue renders it (<= 50 characters, one STATUSTEXT)."""
         return EV.CONTROLLABILITY.render(self.event_args())[1]
+
+
+# A guided entry turns the bank wherever its range and its deploy altitude need it, lift down to
+# lift up included; an authority that cannot turn the bank through 180 deg, rest to rest, within
+# this time [s] cannot serve it (docs/decisions.md)
+GUIDED_TURN_S = 90.0
+
+
+def guided_accel_need_radps2(guidance_mode: str) -> float:
+    """The bank acceleration [rad/s^2] a guided entry (guidance mode npc) needs each way: a
+    rest-to-rest turn through 180 deg within GUIDED_TURN_S, 4 pi / T^2 (triangular rate). 0 for
+    the paper's schedules (mode profile), whose need is the schedule's
+    (``schedule_accel_need_radps2``)."""
+    return 4.0 * math.pi / GUIDED_TURN_S ** 2 if guidance_mode == "npc" else 0.0
 
 
 def schedule_accel_need_radps2(schedule, t_from_s: float) -> float:

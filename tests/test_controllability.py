@@ -265,3 +265,34 @@ def test_held_trim_moves_to_the_weak_way_best_one_closest_to_it():
     r2 = controllability(*args, theta)
     assert np.radians([r2.trim_alpha_deg, r2.trim_beta_deg]) == pytest.approx(theta, abs=1e-9)
     assert min(r2.authority_pos_radps2, r2.authority_neg_radps2) == pytest.approx(weak, rel=1e-6)
+
+
+def test_a_guided_entry_needs_a_turn_from_lift_down_to_lift_up(tmp_path):
+    """A guided entry's label asks for the acceleration that turns the bank through 180 deg rest
+    to rest within GUIDED_TURN_S (4 pi / T^2), each way. Run 50 of the guided campaign at master
+    seed 1111 (a stuck-on bias that leaves one way 0.005 deg/s^2, which turns the bank through
+    180 deg in no less than 6 minutes, longer than the guided flight after its fault) is not
+    controllable as a guided entry; the same jets flying the paper's schedule (mode profile, a
+    single-entry schedule: no need) keep the label they had."""
+    from common.model import load_scenario
+    from ellipsled.controllable import truth_controllability
+    from ellipsled.montecarlo.campaign import load_campaign, pinned_scenario_toml
+    from common.config import resolve
+    from fsw.controllability import GUIDED_TURN_S, guided_accel_need_radps2
+
+    assert guided_accel_need_radps2("npc") == pytest.approx(4.0 * math.pi / GUIDED_TURN_S ** 2)
+    assert guided_accel_need_radps2("profile") == 0.0
+    camp = load_campaign("guided")
+    text = pinned_scenario_toml(camp, resolve("scenarios", camp.scenario), 50, 1111)
+    (tmp_path / "run50.toml").write_text(text)
+    scn = load_scenario(tmp_path / "run50.toml")
+    assert scn.guidance_mode == "npc"
+    applied = [(ev.t_s, j, ev.kind) for ev in scn.faults for j in ev.jets]
+    t = np.linspace(0.0, 300.0, 301)
+    q = np.full_like(t, 18.9)              # the lowest dynamic pressure after its fault, as flown
+    lab = truth_controllability(scn, applied, t, q, 5.0)
+    weak = min(lab["authority_pos_degps2"], lab["authority_neg_degps2"])
+    assert 0.0 < weak < 0.02
+    assert not lab["controllable"] and "deg/s2" in lab["reason"]
+    assert lab["need_degps2"] == pytest.approx(math.degrees(guided_accel_need_radps2("npc")))
+    assert truth_controllability(scn.with_(guidance_mode="profile"), applied, t, q, 5.0)["controllable"]

@@ -52,6 +52,83 @@ def shaper_branch(phi, sign_now, turn, bank_signed):
     return sign_now, turn
 
 
+@njit(cache=True, nogil=True)
+def arrival_s(dist, speed, rate_limit, accel_limit, brake_limit):
+    """Time [s] for the law to come to rest at a target dist [rad] ahead, from the speed
+    [rad/s] towards it (negative: moving away), speeding up at the acceleration limit and
+    braking at the braking limit, within the rate limit. Moving away it first turns round
+    (|speed|/b, v^2/2b further off); too fast to stop on the target it runs past, stops and
+    comes back from rest."""
+    w, a, b = rate_limit, accel_limit, brake_limit
+    if w <= 0.0 or a <= 0.0 or b <= 0.0:
+        return math.inf
+    t = 0.0
+    v = min(speed, w)
+    if v < 0.0:                          # turn round first
+        t = -v / b
+        dist += v * v / (2.0 * b)
+        v = 0.0
+    stop = v * v / (2.0 * b)
+    if stop > dist:                      # past the target, to rest, then back from there
+        t += v / b
+        dist, v = stop - dist, 0.0
+    # speed up from v to the peak: (peak^2 - v^2)/2a + peak^2/2b = dist, within the rate limit
+    peak = math.sqrt((dist + v * v / (2.0 * a)) / (1.0 / (2.0 * a) + 1.0 / (2.0 * b)))
+    if peak <= w:
+        return t + (peak - v) / a + peak / b
+    cruise = dist - (w * w - v * v) / (2.0 * a) - w * w / (2.0 * b)
+    return t + (w - v) / a + cruise / w + w / b
+
+
+# going on by a full turn must spare at least this much time with the lift down [s]: it commits
+# the reference to a turn through the other side, so between ways that differ by a few seconds
+# (a turn round at the nominal braking limit) the one the branch rule gives is kept; the long
+# turn round of a weak braking way after a reconfiguration costs tens of seconds
+GO_ON_MARGIN_S = 10.0
+# the step [s] at which the two ways are flown to compare their time with the lift down
+_WAY_STEP_S = 0.1
+
+
+@njit(cache=True, nogil=True)
+def lift_down_s(phi, phid, target, rate_limit, accel_limit, brake_limit):
+    """Time [s] the law spends with the lift down (cos phi < 0) on its way from (phi, phid) to
+    rest on target, flown at a coarse step (a comparison of ways, not a prediction); at most
+    10 min."""
+    dt, t_down = _WAY_STEP_S, 0.0
+    for _ in range(int(600.0 / dt)):
+        if abs(target - phi) < 1e-3 and abs(phid) < 1e-3:
+            break
+        a = shaper_accel_braked(phi, phid, target, rate_limit, accel_limit, brake_limit, dt)
+        phi += phid * dt + 0.5 * a * dt * dt
+        phid += a * dt
+        if math.cos(phi) < 0.0:
+            t_down += dt
+    return t_down
+
+
+@njit(cache=True, nogil=True)
+def shaper_branch_moving(phi, phid, sign_now, turn, bank_signed, rate_limit, accel_limit, brake_limit):
+    """``shaper_branch`` for a reference moving at phid: when its target lies behind it (a
+    command that reverses its motion), it goes on by a full turn (the turn one 2 pi further the
+    way it moves) when that arrives sooner than turning round at the braking limit and spends
+    GO_ON_MARGIN_S less with the lift down. With a weak braking way turning round is long: a
+    reversal at the rate limit caught by a reconfiguration, then commanded back to lift up,
+    would brake over v^2/2b through lift down and come all the way back. At rest, or moving
+    towards the target, the branch is shaper_branch's."""
+    s, turn = shaper_branch(phi, sign_now, turn, bank_signed)
+    target = bank_signed + turn
+    e = target - phi
+    if phid * e < 0.0:
+        ahead = 2.0 * math.pi - abs(e)
+        if arrival_s(ahead, abs(phid), rate_limit, accel_limit, brake_limit) < \
+                arrival_s(abs(e), -abs(phid), rate_limit, accel_limit, brake_limit):
+            on = target + math.copysign(2.0 * math.pi, phid)
+            if lift_down_s(phi, phid, on, rate_limit, accel_limit, brake_limit) + GO_ON_MARGIN_S < \
+                    lift_down_s(phi, phid, target, rate_limit, accel_limit, brake_limit):
+                turn += math.copysign(2.0 * math.pi, phid)
+    return s, turn
+
+
 # a shaped transition longer than this is not modelled past it (the law takes over)
 N_TRANSITION = 256
 
@@ -72,11 +149,11 @@ def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
     phi, phid, s_now, turn = shp[0], shp[1], shp[2], shp[3]
     rate, accel, dtc, mag_now = shp[4], shp[5], shp[6], shp[7]
     brake = _brake_of(shp)
-    s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_a))
+    s_now, turn = shaper_branch_moving(phi, phid, s_now, turn, math.copysign(mag_now, bank_a), rate, accel, brake)
     target = bank_a + turn
     switched = t_switch <= 0.0
     if switched:
-        s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+        s_now, turn = shaper_branch_moving(phi, phid, s_now, turn, math.copysign(mag_now, bank_b), rate, accel, brake)
         target = bank_b + turn
     per = max(1, int(round(t_sample / dtc)))
     n = 0
@@ -84,7 +161,8 @@ def shaped_transition(shp, bank_a, t_switch, bank_b, t_sample, tab):
     while n < tab.shape[0]:
         if not switched and k * dtc >= t_switch - 1e-9:
             switched = True
-            s_now, turn = shaper_branch(phi, s_now, turn, math.copysign(mag_now, bank_b))
+            s_now, turn = shaper_branch_moving(phi, phid, s_now, turn, math.copysign(mag_now, bank_b), rate, accel,
+                                               brake)
             target = bank_b + turn
         if k % per == 0:
             tab[n] = phi
@@ -157,7 +235,9 @@ class BankShaper:
         self.governed_cycles = 0    # control cycles whose acceleration the governor changed
 
     def command(self, bank_signed_rad: float) -> None:
-        self._sign, self._turn = shaper_branch(self.phi, self._sign, self._turn, float(bank_signed_rad))
+        self._sign, self._turn = shaper_branch_moving(self.phi, self.phid, self._sign, self._turn,
+                                                      float(bank_signed_rad), self.rate_limit_radps,
+                                                      self.accel_limit_radps2, self.brake_limit_radps2)
         self.target = bank_signed_rad + self._turn
 
     def state(self, mag_rad: float) -> np.ndarray:

@@ -242,7 +242,7 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
     # (a = v_B / V) is a bank error; the roll channel then nulls the whole error about a
     # instead of the body-roll error alone (g_x <- (a . g) / a_x for the short axes' terms).
     bk = kb[_K_BKEEP]
-    if bk > 0.0:
+    if bk > 0.0 and abs(beta) < 0.1745 and abs(alpha - prm[_ATRIM]) < 0.1745:
         a0 = math.cos(alpha) * math.cos(beta)
         if a0 > 0.1:
             a1 = math.sin(beta)

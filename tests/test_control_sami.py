@@ -407,3 +407,19 @@ def test_bank_keeping_rolls_out_a_short_yaw_axis_error_about_the_velocity_vector
     u = ctl.update(nav, guid, ctl.u_cal_B.copy()).copy()
     assert not ctl.short
     assert np.allclose(u, u_ref, rtol=1e-10, atol=1e-9 * np.linalg.norm(u_ref))
+
+
+@pytest.mark.parametrize("d_alpha, beta", [(0.0, 0.2), (-0.2, 0.03)])
+def test_bank_keeping_stays_out_beyond_ten_degrees_of_the_trim(d_alpha, beta):
+    """The roll term is a small-error one: beyond 10 deg of the trim in alpha or beta the law is
+    eq 18 with the yaw axis short (truth: eq 18 from matrices)."""
+    ctl = _controller(**{"control.deadzone": 0.0, "control.bank_keep": 1.0})
+    nav = _nav([0.01, -0.004, 0.03], [0.01, 0.0, -0.02], alpha=VEH.aero.alpha_trim_rad + d_alpha, beta=beta)
+    guid = _guid([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    ctl.update(nav, guid, None)
+    delivered = ctl.u_cal_B.copy()
+    delivered[2] = 0.0
+    u_ref, _ = _paper_u(ctl, nav, guid, ctl.eps_int.copy())
+    u = ctl.update(nav, guid, delivered).copy()
+    assert ctl.short
+    assert np.allclose(u, u_ref, rtol=1e-10, atol=1e-9 * np.linalg.norm(u_ref))

@@ -38,6 +38,9 @@ _S_THETA, _S_EPSINT, _S_SIGC, _S_U, _S_EPS, _S_EPSDOT, _S_DIAG, _S_N = 0, 9, 12,
 _W_N = 102                # the kernel's work arrays, after the state in the same buffer
 assert (_K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_BKEEP, _K_N) == (_NPRM, _NPRM + 6, _NPRM + 12, _NPRM + 18,
                                                                      _NPRM + 21, _NPRM + 102, _NPRM + 103)
+# bank keeping acts only this near the trim in alpha and beta [rad] (10 deg): its roll term is
+# a small-error one
+_BK_NEAR_TRIM = 0.1745
 # diag vector layout (telemetry of the last update)
 _D_V, _D_ADAPT, _D_SAT, _D_PROJ, _D_SWITCH, _D_BAD, _D_SHORT = range(7)
 
@@ -242,7 +245,7 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
     # (a = v_B / V) is a bank error; the roll channel then nulls the whole error about a
     # instead of the body-roll error alone (g_x <- (a . g) / a_x for the short axes' terms).
     bk = kb[_K_BKEEP]
-    if bk > 0.0 and abs(beta) < 0.1745 and abs(alpha - prm[_ATRIM]) < 0.1745:
+    if bk > 0.0 and abs(beta) < _BK_NEAR_TRIM and abs(alpha - prm[_ATRIM]) < _BK_NEAR_TRIM:
         a0 = math.cos(alpha) * math.cos(beta)
         if a0 > 0.1:
             a1 = math.sin(beta)

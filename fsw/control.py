@@ -33,11 +33,14 @@ _NPRM = 17
 # the kernel's buffers: constants (prm, h_scale, h_lo, h_hi, u_sat_min, P 9x9) and state
 # (theta, eps_int, sigma_c, u_cal, eps, eps_dot, diag; then its work arrays); two arrays to
 # hand it, not twenty
-_K_PRM, _K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_N = 0, 17, 23, 29, 35, 38, 119
+_K_PRM, _K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_BKEEP, _K_N = 0, 17, 23, 29, 35, 38, 119, 120
 _S_THETA, _S_EPSINT, _S_SIGC, _S_U, _S_EPS, _S_EPSDOT, _S_DIAG, _S_N = 0, 9, 12, 15, 18, 21, 24, 31
 _W_N = 102                # the kernel's work arrays, after the state in the same buffer
-assert (_K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_N) == (_NPRM, _NPRM + 6, _NPRM + 12, _NPRM + 18, _NPRM + 21,
-                                                          _NPRM + 102)
+assert (_K_HSCALE, _K_HLO, _K_HHI, _K_USAT, _K_P, _K_BKEEP, _K_N) == (_NPRM, _NPRM + 6, _NPRM + 12, _NPRM + 18,
+                                                                     _NPRM + 21, _NPRM + 102, _NPRM + 103)
+# bank keeping acts only this near the trim in alpha and beta [rad] (10 deg): its roll term is
+# a small-error one
+_BK_NEAR_TRIM = 0.1745
 # diag vector layout (telemetry of the last update)
 _D_V, _D_ADAPT, _D_SAT, _D_PROJ, _D_SWITCH, _D_BAD, _D_SHORT = range(7)
 
@@ -208,6 +211,26 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
     for i in range(3):
         e[i] = sig[i] - sr[i]
         ed[i] = sd[i] - sr_d[i]
+    # --- saturation awareness: last cycle's delivered torque far short of the command.
+    # short[i]: axis i got more than one largest jet increment (u_sat_min / 2) and more than
+    # shortfall_frac of its command away from it: the tracking error then carries torque
+    # that was commanded but not delivered (or delivered unasked), which is no evidence about
+    # the model, so that axis's aero factor does not learn from it, nor does the inertia.
+    sat = False
+    short = wk[99:102]                  # 1.0: the axis is short
+    for i in range(3):
+        short[i] = 0.0
+    any_short = False
+    if have_del:
+        for i in range(3):
+            miss = abs(u_prev[i] - tau_del[i])
+            if abs(u_prev[i]) > u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
+                sat = True
+            if miss > 0.5 * u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
+                short[i] = 1.0
+                any_short = True
+    diag[_D_SAT] = 1.0 if sat else 0.0
+    diag[_D_SHORT] = 1.0 if any_short else 0.0
     # --- control law (paper eq 18)
     h = theta[0:6]
     M = wk[27:45].reshape((3, 6))
@@ -217,6 +240,17 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
         f[i] = prm[_CD] * ed[i] + prm[_KD] * e[i] + prm[_KI] * ei[i]
     g = wk[48:51]
     _Pa_mul(sig, f, g)
+    # bank keeping: g is the feedback's body-frame angular acceleration. While pitch or yaw is
+    # short, that axis's error cannot be taken out, and its component about the velocity vector
+    # (a = v_B / V) is a bank error; the roll channel then nulls the whole error about a
+    # instead of the body-roll error alone (g_x <- (a . g) / a_x for the short axes' terms).
+    bk = kb[_K_BKEEP]
+    if bk > 0.0 and abs(beta) < _BK_NEAR_TRIM and abs(alpha - prm[_ATRIM]) < _BK_NEAR_TRIM:
+        a0 = math.cos(alpha) * math.cos(beta)
+        if a0 > 0.1:
+            a1 = math.sin(beta)
+            a2 = math.sin(alpha) * math.cos(beta)
+            g[0] += bk * (short[1] * a1 * g[1] + short[2] * a2 * g[2]) / a0
     ufb = wk[51:54]
     _I_mul(h, g, ufb)
     # L(t) = 1/2 S l V^2 diag(beta, alpha - alpha_trim, beta) D_est, D_est = rho_hat diag(C_lb, C_ma, C_nb)
@@ -249,26 +283,6 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
         if i >= 6:
             w[i - 6] = Py                      # E^T P y
     diag[_D_V] = Vl
-    # --- saturation awareness: last cycle's delivered torque far short of the command.
-    # short[i]: axis i got more than one largest jet increment (u_sat_min / 2) and more than
-    # shortfall_frac of its command away from it: the tracking error then carries torque
-    # that was commanded but not delivered (or delivered unasked), which is no evidence about
-    # the model, so that axis's aero factor does not learn from it, nor does the inertia.
-    sat = False
-    short = wk[99:102]                  # 1.0: the axis is short
-    for i in range(3):
-        short[i] = 0.0
-    any_short = False
-    if have_del:
-        for i in range(3):
-            miss = abs(u_prev[i] - tau_del[i])
-            if abs(u_prev[i]) > u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
-                sat = True
-            if miss > 0.5 * u_sat_min[i] and miss > prm[_SFRAC] * abs(u_prev[i]):
-                short[i] = 1.0
-                any_short = True
-    diag[_D_SAT] = 1.0 if sat else 0.0
-    diag[_D_SHORT] = 1.0 if any_short else 0.0
     # --- integrator (frozen while saturated, clamped)
     ei_new = wk[69:72]
     lim = prm[_ILIM]
@@ -371,6 +385,7 @@ class SamiController:
         Param("control.shortfall_frac", 0.0, 1.0, "", "saturation when |u - tau_delivered| > frac |u| on an axis"),
         Param("control.safe_rate_gain", 0.0, 10.0, "1/s", "SAFE mode: tau = -gain I_hat omega"),
         Param("control.sigma_switch", 1.0, 3.0, "", "controller MRP chart switches to the shadow set above this |sigma|"),
+        Param("control.bank_keep", 0.0, 1.0, "", "share of a short pitch/yaw axis's error about the velocity vector the roll channel takes out (0 = the paper's law)"),
     ]
 
     def __init__(self, params: dict[str, float], vehicle: Vehicle, dt_s: float) -> None:
@@ -458,6 +473,7 @@ class SamiController:
                        self.dt_s, p["control.deadzone"] * self.V_q, p["control.int_limit"],
                        p["control.shortfall_frac"], p["control.d_min"], p["control.d_max"],
                        p["control.sigma_switch"], qsl, clb, cma, cnb, atrim]
+        self._kb[_K_BKEEP] = p["control.bank_keep"]
         # keep the current estimates inside (possibly new) bounds
         np.clip(self.theta_hat[0:6], self.h_lo, self.h_hi, out=self.theta_hat[0:6])
         np.clip(self.theta_hat[6:9], p["control.d_min"], p["control.d_max"], out=self.theta_hat[6:9])

@@ -371,3 +371,55 @@ def test_an_axis_short_of_its_command_teaches_neither_its_aero_factor_nor_the_in
     th = ctl.theta_hat.copy()
     ctl.update(nav, guid, ctl.u_cal_B + 0.4 * ctl.u_sat_min_B)
     assert not ctl.short and ctl.theta_hat[7] != th[7]
+
+
+@pytest.mark.parametrize("keep", [0.0, 1.0, 0.5])
+def test_bank_keeping_rolls_out_a_short_yaw_axis_error_about_the_velocity_vector(keep):
+    """With control.bank_keep = k and the yaw axis short, the roll channel's body-frame feedback
+    acceleration g_x becomes g_x + k a_z g_z / a_x (a: the velocity's direction in B), so at
+    k = 1 the roll channel takes out the error about the velocity vector; otherwise (and at
+    k = 0 always) the law is paper eq 18. Truth: eq 18 from matrices and g = P_a (c_d eps_dot +
+    k_d eps + k_i int eps)."""
+    ctl = _controller(**{"control.deadzone": 0.0, "control.bank_keep": keep})
+    alpha, beta = VEH.aero.alpha_trim_rad + 0.02, 0.03
+    nav = _nav([0.01, -0.004, 0.03], [0.01, 0.0, -0.02], alpha=alpha, beta=beta)   # mostly a yaw error
+    guid = _guid([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    ctl.update(nav, guid, None)
+    delivered = ctl.u_cal_B.copy()
+    assert abs(delivered[2]) > ctl.u_sat_min_B[2]
+    delivered[2] = 0.0                                              # the yaw jets gave nothing
+    ei = ctl.eps_int.copy()
+    u_ref, m = _paper_u(ctl, nav, guid, ei)
+    u = ctl.update(nav, guid, delivered).copy()
+    assert ctl.short
+    lam = ctl.params["control.lambda_radps"]
+    g = m["Pa"] @ (3 * lam * m["eps_dot"] + 3 * lam ** 2 * m["eps"] + lam ** 3 * ei)
+    a = np.array([math.cos(alpha) * math.cos(beta), math.sin(beta), math.sin(alpha) * math.cos(beta)])
+    dg = np.array([keep * a[2] * g[2] / a[0], 0.0, 0.0])
+    I_hat = inertia_matrix(ctl.h_hat)
+    assert np.allclose(u, u_ref - I_hat @ dg, rtol=1e-10, atol=1e-9 * np.linalg.norm(u_ref))
+    if keep == 1.0:                  # the roll feedback is the error's component about a, over a_x
+        assert (g + dg)[0] * a[0] == pytest.approx(a[0] * g[0] + a[2] * g[2], rel=1e-12)
+    if keep > 0.0:
+        assert not np.allclose(u, u_ref, rtol=1e-6)
+    # delivered as commanded: nothing is short, the law is eq 18 whatever bank_keep says
+    u_ref, m = _paper_u(ctl, nav, guid, ctl.eps_int.copy())
+    u = ctl.update(nav, guid, ctl.u_cal_B.copy()).copy()
+    assert not ctl.short
+    assert np.allclose(u, u_ref, rtol=1e-10, atol=1e-9 * np.linalg.norm(u_ref))
+
+
+@pytest.mark.parametrize("d_alpha, beta", [(0.0, 0.2), (-0.2, 0.03)])
+def test_bank_keeping_stays_out_beyond_ten_degrees_of_the_trim(d_alpha, beta):
+    """The roll term is a small-error one: beyond 10 deg of the trim in alpha or beta the law is
+    eq 18 with the yaw axis short (truth: eq 18 from matrices)."""
+    ctl = _controller(**{"control.deadzone": 0.0, "control.bank_keep": 1.0})
+    nav = _nav([0.01, -0.004, 0.03], [0.01, 0.0, -0.02], alpha=VEH.aero.alpha_trim_rad + d_alpha, beta=beta)
+    guid = _guid([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    ctl.update(nav, guid, None)
+    delivered = ctl.u_cal_B.copy()
+    delivered[2] = 0.0
+    u_ref, _ = _paper_u(ctl, nav, guid, ctl.eps_int.copy())
+    u = ctl.update(nav, guid, delivered).copy()
+    assert ctl.short
+    assert np.allclose(u, u_ref, rtol=1e-10, atol=1e-9 * np.linalg.norm(u_ref))

@@ -131,6 +131,12 @@ def d_hat_extreme(fn, n: int = 150) -> Callable[[Flight], float]:
     return obs
 
 
+def roll_command_sum(fl: Flight, n: int = 100) -> float:
+    acc = []
+    fl.fly(n, every=lambda f: acc.append(float(f.fsw.control.u_cal_B[0])))
+    return float(np.sum(acc))
+
+
 def axis_error(axis: int, n: int = 100) -> Callable[[Flight], float]:
     def obs(fl: Flight) -> float:
         acc = []
@@ -354,6 +360,10 @@ CASES = [
          lambda fl: sum([fl.fly(1), bool(fl.fsw.control.saturated)][1] for _ in range(100)), ">"),
     Case("control.safe_rate_gain", 5.0, torque_mean, ">", setup=ground(("mode", "safe"))),
     Case("control.sigma_switch", 1.5, chart_switch_on_crossing, "==", (False, True)),
+    # jets 14 and 18 stuck on at q-bar ~1 Pa: pitch and yaw short, the roll command then
+    # carries their error about the velocity vector
+    Case("control.bank_keep", 1.0, roll_command_sum, "!=",
+         setup=ground(("inject", "14", "stuck_on"), ("inject", "18", "stuck_on"))),
     # allocator
     Case("allocator.w_roll", 0.0, axis_error(0), ">"),
     Case("allocator.w_pitch", 0.0, axis_error(1), ">"),

@@ -38,8 +38,8 @@ from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
 from .params import Param, ParamRegistry, periods
 from . import executive
 
-COMMAND_RING_S = 1.28
-_ZERO3 = (0.0, 0.0, 0.0)   # answers kept for FDIR (64 at 50 Hz, 256 at 200 Hz): a command held longer is not judged
+COMMAND_RING_S = 1.28   # answers kept for FDIR (64 at 50 Hz, 256 at 200 Hz): a command held longer is not judged
+_ZERO3 = (0.0, 0.0, 0.0)   # a zero torque as Python floats
 
 
 def declarations() -> tuple[tuple[str, list[Param]], ...]:

@@ -34,6 +34,15 @@ model built at the first short cycle after a change of tables.
 
 The paper's sign box (allocator.spill_jets 0) is flown as before: no modulation. While an
 asynchronous reconfiguration is pending (real time: the interim model) neither.
+
+Real time (``rehearse``, called before each release): a period asleep leaves the HiGHS instance
+cold, and a solve of it then costs several times its warm cost. Re-solving it in the rehearsal is
+not neutral (its warm start, and so the vertex of a degenerate optimum, depends on its history).
+So a second instance, built from the same model, replays in the rehearsal the right-hand sides
+the flying one solved since, in the same order: the same calls on the same model leave it in the
+same state (HiGHS is deterministic on one thread), and the two trade places -- the next cycle
+solves on the instance just warmed, with the answer the other would have given. Batch and
+lockstep never rehearse and keep one instance.
 """
 from __future__ import annotations
 
@@ -42,6 +51,8 @@ import time
 import numpy as np
 
 from .model import N_AXES
+
+MIRROR_BEHIND_MAX = 16     # solves the second instance may lag behind before it is dropped
 
 
 class DutyCycleRealiser:
@@ -78,6 +89,12 @@ class DutyCycleRealiser:
         self._idx = np.zeros(0, dtype=np.int64)   # usable jets (the LP's first columns)
         self._cols = np.zeros((N_AXES, n))
         self._bias = np.zeros(N_AXES)
+        self._lp = None                           # the model of the active tables
+        self._mirror = False                      # rehearsed: keep a second instance from the next build
+        self._follow = False                      # note the solves for the second instance
+        self._spare = None                        # the second instance (same model, same solves)
+        self._behind = np.zeros((MIRROR_BEHIND_MAX, N_AXES))   # right-hand sides it has not solved yet
+        self._n_behind = 0
 
     def _short(self, u_B: np.ndarray, tau_B: np.ndarray) -> bool:
         # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
@@ -116,11 +133,20 @@ class DutyCycleRealiser:
         lp.row_lower_ = np.zeros(N_AXES)
         lp.row_upper_ = np.zeros(N_AXES)
         set_colwise_matrix(lp, M)
+        self._lp = lp
+        self._h = self._highs(lp)
+        self._spare = None                      # built by the next rehearsal, off the control task
+        self._follow = self._mirror
+        self._n_behind = 0
+
+    @staticmethod
+    def _highs(lp):
+        import highspy
         h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("threads", 1)
         h.passModel(lp)
-        self._h = h
+        return h
 
     def duty_cycles(self, allocator, u_B: np.ndarray) -> np.ndarray:
         """d (n jets; 0 for unusable ones): the LP's optimum for demand ``u_B`` on the
@@ -132,6 +158,13 @@ class DutyCycleRealiser:
         h.changeRowsBounds(N_AXES, self._rows, self._rhs, self._rhs)
         h.run()
         x = h.getSolution().col_value
+        if self._follow:                        # the second instance's next solve
+            if self._n_behind == MIRROR_BEHIND_MAX:
+                self._follow = False            # too far behind (rehearsals skipped): one instance
+                self._spare = None
+            else:
+                self._behind[self._n_behind] = self._rhs
+                self._n_behind += 1
         self.d[:] = 0.0
         for q, k in enumerate(self._idx):
             v = x[q]
@@ -174,6 +207,25 @@ class DutyCycleRealiser:
         self.modulated = True
         self.modulated_cycles += 1
         return u
+
+    def rehearse(self) -> None:
+        """Real time, before a release: the second instance solves what the flying one has solved
+        since it last did, then the two trade places (module docstring). The first call only
+        asks for the second instance, from the next build of the LP on."""
+        if not self._mirror:
+            self._mirror = True
+            return
+        if not self._follow or self._n_behind == 0:
+            return
+        spare = self._spare
+        if spare is None:
+            spare = self._highs(self._lp)
+        for i in range(self._n_behind):
+            b = self._behind[i]
+            spare.changeRowsBounds(N_AXES, self._rows, b, b)
+            spare.run()
+        self._n_behind = 0
+        self._h, self._spare = spare, self._h
 
     def reset(self) -> None:
         self.acc[:] = 0.0

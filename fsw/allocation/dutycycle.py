@@ -93,6 +93,7 @@ class DutyCycleRealiser:
         self._mirror = False                      # rehearsed: keep a second instance from the next build
         self._follow = False                      # note the solves for the second instance
         self._spare = None                        # the second instance (same model, same solves)
+        self._blank = None                        # a HiGHS instance made ahead, not yet given a model
         self._behind = np.zeros((MIRROR_BEHIND_MAX, N_AXES))   # right-hand sides it has not solved yet
         self._n_behind = 0
 
@@ -140,11 +141,16 @@ class DutyCycleRealiser:
         self._n_behind = 0
 
     @staticmethod
-    def _highs(lp):
+    def _blank_highs():
         import highspy
         h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("threads", 1)
+        return h
+
+    @classmethod
+    def _highs(cls, lp, h=None):
+        h = cls._blank_highs() if h is None else h
         h.passModel(lp)
         return h
 
@@ -211,15 +217,17 @@ class DutyCycleRealiser:
     def rehearse(self) -> None:
         """Real time, before a release: the second instance solves what the flying one has solved
         since it last did, then the two trade places (module docstring). The first call only
-        asks for the second instance, from the next build of the LP on."""
+        asks for the second instance, from the next build of the LP on. An instance is made
+        ahead, in a rehearsal with nothing to replay (its construction is most of a build)."""
         if not self._mirror:
             self._mirror = True
-            return
         if not self._follow or self._n_behind == 0:
+            if self._blank is None:
+                self._blank = self._blank_highs()
             return
         spare = self._spare
         if spare is None:
-            spare = self._highs(self._lp)
+            spare, self._blank = self._highs(self._lp, self._blank), None
         for i in range(self._n_behind):
             b = self._behind[i]
             spare.changeRowsBounds(N_AXES, self._rows, b, b)

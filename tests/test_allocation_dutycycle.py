@@ -160,39 +160,3 @@ def test_the_fsws_gate_leaves_small_or_mostly_delivered_demands_to_the_exact_ans
     assert abs(AXIS @ al.tau_B) < 0.5 * abs(AXIS @ u)     # the exact answer: short by the rule
     dc.solve(al, u)
     assert dc.modulated
-
-
-def _walk(rng, n):
-    """Demands [N m] as in flight: runs of nearby demands about the bank axis, with jumps."""
-    d = 300.0 * AXIS
-    for _ in range(n):
-        d = d + rng.normal(0.0, 30.0, 3) if rng.random() < 0.9 else rng.normal(0.0, 400.0, 3)
-        yield d
-
-
-def test_a_rehearsed_realiser_answers_bit_for_bit_as_one_never_rehearsed():
-    """Real time: the second HiGHS instance replays the flying one's solves in the rehearsal and
-    the two trade places. The truth is the same realiser never rehearsed (batch): every duty
-    cycle and average torque equal bit for bit, over rehearsals at irregular points, a stretch
-    without any (the second instance dropped: too far behind) and a change of health (a new LP).
-    A rehearsal that re-solved the flying instance itself fails this (its warm start moves)."""
-    from fsw.allocation.dutycycle import MIRROR_BEHIND_MAX
-    rng = np.random.default_rng(7)
-    al = Allocator(T, THRUST, PARAMS)
-    ref = DutyCycleRealiser(AXIS, T, THRUST)
-    dc = DutyCycleRealiser(AXIS, T, THRUST)
-    dc.rehearse()                       # the first rehearsal asks for the second instance
-    swaps = dropped = 0
-    for health in (RUN82, RUN190):
-        al.set_health(health)
-        for i, u in enumerate(_walk(rng, 300)):
-            quiet = health is RUN82 and 100 <= i < 100 + MIRROR_BEHIND_MAX + 2   # no rehearsal: it falls behind
-            if i and not quiet and rng.random() < 0.7:
-                h = dc._h
-                dc.rehearse()
-                swaps += dc._h is not h
-            a, b = ref.duty_cycles(al, u), dc.duty_cycles(al, u)
-            assert a.tobytes() == b.tobytes() and ref.avg_B.tobytes() == dc.avg_B.tobytes(), (health, i)
-            dropped += quiet and dc._spare is None and not dc._follow
-    assert swaps > 100 and dropped > 0          # both paths were flown
-    assert dc._follow                           # the new health's LP has a second instance again

@@ -34,15 +34,6 @@ model built at the first short cycle after a change of tables.
 
 The paper's sign box (allocator.spill_jets 0) is flown as before: no modulation. While an
 asynchronous reconfiguration is pending (real time: the interim model) neither.
-
-Real time (``rehearse``, called before each release): a period asleep leaves the HiGHS instance
-cold, and a solve of it then costs several times its warm cost. Re-solving it in the rehearsal is
-not neutral (its warm start, and so the vertex of a degenerate optimum, depends on its history).
-So a second instance, built from the same model, replays in the rehearsal the right-hand sides
-the flying one solved since, in the same order: the same calls on the same model leave it in the
-same state (HiGHS is deterministic on one thread), and the two trade places -- the next cycle
-solves on the instance just warmed, with the answer the other would have given. Batch and
-lockstep never rehearse and keep one instance.
 """
 from __future__ import annotations
 
@@ -51,8 +42,6 @@ import time
 import numpy as np
 
 from .model import N_AXES
-
-MIRROR_BEHIND_MAX = 16     # solves the second instance may lag behind before it is dropped
 
 
 class DutyCycleRealiser:
@@ -89,13 +78,6 @@ class DutyCycleRealiser:
         self._idx = np.zeros(0, dtype=np.int64)   # usable jets (the LP's first columns)
         self._cols = np.zeros((N_AXES, n))
         self._bias = np.zeros(N_AXES)
-        self._lp = None                           # the model of the active tables
-        self._mirror = False                      # rehearsed: keep a second instance from the next build
-        self._follow = False                      # note the solves for the second instance
-        self._spare = None                        # the second instance (same model, same solves)
-        self._blank = None                        # a HiGHS instance made ahead, not yet given a model
-        self._behind = np.zeros((MIRROR_BEHIND_MAX, N_AXES))   # right-hand sides it has not solved yet
-        self._n_behind = 0
 
     def _short(self, u_B: np.ndarray, tau_B: np.ndarray) -> bool:
         # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
@@ -134,25 +116,11 @@ class DutyCycleRealiser:
         lp.row_lower_ = np.zeros(N_AXES)
         lp.row_upper_ = np.zeros(N_AXES)
         set_colwise_matrix(lp, M)
-        self._lp = lp
-        self._h = self._highs(lp)
-        self._spare = None                      # built by the next rehearsal, off the control task
-        self._follow = self._mirror
-        self._n_behind = 0
-
-    @staticmethod
-    def _blank_highs():
-        import highspy
         h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("threads", 1)
-        return h
-
-    @classmethod
-    def _highs(cls, lp, h=None):
-        h = cls._blank_highs() if h is None else h
         h.passModel(lp)
-        return h
+        self._h = h
 
     def duty_cycles(self, allocator, u_B: np.ndarray) -> np.ndarray:
         """d (n jets; 0 for unusable ones): the LP's optimum for demand ``u_B`` on the
@@ -164,13 +132,6 @@ class DutyCycleRealiser:
         h.changeRowsBounds(N_AXES, self._rows, self._rhs, self._rhs)
         h.run()
         x = h.getSolution().col_value
-        if self._follow:                        # the second instance's next solve
-            if self._n_behind == MIRROR_BEHIND_MAX:
-                self._follow = False            # too far behind (rehearsals skipped): one instance
-                self._spare = None
-            else:
-                self._behind[self._n_behind] = self._rhs
-                self._n_behind += 1
         self.d[:] = 0.0
         for q, k in enumerate(self._idx):
             v = x[q]
@@ -213,27 +174,6 @@ class DutyCycleRealiser:
         self.modulated = True
         self.modulated_cycles += 1
         return u
-
-    def rehearse(self) -> None:
-        """Real time, before a release: the second instance solves what the flying one has solved
-        since it last did, then the two trade places (module docstring). The first call only
-        asks for the second instance, from the next build of the LP on. An instance is made
-        ahead, in a rehearsal with nothing to replay (its construction is most of a build)."""
-        if not self._mirror:
-            self._mirror = True
-        if not self._follow or self._n_behind == 0:
-            if self._blank is None:
-                self._blank = self._blank_highs()
-            return
-        spare = self._spare
-        if spare is None:
-            spare, self._blank = self._highs(self._lp, self._blank), None
-        for i in range(self._n_behind):
-            b = self._behind[i]
-            spare.changeRowsBounds(N_AXES, self._rows, b, b)
-            spare.run()
-        self._n_behind = 0
-        self._h, self._spare = spare, self._h
 
     def reset(self) -> None:
         self.acc[:] = 0.0

@@ -7,6 +7,7 @@ import argparse
 import json
 import math
 
+import numpy as np
 import pytest
 
 from ellipsled.bench import jitter, sil, suite
@@ -275,6 +276,32 @@ def test_latency_floor_is_the_same_runs_round_trip_at_the_runs_rate_plus_the_con
     assert rows[2][1] == "520.0 (20.0)" and "= Zenoh + codec round trip 400.0 + FSW control task 100.0" in rows[2][2]
     assert sil.latency_floor({"sil_realtime": {"idle": run(800.0, 200.0)}}, "idle", 50.0)["floor_p99_us"] is None
 
+
+
+def test_the_control_task_row_sets_the_sil_beside_batch_over_the_same_span_with_and_without_the_lp_cycles():
+    def run(p99, rest):
+        return {"extra": {"fsw_control_us": {"p50": 50.0, "p99": p99, "lp_cycles": 28, "p99_without_lp": rest}}}
+    span = {"p50_us": 20.0, "p99_us": 60.0, "span_s": 10.0, "lp_cycles": 28, "p99_without_lp_us": 25.0}
+    res = {"machine": {"speed_factor": 1.0},
+           "cycle": {"control_p99_us": 40.0, "control_span_50hz": span, "control_span_200hz": dict(span, p99_us=50.0)},
+           "sil_realtime": {"idle": run(150.0, 90.0), "idle_200hz": run(90.0, 45.0)}}
+    rows = sil.control_rows(res)
+    # 150 / 60 = 2.5x the same span's p99 (not 150 / 40, the whole entry's): fails; 90 / 50 = 1.8x passes
+    assert rows[0][3].startswith("2.50x (p99; without the LP's cycles 3.60x)") and rows[0][-1].startswith("**FAIL** (ratio")
+    assert "batch first 10.0 s 20.0 / 60.0 (25.0, 28 LP cycles); whole batch entry p99 40.0" == rows[0][2]
+    assert rows[1][3].startswith("1.80x") and rows[1][-1] == "pass"
+    assert sil.control_rows({"cycle": {}}) == []                  # no SIL run, no row
+
+
+def test_the_batch_span_is_the_first_cycles_of_the_entry_and_its_lp_cycles_are_counted_apart():
+    from ellipsled.bench import cycle
+    c = np.full(1000, 20.0)
+    lp = np.zeros(1000, dtype=bool)
+    c[1:29], lp[1:29] = 200.0, True          # the LP's cycles at the start: 28 of the first 500
+    c[700:720] = 900.0                       # slow cycles after the span: not in it
+    f = cycle.span_figures(c, lp, 10.0, 0.02)
+    assert f["runs"] == 500 and f["lp_cycles"] == 28 and f["p99_us"] == 200.0 and f["max_us"] == 200.0
+    assert f["p99_without_lp_us"] == 20.0
 
 
 def test_the_rehearsal_row_sets_the_run_without_it_beside_the_idle_run():

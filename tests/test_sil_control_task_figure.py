@@ -27,3 +27,15 @@ def test_no_figure_without_saved_control_times(tmp_path):
     np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(3, np.int64),
                         control_ns=np.full(3, -1, np.int64), frame_age_ns=np.zeros(0, np.int64))
     assert control_task_us(tmp_path) is None                       # no tick ran it
+
+
+def test_the_duty_cycle_lps_cycles_are_counted_and_the_p99_given_without_them(tmp_path):
+    c = np.full(500, 50_000, dtype=np.int64)
+    lp = np.zeros(500, dtype=bool)
+    c[1:29], lp[1:29] = 200_000, True      # the LP's cycles: 28 of 500, more than 1 %
+    c[3], lp[3] = -1, False                # a tick without the control task
+    np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(500, np.int64), control_ns=c,
+                        lp_cycle=lp, frame_age_ns=np.zeros(0, np.int64))
+    f = control_task_us(tmp_path)
+    assert f["runs"] == 499 and f["p99"] == 200.0
+    assert f["lp_cycles"] == 27 and f["p99_without_lp"] == 50.0

@@ -38,6 +38,15 @@ REALTIME_TARGETS = {"latency_p99_us_max": 1000.0, "slips": 0}   # jitter: as the
 FOOTPRINT_TARGETS = {"locked_over_unlocked_rss_max": 1.2}
 FOOTPRINT_KEYS = ("fsw_rss_mb", "fsw_unlocked_rss_mb", "fsw_locked_mb", "sim_rss_mb", "sim_unlocked_rss_mb",
                   "sim_locked_mb")
+CONTROL_TARGETS = {"sil_over_batch_p99_max": 2.0, "p99_us_max": 100.0}
+FAST_DT_S = 0.005       # the rate headroom's control period (200 Hz)
+
+
+def realtime_seconds(quick: bool) -> float:
+    """The simulated span each real-time SIL run flies (its batch baseline: cycle.py)."""
+    return 10.0 if quick else 60.0
+
+
 SIL_KEYS = ("realtime_factor", "latency_p50_us", "latency_p99_us", "jitter_p50_us", "jitter_p99_us",
             "jitter_max_us", "slips")
 
@@ -114,7 +123,7 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
     if not ok:
         return {"idle": _nulls(SIL_KEYS[1:], why), "load": _nulls(SIL_KEYS[1:], why),
                 "footprint": _nulls(FOOTPRINT_KEYS, why)}
-    dur = 10.0 if quick else 60.0
+    dur = realtime_seconds(quick)
 
     def one(extra=()) -> dict:
         try:
@@ -139,7 +148,7 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
            # the footprint's baseline: the same run with nothing locked (nor SCHED_FIFO)
            "idle_unlocked": one(("--no-rt",)),
            # rate headroom: the same run at 200 Hz
-           "idle_200hz": one(("--dt-control", "0.005")),
+           "idle_200hz": one(("--dt-control", f"{FAST_DT_S:g}")),
            # the nodes' rehearsal of their receiving paths off: what it takes off the latency
            "idle_no_rehearse": one(("--no-rehearse",))}
     res["footprint"] = footprint(res["idle"], res["idle_unlocked"])
@@ -276,6 +285,32 @@ def floor_rows(res: dict) -> list[Row]:
     return R
 
 
+def control_rows(res: dict) -> list[Row]:
+    """The control task in the real-time SIL against the same task in batch over the same
+    simulated span (cycle.py's ``control_span_*``; its whole-entry p99 for scale), at 50 and
+    200 Hz; beside each p99, the p99 without the duty-cycle LP's cycles."""
+    k, lim = CONTROL_TARGETS["sil_over_batch_p99_max"], CONTROL_TARGETS["p99_us_max"]
+    R = []
+    for key, hz in FLOOR_RUNS:
+        s = g(res, "sil_realtime", key) or {}
+        if not s:
+            continue
+        ctl = g(s, "extra", "fsw_control_us") or {}
+        b = g(res, "cycle", f"control_span_{hz:g}hz") or {}
+        r, r_rest = ratio(ctl.get("p99"), b.get("p99_us")), ratio(ctl.get("p99_without_lp"), b.get("p99_without_lp_us"))
+        R.append(row(f"control task at {hz:g} Hz, real-time SIL against batch over the same span, p50 / p99 [us] "
+                     "(p99 without the duty-cycle LP's cycles)",
+                     f"{fmt(ctl.get('p50'))} / {fmt(ctl.get('p99'))} ({fmt(ctl.get('p99_without_lp'))}, "
+                     f"{fmt(ctl.get('lp_cycles'))} LP cycles)",
+                     f"batch first {fmt(b.get('span_s'))} s {fmt(b.get('p50_us'))} / {fmt(b.get('p99_us'))} "
+                     f"({fmt(b.get('p99_without_lp_us'))}, {fmt(b.get('lp_cycles'))} LP cycles); "
+                     f"whole batch entry p99 {fmt(g(res, 'cycle', 'control_p99_us'))}",
+                     f"{fmt(r)}x (p99; without the LP's cycles {fmt(r_rest)}x)",
+                     f"p99 <= {k:g}x batch, <= {lim:g} us", None if r is None else r <= k,
+                     absolute=(ctl.get("p99"), lim, "<="), machine=speed(res)))
+    return R
+
+
 def _minus(a, b):
     """a - b (the middle leg of two percentiles: an estimate, percentiles do not subtract exactly)."""
     return None if a is None or b is None else a - b
@@ -350,7 +385,7 @@ def realtime_rows(res: dict) -> list[Row]:
                      f"{slips}", None if s.get("slips") is None else s.get("slips") == slips))
         R += latency_rows(res, regime, s)
         if regime == "idle":
-            R += footprint_rows(res) + rate_rows(res) + floor_rows(res)
+            R += footprint_rows(res) + rate_rows(res) + floor_rows(res) + control_rows(res)
     s = g(res, "sil_realtime", "idle_no_rehearse") or {}
     if s:
         on = g(res, "sil_realtime", "idle") or {}

@@ -121,6 +121,9 @@ class FswNode:
         # every tick's control task time (-1: not run), whole run: the executive's statistics
         # keep only its recent cycles, and the latency it is a share of covers the whole run
         self.control_ns = np.full(len(self.history.a["k"]), -1, dtype=np.int64)
+        # every tick: its control cycle flew the duty-cycle LP's answer (a HiGHS solve: the
+        # control task's dearest cycles, all near the entry's start in the nominal flight)
+        self.lp_cycle = np.zeros(len(self.history.a["k"]), dtype=bool)
         # real time: how long after the plant published it each frame reached this loop
         self.frame_age_ns = np.zeros(len(self.history.a["k"]), dtype=np.int64)
         self.n_frames = 0
@@ -309,10 +312,12 @@ class FswNode:
         if self.ticks >= len(self.jitter_ns):
             self.jitter_ns = np.concatenate((self.jitter_ns, np.zeros_like(self.jitter_ns)))
             self.control_ns = np.concatenate((self.control_ns, np.full_like(self.control_ns, -1)))
+            self.lp_cycle = np.concatenate((self.lp_cycle, np.zeros_like(self.lp_cycle)))
         self.jitter_ns[self.ticks] = cyc.t_start_ns - cyc.t_release_ns
         st = ex.stats
         if st is not None and st.n:
             self.control_ns[self.ticks] = st.task_ns[(st.n - 1) % st.capacity, self._control_col]
+        self.lp_cycle[self.ticks] = self.topo.got_frame and self.fsw.dutycycle.modulated
         self.ticks += 1
         if not self.topo.got_frame:
             return
@@ -413,7 +418,7 @@ class FswNode:
         a = self.args
         if a.mode == "realtime":    # the arrays the loop fills: no first-touch page fault in flight
             rt.prefault(self.history.truth_rows, self.history.fsw_rows, self.jitter_ns, self.frame_age_ns,
-                       self.control_ns)
+                       self.control_ns, self.lp_cycle)
         rt.gc_out_of_cycle()
         say(ROLE, f"{self.scn.name}, {a.mode}; waiting for the plant")
         if not transport.wait_for_alive(self.session, self.K.alive_sim, a.wait_peers):
@@ -437,7 +442,7 @@ class FswNode:
         # every tick's release jitter and control task time and every frame's age, raw (the launcher
         # and ellipsled/node_reports.py sum them up)
         np.savez_compressed(out / "fsw_timing.npz", jitter_ns=self.jitter_ns[: self.ticks],
-                            control_ns=self.control_ns[: self.ticks],
+                            control_ns=self.control_ns[: self.ticks], lp_cycle=self.lp_cycle[: self.ticks],
                             frame_age_ns=self.frame_age_ns[: self.n_frames])
         rep = fsw_report(self.fsw, self.topo.executive.slips, self.samples)
         ex = self.topo.executive.telemetry()

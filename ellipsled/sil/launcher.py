@@ -88,20 +88,30 @@ def add_arguments(p) -> None:
 def control_task_us(out: Path) -> dict | None:
     """The FSW's control task over the whole run, p50 / p99 / max [us] and its runs, from the
     per-tick times the FSW node saved (fsw_timing.npz); None when it saved none (the
-    executive's own statistics cover only its recent cycles)."""
+    executive's own statistics cover only its recent cycles). With the node's per-tick flag
+    of the duty-cycle LP's cycles: their count (``lp_cycles``) and the p99 without them
+    (``p99_without_lp``), the rest of the control task."""
     import numpy as np
     try:
         with np.load(Path(out) / "fsw_timing.npz") as z:
             if "control_ns" not in z.files:
                 return None
             c = z["control_ns"]
+            lp = z["lp_cycle"] if "lp_cycle" in z.files else None
     except (OSError, ValueError):
         return None
-    c = c[c >= 0] / 1e3
+    ran = c >= 0
+    c = c[ran] / 1e3
     if not len(c):
         return None
-    return {"p50": float(np.percentile(c, 50)), "p99": float(np.percentile(c, 99)), "max": float(c.max()),
-            "runs": int(len(c))}
+    f = {"p50": float(np.percentile(c, 50)), "p99": float(np.percentile(c, 99)), "max": float(c.max()),
+         "runs": int(len(c))}
+    if lp is not None and len(lp) == len(ran):
+        rest = c[~lp[ran]]
+        f["lp_cycles"] = int(lp[ran].sum())
+        f["p99_without_lp"] = float(np.percentile(rest, 99)) if len(rest) else None
+    return f
+
 
 class LogRelay:
     """Follows the children's log files and hands each complete new line to ``emit``."""

@@ -44,7 +44,8 @@ class AuthoritySupervisor:
               "after a reconfiguration the reference's bank acceleration is capped at this fraction of the weaker "
               "way of the controllability LP's bank authority (the rest is kept for the feedback)"),
         Param("guidance.trim_max_deg", 0.0, 30.0, "deg",
-              "largest alpha/beta trim offset accepted to absorb a stuck-on bias the jets cannot cancel"),
+              "largest alpha/beta trim offset accepted to absorb a stuck-on bias the jets cannot cancel, or to give "
+              "the weaker bank way authority while they can"),
         Param("guidance.npc_inertia_unc", 0.0, 0.9, "",
               "guidance mode npc: after a reconfiguration the reference brakes at its acceleration limit / (1 + this) "
               "(what the torque of that limit gives a bank-axis inertia this fraction above the nominal)",

@@ -83,3 +83,30 @@ def test_while_the_jets_cancel_the_bias_the_trim_is_the_smallest_that_gives_what
     r_ok = controllability(T, h_ok, I_NOM, V_B, A, 5.0, 0.0, qbar_pa=2000.0, weak_enough_radps2=low)
     assert r_ok.trim_alpha_deg == 0.0 and r_ok.trim_beta_deg == 0.0
     assert _weak(r_ok) == pytest.approx(_weak_way_truth(C2, b2, A, W, np.zeros(2)), rel=1e-6)
+
+
+def test_the_reference_keeps_its_limit_when_a_trim_gives_the_weaker_way_back():
+    """The flight software's own reconfiguration (fsw/authority.py) on those faults, FDIR's
+    estimate of jet 15, at 2 kPa: the weaker way reads what the reference can use (its limit over
+    guidance.authority_use), the trim that gives it is flown, and the reference keeps the
+    scenario's acceleration limit. With no trim allowed (trim_max_deg 0) the same answer is the
+    jets' 0.01-0.04 deg/s^2 and the reference is re-planned to authority_use of that."""
+    from common.model import load_scenario
+    from fsw.flightsoftware import FlightSoftware
+    sc = load_scenario("guided-case2")        # a guided entry: no schedule need under the reference's limit
+
+    def fsw(**over):
+        f = FlightSoftware(sc, param_overrides={"guidance": over} if over else None)
+        f.nav.state.qbar_pa = 2000.0
+        f.fdir.health_active = _health(0.4712)
+        f.t_s = 3.0
+        f.health_changed()
+        return f
+    f = fsw()
+    use = f.params["guidance.authority_use"]
+    assert _weak(f.controllability) == pytest.approx(sc.bank_accel_limit_radps2 / use, rel=1e-6)
+    assert max(abs(f.controllability.trim_alpha_deg), abs(f.controllability.trim_beta_deg)) > 0.1
+    assert f.guidance.profile.accel_limit_radps2 == pytest.approx(sc.bank_accel_limit_radps2)
+    f0 = fsw(trim_max_deg=0.0)
+    assert _weak(f0.controllability) < math.radians(0.05)
+    assert f0.guidance.profile.accel_limit_radps2 == pytest.approx(use * _weak(f0.controllability))

@@ -206,20 +206,29 @@ def bank_authority(C: np.ndarray, rhs: np.ndarray, W: np.ndarray) -> list[float]
     return out
 
 
-def _worth_trim(M: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, t_max: float,
-                held: np.ndarray) -> np.ndarray | None:
-    """Item 2 for a bias the jets alone cancel: max t - TRIM_WORTH * sum |theta_i - held_i| with
-    t <= ``t_max``: a trim moves from the one flown only while each radian buys the weaker way at
-    least TRIM_WORTH, and only up to ``t_max``. x as item 2's, or None when HiGHS finds none."""
-    n = M.shape[1]                       # x = [d+, d-, dalpha, beta, a+, a-, t, u0, u1]; u_i >= |theta_i - held_i|
+def _trim_distance(M: np.ndarray, rhs: np.ndarray, held: np.ndarray, extra_rows: int = 0) -> tuple:
+    """Item 2's LP with u_i >= |theta_i - held_i| (two columns, four rows) and ``extra_rows`` zero
+    rows after them: (matrix, row_lo, row_hi) for x = [d+, d-, dalpha, beta, a+, a-, t, u0, u1];
+    the extra rows' bounds are the caller's to append."""
+    n = M.shape[1]
     j = n - 5                            # first trim column
-    Mc = np.zeros((M.shape[0] + 4, n + 2))
+    Mc = np.zeros((M.shape[0] + 4 + extra_rows, n + 2))
     Mc[:M.shape[0], :n] = M
     for k, (i, sg) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):   # +-(theta_i - held_i) - u_i <= 0
         Mc[M.shape[0] + k, j + i] = sg
         Mc[M.shape[0] + k, n + i] = -1.0
     row_lo = np.concatenate([rhs, [0.0, 0.0], np.full(4, -math.inf)])
     row_hi = np.concatenate([rhs, [math.inf, math.inf], [held[0], -held[0], held[1], -held[1]]])
+    return Mc, row_lo, row_hi
+
+
+def _worth_trim(M: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, t_max: float,
+                held: np.ndarray) -> np.ndarray | None:
+    """Item 2 for a bias the jets alone cancel: max t - TRIM_WORTH * sum |theta_i - held_i| with
+    t <= ``t_max``: a trim moves from the one flown only while each radian buys the weaker way at
+    least TRIM_WORTH, and only up to ``t_max``. x as item 2's, or None when HiGHS finds none."""
+    n = M.shape[1]
+    Mc, row_lo, row_hi = _trim_distance(M, rhs, held)
     cost = np.zeros(n + 2)
     cost[n - 1] = -1.0
     cost[n:] = TRIM_WORTH
@@ -235,17 +244,12 @@ def _closest_trim(M: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray
     the one closest (sum of |theta_i - held_i|) to the trim flown, so that a trim carried
     through the entry moves only as far as the flight condition makes it, never between equally
     good trims. x as item 2's, or None when HiGHS finds none (then item 2's own answer stands)."""
-    n = M.shape[1]                       # x = [d+, d-, dalpha, beta, a+, a-, t, u0, u1]; u_i >= |theta_i - held_i|
-    j = n - 5                            # first trim column
-    Mc = np.zeros((M.shape[0] + 5, n + 2))
-    Mc[:M.shape[0], :n] = M
-    for k, (i, sg) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):   # +-(theta_i - held_i) - u_i <= 0
-        Mc[M.shape[0] + k, j + i] = sg
-        Mc[M.shape[0] + k, n + i] = -1.0
+    n = M.shape[1]
+    Mc, row_lo, row_hi = _trim_distance(M, rhs, held, extra_rows=1)
     Mc[-1, n - 1] = 1.0                  # t >= t_best, less HiGHS's tolerance
     t_floor = t_best - 1e-9 * max(1.0, abs(t_best))
-    row_lo = np.concatenate([rhs, [0.0, 0.0], np.full(4, -math.inf), [t_floor]])
-    row_hi = np.concatenate([rhs, [math.inf, math.inf], [held[0], -held[0], held[1], -held[1]], [math.inf]])
+    row_lo = np.concatenate([row_lo, [t_floor]])
+    row_hi = np.concatenate([row_hi, [math.inf]])
     cost = np.zeros(n + 2)
     cost[n:] = 1.0
     x = _lp(cost, Mc, row_lo, row_hi, np.concatenate([lo, [0.0, 0.0]]), np.concatenate([hi, [math.inf, math.inf]]))

@@ -6,7 +6,9 @@ thrust factors), the truth inertia and aerodynamic derivatives, and the truth dy
 of the flight. The trim is judged at the lowest dynamic pressure flown after the fault (where a
 bias the jets cannot cancel needs the largest alpha/beta offset), the authority against what the
 bank schedule still needs after the fault (a guided entry: at least what a turn from lift down
-to lift up needs, fsw/controllability.py ``guided_accel_need_radps2``). A run labelled not
+to lift up needs, fsw/controllability.py ``guided_accel_need_radps2``); the weaker way's trim is
+sought as far as it is worth, without the FSW's ceiling of what its reference can use (a perfect
+controller uses all that the jets and a trim give). A run labelled not
 controllable is out of reach of any controller of these jets; the campaign reports success over all runs and over the others.
 """
 from __future__ import annotations

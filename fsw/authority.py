@@ -44,7 +44,8 @@ class AuthoritySupervisor:
               "after a reconfiguration the reference's bank acceleration is capped at this fraction of the weaker "
               "way of the controllability LP's bank authority (the rest is kept for the feedback)"),
         Param("guidance.trim_max_deg", 0.0, 30.0, "deg",
-              "largest alpha/beta trim offset accepted to absorb a stuck-on bias the jets cannot cancel"),
+              "largest alpha/beta trim offset accepted to absorb a stuck-on bias the jets cannot cancel, or to give "
+              "the weaker bank way authority while they can"),
         Param("guidance.npc_inertia_unc", 0.0, 0.9, "",
               "guidance mode npc: after a reconfiguration the reference brakes at its acceleration limit / (1 + this) "
               "(what the torque of that limit gives a bank-axis inertia this fraction above the nominal)",
@@ -90,8 +91,9 @@ class AuthoritySupervisor:
     # ---------------------------------------------------------------- the LP
     def lp_problem(self, t_s: float, held_trim_rad=None) -> tuple:
         """(schedule's need, arguments of controllability()) for the health the allocator uses (the
-        verdict asked against the schedule's need and, for a guided entry, what it needs);
-        the authority promised for every inertia within the vehicle's stated uncertainty about
+        verdict asked against the schedule's need and, for a guided entry, what it needs; while
+        the jets alone cancel a stuck-on bias, a trim only as far as the weaker way the reference
+        can use); the authority promised for every inertia within the vehicle's stated uncertainty about
         its nominal inertia (the box known to hold the truth). SAMI's inertia estimate is not
         used as that knowledge: with the dead zone it stays at nominal or drifts along what the
         tracking excites."""
@@ -108,9 +110,12 @@ class AuthoritySupervisor:
         need = schedule_accel_need_radps2(self.scenario.bank_schedule, t_s)
         # the verdict also asks what a guided entry needs; the reference's floor stays the schedule's
         verdict_need = max(need, guided_accel_need_radps2(self.scenario.guidance_mode))
+        # the weaker way the reference can use: beyond it the scenario's limit caps the reference
+        # (``_reference_limit``); a trim that would buy more is not flown
+        usable = self.scenario.bank_accel_limit_radps2 / self.params["guidance.authority_use"]
         args = (veh.torque_matrix_Nm, self.health().copy(), veh.inertia_kgm2, v_B, A,
                 self.params["guidance.trim_max_deg"], verdict_need, float(nav.qbar_pa), veh.inertia_uncertainty_frac,
-                held_trim_rad)
+                held_trim_rad, usable)
         return need, args
 
     def assess(self, t_s: float, periodic: bool = False, held_trim_rad=None) -> None:

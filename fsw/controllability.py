@@ -18,9 +18,15 @@ at d = 1 and form the bias b. Three questions are asked of it, each a small LP (
    order at bank rates of a few deg/s and is neglected):
        C d + A theta - I v a = -b,  0 <= d <= 1.
    The trim theta is one offset held through a manoeuvre either way (a constant aerodynamic
-   moment, not a control), chosen to maximise the weaker way (max t, a+ >= t, -a- >= t), within
-   ``trim_max_deg`` once the jets alone cannot cancel the bias and zero otherwise (the guidance
-   flies beta_r = 0); each way's own maximum is then solved with that trim held.
+   moment, not a control), within ``trim_max_deg`` whenever there is a stuck-on bias (none:
+   zero, the guidance flies beta_r = 0). Once the jets alone cannot cancel the bias, the trim
+   that maximises the weaker way (max t, a+ >= t, -a- >= t); while they can, the trim that
+   maximises t - TRIM_WORTH sum |theta_i| with t at most ``weak_enough_radps2`` (what the
+   reference can use): none when the jets alone give that, or when a trim buys next to nothing
+   (a dynamic pressure near zero). (A trim allowed only once the jets cannot cancel the bias made
+   the weaker way jump by two orders of magnitude across that edge: jets that cancel the bias at
+   full duty leave the other way nothing, and a trim of a degree gives it back.) Each way's own
+   maximum is then solved with that trim held.
 3. The verdict: controllable when a trim exists within ``trim_max_deg`` and both authorities
    are above zero and reach ``authority_min_radps2`` (``schedule_accel_need_radps2``: what the
    bank schedule still needs; for a guided entry at least ``guided_accel_need_radps2``); else
@@ -46,6 +52,14 @@ from .lp import set_colwise_matrix, solve_or_none
 
 # HiGHS feasibility tolerance on the torque rows [N m]: far below one jet's torque
 _TOL_NM = 1e-7
+# A trim the LP returns below this [rad] is no offset to fly (HiGHS's round-off of zero)
+_TRIM_ZERO_RAD = 1e-9
+# While the jets alone cancel a stuck-on bias, a trim is flown only where each radian of it buys
+# the weaker way at least this much bank acceleration [rad/s^2 per rad]: a guided entry's need
+# (GUIDED_TURN_S) over the default trim limit (5 deg) is 0.018. A trim at a dynamic pressure near
+# zero buys next to nothing and is not worth its offset; at a few kPa a degree can buy
+# deg/s^2 (module docstring, item 2)
+TRIM_WORTH = 0.02
 # The trim is an offset in a linear moment model about trim: an answer beyond a right angle is no
 # attitude the vehicle can fly (it appears when the dynamic pressure is near 0 and A -> 0)
 TRIM_PHYSICAL_DEG = 90.0
@@ -192,23 +206,50 @@ def bank_authority(C: np.ndarray, rhs: np.ndarray, W: np.ndarray) -> list[float]
     return out
 
 
+def _trim_distance(M: np.ndarray, rhs: np.ndarray, held: np.ndarray, extra_rows: int = 0) -> tuple:
+    """Item 2's LP with u_i >= |theta_i - held_i| (two columns, four rows) and ``extra_rows`` zero
+    rows after them: (matrix, row_lo, row_hi) for x = [d+, d-, dalpha, beta, a+, a-, t, u0, u1];
+    the extra rows' bounds are the caller's to append."""
+    n = M.shape[1]
+    j = n - 5                            # first trim column
+    Mc = np.zeros((M.shape[0] + 4 + extra_rows, n + 2))
+    Mc[:M.shape[0], :n] = M
+    for k, (i, sg) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):   # +-(theta_i - held_i) - u_i <= 0
+        Mc[M.shape[0] + k, j + i] = sg
+        Mc[M.shape[0] + k, n + i] = -1.0
+    row_lo = np.concatenate([rhs, [0.0, 0.0], np.full(4, -math.inf)])
+    row_hi = np.concatenate([rhs, [math.inf, math.inf], [held[0], -held[0], held[1], -held[1]]])
+    return Mc, row_lo, row_hi
+
+
+def _worth_trim(M: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, t_max: float,
+                held: np.ndarray) -> np.ndarray | None:
+    """Item 2 for a bias the jets alone cancel: max t - TRIM_WORTH * sum |theta_i - held_i| with
+    t <= ``t_max``: a trim moves from the one flown only while each radian buys the weaker way at
+    least TRIM_WORTH, and only up to ``t_max``. x as item 2's, or None when HiGHS finds none."""
+    n = M.shape[1]
+    Mc, row_lo, row_hi = _trim_distance(M, rhs, held)
+    cost = np.zeros(n + 2)
+    cost[n - 1] = -1.0
+    cost[n:] = TRIM_WORTH
+    hi_t = np.concatenate([hi, [math.inf, math.inf]])
+    hi_t[n - 1] = t_max
+    x = _lp(cost, Mc, row_lo, row_hi, np.concatenate([lo, [0.0, 0.0]]), hi_t)
+    return None if x is None else x[:n]
+
+
 def _closest_trim(M: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, t_best: float,
                   held: np.ndarray) -> np.ndarray | None:
     """Item 2 again with the weaker way held at its best ``t_best``: of the trims that give it,
     the one closest (sum of |theta_i - held_i|) to the trim flown, so that a trim carried
     through the entry moves only as far as the flight condition makes it, never between equally
     good trims. x as item 2's, or None when HiGHS finds none (then item 2's own answer stands)."""
-    n = M.shape[1]                       # x = [d+, d-, dalpha, beta, a+, a-, t, u0, u1]; u_i >= |theta_i - held_i|
-    j = n - 5                            # first trim column
-    Mc = np.zeros((M.shape[0] + 5, n + 2))
-    Mc[:M.shape[0], :n] = M
-    for k, (i, sg) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):   # +-(theta_i - held_i) - u_i <= 0
-        Mc[M.shape[0] + k, j + i] = sg
-        Mc[M.shape[0] + k, n + i] = -1.0
+    n = M.shape[1]
+    Mc, row_lo, row_hi = _trim_distance(M, rhs, held, extra_rows=1)
     Mc[-1, n - 1] = 1.0                  # t >= t_best, less HiGHS's tolerance
     t_floor = t_best - 1e-9 * max(1.0, abs(t_best))
-    row_lo = np.concatenate([rhs, [0.0, 0.0], np.full(4, -math.inf), [t_floor]])
-    row_hi = np.concatenate([rhs, [math.inf, math.inf], [held[0], -held[0], held[1], -held[1]], [math.inf]])
+    row_lo = np.concatenate([row_lo, [t_floor]])
+    row_hi = np.concatenate([row_hi, [math.inf]])
     cost = np.zeros(n + 2)
     cost[n:] = 1.0
     x = _lp(cost, Mc, row_lo, row_hi, np.concatenate([lo, [0.0, 0.0]]), np.concatenate([hi, [math.inf, math.inf]]))
@@ -217,7 +258,8 @@ def _closest_trim(M: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray
 
 def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: np.ndarray, A_aero: np.ndarray,
                     trim_max_deg: float, authority_min_radps2: float, qbar_pa: float = float("nan"),
-                    inertia_unc_frac: float = 0.0, held_trim_rad=None) -> Controllability:
+                    inertia_unc_frac: float = 0.0, held_trim_rad=None,
+                    weak_enough_radps2: float = math.inf) -> Controllability:
     """The duty-cycle LP (module docstring) for one jet health and flight condition.
 
     ``T_Nm`` (3 x n) torque matrix, ``I_B`` (3x3) inertia [kg m^2], ``v_B`` velocity direction
@@ -228,7 +270,9 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
     weaker way its best (item 2), the one closest to it is returned with its authority (the
     best trim turns with the flight condition: held unchanged, the offset is no longer the
     one that balances the bias, and the weaker way can fall to nothing while another trim
-    within ``trim_max_deg`` still gives it); the held trim itself when no trim exists."""
+    within ``trim_max_deg`` still gives it); the held trim itself when no trim exists.
+    ``weak_enough_radps2``: while the jets alone cancel the bias, no trim is sought for more
+    weak-way authority than this (inf: as much as is worth a trim; module docstring, item 2)."""
     t0 = time.perf_counter()
     C, b = jet_columns(T_Nm, health)
     p = C.shape[1]
@@ -257,13 +301,13 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
             theta, s_star = x[p:p + 2], float(x[p + 2])
     residual = float(np.linalg.norm(A @ theta)) if math.isfinite(s_star) else inf
     trim_deg = math.degrees(s_star) if math.isfinite(s_star) else inf
-    # 2. one trim theta held through a manoeuvre either way, chosen to maximise the weaker way:
+    # 2. one trim theta held through a manoeuvre either way, chosen for the weaker way:
     #    x = [d+ (p), d- (p), dalpha, beta, a+, a-, t]; max t, a+ >= t, -a- >= t. The trim may use
-    #    the whole allowed offset once the jets alone cannot cancel the bias (else none: beta_r = 0)
+    #    the whole allowed offset whenever there is a bias (none: beta_r = 0)
     auth = [0.0, 0.0]
     held = None if held_trim_rad is None else np.asarray(held_trim_rad, float)
     if math.isfinite(s_star):
-        box = (max(s_star, math.radians(trim_max_deg)) * (1.0 + 1e-9) + 1e-12) if s_star > 0.0 else 0.0
+        box = (max(s_star, math.radians(trim_max_deg)) * (1.0 + 1e-9) + 1e-12) if np.any(b) else 0.0
         M = np.zeros((8, 2 * p + 5))
         M[0:3, 0:p], M[3:6, p:2 * p] = C, C
         M[0:3, 2 * p:2 * p + 2] = M[3:6, 2 * p:2 * p + 2] = A
@@ -276,8 +320,15 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
         lo = np.concatenate([np.zeros(2 * p), [-box, -box, -inf, -inf, -inf]])
         hi = np.concatenate([np.ones(2 * p), [box, box, inf, inf, inf]])
         rhs = np.concatenate([-b, -b])
-        x = _lp(cost, M, np.concatenate([rhs, [0.0, 0.0]]), np.concatenate([rhs, [inf, inf]]), lo, hi)
-        if x is not None and held is not None:
+        if s_star == 0.0 and np.any(b):
+            # the jets alone cancel the bias: a trim only as far as it is worth (TRIM_WORTH) away
+            # from the one flown (none: zero), for no more than what the reference can use
+            x = _worth_trim(M, rhs, lo, hi, weak_enough_radps2, np.zeros(2) if held is None else held)
+            if x is not None and held is None:      # HiGHS's round-off of no trim is no trim
+                x[2 * p:2 * p + 2] = np.where(np.abs(x[2 * p:2 * p + 2]) <= _TRIM_ZERO_RAD, 0.0, x[2 * p:2 * p + 2])
+        else:
+            x = _lp(cost, M, np.concatenate([rhs, [0.0, 0.0]]), np.concatenate([rhs, [inf, inf]]), lo, hi)
+        if x is not None and held is not None and not (s_star == 0.0 and np.any(b)):
             x_near = _closest_trim(M, rhs, lo, hi, x[-1], held)
             x = x if x_near is None else x_near
         if x is not None:

@@ -78,3 +78,38 @@ def test_a_reversal_commanded_with_the_reference_on_the_new_side_takes_the_neare
     # the reference already past lift up onto the negative side (a reversal back commanded late)
     s, turn = shaper.shaper_branch(d(-5.0), 1.0, 0.0, d(-95.0))
     assert (s, turn) == (-1.0, 0.0)
+
+
+def _under_way(phi0_deg: float, mag_deg: float) -> np.ndarray:
+    """The shaper's state (shp) at rest at +phi0_deg with a reversal to -mag_deg commanded."""
+    sh = shaper.BankShaper(d(phi0_deg), RATE, ACCEL, DT)
+    sh.command(d(-mag_deg))
+    return sh.state(d(mag_deg))
+
+
+def test_a_reversal_set_off_through_lift_up_is_not_turned_round_for_a_few_degrees_less():
+    # from 93 deg to -93 deg: through lift up 186 deg, through lift down 174 deg: 12 deg shorter,
+    # within the 30 deg the reversal set off with; the corrector is not offered the other way
+    assert _under_way(93.0, 93.0)[3] == 0.0            # set off through lift up (no turn)
+    assert shaper.reversal_other_way(_under_way(93.0, 93.0), -1.0) is None
+
+
+def test_a_reversal_through_lift_up_is_offered_lift_down_when_that_is_far_shorter():
+    # the magnitude commanded then rises to 150 deg: through lift up 243 deg, through lift down
+    # 117 deg (126 deg shorter): the other way, its target at 360 - 150 = 210 deg
+    shp = _under_way(93.0, 93.0)
+    shp[7] = d(150.0)
+    alt = shaper.reversal_other_way(shp, -1.0)
+    assert alt is not None
+    assert math.degrees(-d(150.0) + alt[3]) == pytest.approx(210.0)
+
+
+def test_a_reversal_through_lift_down_is_offered_lift_up_when_that_is_shorter():
+    # set off from 120 deg through lift down to -120 (240 deg); the magnitude commanded falls to
+    # 10 deg: through lift down on 250 deg, back through lift up 130 deg: offered, target -10 deg
+    shp = _under_way(120.0, 120.0)
+    assert math.degrees(shp[3]) == pytest.approx(360.0)
+    shp[7] = d(10.0)
+    alt = shaper.reversal_other_way(shp, -1.0)
+    assert alt is not None
+    assert math.degrees(-d(10.0) + alt[3]) == pytest.approx(-10.0)

@@ -56,12 +56,12 @@ def _reversal_turn(phi, bank_signed):
     shorter by more than REVERSAL_LIFT_UP_RAD."""
     turn = 2.0 * math.pi * round((phi - bank_signed) / (2.0 * math.pi))
     near = bank_signed + turn
-    other = near - math.copysign(2.0 * math.pi, near - phi)
+    turn_other = turn - math.copysign(2.0 * math.pi, near - phi)
     # of two ways to the other side, the one through lift up has its mid-point at cos > 0
-    up, down = (near, other) if math.cos(0.5 * (phi + near)) > 0.0 else (other, near)
-    if abs(up - phi) - abs(down - phi) <= REVERSAL_LIFT_UP_RAD:
-        return up - bank_signed
-    return down - bank_signed
+    up, down = (turn, turn_other) if math.cos(0.5 * (phi + near)) > 0.0 else (turn_other, turn)
+    if abs(bank_signed + up - phi) - abs(bank_signed + down - phi) <= REVERSAL_LIFT_UP_RAD:
+        return up
+    return down
 
 
 @njit(cache=True, nogil=True)
@@ -207,7 +207,8 @@ def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
     """The shaper's state (shaped_transition's shp) with a reversal to ``sign`` going the
     other way round, or None: when no reversal is under way (the reference already on the
     side of ``sign``: magnitude changes take the nearest way), or when the other way is not
-    the shorter one from the reference's state (braking included). The way a reversal
+    the shorter one from the reference's state (braking included; through lift down, shorter
+    by more than REVERSAL_LIFT_UP_RAD, the margin the reversal set off with). The way a reversal
     goes is chosen for the magnitude commanded when it starts; the corrector's next answer
     can make the other way the shorter (a reversal begun at 92 deg through 180 deg, then a
     10 deg command: 258 deg on through lift down, ~100 deg back through lift up). The way
@@ -220,9 +221,12 @@ def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
     target = math.copysign(mag, sign) + turn
     other = target - math.copysign(2.0 * math.pi, target - phi)
     # moving towards the present target, the other way first turns round at the braking
-    # limit b: v^2/2b out and back
+    # limit b: v^2/2b out and back; a way through lift down must be shorter by more than
+    # REVERSAL_LIFT_UP_RAD, as when the reversal set off (shaper_branch), or a turn round would
+    # undo that rule's choice a cycle later
     brake = phid * phid / decel if phid * (target - phi) > 0.0 else 0.0
-    if abs(other - phi) + brake >= abs(target - phi):
+    margin = REVERSAL_LIFT_UP_RAD if math.cos(0.5 * (phi + other)) < 0.0 else 0.0
+    if abs(other - phi) + brake + margin >= abs(target - phi):
         return None
     alt = shp.copy()
     alt[2], alt[3] = s, other - math.copysign(mag, sign)

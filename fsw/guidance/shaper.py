@@ -41,12 +41,39 @@ def _brake_of(shp):
     return shp[8] if shp.shape[0] > 8 else shp[5]
 
 
+# a reversal goes through lift up unless the way through lift down is shorter by more than this
+# [rad]: near a 90 deg magnitude the two ways take about the same time, and the one through lift
+# down spends it with the lift down, which costs range the corrector then wins back by turning
+# the reversal round (braked and flown back the other way, late on the timing the lateral
+# decision set); 30 deg is ~4 s at the 8 deg/s rate limit, a reversal at up to 97.5 deg
+REVERSAL_LIFT_UP_RAD = math.radians(30.0)
+
+
+@njit(cache=True, nogil=True)
+def _reversal_turn(phi, bank_signed):
+    """The turn (a multiple of 2 pi) of a new reversal from phi to the other side's
+    bank_signed: through lift up (cos < 0 never crossed), unless the way through lift down is
+    shorter by more than REVERSAL_LIFT_UP_RAD."""
+    turn = 2.0 * math.pi * round((phi - bank_signed) / (2.0 * math.pi))
+    near = bank_signed + turn
+    turn_other = turn - math.copysign(2.0 * math.pi, near - phi)
+    # of two ways to the other side, the one through lift up has its mid-point at cos > 0
+    up, down = (turn, turn_other) if math.cos(0.5 * (phi + near)) > 0.0 else (turn_other, turn)
+    if abs(bank_signed + up - phi) - abs(bank_signed + down - phi) <= REVERSAL_LIFT_UP_RAD:
+        return up
+    return down
+
+
 @njit(cache=True, nogil=True)
 def shaper_branch(phi, sign_now, turn, bank_signed):
     """(sign, turn) of the reference's target bank_signed + turn (turn a multiple of 2 pi): a
-    new reversal goes the shorter way from phi; once the reference is on the commanded
-    side, magnitude changes take the nearest way (they never cross 0 or 180 deg)."""
+    new reversal from the other side goes through lift up, or through lift down when that way
+    is shorter by more than REVERSAL_LIFT_UP_RAD (``_reversal_turn``); a reversal commanded
+    while the reference is on the new side already, and magnitude changes once it is on the
+    commanded side, take the nearest way (they never cross 0 or 180 deg)."""
     s = 1.0 if bank_signed >= 0 else -1.0
+    if s != sign_now and math.sin(phi) * s < 0.0:
+        return s, _reversal_turn(phi, bank_signed)
     if s != sign_now or math.sin(phi) * s > 0.0:
         return s, 2.0 * math.pi * round((phi - bank_signed) / (2.0 * math.pi))
     return sign_now, turn
@@ -180,7 +207,8 @@ def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
     """The shaper's state (shaped_transition's shp) with a reversal to ``sign`` going the
     other way round, or None: when no reversal is under way (the reference already on the
     side of ``sign``: magnitude changes take the nearest way), or when the other way is not
-    the shorter one from the reference's state (braking included). The way a reversal
+    the shorter one from the reference's state (braking included; through lift down, shorter
+    by more than REVERSAL_LIFT_UP_RAD, the margin the reversal set off with). The way a reversal
     goes is chosen for the magnitude commanded when it starts; the corrector's next answer
     can make the other way the shorter (a reversal begun at 92 deg through 180 deg, then a
     10 deg command: 258 deg on through lift down, ~100 deg back through lift up). The way
@@ -193,9 +221,12 @@ def reversal_other_way(shp: np.ndarray, sign: float) -> np.ndarray | None:
     target = math.copysign(mag, sign) + turn
     other = target - math.copysign(2.0 * math.pi, target - phi)
     # moving towards the present target, the other way first turns round at the braking
-    # limit b: v^2/2b out and back
+    # limit b: v^2/2b out and back; a way through lift down must be shorter by more than
+    # REVERSAL_LIFT_UP_RAD, as when the reversal set off (shaper_branch), or a turn round would
+    # undo that rule's choice a cycle later
     brake = phid * phid / decel if phid * (target - phi) > 0.0 else 0.0
-    if abs(other - phi) + brake >= abs(target - phi):
+    margin = REVERSAL_LIFT_UP_RAD if math.cos(0.5 * (phi + other)) < 0.0 else 0.0
+    if abs(other - phi) + brake + margin >= abs(target - phi):
         return None
     alt = shp.copy()
     alt[2], alt[3] = s, other - math.copysign(mag, sign)
@@ -313,9 +344,12 @@ class BankShaper:
         return d / w + w / h if d >= w * w / h else 2.0 * math.sqrt(d / h)
 
     def reversal_s(self, mag_rad: float) -> float:
-        """Time [s] of a reversal at bank magnitude mag_rad (the shorter way: through 0 below
-        90 deg, through 180 above)."""
-        return self.transition_s(2.0 * min(abs(mag_rad), math.pi - abs(mag_rad)))
+        """Time [s] of a reversal from rest at bank magnitude mag_rad, the way shaper_branch
+        takes: through 0 (2 |mag|) unless through 180 deg is shorter by more than
+        REVERSAL_LIFT_UP_RAD."""
+        m = abs(mag_rad)
+        up, down = 2.0 * m, 2.0 * (math.pi - m)
+        return self.transition_s(up if up - down <= REVERSAL_LIFT_UP_RAD else down)
 
     def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float,
                brake_limit_radps2: float | None = None) -> bool:

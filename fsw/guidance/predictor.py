@@ -214,8 +214,8 @@ def predict_shaped(x0, c, b0, bf, e0, ef, sign, dt, out, shp, t_switch=0.0):
     (shp, see shaped_transition) to the law's bank at x0 (sign ``sign``, the magnitude with
     the path-limit feedback) within the rate and acceleration limits the attitude chain is
     given (the controllability LP's authority): a reversal in progress, or one just
-    commanded, is flown as the vehicle will fly it, through lift down when its shorter way
-    is that. With t_switch > 0, the reference keeps the other sign until then (a reversal
+    commanded, is flown as the vehicle will fly it, by the way the shaper takes (through lift
+    up unless lift down is shorter by more than shaper.REVERSAL_LIFT_UP_RAD). With t_switch > 0, the reference keeps the other sign until then (a reversal
     commanded at t_switch). Afterwards the law, as in ``predict``."""
     dx = np.empty(6)
     aux = np.empty(5)

@@ -17,6 +17,7 @@ from common.model import inertia_matrix, inertia_vector, load_vehicle
 from fsw.controllability import (aero_moment_per_rad, controllability, jet_columns, schedule_accel_need_radps2,
                                  velocity_dir_B)
 from fsw.health import JetHealth
+from tests.lp_oracle import weak_way_truth
 
 VEH = load_vehicle("ellipsled")
 T = np.asarray(VEH.torque_matrix_Nm, float)
@@ -217,25 +218,6 @@ def test_a_one_way_authority_of_lp_round_off_is_no_authority():
     assert not r.controllable and r.reason.startswith("bank authority +")
 
 
-def _weak_way_truth(C, b, A, W, theta):
-    """The weaker way's bank authority with trim theta held, from scipy's LP on the stacked
-    inertia corners (an independent formulation of item 2/3: one duty-cycle set per corner)."""
-    from scipy.optimize import linprog
-    p, K = C.shape[1], W.shape[0]
-    out = []
-    for sg in (1.0, -1.0):
-        Aeq = np.zeros((3 * K, K * p + 1))
-        for k in range(K):
-            Aeq[3 * k:3 * k + 3, k * p:(k + 1) * p] = C
-            Aeq[3 * k:3 * k + 3, -1] = -W[k]
-        c = np.zeros(K * p + 1)
-        c[-1] = -sg
-        res = linprog(c, A_eq=Aeq, b_eq=np.tile(-b - A @ theta, K), bounds=[(0, 1)] * (K * p) + [(None, None)],
-                      method="highs")
-        out.append(max(0.0, sg * res.x[-1]) if res.status == 0 else 0.0)
-    return min(out)
-
-
 def test_held_trim_moves_to_the_weak_way_best_one_closest_to_it():
     """A trim chosen at a high dynamic pressure and carried (clipped at trim_max) to a low one
     no longer balances the bias: with it held, the weaker way has nothing (truth: scipy on a
@@ -253,16 +235,16 @@ def test_held_trim_moves_to_the_weak_way_best_one_closest_to_it():
     C, b = jet_columns(veh.torque_matrix_Nm, h)
     W = inertia_corners(veh.inertia_kgm2, v, veh.inertia_uncertainty_frac)
     held = np.radians([-5.0, 2.32])
-    assert _weak_way_truth(C, b, A, W, held) == 0.0
+    assert weak_way_truth(C, b, A, W, held) == 0.0
     grid = np.radians(np.linspace(-5.0, 5.0, 21))
-    best = max(_weak_way_truth(C, b, A, W, np.array([x, y])) for x in grid for y in grid)
+    best = max(weak_way_truth(C, b, A, W, np.array([x, y])) for x in grid for y in grid)
     assert best > math.radians(0.5)
     r = controllability(*args, held)
     weak = min(r.authority_pos_radps2, r.authority_neg_radps2)
     theta = np.radians([r.trim_alpha_deg, r.trim_beta_deg])
     assert np.max(np.abs(theta)) <= math.radians(5.0) * (1 + 1e-6)
     assert weak >= best * (1 - 1e-6)
-    assert weak == pytest.approx(_weak_way_truth(C, b, A, W, theta), rel=1e-6)
+    assert weak == pytest.approx(weak_way_truth(C, b, A, W, theta), rel=1e-6)
     # already the best: held where it is (not moved to another trim as good)
     r2 = controllability(*args, theta)
     assert np.radians([r2.trim_alpha_deg, r2.trim_beta_deg]) == pytest.approx(theta, abs=1e-9)

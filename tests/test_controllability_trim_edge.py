@@ -6,7 +6,7 @@ cancel the bias turns on jet 15's efficiency, which FDIR estimates to about a pe
 0.4712 against a truth of 0.4652). Truth, independent of HiGHS's formulation here: a jet's
 columns scale with its efficiency, so the average torques the jets hold only grow with it, and
 the best weak way over the same trims can only grow (monotone in eta); each answer's authority
-with its own trim held, from scipy's LP (tests/test_controllability.py ``_weak_way_truth``); the
+with its own trim held, from scipy's LP (tests/lp_oracle.py ``weak_way_truth``); the
 smallest trim checked against a grid of trims.
 """
 import math
@@ -18,7 +18,7 @@ from common.model import load_vehicle
 from fsw.controllability import aero_moment_per_rad, controllability, inertia_corners, jet_columns, velocity_dir_B
 from fsw.health import JetHealth
 
-from tests.test_controllability import _weak_way_truth
+from tests.lp_oracle import weak_way_truth
 
 VEH = load_vehicle("ellipsled")
 T = np.asarray(VEH.torque_matrix_Nm, float)
@@ -50,7 +50,7 @@ def test_the_weak_way_grows_with_the_thrust_of_the_jet_that_cancels_the_bias():
         h = _health(eta)
         r = controllability(T, h, I_NOM, V_B, A, 5.0, 0.0, qbar_pa=2000.0)
         C, b = jet_columns(T, h)
-        assert _weak(r) == pytest.approx(_weak_way_truth(C, b, A, W, _theta(r)), rel=1e-6, abs=1e-9)
+        assert _weak(r) == pytest.approx(weak_way_truth(C, b, A, W, _theta(r)), rel=1e-6, abs=1e-9)
         assert np.max(np.abs(_theta(r))) <= math.radians(5.0) * (1 + 1e-6)
         weak.append(_weak(r))
     assert all(b >= a * (1 - 1e-6) for a, b in zip(weak, weak[1:]))
@@ -67,22 +67,22 @@ def test_while_the_jets_cancel_the_bias_the_trim_is_the_smallest_that_gives_what
     enough = math.radians(1.0) / 0.75
     h = _health(0.4712)
     C, b = jet_columns(T, h)
-    assert _weak_way_truth(C, b, A, W, np.zeros(2)) < math.radians(0.05)
+    assert weak_way_truth(C, b, A, W, np.zeros(2)) < math.radians(0.05)
     r = controllability(T, h, I_NOM, V_B, A, 5.0, 0.0, qbar_pa=2000.0, weak_enough_radps2=enough)
     assert _weak(r) == pytest.approx(enough, rel=1e-6)
     norm = np.sum(np.abs(_theta(r)))
     grid = np.radians(np.arange(-3.0, 3.0001, 0.1))
     step = math.radians(0.1)
     smaller = [(x, y) for x in grid for y in grid if abs(x) + abs(y) < norm - 2 * step]
-    assert smaller and all(_weak_way_truth(C, b, A, W, np.array(t)) < enough for t in smaller)
+    assert smaller and all(weak_way_truth(C, b, A, W, np.array(t)) < enough for t in smaller)
     # the jets alone give it: no trim at all
     h_ok = JetHealth.of(failed_off=[2], stuck_on=[4, 12], degraded=[(13, .7), (18, .3)])
     C2, b2 = jet_columns(T, h_ok)
     low = math.radians(0.5)
-    assert _weak_way_truth(C2, b2, A, W, np.zeros(2)) > low
+    assert weak_way_truth(C2, b2, A, W, np.zeros(2)) > low
     r_ok = controllability(T, h_ok, I_NOM, V_B, A, 5.0, 0.0, qbar_pa=2000.0, weak_enough_radps2=low)
     assert r_ok.trim_alpha_deg == 0.0 and r_ok.trim_beta_deg == 0.0
-    assert _weak(r_ok) == pytest.approx(_weak_way_truth(C2, b2, A, W, np.zeros(2)), rel=1e-6)
+    assert _weak(r_ok) == pytest.approx(weak_way_truth(C2, b2, A, W, np.zeros(2)), rel=1e-6)
 
 
 def test_the_reference_keeps_its_limit_when_a_trim_gives_the_weaker_way_back():

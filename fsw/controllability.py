@@ -328,9 +328,9 @@ def controllability(T_Nm: np.ndarray, health: JetHealth, I_B: np.ndarray, v_B: n
                 x[2 * p:2 * p + 2] = np.where(np.abs(x[2 * p:2 * p + 2]) <= _TRIM_ZERO_RAD, 0.0, x[2 * p:2 * p + 2])
         else:
             x = _lp(cost, M, np.concatenate([rhs, [0.0, 0.0]]), np.concatenate([rhs, [inf, inf]]), lo, hi)
-        if x is not None and held is not None and not (s_star == 0.0 and np.any(b)):
-            x_near = _closest_trim(M, rhs, lo, hi, x[-1], held)
-            x = x if x_near is None else x_near
+            if x is not None and held is not None:
+                x_near = _closest_trim(M, rhs, lo, hi, x[-1], held)
+                x = x if x_near is None else x_near
         if x is not None:
             theta = x[2 * p:2 * p + 2]
             # 3. each way's own maximum with that trim held, for every inertia the FSW cannot

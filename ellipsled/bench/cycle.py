@@ -12,7 +12,7 @@ the whole entry. Two garbage-collection regimes are measured in the same invocat
 
 The headline figures are the first (that is how the cycle runs in real time).
 
-The real-time SIL's baseline (issue item "the control task as fast in real time as in batch"):
+The real-time SIL's baseline (the control task as fast in real time as in batch):
 the control task over the same simulated span the real-time SIL flies (the first
 ``sil.realtime_seconds`` of the nominal entry), at 50 Hz from the first entry and at 200 Hz from
 one more flight over that span. The duty-cycle LP's cycles (a HiGHS solve each, the control

@@ -213,6 +213,21 @@ def collect_in_slack(min_slack_ns: int = 5_000_000, min_gen0: int = 200) -> Call
     return hook
 
 
+def throttle() -> dict:
+    """The kernel's real-time throttle: SCHED_FIFO threads may run ``runtime_us`` of each
+    ``period_us`` (runtime -1: never throttled). A real-time loop busy longer than that is
+    stopped for the rest of the period (~50 ms a second by default): a loop that measures
+    must sleep as the flight's does. None where the files cannot be read."""
+    out = {}
+    for key, name in (("runtime_us", "sched_rt_runtime_us"), ("period_us", "sched_rt_period_us")):
+        try:
+            with open(f"/proc/sys/kernel/{name}") as f:
+                out[key] = int(f.read().strip())
+        except (OSError, ValueError):
+            out[key] = None
+    return out
+
+
 def set_timer_slack(ns: int = 1) -> bool:
     """Timer slack of this thread (default 50 us on Linux delays every timed wake-up of a
     SCHED_OTHER thread; recent kernels give SCHED_FIFO threads none, and read back 0).

@@ -2,7 +2,13 @@
 answer, sample the allocator, send the MAVLink telemetry that is due, signed) against its
 budget per tick (fsw/groundlink/schedule.py: a share of the control period), at 50 and
 200 Hz, beside the FSW control step measured in the same run; the loop runs SCHED_FIFO when
-permitted, as the FSW's control thread does in the real-time SIL (``sched_fifo`` says).
+permitted, as the FSW's control thread does in the real-time SIL (``sched_fifo`` says), and
+like that thread it sleeps a control period before the cycle whose link tick is measured (the
+flight between link ticks is flown back to back). Without the sleep a SCHED_FIFO loop busy for
+longer than the kernel's real-time budget (``sched_rt_runtime_us`` of each
+``sched_rt_period_us``, 0.95 s of 1 s by default) is stopped for the rest of the period: a
+~50-ms tick once a second of busy loop, the host's throttle, not the link's work
+(``rt_throttle`` records the budget in force).
 
 Three regimes, the scheduling clock advanced one RG2 period a tick: the default stream
 rates; every stream at the fastest rate a ground station may set with
@@ -132,7 +138,9 @@ def _at_rate(hz: int, quick: bool) -> dict:
             ns = []
             b0, d0, over0 = gl.stats["tx_bytes"], gl.stats["tx_deferred"], gl.budget.over
             for _ in range(n):
-                for _ in range(divisor):
+                for i in range(divisor):
+                    if i == divisor - 1:
+                        time.sleep(scn.dt_control_s)   # the period the link's cycle starts from
                     step()
                 if name == "flood":
                     for d in per_tick:
@@ -158,7 +166,8 @@ def _at_rate(hz: int, quick: bool) -> dict:
             "flood_datagrams_per_tick": len(per_tick), "fastest_rate_hz": gl.max_rate_hz, **out,
             "worst_p99_us": max(out[k]["p99_us"] for k in out), "worst_max_us": max(out[k]["max_us"] for k in out),
             "baseline_control_step_p50_us": ctl["p50_us"], "baseline_control_step_p99_us": ctl["p99_us"],
-            "tx_errors": int(gl.stats["tx_errors"]), "sched_fifo": bool(rt_rep.get("sched_fifo"))}
+            "tx_errors": int(gl.stats["tx_errors"]), "sched_fifo": bool(rt_rep.get("sched_fifo")),
+            "rt_throttle": rt.throttle()}
 
 
 def _answers(hz: int, quick: bool) -> dict:

@@ -189,9 +189,8 @@ class EntryGuidance(Corrector):
         if self._frozen:
             return
         sign = self.lateral.sign
-        # a reversal decided at the next cycle, in effect laterally at its shaped transition's
-        # mid-point (half-way the lateral lift has turned over)
-        t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
+        # a reversal decided at the next cycle, flown through the shaper from its state now
+        t_flip = period
         shp = self.shaper.state(self.bank_cmd)
         base = self.params["npc.h_floor_m"]
         self.job.submit(x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp,

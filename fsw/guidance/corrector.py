@@ -212,6 +212,8 @@ class Correction(TypedDict):
     xr_keep_m: float          # predicted deploy crossrange (+ left; _deploy_crossrange), sign kept (NaN: not
                               # predicted) ...
     xr_rev_m: float           # ... and reversed t_flip from now (the range solved again for it)
+    xr_keep_held_m: float     # the held pair: this answer's magnitude kept, sign kept ...
+    xr_rev_held_m: float      # ... and reversed, in effect at once t_flip_held from now
     compute_ns: int           # the correction's wall time
     t_s: NotRequired[float]   # release time of the cycle it answers (added by the worker)
     sign: NotRequired[float]  # bank sign it was solved for (added by the worker)
@@ -361,13 +363,16 @@ class Corrector:
         return crossrange(x[:3], self.target_u, out[:3], self.radius_m)
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
-              shp: np.ndarray | None = None, h_floor_m: float | None = None) -> Correction:
+              shp: np.ndarray | None = None, h_floor_m: float | None = None,
+              t_flip_held: float = math.nan) -> Correction:
         """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
         t_flip given, the lateral logic's final reversal gets its pair (deploy crossranges with
         the sign kept, and reversed: a reversal commanded t_flip from now, the range solved
-        again for it). shp: the reference shaper's state at x (shaped_transition), None: the
-        bank follows the law at once (and a reversal takes effect at t_flip). h_floor_m: the
-        predicted deploy altitude to keep (range traded for it), None: npc.h_floor_m."""
+        again for it); with t_flip_held given too, the held pair (this answer's magnitude, the
+        reversal in effect at once t_flip_held from now). shp: the reference shaper's state at
+        x (shaped_transition), None: the bank follows the law at once (and a reversal takes
+        effect at t_flip). h_floor_m: the predicted deploy altitude to keep (range traded for
+        it), None: npc.h_floor_m."""
         t0 = time.perf_counter_ns()
         self._shp = shp
         c = self.constants
@@ -449,7 +454,7 @@ class Corrector:
                          turn_rad=turn, ok=ok or floor, range_to_go_m=s_togo,
                          lat_rad=math.asin(rf[2] / math.sqrt(float(rf @ rf))), lon_rad=math.atan2(rf[1], rf[0]),
                          h_final_m=float(self._out[O_H]), h_box_m=float(self._out[O_H_BOX]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,
-                         xr_rev_m=math.nan, compute_ns=0)
+                         xr_rev_m=math.nan, xr_keep_held_m=math.nan, xr_rev_held_m=math.nan, compute_ns=0)
         if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
             # the lateral decision's pair, each the flight the corrector would fly: "keep" is this
             # answer's own prediction (its profile, through the shaper); "reverse" is the range
@@ -472,5 +477,17 @@ class Corrector:
             res["predictions"] += n_rev + 1
             if out[O_FLAG] == REACHED:
                 res["xr_rev_m"] = self._deploy_crossrange(x, out)
+            if math.isfinite(t_flip_held):
+                # the held pair: this answer's magnitude kept, the reversal in effect at once at
+                # t_flip_held (LateralLogic: a final reversal must be due for both pairs)
+                dt, ef = self.params["npc.dt_pred_s"], self.e_deploy_jpkg
+                predict(x, c, b0, bf, e0, ef, sign, dt, out, 0.0)
+                res["predictions"] += 1
+                if out[O_FLAG] == REACHED:
+                    res["xr_keep_held_m"] = self._deploy_crossrange(x, out)
+                    predict(x, c, b0, bf, e0, ef, -sign, dt, out, t_flip_held)
+                    res["predictions"] += 1
+                    if out[O_FLAG] == REACHED:
+                        res["xr_rev_held_m"] = self._deploy_crossrange(x, out)
         res["compute_ns"] = time.perf_counter_ns() - t0
         return res

@@ -508,6 +508,29 @@ def test_final_reversal_at_the_cycle_nearest_the_crossing():
         assert fired == [want] and lat.rules == ["final"]
 
 
+def test_final_reversal_waits_until_the_held_pair_is_due_too():
+    """Scripted pairs, 'keep' 20 km left each cycle (the sign pushes left). The re-solved
+    'reverse now' crossrange crosses to +0.3 km at cycle 10 (due: even reversing leaves the
+    deploy on the pushed side), while the held pair's (this magnitude, an instant flip) still
+    overshoots to -30 km and closes 10 km a cycle: no final reversal until the held pair is due
+    too (cycle 13, +0.5 km), and the corridor stays on meanwhile (a heading error beyond it at
+    cycle 11 reverses by the corridor). Without the held pair (NaN) the re-solved pair alone
+    decides, at cycle 10."""
+    p = dict(PARAMS, **{"npc.v_norev_mps": 0.0})
+    rev = {t: 0.3e3 + 0.1e3 * (t - 10) for t in range(9, 15)}
+    rev[9] = -0.9e3
+    held = {9: -39.5e3, 10: -29.5e3, 11: -19.5e3, 12: -9.5e3, 13: 0.5e3, 14: 10.5e3}
+    lat = lateral.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+    fired = [t for t in range(9, 15) if lat.update(float(t), 5000.0, 0.0, 20e3, rev[t], math.inf, 0.0, 20e3, held[t])]
+    assert fired == [13] and lat.rules == ["final"]
+    lat = lateral.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+    assert lat.update(10.0, 5000.0, 0.0, 20e3, rev[10], math.inf, 0.0, 20e3, held[10]) is False
+    assert lat.update(11.0, 5000.0, math.radians(30.0), 20e3, rev[11], math.inf, 0.0, 20e3, held[11])
+    assert lat.rules == ["corridor"] and not lat.final
+    lat = lateral.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+    assert [t for t in range(9, 15) if lat.update(float(t), 5000.0, 0.0, 20e3, rev[t])] == [10]
+
+
 def _held_profile(p, lo, hi, f, frac):
     """The corrector's family written out independently: inside the bounds the line from p to
     f; beyond hi, hi held for the fraction k = (p - hi) / (hi - f) of the energy span, then a

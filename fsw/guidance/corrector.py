@@ -460,10 +460,10 @@ class Corrector:
             # answer's own prediction (its profile, through the shaper); "reverse" is the range
             # solution for the other sign with the reversal commanded t_flip from now and flown
             # through the shaper from its present state (the way round it takes, a reference
-            # still moving or beyond 90 deg), re-solved because the next answers will be: after a
-            # final reversal the magnitude moves (from 84 deg to 13 deg, the reversal having cost
-            # range), and a pair flown with this answer's magnitude and an instant flip
-            # promised a null the flight then lost. Their crossranges are the deploy's
+            # still moving or beyond 90 deg), re-solved because the next answers will be: a
+            # reversal costs or gains range, the magnitude after it moves (towards lift up after
+            # one through lift down), and a pair flown with this answer's magnitude and an
+            # instant flip promised a null the flight then lost. Their crossranges are the deploy's
             # (_deploy_crossrange): with the range trigger the miss where the target comes
             # abeam, not the offset of where the prediction ends (the aim point, range_reserve
             # and the box's stretch further on) off the great circle to the target: a track that

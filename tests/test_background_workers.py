@@ -577,9 +577,9 @@ def test_a_guidance_answer_late_for_its_due_step_is_an_overrun_and_the_previous_
     t_go_seen = []                                       # (t, t_go) handed to the lateral decision
     update = eg.lateral.update
 
-    def lateral_update(t_s, V, dpsi, xr_keep, xr_rev, t_go_s, t_rev_s):
+    def lateral_update(t_s, V, dpsi, xr_keep, xr_rev, t_go_s, t_rev_s, *held):
         t_go_seen.append((t_s, t_go_s))
-        return update(t_s, V, dpsi, xr_keep, xr_rev, t_go_s, t_rev_s)
+        return update(t_s, V, dpsi, xr_keep, xr_rev, t_go_s, t_rev_s, *held)
     eg.lateral.update = lateral_update
     overruns = lambda: [e for e in fl.fsw.events.history if e.code == "guidance_overrun"]  # noqa: E731
     try:

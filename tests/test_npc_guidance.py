@@ -508,6 +508,29 @@ def test_final_reversal_at_the_cycle_nearest_the_crossing():
         assert fired == [want] and lat.rules == ["final"]
 
 
+def test_final_reversal_waits_until_the_held_pair_is_due_too():
+    """Scripted pairs, 'keep' 20 km left each cycle (the sign pushes left). The re-solved
+    'reverse now' crossrange crosses to +0.3 km at cycle 10 (due: even reversing leaves the
+    deploy on the pushed side), while the held pair's (this magnitude, an instant flip) still
+    overshoots to -30 km and closes 10 km a cycle: no final reversal until the held pair is due
+    too (cycle 13, +0.5 km), and the corridor stays on meanwhile (a heading error beyond it at
+    cycle 11 reverses by the corridor). Without the held pair (NaN) the re-solved pair alone
+    decides, at cycle 10."""
+    p = dict(PARAMS, **{"npc.v_norev_mps": 0.0})
+    rev = {t: 0.3e3 + 0.1e3 * (t - 10) for t in range(9, 15)}
+    rev[9] = -0.9e3
+    held = {9: -39.5e3, 10: -29.5e3, 11: -19.5e3, 12: -9.5e3, 13: 0.5e3, 14: 10.5e3}
+    lat = lateral.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+    fired = [t for t in range(9, 15) if lat.update(float(t), 5000.0, 0.0, 20e3, rev[t], math.inf, 0.0, 20e3, held[t])]
+    assert fired == [13] and lat.rules == ["final"]
+    lat = lateral.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+    assert lat.update(10.0, 5000.0, 0.0, 20e3, rev[10], math.inf, 0.0, 20e3, held[10]) is False
+    assert lat.update(11.0, 5000.0, math.radians(30.0), 20e3, rev[11], math.inf, 0.0, 20e3, held[11])
+    assert lat.rules == ["corridor"] and not lat.final
+    lat = lateral.LateralLogic(p, 7300.0, 450.0, sign0=1.0)
+    assert [t for t in range(9, 15) if lat.update(float(t), 5000.0, 0.0, 20e3, rev[t])] == [10]
+
+
 def _held_profile(p, lo, hi, f, frac):
     """The corrector's family written out independently: inside the bounds the line from p to
     f; beyond hi, hi held for the fraction k = (p - hi) / (hi - f) of the energy span, then a
@@ -692,7 +715,8 @@ def _correction(t_s, sign, h_box_m, turn_rad=math.nan):
     return dict(t_s=t_s, sign=sign, predictions=3, compute_ns=0, bank0_rad=1.0, miss_m=0.0, p_range_rad=1.0,
                 e0_jpkg=math.nan, f_family_rad=1.0, bank_line_rad=1.0, bank_final_rad=1.0, floor=False, held=False,
                 ok=True, lat_rad=0.0, lon_rad=0.0, h_final_m=h_box_m - 1500.0, h_box_m=h_box_m, t_go_s=100.0,
-                turn_rad=turn_rad, xr_keep_m=math.nan, xr_rev_m=math.nan)
+                turn_rad=turn_rad, xr_keep_m=math.nan, xr_rev_m=math.nan, xr_keep_held_m=math.nan,
+                xr_rev_held_m=math.nan)
 
 
 def test_floor_margin_does_not_count_a_reversal_as_prediction_error():
@@ -940,3 +964,60 @@ def test_trigger_crossrange_counts_only_within_the_reserve_of_the_target():
         assert off == geometry.crossrange(x0[:3], target, end, R) and abs(off) > 3000.0
     finally:
         eg.close()
+
+
+def test_lateral_pair_reverses_into_the_range_solution_the_shaper_will_fly():
+    """The final reversal's pair is the two flights the corrector would fly. A late state (1.7
+    km/s at 17 km, about 100 s to the deploy), the bank sign -1 at 60 deg, the target where that
+    answer deploys, and the reference shaper at -40 deg still moving away at 7 deg/s (towards a
+    larger magnitude commanded before): a reversal commanded one cycle on first brakes, out to
+    -64 deg, then turns back through lift up, which flies long, and the corrector then answers
+    with more bank. Truth by brute force: the predictor flown through the shaper with the
+    reversal commanded at t_flip, on a 0.5 deg grid of the family's parameter; the range
+    solution where its miss changes sign (interpolated), and the deploy crossrange of that
+    flight. The reversed crossrange the lateral logic gets is that one, not the one of this
+    answer's magnitude flipped at once (kilometres apart)."""
+    d = math.radians
+    R = SCN.planet.radius_m
+    x = np.array([R + 17e3, 0.0, 0.0, 1700.0 * math.sin(d(-3.0)), 1700.0 * math.cos(d(-3.0)), 0.0])
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    dt, f = PARAMS["npc.dt_pred_s"], d(PARAMS["npc.bank_final_deg"])
+    lo, hi = d(PARAMS["npc.bank_min_deg"]), d(PARAMS["npc.bank_max_deg"])
+    c = predictor.predictor_constants(SCN, PARAMS)
+    out = np.zeros(predictor.N_O)
+    shp = np.array([d(-40.0), d(-7.0), -1.0, 0.0, d(8.0), d(1.0), 0.02, d(60.0), d(1.0)])
+    predictor.predict_shaped(x, c, d(60.0), f, e0, ef, -1.0, dt, out, shp, 0.0)
+    target = out[:3] / np.linalg.norm(out[:3])
+    t_flip = 1.0
+    tab = np.empty(shaper.N_TRANSITION)
+    n = shaper.shaped_transition(shp, d(-60.0), t_flip, d(60.0), 0.5, tab)
+    assert np.degrees(tab[:n]).min() < -60.0 and np.degrees(tab[n - 1]) == pytest.approx(60.0, abs=0.1)
+    base = dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.tol_m": 20.0})
+    eg = npc.EntryGuidance(SCN, base, EventLog(), 0.02)
+    try:
+        eg.target_u, eg.bank0 = target, d(60.0)
+        res = eg.solve(x, -1.0, 1.0, 1.0, t_flip=t_flip, shp=shp, h_floor_m=0.0)
+        c = eg.constants.copy()
+    finally:
+        eg.close()
+    assert res["ok"] and abs(res["xr_keep_m"]) < 300.0          # kept, it deploys at the target
+    s_togo = geometry.central_angle(x[:3], target) * R
+
+    def flown(p):
+        b0, bf = corrector.bank_profile(p, lo, hi, f)
+        predictor.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, shp, t_flip)
+        assert out[predictor.O_FLAG] == predictor.REACHED
+        return geometry.central_angle(x[:3], out[:3]) * R - s_togo, geometry.crossrange(x[:3], target, out[:3], R)
+    ps = np.arange(*corrector.profile_span(lo, hi, f), d(0.5))
+    z = np.array([flown(p)[0] for p in ps])
+    cross = np.flatnonzero(np.sign(z[:-1]) != np.sign(z[1:]))
+    assert len(cross) == 1                                        # one range solution reversed
+    i = cross[0]
+    p_root = ps[i] + (ps[i + 1] - ps[i]) * z[i] / (z[i] - z[i + 1])
+    assert math.degrees(p_root) > 70.0                            # more bank than kept
+    xr_truth = flown(p_root)[1]
+    assert res["xr_rev_m"] == pytest.approx(xr_truth, abs=150.0)
+    # this answer's magnitude, the reversal in effect at once: another figure
+    predictor.predict(x, c, res["bank_line_rad"], res["bank_final_rad"], e0, ef, 1.0, dt, out, t_flip)
+    assert abs(geometry.crossrange(x[:3], target, out[:3], R) - xr_truth) > 5000.0

@@ -211,7 +211,9 @@ class Correction(TypedDict):
     t_go_s: float             # predicted time to deploy, from the state answered
     xr_keep_m: float          # predicted deploy crossrange (+ left; _deploy_crossrange), sign kept (NaN: not
                               # predicted) ...
-    xr_rev_m: float           # ... and reversed t_flip from now
+    xr_rev_m: float           # ... and reversed t_flip from now (the range solved again for it)
+    xr_keep_held_m: float     # the held pair: this answer's magnitude kept, sign kept ...
+    xr_rev_held_m: float      # ... and reversed, in effect at once t_flip_held from now
     compute_ns: int           # the correction's wall time
     t_s: NotRequired[float]   # release time of the cycle it answers (added by the worker)
     sign: NotRequired[float]  # bank sign it was solved for (added by the worker)
@@ -283,9 +285,11 @@ class Corrector:
     def _predict(self, x, b0, bf, e0, sign, out, t_switch=0.0):
         """The corrector's prediction: from the reference shaper's state when one is given
         (the transition in progress flown within the attitude chain's limits; a reversal to
-        ``sign`` commanded at t_switch > 0), else the law from the start."""
+        ``sign`` commanded at t_switch > 0), else the law from the start (a reversal to ``sign``
+        in effect at t_switch)."""
         if self._shp is None:
-            predict(x, self.constants, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"], out, 0.0)
+            predict(x, self.constants, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"], out,
+                    float(t_switch))
         else:
             predict_shaped(x, self.constants, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"],
                            out, self._shp, float(t_switch))
@@ -359,13 +363,16 @@ class Corrector:
         return crossrange(x[:3], self.target_u, out[:3], self.radius_m)
 
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
-              shp: np.ndarray | None = None, h_floor_m: float | None = None) -> Correction:
+              shp: np.ndarray | None = None, h_floor_m: float | None = None,
+              t_flip_held: float = math.nan) -> Correction:
         """One correction from the planet-fixed state x: phi_0 and the predicted deploy. With
-        t_flip given, one more prediction: the same phi_0 with a reversal taking effect
-        t_flip from now, for the lateral logic's final reversal (deploy crossranges with the
-        sign kept and reversed). shp: the reference shaper's state at x (shaped_transition),
-        None: the bank follows the law at once. h_floor_m: the predicted deploy altitude to keep
-        (range traded for it), None: npc.h_floor_m."""
+        t_flip given, the lateral logic's final reversal gets its pair (deploy crossranges with
+        the sign kept, and reversed: a reversal commanded t_flip from now, the range solved
+        again for it); with t_flip_held given too, the held pair (this answer's magnitude, the
+        reversal in effect at once t_flip_held from now). shp: the reference shaper's state at
+        x (shaped_transition), None: the bank follows the law at once (and a reversal takes
+        effect at t_flip). h_floor_m: the predicted deploy altitude to keep (range traded for
+        it), None: npc.h_floor_m."""
         t0 = time.perf_counter_ns()
         self._shp = shp
         c = self.constants
@@ -447,25 +454,40 @@ class Corrector:
                          turn_rad=turn, ok=ok or floor, range_to_go_m=s_togo,
                          lat_rad=math.asin(rf[2] / math.sqrt(float(rf @ rf))), lon_rad=math.atan2(rf[1], rf[0]),
                          h_final_m=float(self._out[O_H]), h_box_m=float(self._out[O_H_BOX]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,
-                         xr_rev_m=math.nan, compute_ns=0)
+                         xr_rev_m=math.nan, xr_keep_held_m=math.nan, xr_rev_held_m=math.nan, compute_ns=0)
         if self._out[O_FLAG] == REACHED and math.isfinite(t_flip):
-            # the lateral decision's pair, "keep" and "reverse at t_flip", both flown with the
-            # bank switching at once (the reversal at its shaped transition's mid-point) and
-            # this phi_0: a pair flown through the shaper, the reversed one re-solved, would
-            # decide the final reversal at the first reversal, where the load limit's lift-up
-            # sends the swing through lift up, and fly far long. Their crossranges are the
-            # deploy's (_deploy_crossrange): with the range trigger the miss where the target
-            # comes abeam, not the offset of where the prediction ends (the aim point,
-            # range_reserve and the box's stretch further on) off the great circle to the target:
-            # a track that meets that circle at an angle nulls one and not the other
-            dt, ef, out = self.params["npc.dt_pred_s"], self.e_deploy_jpkg, self._out
-            predict(x, c, b0, bf, e0, ef, sign, dt, out, 0.0)
-            res["predictions"] += 1
+            # the lateral decision's pair, each the flight the corrector would fly: "keep" is this
+            # answer's own prediction (its profile, through the shaper); "reverse" is the range
+            # solution for the other sign with the reversal commanded t_flip from now and flown
+            # through the shaper from its present state (the way round it takes, a reference
+            # still moving or beyond 90 deg), re-solved because the next answers will be: a
+            # reversal costs or gains range, the magnitude after it moves (towards lift up after
+            # one through lift down), and a pair flown with this answer's magnitude and an
+            # instant flip promised a null the flight then lost. Their crossranges are the deploy's
+            # (_deploy_crossrange): with the range trigger the miss where the target comes
+            # abeam, not the offset of where the prediction ends (the aim point, range_reserve
+            # and the box's stretch further on) off the great circle to the target: a track that
+            # meets that circle at an angle nulls one and not the other
+            out = self._out
+            res["xr_keep_m"] = self._deploy_crossrange(x, out)
+            p_rev, _, n_rev, _ = solve_bank(self._z(x, e0, s_aim, -sign, t_flip, f), *profile_span(lo, hi, f), p,
+                                            tol, n_max)
+            b0_rev, bf_rev = bank_profile(p_rev, lo, hi, f)
+            self._predict(x, b0_rev, bf_rev, e0, -sign, out, t_flip)
+            res["predictions"] += n_rev + 1
             if out[O_FLAG] == REACHED:
-                res["xr_keep_m"] = self._deploy_crossrange(x, out)
-                predict(x, c, b0, bf, e0, ef, -sign, dt, out, t_flip)
+                res["xr_rev_m"] = self._deploy_crossrange(x, out)
+            if math.isfinite(t_flip_held):
+                # the held pair: this answer's magnitude kept, the reversal in effect at once at
+                # t_flip_held (LateralLogic: a final reversal must be due for both pairs)
+                dt, ef = self.params["npc.dt_pred_s"], self.e_deploy_jpkg
+                predict(x, c, b0, bf, e0, ef, sign, dt, out, 0.0)
                 res["predictions"] += 1
                 if out[O_FLAG] == REACHED:
-                    res["xr_rev_m"] = self._deploy_crossrange(x, out)
+                    res["xr_keep_held_m"] = self._deploy_crossrange(x, out)
+                    predict(x, c, b0, bf, e0, ef, -sign, dt, out, t_flip_held)
+                    res["predictions"] += 1
+                    if out[O_FLAG] == REACHED:
+                        res["xr_rev_held_m"] = self._deploy_crossrange(x, out)
         res["compute_ns"] = time.perf_counter_ns() - t0
         return res

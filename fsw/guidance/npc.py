@@ -132,6 +132,8 @@ class EntryGuidance(Corrector):
         self._t_answer = math.nan        # release time of the last answer applied (its state's time)
         self.xr_keep_m = math.nan        # predicted deploy crossrange, sign kept [+ left]
         self.xr_rev_m = math.nan         # ... reversed at the next cycle
+        self.xr_keep_held_m = math.nan   # the same, this answer's magnitude held (LateralLogic)
+        self.xr_rev_held_m = math.nan
         self._t_cycle = math.nan         # release time of the last cycle
         self.cycles = 0                  # corrections whose answers were applied
         self.no_root = 0
@@ -179,8 +181,9 @@ class EntryGuidance(Corrector):
         # release (a late answer's is older than the last cycle)
         t_go = self.t_go_s - (t_s - self._t_answer) if math.isfinite(self._t_answer) else math.inf
         if self.lateral.update(t_s, V, dpsi, self.xr_keep_m, self.xr_rev_m, t_go,
-                               self.shaper.reversal_s(self.bank_cmd)):
-            self.xr_keep_m = self.xr_rev_m = math.nan      # for the sign just left
+                               self.shaper.reversal_s(self.bank_cmd), self.xr_keep_held_m, self.xr_rev_held_m):
+            # for the sign just left
+            self.xr_keep_m = self.xr_rev_m = self.xr_keep_held_m = self.xr_rev_held_m = math.nan
             self.events.emit(t_s, EV.BANK_REVERSAL, rule=REVERSAL_RULE.code_of(self.lateral.rules[-1].upper()),
                              dpsi_deg=math.degrees(dpsi))
         period = t_s - self._t_cycle if math.isfinite(self._t_cycle) else 1.0
@@ -189,13 +192,15 @@ class EntryGuidance(Corrector):
         if self._frozen:
             return
         sign = self.lateral.sign
-        # a reversal decided at the next cycle, in effect laterally at its shaped transition's
-        # mid-point (half-way the lateral lift has turned over)
-        t_flip = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
+        # a reversal decided at the next cycle, flown through the shaper from its state now;
+        # for the held pair in effect at once at its shaped transition's mid-point (half-way the
+        # lateral lift has turned over)
+        t_flip = period
+        t_flip_held = period + 0.5 * self.shaper.reversal_s(self.bank_cmd)
         shp = self.shaper.state(self.bank_cmd)
         base = self.params["npc.h_floor_m"]
         self.job.submit(x, sign, self.estimator.k_rho, self.estimator.k_ld, t_flip, shp,
-                        base + self.floor_margin_m if base > 0.0 else 0.0, tag=sign, t_s=t_s, due_t=t_s + self.apply_delay_s - 1e-9)
+                        base + self.floor_margin_m if base > 0.0 else 0.0, t_flip_held, tag=sign, t_s=t_s, due_t=t_s + self.apply_delay_s - 1e-9)
 
     def _apply(self, res: Correction) -> None:
         i = self.cycles % self.STATS
@@ -226,6 +231,7 @@ class EntryGuidance(Corrector):
             self.events.emit(res["t_s"], EV.REVERSAL_WAY, miss_km=res["miss_m"] / 1e3)
         if res["sign"] == self.lateral.sign:        # not for a sign left since the job started
             self.xr_keep_m, self.xr_rev_m = res["xr_keep_m"], res["xr_rev_m"]
+            self.xr_keep_held_m, self.xr_rev_held_m = res["xr_keep_held_m"], res["xr_rev_held_m"]
         if not res["ok"]:
             self.no_root += 1
             self.events.emit(res["t_s"], EV.GUIDANCE_NO_ROOT, miss_km=res["miss_m"] / 1e3)

@@ -96,17 +96,18 @@ class AuthoritySupervisor:
         can use); the authority promised for every inertia within the vehicle's stated uncertainty about
         its nominal inertia (the box known to hold the truth). SAMI's inertia estimate is not
         used as that knowledge: with the dead zone it stays at nominal or drifts along what the
-        tracking excites."""
+        tracking excites. Nor are its aerodynamic factors d_hat: they learn whatever torque the
+        model lacks, a fault not yet detected included, and a factor learned at half the truth
+        made a trim within the limit read as none (no authority the weak way)."""
         nav = self.nav.state
         veh = self.scenario.vehicle
         a = veh.aero
-        d = self.control.d_hat
         V = nav.V_rel_mps
         v_B = nav.C_BN @ nav.vrel_N / V if V > 1.0 else None
         if v_B is None or not np.all(np.isfinite(v_B)):     # no flight condition yet: the trim direction
             v_B = velocity_dir_B(a.alpha_trim_rad)
-        A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta * d[0], a.C_malpha * d[1],
-                                a.C_nbeta * d[2])
+        # the nominal derivatives (docstring; docs/decisions.md)
+        A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta, a.C_malpha, a.C_nbeta)
         need = schedule_accel_need_radps2(self.scenario.bank_schedule, t_s)
         # the verdict also asks what a guided entry needs; the reference's floor stays the schedule's
         verdict_need = max(need, guided_accel_need_radps2(self.scenario.guidance_mode))
@@ -120,10 +121,10 @@ class AuthoritySupervisor:
 
     def assess(self, t_s: float, periodic: bool = False, held_trim_rad=None) -> None:
         """The duty-cycle LP on the health the allocator now uses, with the FSW's own models:
-        inertia estimate, velocity direction from navigation, the aero moment of its density
-        model, nominal derivatives and current factors d_hat. Real time: asked off the loop,
-        applied by the first cycle after it is ready (a newer request makes an older one
-        stale); batch and lockstep: applied here. ``periodic``: a re-assessment of the same
+        nominal inertia, velocity direction from navigation, the aero moment of its density
+        model and the nominal derivatives. Real time: asked off the loop, applied by the first
+        cycle after it is ready (a newer request makes an older one stale); batch and lockstep:
+        applied here. ``periodic``: a re-assessment of the same
         health (``reassess``); ``held_trim_rad``: the authority with the trim offset the
         reference flies now (no new trim sought)."""
         need, args = self.lp_problem(t_s, held_trim_rad)
@@ -141,7 +142,7 @@ class AuthoritySupervisor:
 
         While a trim is held, the authority is asked again from that trim as flown now: the
         jets' share of the bias grows as the dynamic pressure falls (the offset is held within
-        guidance.trim_max_deg) and the aerodynamic factors are learned, so neither the trim nor
+        guidance.trim_max_deg), so neither the trim nor
         the authority found at the reconfiguration's dynamic pressure holds for a reversal flown
         at the entry's lowest. The LP moves the trim to the weak-way-best one closest to it
         (fsw/controllability.py), never to another equally good one."""

@@ -60,7 +60,7 @@ class AuthoritySupervisor:
         self.health, self.now_s = health, now_s
         self.controllability: Controllability | None = None   # the LP's answer at the last reconfiguration
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
-        self.lp = BackgroundJob(controllability, "controllability", mode=REALTIME if realtime else IN_PLACE,
+        self.lp = BackgroundJob(learned_or_nominal, "controllability", mode=REALTIME if realtime else IN_PLACE,
                                 events=events, overrun_event=EV.CONTROLLABILITY_OVERRUN,
                                 fault_event=EV.CONTROLLABILITY_FAULT)
 
@@ -96,18 +96,17 @@ class AuthoritySupervisor:
         can use); the authority promised for every inertia within the vehicle's stated uncertainty about
         its nominal inertia (the box known to hold the truth). SAMI's inertia estimate is not
         used as that knowledge: with the dead zone it stays at nominal or drifts along what the
-        tracking excites. Nor are its aerodynamic factors d_hat: they learn whatever torque the
-        model lacks, a fault not yet detected included, and a factor learned at half the truth
-        made a trim within the limit read as none (no authority the weak way)."""
+        tracking excites."""
         nav = self.nav.state
         veh = self.scenario.vehicle
         a = veh.aero
+        d = self.control.d_hat
         V = nav.V_rel_mps
         v_B = nav.C_BN @ nav.vrel_N / V if V > 1.0 else None
         if v_B is None or not np.all(np.isfinite(v_B)):     # no flight condition yet: the trim direction
             v_B = velocity_dir_B(a.alpha_trim_rad)
-        # the nominal derivatives (docstring; docs/decisions.md)
-        A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta, a.C_malpha, a.C_nbeta)
+        A = aero_moment_per_rad(nav.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta * d[0], a.C_malpha * d[1],
+                                a.C_nbeta * d[2])
         need = schedule_accel_need_radps2(self.scenario.bank_schedule, t_s)
         # the verdict also asks what a guided entry needs; the reference's floor stays the schedule's
         verdict_need = max(need, guided_accel_need_radps2(self.scenario.guidance_mode))
@@ -119,16 +118,27 @@ class AuthoritySupervisor:
                 held_trim_rad, usable)
         return need, args
 
+    def aero_nominal(self) -> np.ndarray:
+        """The aerodynamic moment per radian (``aero_moment_per_rad``) of the nominal derivatives
+        at navigation's dynamic pressure: what the LP asks when SAMI's factors find the vehicle
+        not controllable (``learned_or_nominal``)."""
+        veh = self.scenario.vehicle
+        a = veh.aero
+        return aero_moment_per_rad(self.nav.state.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta, a.C_malpha,
+                                   a.C_nbeta)
+
     def assess(self, t_s: float, periodic: bool = False, held_trim_rad=None) -> None:
         """The duty-cycle LP on the health the allocator now uses, with the FSW's own models:
         nominal inertia, velocity direction from navigation, the aero moment of its density
-        model and the nominal derivatives. Real time: asked off the loop, applied by the first
-        cycle after it is ready (a newer request makes an older one stale); batch and lockstep:
-        applied here. ``periodic``: a re-assessment of the same
+        model, nominal derivatives and current factors d_hat (the nominal derivatives alone
+        when those find the vehicle controllable and the learned ones do not:
+        ``learned_or_nominal``). Real time: asked
+        off the loop, applied by the first cycle after it is ready (a newer request makes an
+        older one stale); batch and lockstep: applied here. ``periodic``: a re-assessment of the same
         health (``reassess``); ``held_trim_rad``: the authority with the trim offset the
         reference flies now (no new trim sought)."""
         need, args = self.lp_problem(t_s, held_trim_rad)
-        self.lp.submit(*args, tag=(need, periodic, held_trim_rad is not None), t_s=t_s)
+        self.lp.submit(self.aero_nominal(), *args, tag=(need, periodic, held_trim_rad is not None), t_s=t_s)
         if self.lp.mode == IN_PLACE:
             self._take(t_s)
 
@@ -142,7 +152,7 @@ class AuthoritySupervisor:
 
         While a trim is held, the authority is asked again from that trim as flown now: the
         jets' share of the bias grows as the dynamic pressure falls (the offset is held within
-        guidance.trim_max_deg), so neither the trim nor
+        guidance.trim_max_deg) and the aerodynamic factors are learned, so neither the trim nor
         the authority found at the reconfiguration's dynamic pressure holds for a reversal flown
         at the entry's lowest. The LP moves the trim to the weak-way-best one closest to it
         (fsw/controllability.py), never to another equally good one."""
@@ -252,11 +262,31 @@ class AuthoritySupervisor:
         of the first fault slip). The answers are discarded. True if the LP's thread finished
         in time."""
         _, args = self.lp_problem(self.now_s())
-        controllability(*args)
-        return self.lp.warm(*args, timeout_s=timeout_s)
+        learned_or_nominal(self.aero_nominal(), *args)
+        return self.lp.warm(self.aero_nominal(), *args, timeout_s=timeout_s)
 
     def close(self) -> None:
         self.lp.close()
+
+
+def learned_or_nominal(A_nominal: np.ndarray, *args) -> Controllability:
+    """The controllability LP (``controllability(*args)``, asked with SAMI's aerodynamic factors
+    d_hat), asked again with the nominal derivatives' moment ``A_nominal`` when its verdict is
+    not controllable; that answer is taken when the nominal derivatives find the vehicle
+    controllable. The factors also learn the torque of a fault not yet detected and swing
+    between the projection's bounds from one second to the next; a factor learned at half the
+    truth's puts a trim of 2 deg at or beyond the limit, where the weak way reads 0, and a zero
+    holds the reference still for the rest of the entry (held answers only slow it).
+    Otherwise the learned factors stand: they are the moment SAMI feeds forward, and a trim
+    chosen from the nominal ones against factors learned far from them was fought by the
+    controller (docs/decisions.md#the-controllability-lp-nominal-inertia-trim-held)."""
+    r = controllability(*args)
+    if r.controllable:
+        return r
+    nominal = list(args)
+    nominal[4] = A_nominal
+    r_nominal = controllability(*nominal)
+    return r_nominal if r_nominal.controllable else r
 
 
 def _limit_text(accel_radps2: float) -> str:

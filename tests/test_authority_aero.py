@@ -1,5 +1,6 @@
-"""The authority supervisor (fsw/authority.py) asks the controllability LP with the vehicle's
-nominal aerodynamic derivatives, not SAMI's learned factors d_hat.
+"""The authority supervisor (fsw/authority.py) asks the controllability LP with SAMI's learned
+aerodynamic factors d_hat, and again with the vehicle's nominal derivatives when the learned
+ones find the vehicle not controllable (``learned_or_nominal``).
 
 Truth: scipy's LP (tests/lp_oracle.py, not the FSW's HiGHS model) with the nominal aerodynamic
 moment, over a grid of trims within the trim limit: the weaker way the best of them gives, and
@@ -69,8 +70,9 @@ def test_learned_aero_factors_do_not_take_away_a_trim_the_air_gives(d_hat):
         f.close()
 
 
-def test_the_held_trim_is_reassessed_with_the_nominal_derivatives():
-    """The 1 Hz re-assessment from the held trim answers the same whatever SAMI has learned."""
+def test_the_held_trim_is_reassessed_with_the_nominal_derivatives_when_the_learned_find_no_authority():
+    """The 1 Hz re-assessment from the held trim, with factors learned after the reconfiguration
+    that find no trim within the limit, answers as with the nominal derivatives."""
     answers = []
     for d_hat in ((1.0, 1.0, 1.0), D_HAT_LEARNED):
         f = _reconfigured((1.0, 1.0, 1.0))

@@ -60,7 +60,7 @@ class AuthoritySupervisor:
         self.health, self.now_s = health, now_s
         self.controllability: Controllability | None = None   # the LP's answer at the last reconfiguration
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
-        self.lp = BackgroundJob(learned_or_nominal, "controllability", mode=REALTIME if realtime else IN_PLACE,
+        self.lp = BackgroundJob(controllability, "controllability", mode=REALTIME if realtime else IN_PLACE,
                                 events=events, overrun_event=EV.CONTROLLABILITY_OVERRUN,
                                 fault_event=EV.CONTROLLABILITY_FAULT)
 
@@ -118,27 +118,16 @@ class AuthoritySupervisor:
                 held_trim_rad, usable)
         return need, args
 
-    def aero_nominal(self) -> np.ndarray:
-        """The aerodynamic moment per radian (``aero_moment_per_rad``) of the nominal derivatives
-        at navigation's dynamic pressure: what the LP asks when SAMI's factors find the vehicle
-        not controllable (``learned_or_nominal``)."""
-        veh = self.scenario.vehicle
-        a = veh.aero
-        return aero_moment_per_rad(self.nav.state.qbar_pa, veh.S_ref_m2, veh.l_ref_m, a.C_lbeta, a.C_malpha,
-                                   a.C_nbeta)
-
     def assess(self, t_s: float, periodic: bool = False, held_trim_rad=None) -> None:
         """The duty-cycle LP on the health the allocator now uses, with the FSW's own models:
-        nominal inertia, velocity direction from navigation, the aero moment of its density
-        model, nominal derivatives and current factors d_hat (the nominal derivatives alone
-        when those find the vehicle controllable and the learned ones do not:
-        ``learned_or_nominal``). Real time: asked
-        off the loop, applied by the first cycle after it is ready (a newer request makes an
-        older one stale); batch and lockstep: applied here. ``periodic``: a re-assessment of the same
+        inertia estimate, velocity direction from navigation, the aero moment of its density
+        model, nominal derivatives and current factors d_hat. Real time: asked off the loop,
+        applied by the first cycle after it is ready (a newer request makes an older one
+        stale); batch and lockstep: applied here. ``periodic``: a re-assessment of the same
         health (``reassess``); ``held_trim_rad``: the authority with the trim offset the
         reference flies now (no new trim sought)."""
         need, args = self.lp_problem(t_s, held_trim_rad)
-        self.lp.submit(self.aero_nominal(), *args, tag=(need, periodic, held_trim_rad is not None), t_s=t_s)
+        self.lp.submit(*args, tag=(need, periodic, held_trim_rad is not None), t_s=t_s)
         if self.lp.mode == IN_PLACE:
             self._take(t_s)
 
@@ -262,31 +251,11 @@ class AuthoritySupervisor:
         of the first fault slip). The answers are discarded. True if the LP's thread finished
         in time."""
         _, args = self.lp_problem(self.now_s())
-        learned_or_nominal(self.aero_nominal(), *args)
-        return self.lp.warm(self.aero_nominal(), *args, timeout_s=timeout_s)
+        controllability(*args)
+        return self.lp.warm(*args, timeout_s=timeout_s)
 
     def close(self) -> None:
         self.lp.close()
-
-
-def learned_or_nominal(A_nominal: np.ndarray, *args) -> Controllability:
-    """The controllability LP (``controllability(*args)``, asked with SAMI's aerodynamic factors
-    d_hat), asked again with the nominal derivatives' moment ``A_nominal`` when its verdict is
-    not controllable; that answer is taken when the nominal derivatives find the vehicle
-    controllable. The factors also learn the torque of a fault not yet detected and swing
-    between the projection's bounds from one second to the next; a factor learned at half the
-    truth's puts a trim of 2 deg at or beyond the limit, where the weak way reads 0, and a zero
-    holds the reference still for the rest of the entry (held answers only slow it).
-    Otherwise the learned factors stand: they are the moment SAMI feeds forward, and a trim
-    chosen from the nominal ones against factors learned far from them was fought by the
-    controller (docs/decisions.md#the-controllability-lp-nominal-inertia-trim-held)."""
-    r = controllability(*args)
-    if r.controllable:
-        return r
-    nominal = list(args)
-    nominal[4] = A_nominal
-    r_nominal = controllability(*nominal)
-    return r_nominal if r_nominal.controllable else r
 
 
 def _limit_text(accel_radps2: float) -> str:

@@ -20,7 +20,10 @@ oracle without a fault log), so it never rebuilds tables or solves the controlla
 inside the rehearsal. What the spare cannot warm for the flying one -- its own data searched
 by a compiled kernel (the allocator's tables) and the kernel the spare skips (the jet
 monitor) -- the flying one rehearses itself, its answers discarded (FlightSoftware.rehearse).
-Lockstep and batch have no idle gap and no rehearsal.
+A process shell whose input task waits for its frame after the release (the SIL's FSW) repeats
+that own rehearsal between its polls (rehearse_waiting): the wait, with the transport's threads
+at work, cools again what the rehearsal warmed. Lockstep and batch have no idle gap and no
+rehearsal.
 """
 from __future__ import annotations
 
@@ -62,6 +65,7 @@ class Topology:
         self.executive.add(3, "controllability", lambda c: fsw.reassess_step())
         self.rehearsal: FlightSoftware | None = None
         self.rehearsal_errors = 0
+        self.wait_rehearsals = 0          # the flying instance's own rehearsals while its input task waited
         self._last_frame = None
         self._rehearsal_frame = None     # the spare's own copy of the last frame (made once)
         lead_ns = int(round(fsw.params["executive.rehearse_us"] * 1e3))
@@ -92,6 +96,21 @@ class Topology:
                 np.copyto(mine, frame)
             self.rehearsal.control_step(mine)
             self.fsw.rehearse(frame, self.rehearsal.u_cal_B)
+        except Exception:
+            self.rehearsal_errors += 1
+
+    def rehearse_waiting(self) -> None:
+        """Real time, while the input task waits for the frame due (between its polls): the
+        flying instance's own rehearsal alone (FlightSoftware.rehearse on the last frame it took,
+        the allocator's query for the spare's last demand), short enough to repeat between polls.
+        Changes nothing the next cycle reads; without a rehearsal (lockstep, --no-rehearse)
+        nothing; never raises (a failure is counted)."""
+        frame = self._last_frame
+        if frame is None or self.rehearsal is None:
+            return
+        try:
+            self.fsw.rehearse(frame, self.rehearsal.u_cal_B)
+            self.wait_rehearsals += 1
         except Exception:
             self.rehearsal_errors += 1
 

@@ -3,7 +3,8 @@ on the last frame before each release) leaves the flight unchanged, runs only in
 and never rebuilds tables or solves the controllability LP (its FDIR identifies nothing). The
 flying instance's own rehearsal (its allocator's query on its tables, its jet monitor on copies
 of its counters, its frame check, navigation and SAMI on copies)
-changes nothing either, also through a fault's detection."""
+changes nothing either, also through a fault's detection, and also repeated while the input
+task waits for its frame."""
 from __future__ import annotations
 
 import numpy as np
@@ -31,16 +32,23 @@ class FakeTime:
         self.t = max(self.t, t)
 
 
-def _fly(rehearse_us: float, n: int = 60, scenario: str = "nominal", warm: bool = False):
+def _fly(rehearse_us: float, n: int = 60, scenario: str = "nominal", warm: bool = False, wait_polls: int = 0):
     """``n`` real-time ticks on a fake clock with the plant stepped in the loop (as the
     bench's in-process loop does); the jet commands and output records of every tick.
-    ``warm``: Topology.warm_up on the first frame before the clock starts (as the SIL does)."""
+    ``warm``: Topology.warm_up on the first frame before the clock starts (as the SIL does).
+    ``wait_polls``: the input task rehearses while it waits this many polls before its frame
+    comes (Topology.rehearse_waiting, as the SIL's FSW does between its polls)."""
     scn = load_scenario(scenario)
     plant = Plant(scn, scn.seed)
     fsw = FlightSoftware(scn, EventLog(), param_overrides={"executive.rehearse_us": rehearse_us})
     ft = FakeTime()
     clock = RealTimeClock(int(round(fsw.dt_s * 1e9)), now_ns=ft.now, sleep_until=ft.sleep_until)
-    topo = Topology(fsw, clock, frame_source=lambda: plant.sensors)
+
+    def newest_frame():
+        for _ in range(wait_polls):
+            topo.rehearse_waiting()
+        return plant.sensors
+    topo = Topology(fsw, clock, frame_source=newest_frame)
     topo.add(1, "plant", lambda c: plant.step(topo.u))
     if warm:
         topo.warm_up(plant.sensors)
@@ -128,6 +136,37 @@ def test_the_flying_instances_own_rehearsals_change_nothing_and_compute_what_the
     fsw.control_step(frame)
     np.testing.assert_array_equal(fsw.nav._r_buf, fsw.nav.state.buf)  # navigation on this frame
     assert np.isnan(frame["chamber"][2]) and fsw.monitor.counts["chamber_range"] == 1
+
+
+@pytest.mark.parametrize("scenario, n", [("nominal", 60), ("case1", 200)])
+def test_rehearsing_while_the_input_task_waits_changes_nothing_in_the_flight(scenario, n):
+    """The flying instance's own rehearsal repeated between the input task's polls (three a
+    tick, on the record the plant has refilled with the frame due) leaves every jet command and
+    output the same as a flight never rehearsed; case1 through its four detections and the
+    tables rebuilt for them."""
+    topo, _, jets, outs = _fly(800.0, n=n, scenario=scenario, wait_polls=3)
+    ref_topo, _, ref_jets, ref_outs = _fly(0.0, n=n, scenario=scenario, wait_polls=3)
+    assert topo.wait_rehearsals == 3 * (n - 1) and topo.rehearsal_errors == 0   # none before a frame was taken
+    assert ref_topo.wait_rehearsals == 0                      # no rehearsal: nothing while waiting either
+    assert jets.any()
+    np.testing.assert_array_equal(jets, ref_jets)
+    for a, b in zip(outs, ref_outs):
+        for name in a.dtype.names:
+            if name not in ("t_release_ns", "jitter_us", "compute_us", "alloc_us"):    # host timing
+                np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    if scenario == "case1":
+        det = [(d["jet"], d["t_s"]) for d in topo.fsw.fdir.detections]
+        assert det and det == [(d["jet"], d["t_s"]) for d in ref_topo.fsw.fdir.detections]
+        assert topo.fsw.allocator.tables_version == ref_topo.fsw.allocator.tables_version > 1
+
+
+def test_a_failing_rehearsal_while_waiting_is_counted_and_the_flight_goes_on():
+    topo, _, _, _ = _fly(800.0, n=3)
+    topo.fsw.rehearse = None                     # calling it raises TypeError
+    topo.rehearse_waiting()
+    assert topo.rehearsal_errors == 1 and topo.wait_rehearsals == 0
+    topo.tick()
+    assert topo.fsw.cycles == 4
 
 
 def test_fdir_rehearse_computes_the_next_update_on_copies():

@@ -19,6 +19,13 @@ def _max(x: np.ndarray) -> float | None:
     return float(np.max(x)) if len(x) else None
 
 
+def lp_split(control_us: np.ndarray, lp_cycle: np.ndarray) -> dict:
+    """The control task's duty-cycle LP cycles (a HiGHS solve each, its dearest) apart from the
+    rest: their count and the p99 [us] of the other cycles (None if none)."""
+    rest = control_us[~lp_cycle]
+    return {"lp_cycles": int(lp_cycle.sum()), "p99_without_lp": _pct(rest, 99)}
+
+
 def latency_split(total_us: np.ndarray, command_us: np.ndarray) -> dict | None:
     """Where the sensor-to-actuator time goes: the sensor leg with the FSW's wait and
     compute (plant publishes -> FSW publishes its answer) and the command leg (FSW

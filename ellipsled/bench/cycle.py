@@ -33,6 +33,7 @@ import numpy as np
 
 from common.model import load_scenario
 from common.events import EventLog
+from ellipsled.node_reports import lp_split
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
 from fsw.topology import Topology
@@ -55,9 +56,9 @@ def span_figures(control_us: np.ndarray, lp_cycle: np.ndarray, span_s: float, dt
     over every cycle, the duty-cycle LP's cycles (``lp_cycles``) and the p99 without them."""
     n = int(round(span_s / dt_s))
     c, lp = control_us[:n], lp_cycle[:n]
-    rest = c[~lp]
-    return {**_pct(c), "span_s": float(span_s), "lp_cycles": int(lp.sum()),
-            "p99_without_lp_us": float(np.percentile(rest, 99)) if rest.size else None}
+    split = lp_split(c, lp)
+    return {**_pct(c), "span_s": float(span_s), "lp_cycles": split["lp_cycles"],
+            "p99_without_lp_us": split["p99_without_lp"]}
 
 
 def fly(scenario: str = "nominal", duration_s: float | None = None, gc_mode: str = "out_of_cycle",

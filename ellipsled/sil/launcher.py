@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from common import argtypes
-from ellipsled.node_reports import read_fsw, read_sim
+from ellipsled.node_reports import lp_split, read_fsw, read_sim
 from ellipsled.procs import ELLIPSLED, die_with_parent, stop_process
 from ellipsled.runlib import EXIT_NOT_COMPLETED, exit_code, format_summary, judge
 from ellipsled.terminal import RunProgress, files_written
@@ -107,9 +107,7 @@ def control_task_us(out: Path) -> dict | None:
     f = {"p50": float(np.percentile(c, 50)), "p99": float(np.percentile(c, 99)), "max": float(c.max()),
          "runs": int(len(c))}
     if lp is not None and len(lp) == len(ran):
-        rest = c[~lp[ran]]
-        f["lp_cycles"] = int(lp[ran].sum())
-        f["p99_without_lp"] = float(np.percentile(rest, 99)) if len(rest) else None
+        f.update(lp_split(c, lp[ran]))
     return f
 
 

@@ -1075,3 +1075,64 @@ def test_lateral_pair_has_no_reversed_crossrange_when_no_reversal_reaches_the_ra
         else:
             assert z.max() < -miss_max                             # short at every bank, by kilometres
             assert math.isnan(res["xr_rev_m"])
+
+
+def test_lateral_pair_reverses_the_way_this_answers_magnitude_takes():
+    """The reversal the pair predicts is commanded at the next cycle with this answer's
+    magnitude, and that magnitude picks the way round. 2.5 km/s at 25 km, bank sign +1, the
+    reference at rest at 134 deg, the magnitude commanded now 51 deg (the last answer's), this
+    answer 117 deg (the target where 117 deg deploys), 1 deg/s^2 of acceleration. Reversing to
+    -117 deg goes through lift down (109 deg against 251), to -51 deg through lift up (185
+    against 175: within the 30-deg margin). Truth by brute force: the reversed flight through
+    the shaper with the command magnitude 117 deg, on a 0.5-deg grid of the family's
+    parameter; the range solution where its miss changes sign (interpolated), and that flight's
+    deploy crossrange. The pair's figure is that one, not the one through lift up (kilometres
+    apart)."""
+    d = math.radians
+    R = SCN.planet.radius_m
+    gam = d(-2.0)
+    x = np.array([R + 25e3, 0.0, 0.0, 2500.0 * math.sin(gam), 2500.0 * math.cos(gam), 0.0])
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    dt, f = PARAMS["npc.dt_pred_s"], d(PARAMS["npc.bank_final_deg"])
+    lo, hi = d(PARAMS["npc.bank_min_deg"]), d(PARAMS["npc.bank_max_deg"])
+    out = np.zeros(predictor.N_O)
+    shp = np.array([d(134.0), 0.0, 1.0, 0.0, d(8.0), d(1.0), 0.02, d(51.0), d(1.0)])
+    c = predictor.predictor_constants(SCN, PARAMS)
+    predictor.predict_shaped(x, c, d(117.0), f, e0, ef, 1.0, dt, out, shp, 0.0)
+    target = out[:3] / np.linalg.norm(out[:3])
+    eg = npc.EntryGuidance(SCN, dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.tol_m": 20.0}),
+                           EventLog(), 0.02)
+    try:
+        eg.target_u, eg.bank0 = target, d(117.0)
+        res = eg.solve(x, 1.0, 1.0, 1.0, t_flip=1.0, shp=shp, h_floor_m=0.0)
+        c = eg.constants.copy()
+    finally:
+        eg.close()
+    assert res["ok"] and math.degrees(res["bank0_rad"]) == pytest.approx(117.0, abs=0.5)
+    s_togo = geometry.central_angle(x[:3], target) * R
+    tab = np.empty(shaper.N_TRANSITION)
+
+    def reversed_solution(mag):
+        sh = shp.copy()
+        sh[7] = mag
+        ps = np.arange(*corrector.profile_span(lo, hi, f), d(0.5))
+
+        def flown(p):
+            b0, bf = corrector.bank_profile(p, lo, hi, f)
+            predictor.predict_shaped(x, c, b0, bf, e0, ef, -1.0, dt, out, sh, 1.0)
+            return geometry.central_angle(x[:3], out[:3]) * R - s_togo, geometry.crossrange(x[:3], target, out[:3], R)
+        z = np.array([flown(p)[0] for p in ps])     # (the most lift down of the family hits the ground: short)
+        cross = np.flatnonzero(np.sign(z[:-1]) != np.sign(z[1:]))
+        assert len(cross) == 1
+        i = cross[0]
+        n = shaper.shaped_transition(sh, d(117.0), 1.0, -mag, 0.5, tab)
+        through_lift_down = bool(np.any(np.cos(tab[:n]) < -0.99))
+        xr = flown(ps[i] + (ps[i + 1] - ps[i]) * z[i] / (z[i] - z[i + 1]))[1]
+        assert out[predictor.O_FLAG] == predictor.REACHED
+        return xr, through_lift_down
+    xr_answer, down_answer = reversed_solution(res["bank0_rad"])
+    xr_last, down_last = reversed_solution(d(51.0))
+    assert down_answer and not down_last
+    assert res["xr_rev_m"] == pytest.approx(xr_answer, abs=300.0)
+    assert abs(xr_answer - xr_last) > 5000.0

@@ -484,13 +484,6 @@ class Corrector:
             # meets that circle at an angle nulls one and not the other
             out = self._out
             res["xr_keep_m"] = self._deploy_crossrange(x, out)
-            if self._shp is not None:
-                # the reversal is commanded with this answer's magnitude (the re-solved one arrives
-                # after it has set off), and that magnitude picks its way round (shaper_branch):
-                # not the one commanded now, the last answer's. From 134 deg, a 51-deg command
-                # reverses through lift up and a 117-deg one through lift down, kilometres apart
-                self._shp = self._shp.copy()
-                self._shp[7] = res["bank0_rad"]
             p_rev, z_rev, n_rev, _ = solve_bank(self._z(x, e0, s_aim, -sign, t_flip, f), *profile_span(lo, hi, f),
                                                 p, tol, n_max)
             b0_rev, bf_rev = bank_profile(p_rev, lo, hi, f)

@@ -1021,3 +1021,58 @@ def test_lateral_pair_reverses_into_the_range_solution_the_shaper_will_fly():
     # this answer's magnitude, the reversal in effect at once: another figure
     predictor.predict(x, c, res["bank_line_rad"], res["bank_final_rad"], e0, ef, 1.0, dt, out, t_flip)
     assert abs(geometry.crossrange(x[:3], target, out[:3], R) - xr_truth) > 5000.0
+
+
+def test_lateral_pair_has_no_reversed_crossrange_when_no_reversal_reaches_the_range():
+    """The reversed half of the final reversal's pair counts only when a range solution exists
+    for it. A late state (1.9 km/s at 21 km), the answer -87 deg, the target where it deploys,
+    and an attitude chain left 1 deg/s^2 of acceleration (a reconfigured vehicle): with the
+    reference at rest at -119.5 deg (beyond 90: past a larger magnitude commanded before) a
+    reversal goes through lift down, ~30 s at that acceleration, and deploys short at any bank
+    of the family; with it at rest at -87 deg it goes through lift up and the range is
+    reached. Truth by brute force: the reversed flight (the predictor through the shaper, the
+    reversal commanded one cycle on) on a 1-deg grid of the family's parameter, its miss
+    against what the guidance accepts (npc.floor_miss_max_m; no range reserve: the plant
+    deploys). Without a solution the reversed crossrange is NaN (the final rule then waits: the
+    bank the corrector would fly there deploys kilometres short, and the next answers fly
+    another reversal than the one predicted), with one it is a figure."""
+    d = math.radians
+    R = SCN.planet.radius_m
+    V, gam = 1900.0, d(-3.0)
+    x = np.array([R + 21e3, 0.0, 0.0, V * math.sin(gam), V * math.cos(gam), 0.0])
+    e0 = SCN.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    ef = predictor.deploy_energy(SCN, PARAMS["npc.h_deploy_m"])
+    dt, f = PARAMS["npc.dt_pred_s"], d(PARAMS["npc.bank_final_deg"])
+    lo, hi = d(PARAMS["npc.bank_min_deg"]), d(PARAMS["npc.bank_max_deg"])
+    miss_max = PARAMS["npc.floor_miss_max_m"]
+    out = np.zeros(predictor.N_O)
+    for phi_deg, reachable in ((-119.5, False), (-87.0, True)):
+        shp = np.array([d(phi_deg), 0.0, -1.0, 0.0, d(8.0), d(1.0), 0.02, d(87.0), d(1.0)])
+        c = predictor.predictor_constants(SCN, PARAMS)
+        predictor.predict_shaped(x, c, d(87.0), f, e0, ef, -1.0, dt, out, shp, 0.0)
+        target = out[:3] / np.linalg.norm(out[:3])
+        eg = npc.EntryGuidance(SCN, dict(PARAMS, **{"npc.max_iter": 20, "npc.h_floor_m": 0.0, "npc.tol_m": 20.0}),
+                               EventLog(), 0.02)
+        try:
+            eg.target_u, eg.bank0 = target, d(87.0)
+            res = eg.solve(x, -1.0, 1.0, 1.0, t_flip=1.0, shp=shp, h_floor_m=0.0)
+            c = eg.constants.copy()
+        finally:
+            eg.close()
+        assert res["ok"] and abs(res["miss_m"]) <= 20.0            # kept, the range is reached
+        s_togo = geometry.central_angle(x[:3], target) * R
+        z = []
+        for p in np.arange(*corrector.profile_span(lo, hi, f), d(1.0)):
+            b0, bf = corrector.bank_profile(p, lo, hi, f)
+            predictor.predict_shaped(x, c, b0, bf, e0, ef, 1.0, dt, out, shp, 1.0)
+            assert out[predictor.O_FLAG] == predictor.REACHED
+            z.append(geometry.central_angle(x[:3], out[:3]) * R - s_togo)
+        z = np.array(z)
+        solvable = bool(np.any(np.sign(z[:-1]) != np.sign(z[1:])) or np.any(np.abs(z) <= miss_max))
+        assert solvable is reachable
+        if reachable:
+            assert math.isfinite(res["xr_rev_m"])
+        else:
+            assert z.max() < -miss_max                             # short at every bank, by kilometres
+            assert math.isnan(res["xr_rev_m"])
+

@@ -362,6 +362,21 @@ class Corrector:
                 return xr
         return crossrange(x[:3], self.target_u, out[:3], self.radius_m)
 
+    def _missed(self, z_m: float) -> bool:
+        """A range miss the guidance does not fly to: short beyond the range reserve (with the
+        range trigger its altitude floor then fires short of the target), or beyond
+        npc.floor_miss_max_m either way (the most it trades anywhere). NaN: missed."""
+        return (self.reserve_m > 0.0 and z_m < -self.reserve_m) or not abs(z_m) <= self.params["npc.floor_miss_max_m"]
+
+    def _reversal_loses_range(self, z_rev_m: float, z_keep_m: float) -> bool:
+        """The reversed flight of the lateral pair has no range solution (z_rev_m, past the aim
+        point) where the kept one has (z_keep_m): a reversal now would be flown to a deploy
+        short or long by more than the guidance accepts (_missed), at whatever bank the
+        corrector then finds least bad. Its crossrange is then not one the final rule may null:
+        that flight is not the one that follows (the next answers, re-solved from the states
+        the reversal passes through, turn or change the way it goes)."""
+        return self._missed(z_rev_m) and abs(z_rev_m) > abs(z_keep_m) + self.params["npc.tol_m"]
+
     def solve(self, x: np.ndarray, sign: float, k_rho: float, k_ld: float, t_flip: float = math.nan,
               shp: np.ndarray | None = None, h_floor_m: float | None = None,
               t_flip_held: float = math.nan) -> Correction:
@@ -391,8 +406,7 @@ class Corrector:
         p, zb, n, ok = solve_bank(self._z(x, e0, s_aim, sign, f=f), *p_span, p_warm, tol, n_max)
         turn = math.nan
         alt = None
-        short = self.reserve_m > 0.0 and zb < -self.reserve_m
-        if shp is not None and (short or not abs(zb) <= self.params["npc.floor_miss_max_m"]):
+        if shp is not None and self._missed(zb):
             alt = reversal_other_way(shp, sign)
         if alt is not None:
             # a reversal in progress whose way round costs more range than the guidance
@@ -470,12 +484,12 @@ class Corrector:
             # meets that circle at an angle nulls one and not the other
             out = self._out
             res["xr_keep_m"] = self._deploy_crossrange(x, out)
-            p_rev, _, n_rev, _ = solve_bank(self._z(x, e0, s_aim, -sign, t_flip, f), *profile_span(lo, hi, f), p,
-                                            tol, n_max)
+            p_rev, z_rev, n_rev, _ = solve_bank(self._z(x, e0, s_aim, -sign, t_flip, f), *profile_span(lo, hi, f),
+                                                p, tol, n_max)
             b0_rev, bf_rev = bank_profile(p_rev, lo, hi, f)
             self._predict(x, b0_rev, bf_rev, e0, -sign, out, t_flip)
             res["predictions"] += n_rev + 1
-            if out[O_FLAG] == REACHED:
+            if out[O_FLAG] == REACHED and not self._reversal_loses_range(z_rev, zb):
                 res["xr_rev_m"] = self._deploy_crossrange(x, out)
             if math.isfinite(t_flip_held):
                 # the held pair: this answer's magnitude kept, the reversal in effect at once at

@@ -138,10 +138,10 @@ def _at_rate(hz: int, quick: bool) -> dict:
             ns = []
             b0, d0, over0 = gl.stats["tx_bytes"], gl.stats["tx_deferred"], gl.budget.over
             for _ in range(n):
-                for i in range(divisor):
-                    if i == divisor - 1:
-                        time.sleep(scn.dt_control_s)   # the period the link's cycle starts from
+                for _ in range(divisor - 1):
                     step()
+                time.sleep(scn.dt_control_s)           # the period the link's cycle starts from
+                step()
                 if name == "flood":
                     for d in per_tick:
                         flood.sendto(d, gl.address)

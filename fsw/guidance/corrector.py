@@ -399,59 +399,64 @@ class Corrector:
 
     def _reach(self, x, e0, sign, b0, bf, h_floor, h_fire, n_max) -> tuple[float, int]:
         """(phi [rad], predictions): the bank magnitude held to the end that nulls the crossrange
-        where the range trigger fires (_reach_xr), searched up from the answer's lift-up bound
-        towards 90 deg (the most lateral lift), NaN when none does better than the answer by more
-        than npc.tol_m. For an answer that flies the lift-up bound (a range solution held there
-        short of the aim point, or a lift-up late at its lowest): the range trigger deploys where
-        the target comes abeam anywhere in the box, so the range the bound buys past that point is
+        where the range trigger fires (_reach_xr), searched from the answer's bank now towards
+        90 deg (the most lateral lift), NaN when none does better than the answer by more than
+        npc.tol_m. For an answer at the lift-up bound (a range solution held there short of the
+        aim point, or a lift-up late whose line ends there): the range trigger deploys where the
+        target comes abeam anywhere in the box, so the range the bound buys past that point is
         not needed, while the bank's sine at the bound (0.17 at 10 deg) is all the lateral lift the
         sign kept has to null the crossrange with: 4.9 km left at the deploy of 1732050 run 56,
         whose prediction at 140 s nulled it at 25 deg and still deployed at the target at 9.9 km.
         Every magnitude tried must still fire at the target with the range solution's altitude
-        criteria (the feasible ones are those below the first that does not: more bank flies
-        shorter and lower). Secant on the crossrange from the answer's, inside a bracket once one
-        is found; stops when the crossrange stops shrinking (the sign kept pushes the other way,
-        or the lift past 90 deg would give less)."""
+        criteria (the feasible ones are those nearer the bank now than the first that does not).
+        Secant on the crossrange from the answer's, inside a bracket once one is found; stops when
+        the crossrange stops shrinking (the sign kept pushes the other way, or the most lateral
+        lift is reached)."""
         tol = self.params["npc.tol_m"]
         g0 = self._reach_xr(x, b0, bf, e0, sign, h_floor, h_fire)
         n = 1
         if not abs(g0) > tol:           # on target already, or not firing at the target: no reach to use
             return math.nan, n
-        a_phi, a_g = min(self.bank_max_rad, max(self.bank_min_rad, b0)), g0   # same side as g0, nearest the null
         top = 0.5 * math.pi
-        c_phi = c_g = math.nan          # the other side (a bracket), once found
-        bad = math.inf                  # lowest magnitude that does not fire at the target
-        prev_phi, prev_g = math.nan, math.nan
-        phi = self.reach_rad if a_phi < self.reach_rad < top else min(top, a_phi + self.REACH_STEP_RAD)
-        best_phi, best_g = math.nan, g0
-        while n < n_max:
+        base = min(self.bank_max_rad, max(self.bank_min_rad, b0))
+        d = 1.0 if base <= top else -1.0    # towards 90 deg from the bank now: t = d (phi - base)
+        t_top = abs(top - base)
+        a_t, a_g = 0.0, g0              # same side as g0, nearest the null
+        c_t = c_g = math.nan            # the other side (a bracket), once found
+        bad = math.inf                  # nearest magnitude that does not fire at the target
+        prev_t = prev_g = math.nan
+        t_w = d * (self.reach_rad - base)
+        t = t_w if 0.0 < t_w < t_top else min(t_top, self.REACH_STEP_RAD)
+        best_t, best_g = math.nan, g0
+        while n < n_max and t > 0.0:
+            phi = base + d * t
             g = self._reach_xr(x, phi, phi, e0, sign, h_floor, h_fire)
             n += 1
             if math.isnan(g):
-                bad = phi
+                bad = t
             else:
                 if abs(g) < abs(best_g):
-                    best_phi, best_g = phi, g
+                    best_t, best_g = t, g
                 if abs(g) <= tol:
                     break
                 if g * g0 > 0.0:
-                    if abs(g) >= abs(a_g) and math.isnan(c_phi):
+                    if abs(g) >= abs(a_g) and math.isnan(c_t):
                         break           # shrinking no more: the most this sign reaches
-                    prev_phi, prev_g, a_phi, a_g = a_phi, a_g, phi, g
+                    prev_t, prev_g, a_t, a_g = a_t, a_g, t, g
                 else:
-                    c_phi, c_g = phi, g
-            hi_lim = min(bad, top) if math.isnan(c_phi) else c_phi
-            if hi_lim - a_phi < self.REACH_RES_RAD:
+                    c_t, c_g = t, g
+            hi_lim = min(bad, t_top) if math.isnan(c_t) else c_t
+            if hi_lim - a_t < self.REACH_RES_RAD:
                 break
-            if not math.isnan(c_phi):
-                nxt = a_phi - a_g * (c_phi - a_phi) / (c_g - a_g)
-            elif not math.isnan(prev_phi) and a_g != prev_g:
-                nxt = a_phi - a_g * (a_phi - prev_phi) / (a_g - prev_g)
+            if not math.isnan(c_t):
+                nxt = a_t - a_g * (c_t - a_t) / (c_g - a_g)
+            elif not math.isnan(prev_t) and a_g != prev_g:
+                nxt = a_t - a_g * (a_t - prev_t) / (a_g - prev_g)
             else:
-                nxt = a_phi + self.REACH_STEP_RAD
-            phi = nxt if a_phi < nxt < hi_lim else 0.5 * (a_phi + hi_lim)
+                nxt = a_t + self.REACH_STEP_RAD
+            t = nxt if a_t < nxt < hi_lim else 0.5 * (a_t + hi_lim)
         if abs(best_g) < abs(g0) - tol:
-            return best_phi, n
+            return base + d * best_t, n
         return math.nan, n
 
     def _deploy_crossrange(self, x: np.ndarray, out: np.ndarray) -> float:
@@ -571,9 +576,10 @@ class Corrector:
         reach = False
         if self._reach_end is not None and h_floor > 0.0 and self._out[O_FLAG] == REACHED:
             # the answer flies the lift-up bound now and over the first half of the energy to go
-            # (held there, or a lift-up late at its lowest): the magnitude for the crossrange too
+            # (a range solution held there), or its line ends there (a lift-up late at its lowest):
+            # the magnitude for the crossrange too
             lift = self._lift_min() + 1e-9
-            if min(hi, max(lo, b0)) <= lift and min(hi, max(lo, 0.5 * (b0 + bf))) <= lift:
+            if min(hi, max(lo, b0)) <= lift and min(hi, max(lo, 0.5 * (b0 + bf))) <= lift or bf <= lift:
                 phi, nr = self._reach(x, e0, sign, b0, bf, h_floor, h_fire, n_max)
                 n += nr
                 self.reach_rad = phi

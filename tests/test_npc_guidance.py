@@ -10,7 +10,7 @@ import pytest
 
 from common.model import load_scenario
 from common.events import EventLog
-from fsw.guidance import corrector, estimator, geometry, lateral, npc, predictor, shaper
+from fsw.guidance import corrector, estimator, geometry, lateral, npc, predictor, shaper, trigger
 from fsw.navigation import Navigation
 from fsw.params import load_params
 from sim.openloop import OMEGA_N_RADPS, ZETA, ideal_torque
@@ -1076,3 +1076,60 @@ def test_lateral_pair_has_no_reversed_crossrange_when_no_reversal_reaches_the_ra
             assert z.max() < -miss_max                             # short at every bank, by kilometres
             assert math.isnan(res["xr_rev_m"])
 
+
+
+def test_range_trigger_raises_the_magnitude_off_the_lift_up_bound_to_null_the_crossrange_where_it_fires():
+    """An answer that flies the lift-up bound (a target beyond what any bank reaches by the deploy
+    condition) with crossrange left. Truth by construction: from a late state (1 km/s, 16 km,
+    -4 deg) the predictor flown at 35 deg held to the end (sign +1) passes a point P at Mach 1.6,
+    inside the deploy box at 9.7 km, before the range trigger's last point (Mach 1.45); the target
+    put at P. Every bank ends short of the aim point at the deploy condition (Mach 2), so the range
+    solution holds 10 deg, along which the trigger fires 4.8 km off the target. With the range
+    trigger the corrector's answer is 35 deg held again (within the secant's 200 m), and flown on
+    to the trigger's last point it fires at P with the crossrange within that tolerance; with the
+    velocity trigger (it deploys at the deploy condition, short, wherever the bank) the bound stays."""
+    prm = dict(load_params(npc.PARAMS + trigger.PARAMS))
+    scn = SCN.with_(deploy_by="fsw")
+    R = scn.planet.radius_m
+    g = math.radians(-4.0)
+    x = np.array([R + 16e3, 0.0, 0.0, 1000.0 * math.sin(g), 1000.0 * math.cos(g), 0.0])
+    e0 = scn.planet.mu_m3ps2 / np.linalg.norm(x[:3]) - 0.5 * float(x[3:] @ x[3:])
+    ef = predictor.deploy_energy(scn, prm["npc.h_deploy_m"])
+    dt = prm["npc.dt_pred_s"]
+    b_star = math.radians(35.0)
+    c = predictor.predictor_constants(scn, prm)
+    at = np.zeros(predictor.N_O)
+    c_p = c.copy()
+    c_p[predictor.C_MACH_F] = 1.6
+    predictor.predict(x, c_p, b_star, b_star, e0, ef, 1.0, dt, at, 0.0)
+    target = at[:3] / np.linalg.norm(at[:3])
+    assert np.linalg.norm(at[:3]) - R > prm["npc.h_fire_m"] + 2000.0
+
+    def trigger_xr(b):
+        """Where the trigger fires flown at b held, on to its last point: (crossrange, distance to P)."""
+        c_end = c.copy()
+        c_end[predictor.C_MACH_F], c_end[predictor.C_H_FLOOR] = 1.45, prm["deploy.h_floor_m"]
+        c_end[predictor.C_TGT:predictor.C_TGT + 3] = target
+        out = np.zeros(predictor.N_O)
+        predictor.predict(x, c_end, b, b, e0, ef, 1.0, dt, out, 0.0)
+        return out[predictor.O_XR_TRIG], np.linalg.norm(out[predictor.O_R_TRIG:predictor.O_R_TRIG + 3] - at[:3])
+
+    lo = math.radians(prm["npc.bank_min_deg"])
+    xr_lo, _ = trigger_xr(lo)
+    assert xr_lo > 4000.0                       # the bound's crossrange where it fires
+    for trig, reach in (("range", True), ("velocity", False)):
+        eg = npc.EntryGuidance(scn, dict(prm, **{"deploy.trigger": trig}), EventLog(), 0.02)
+        try:
+            eg.target_u, eg.bank0 = target, lo
+            res = eg.solve(x, 1.0, 1.0, 1.0, h_floor_m=6000.0)
+        finally:
+            eg.close()
+        assert res["held"] and not res["ok"] and res["miss_m"] < -5000.0     # short of the aim point at Mach 2
+        if reach:
+            assert math.degrees(res["bank0_rad"]) == pytest.approx(35.0, abs=1.5)
+            assert res["bank_final_rad"] == res["bank0_rad"]                # held to the end
+            xr, miss_p = trigger_xr(res["bank0_rad"])
+            assert abs(xr) <= prm["npc.tol_m"] and miss_p < 300.0
+        assert res.get("reach", False) is reach
+        if not reach:
+            assert res["bank0_rad"] == pytest.approx(lo)

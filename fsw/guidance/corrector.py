@@ -18,8 +18,9 @@ import numpy as np
 
 from common.model import Scenario
 from .geometry import central_angle, crossrange, unit_from_latlon
-from .predictor import (C_KLD, C_KRHO, C_TGT, C_TRIG, N_O, O_FLAG, O_H, O_H_BOX, O_R_TRIG, O_T, O_XR_TRIG, REACHED,
-                        SKIPPED, TIMEOUT, deploy_energy, predict, predict_shaped, predictor_constants)
+from .predictor import (C_H_FLOOR, C_KLD, C_KRHO, C_MACH_F, C_TGT, C_TRIG, GROUND, N_O, O_FLAG, O_H, O_H_BOX, O_R_TRIG,
+                        O_T, O_XR_TRIG, REACHED, SKIPPED, TIMEOUT, deploy_energy, predict, predict_shaped,
+                        predictor_constants)
 from .shaper import reversal_other_way
 
 
@@ -187,6 +188,22 @@ def range_reserve(scenario: Scenario, params: dict) -> float:
     return 0.0
 
 
+def trigger_reach_end(scenario: Scenario, params: dict) -> tuple[float, float] | None:
+    """(Mach [-], altitude [m]) where the range trigger fires at the latest when the target is
+    still ahead: the deploy box's Mach minimum plus deploy.mach_margin, and deploy.h_floor_m (or
+    the box's altitude minimum plus deploy.h_margin_m, the higher). None: no range trigger, or a
+    deploy condition that is a speed, not a Mach. The predictions end at the deploy condition
+    (the scenario's end Mach), but the trigger flies on through the box until the target comes
+    abeam: how far the vehicle reaches past that condition decides whether it still deploys on
+    target (Corrector._reach)."""
+    box = scenario.vehicle.deploy_box
+    if (box is None or scenario.deploy_by != "fsw" or params.get("deploy.trigger") != "range"
+            or scenario.end_speed_mps is not None):
+        return None
+    return (box.mach_min + float(params.get("deploy.mach_margin", 0.0)),
+            max(float(params.get("deploy.h_floor_m", 0.0)), box.h_min_m + float(params.get("deploy.h_margin_m", 0.0))))
+
+
 class Correction(TypedDict):
     """One answer of the corrector (Corrector.solve): the bank profile to fly from the
     state it answers, and what its prediction says of the deploy."""
@@ -197,6 +214,7 @@ class Correction(TypedDict):
     bank_line_rad: float      # the profile flown: phi_0 of its line ...
     bank_final_rad: float     # ... and its phi_f (the line clipped to the phi_0 bounds, as predicted)
     floor: bool               # the deploy-altitude floor traded range for altitude
+    reach: bool               # the magnitude raised off the lift-up bound for the crossrange (_reach)
     held: bool                # the range solution holds a phi_0 bound (and no floor trade)
     miss_m: float             # predicted range miss, past the aim point (range_reserve beyond the target;
                               # NaN: the floor's profile does not reach the deploy)
@@ -249,6 +267,9 @@ class Corrector:
         self._p_e0_jpkg = math.nan       # energy at which bank0's profile starts
         self._shp = None                 # the reference shaper's state the predictions start from
         self._out = np.zeros(N_O)
+        self._c_reach = np.zeros_like(self.constants)   # _reach's: the prediction flown on to the box's edge
+        self._reach_end = trigger_reach_end(scenario, params)
+        self.reach_rad = math.nan        # the last answer's lateral magnitude (_reach), NaN: none
 
     def take_params(self, names: set[str]) -> None:
         """Apply self.params (``names``: the ones just set) where the construction put them."""
@@ -346,6 +367,97 @@ class Corrector:
                 f_bad = f
             f = 0.5 * (f_ok + f_bad)
         return (best[0], best[1], best[2], n)
+
+    REACH_STEP_RAD = math.radians(10.0)   # _reach's first step up from the lift-up bound ...
+    REACH_RES_RAD = math.radians(0.5)     # ... and the resolution it stops at
+
+    def _reach_xr(self, x, b0, bf, e0, sign, h_floor, h_fire) -> float:
+        """The crossrange [m, + left] where the range trigger fires on the profile (b0, bf) flown on
+        past the deploy condition to the trigger's last point (trigger_reach_end), NaN when it does
+        not fire at the target there: the target passed above the box (fired at its entry, behind
+        it), or not reached before the trigger's Mach or altitude floor (short), or fired below
+        h_fire, or the box entered below h_floor (the range solution's own altitude criteria)."""
+        c, out = self._c_reach, self._out
+        c[:] = self.constants
+        c[C_MACH_F], c[C_H_FLOOR] = self._reach_end
+        dt, ef = self.params["npc.dt_pred_s"], self.e_deploy_jpkg
+        if self._shp is None:
+            predict(x, c, b0, bf, e0, ef, sign, dt, out, 0.0)
+        else:
+            predict_shaped(x, c, b0, bf, e0, ef, sign, dt, out, self._shp, 0.0)
+        if out[O_FLAG] != REACHED and out[O_FLAG] != GROUND or out[O_H_BOX] < h_floor:
+            return math.nan
+        # not fired: O_R_TRIG is the final position (predict)
+        if out[O_R_TRIG] == out[0] and out[O_R_TRIG + 1] == out[1] and out[O_R_TRIG + 2] == out[2]:
+            return math.nan
+        rt = out[O_R_TRIG:O_R_TRIG + 3]
+        xr = float(out[O_XR_TRIG])
+        d = central_angle(rt, self.target_u) * self.radius_m
+        if d * d - xr * xr > self.params["npc.tol_m"] ** 2 or math.sqrt(float(rt @ rt)) - self.radius_m < h_fire:
+            return math.nan
+        return xr
+
+    def _reach(self, x, e0, sign, b0, bf, h_floor, h_fire, n_max) -> tuple[float, int]:
+        """(phi [rad], predictions): the bank magnitude held to the end that nulls the crossrange
+        where the range trigger fires (_reach_xr), searched from the answer's bank now towards
+        90 deg (the most lateral lift), NaN when none does better than the answer by more than
+        npc.tol_m. For an answer at the lift-up bound (a range solution held there short of the
+        aim point, or a lift-up late whose line ends there): the range trigger deploys where the
+        target comes abeam anywhere in the box, so the range the bound buys past that point is
+        not needed, while the bank's sine at the bound (0.17 at 10 deg) is all the lateral lift the
+        sign kept has to null the crossrange with: 4.9 km left at the deploy of 1732050 run 56,
+        whose prediction at 140 s nulled it at 25 deg and still deployed at the target at 9.9 km.
+        Every magnitude tried must still fire at the target with the range solution's altitude
+        criteria (the feasible ones are those nearer the bank now than the first that does not).
+        Secant on the crossrange from the answer's, inside a bracket once one is found; stops when
+        the crossrange stops shrinking (the sign kept pushes the other way, or the most lateral
+        lift is reached)."""
+        tol = self.params["npc.tol_m"]
+        g0 = self._reach_xr(x, b0, bf, e0, sign, h_floor, h_fire)
+        n = 1
+        if not abs(g0) > tol:           # on target already, or not firing at the target: no reach to use
+            return math.nan, n
+        top = 0.5 * math.pi
+        base = min(self.bank_max_rad, max(self.bank_min_rad, b0))
+        d = 1.0 if base <= top else -1.0    # towards 90 deg from the bank now: t = d (phi - base)
+        t_top = abs(top - base)
+        a_t, a_g = 0.0, g0              # same side as g0, nearest the null
+        c_t = c_g = math.nan            # the other side (a bracket), once found
+        bad = math.inf                  # nearest magnitude that does not fire at the target
+        prev_t = prev_g = math.nan
+        t_w = d * (self.reach_rad - base)
+        t = t_w if 0.0 < t_w < t_top else min(t_top, self.REACH_STEP_RAD)
+        best_t, best_g = math.nan, g0
+        while n < n_max and t > 0.0:
+            phi = base + d * t
+            g = self._reach_xr(x, phi, phi, e0, sign, h_floor, h_fire)
+            n += 1
+            if math.isnan(g):
+                bad = t
+            else:
+                if abs(g) < abs(best_g):
+                    best_t, best_g = t, g
+                if abs(g) <= tol:
+                    break
+                if g * g0 > 0.0:
+                    if abs(g) >= abs(a_g) and math.isnan(c_t):
+                        break           # shrinking no more: the most this sign reaches
+                    prev_t, prev_g, a_t, a_g = a_t, a_g, t, g
+                else:
+                    c_t, c_g = t, g
+            hi_lim = min(bad, t_top) if math.isnan(c_t) else c_t
+            if hi_lim - a_t < self.REACH_RES_RAD:
+                break
+            if not math.isnan(c_t):
+                nxt = a_t - a_g * (c_t - a_t) / (c_g - a_g)
+            elif not math.isnan(prev_t) and a_g != prev_g:
+                nxt = a_t - a_g * (a_t - prev_t) / (a_g - prev_g)
+            else:
+                nxt = a_t + self.REACH_STEP_RAD
+            t = nxt if a_t < nxt < hi_lim else 0.5 * (a_t + hi_lim)
+        if abs(best_g) < abs(g0) - tol:
+            return base + d * best_t, n
+        return math.nan, n
 
     def _deploy_crossrange(self, x: np.ndarray, out: np.ndarray) -> float:
         """The predicted deploy crossrange [m, + left] of the prediction out from x: with the range
@@ -461,10 +573,29 @@ class Corrector:
                 zb = (central_angle(x[:3], self._out[:3]) * self.radius_m - s_aim if self._out[O_FLAG] == REACHED
                       else math.nan)
                 ok = False
+        reach = False
+        if self._reach_end is not None and h_floor > 0.0 and self._out[O_FLAG] == REACHED:
+            # the answer flies the lift-up bound now and over the first half of the energy to go
+            # (a range solution held there), or its line ends there (a lift-up late at its lowest):
+            # the magnitude for the crossrange too
+            lift = self._lift_min() + 1e-9
+            if min(hi, max(lo, b0)) <= lift and min(hi, max(lo, 0.5 * (b0 + bf))) <= lift or bf <= lift:
+                phi, nr = self._reach(x, e0, sign, b0, bf, h_floor, h_fire, n_max)
+                n += nr
+                self.reach_rad = phi
+                self._predict(x, b0 if math.isnan(phi) else phi, bf if math.isnan(phi) else phi, e0, sign, self._out)
+                if not math.isnan(phi) and self._out[O_FLAG] == REACHED:
+                    reach = True
+                    b0 = bf = phi
+                    zb = central_angle(x[:3], self._out[:3]) * self.radius_m - s_aim
+                elif not math.isnan(phi):
+                    self._predict(x, b0, bf, e0, sign, self._out)
+            else:
+                self.reach_rad = math.nan
         rf = self._out[:3].copy()
         # phi_0 commanded: the profile's bank now (the line clipped to the bounds, as predicted)
         res = Correction(bank0_rad=min(hi, max(lo, b0)), p_range_rad=b_range, f_family_rad=f, e0_jpkg=e0, bank_line_rad=b0,
-                         bank_final_rad=bf, floor=floor, held=held and not floor, miss_m=zb, predictions=n + 1,
+                         bank_final_rad=bf, floor=floor, reach=reach, held=held and not floor, miss_m=zb, predictions=n + 1,
                          turn_rad=turn, ok=ok or floor, range_to_go_m=s_togo,
                          lat_rad=math.asin(rf[2] / math.sqrt(float(rf @ rf))), lon_rad=math.atan2(rf[1], rf[0]),
                          h_final_m=float(self._out[O_H]), h_box_m=float(self._out[O_H_BOX]), t_go_s=float(self._out[O_T]), xr_keep_m=math.nan,

@@ -270,7 +270,11 @@ class FlightSoftware(GroundCommands):
             self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
         if self.allocator.degraded:
             self.events.emit(t_s, EV.ALLOC_DEGRADED)
-        # the rest of the cycle in one compiled call (finish_cycle); its rare events here
+        return self._finish(t_s, u_alloc)
+
+    def _finish(self, t_s: float, u_alloc: np.ndarray) -> np.ndarray:
+        """The rest of the cycle in one compiled call (``finish_cycle``), the events it calls
+        for here; returns the command sent."""
         driver = self.driver
         used, short = finish_cycle(self.dutycycle.tau_B, u_alloc, driver.armed and self.modes.jets_enabled,
                                    *self._drive_state, self._sent, self._sent_k,

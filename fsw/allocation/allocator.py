@@ -136,8 +136,6 @@ class Allocator:
         self._delta = np.zeros(N_AXES)
         self._shifted = False
         self._tables: Tables | None = None
-        self._query = None                 # the query kernel for the model in force, and its
-        self._query_args: tuple = ()       # arguments after the demand (_bind_query)
         async_now, self.async_rebuild = self.async_rebuild, False   # first tables: built here
         self.set_params(params)
         self._warm_kernels()
@@ -308,7 +306,6 @@ class Allocator:
         self.reconfig_pending = False
         self._forbid = 0
         self._shifted = False
-        self._bind_query()
         self.tables_from_cache = from_cache
         if not from_cache:
             self.rebuild_time_s = tables.build_s
@@ -323,7 +320,6 @@ class Allocator:
             self.reconfig_pending = False
             self._forbid = 0
             self._shifted = False
-            self._bind_query()
             self.tables_from_cache = True
             return
         self._collect()
@@ -348,30 +344,7 @@ class Allocator:
         self._target_key = key
         self._target_job = job
         self.reconfig_pending = True
-        self._bind_query()
         self._rebuilder.submit(job)
-
-    def _bind_query(self) -> None:
-        """Choose the query ``solve`` runs for the model in force (tables, interim forbidden
-        jets and bias shift) and gather its arguments after the demand once, so the cycle
-        looks up none of them: the spill box's tree search; with the sign box the octant
-        tables, or while an interim bias shift is in force the exhaustive scan."""
-        t = self._tables
-        out = (TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN)
-        if t.spill_box:
-            self._query = solve_tree_kernel
-            self._query_args = (t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend, t.n_internal, t.tau,
-                                t.pen, t.pat, t.ties, t.scratch, self._forbid,
-                                self._delta if self._shifted else ZERO3, *out,
-                                self._stack_k, self._stack_lb, self.u, self.tau_B, self._obj)
-        elif self.reconfig_pending and self._shifted:
-            self._query = solve_scan_kernel
-            self._query_args = (t.w, t.spill, t.tau, t.pen, t.pat, t.scratch, self._forbid, self._delta, *out,
-                                self.u, self.tau_B, self._obj)
-        else:
-            self._query = solve_kernel
-            self._query_args = (t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen, t.pat,
-                                t.scratch, self._forbid, *out, self.u, self.tau_B, self._obj)
 
     def _try_switch(self) -> bool:
         t = self._rebuilder.take(self._target_key) if self._rebuilder is not None else None
@@ -415,10 +388,25 @@ class Allocator:
             tau_d = _as_demand(tau_d)
         if self.reconfig_pending:
             self._try_switch()
+        t = self._tables
         self.interim = self.reconfig_pending
-        status = self._query(tau_d, *self._query_args)
+        if t.spill_box:
+            status = solve_tree_kernel(tau_d, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend,
+                                       t.n_internal, t.tau, t.pen, t.pat, t.ties, t.scratch,
+                                       self._forbid, self._delta if self._shifted else ZERO3,
+                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                       self._stack_k, self._stack_lb, self.u, self.tau_B, self._obj)
+        elif self.reconfig_pending and self._shifted:
+            status = solve_scan_kernel(tau_d, t.w, t.spill, t.tau, t.pen, t.pat, t.scratch,
+                                       self._forbid, self._delta,
+                                       TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                       self.u, self.tau_B, self._obj)
+        else:
+            status = solve_kernel(tau_d, t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin,
+                                  t.tau, t.pen, t.pat, t.scratch,
+                                  self._forbid, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                                  self.u, self.tau_B, self._obj)
         if status == STATUS_REJECTED:
-            t = self._tables
             if self.interim:
                 np.add(t.bias, self._delta, out=self.tau_B)
             else:

@@ -281,7 +281,7 @@ class FlightSoftware(GroundCommands):
                                    self.bank_axis_B, self._bank_short_min_Nm, self.params["control.shortfall_frac"],
                                    self._output.one, *self._output.fill_args(self))
         driver.count(used)
-        self._note_shortfall(t_s, short)
+        self._check_bank_shortfall(t_s, short)
         self._tau_last = tuple(self.tau_alloc_B.tolist())       # this cycle's torque, as floats
         self._have_prev = True
         return driver.last_command
@@ -324,7 +324,7 @@ class FlightSoftware(GroundCommands):
         i = u_k % self._ring
         return self._sent[i] if self._sent_k[i] == u_k else None
 
-    def _note_shortfall(self, t_s: float, short: bool) -> None:
+    def _check_bank_shortfall(self, t_s: float, short: bool) -> None:
         """Note whether the bank axis fell short this cycle (``bank_short``)."""
         self.alloc_short = short
         if short:

@@ -126,7 +126,7 @@ class PythonTailFlightSoftware(FlightSoftware):
 
     def _finish(self, t_s: float, u_alloc: np.ndarray) -> np.ndarray:
         self.tau_alloc_B[:] = self.dutycycle.tau_B
-        self._note_shortfall(t_s, python_bank_short(self.bank_axis_B, self.u_cal_B, self.tau_alloc_B,
+        self._check_bank_shortfall(t_s, python_bank_short(self.bank_axis_B, self.u_cal_B, self.tau_alloc_B,
                                                     self._bank_short_min_Nm, self.params["control.shortfall_frac"]))
         self._tau_last = tuple(self.tau_alloc_B.tolist())
         self._have_prev = True

@@ -75,7 +75,7 @@ def bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac):
 @njit(cache=True)
 def finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s, sent, sent_k,
                  bank_axis_B, short_min_Nm, short_frac,
-                 r, alloc_ns, mode, degraded, deploy, target_flag, npc, guid_cycles, bank_cmd, pred,
+                 r, target_flag, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
                  k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
     """The control cycle's tail after the allocation, in one compiled call: the allocated
     torque ``tau_B`` copied to ``tau_alloc_B``, the bank-shortfall test (``bank_short``), the
@@ -88,7 +88,7 @@ def finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kg
     short = bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac)
     used = _drive(u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s)
     note_sent(sent, sent_k, k, last)
-    fill_record(r, last, short, alloc_ns, mode, degraded, deploy, target_flag, npc, guid_cycles, bank_cmd, pred,
+    fill_record(r, target_flag, last, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
                 k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)
     return used, short
 
@@ -275,11 +275,11 @@ class FlightSoftware(GroundCommands):
     def _finish(self, t_s: float, u_alloc: np.ndarray) -> np.ndarray:
         """The rest of the cycle in one compiled call (``finish_cycle``), the events it calls
         for here; returns the command sent."""
-        driver = self.driver
+        driver, out = self.driver, self._output
         used, short = finish_cycle(self.dutycycle.tau_B, u_alloc, driver.armed and self.modes.jets_enabled,
                                    *self._drive_state, self._sent, self._sent_k,
                                    self.bank_axis_B, self._bank_short_min_Nm, self.params["control.shortfall_frac"],
-                                   self._output.one, *self._output.fill_args(self))
+                                   out.one, out.target_flag, *out.fill_args(self))
         driver.count(used)
         self._check_bank_shortfall(t_s, short)
         self._tau_last = tuple(self.tau_alloc_B.tolist())       # this cycle's torque, as floats

@@ -21,7 +21,7 @@ _NO_PREDICTION = np.zeros(2)     # profile mode: no guidance answer to report
 
 
 @njit(cache=True)
-def fill_record(r, u, short, alloc_ns, mode, degraded, deploy, target_flag, npc, guid_cycles, bank_cmd,
+def fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd,
                 pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta,
                 health):
     """Write one cycle's outputs into ``r[0]`` (FSW_STATE). Entry guidance (``npc``): a value
@@ -69,9 +69,9 @@ def fill_record(r, u, short, alloc_ns, mode, degraded, deploy, target_flag, npc,
 
 
 @njit(cache=True)
-def _fill(r, u, short, alloc_ns, mode, degraded, deploy, target_flag, npc, guid_cycles, bank_cmd, pred,
+def _fill(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
           k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
-    fill_record(r, u, short, alloc_ns, mode, degraded, deploy, target_flag, npc, guid_cycles, bank_cmd, pred,
+    fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
                 k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)
 
 
@@ -86,23 +86,25 @@ class OutputFiller:
         # there is none (never NaN on the wire)
         tlat, tlon = scenario.target_lat_rad, scenario.target_lon_rad
         has_target = tlat is not None and math.isfinite(tlat) and math.isfinite(tlon)
-        self._target_flag = GUID_TARGET if has_target else 0
+        self.target_flag = GUID_TARGET if has_target else 0
         self.rec["target_lat_rad"] = tlat if has_target else 0.0
         self.rec["target_lon_rad"] = tlon if has_target else 0.0
 
     def fill_args(self, fsw) -> tuple:
-        """``fill_record``'s arguments after the record, ``u`` and ``short``: the outputs of the cycle
-        ``fsw`` has just run that are not the jet command's."""
+        """``fill_record``'s arguments after the record, ``target_flag``, ``u`` and ``short``: the
+        outputs of the cycle ``fsw`` has just run that are not the jet command's. (19 items: CPython
+        3.11 keeps every freed 20-item tuple on a free list it never takes them back from, up to
+        2,000 -- a new memory block each cycle, a pool every few dozen.)"""
         g = fsw.guidance
         health = fsw.health
         e = fsw.entry
         npc = e is not None
         return (fsw.alloc_ns, int(fsw.modes.mode), fsw.allocator.degraded,
-                fsw.deploy.code if fsw.deploy is not None else 0, self._target_flag, npc,
+                fsw.deploy.code if fsw.deploy is not None else 0, npc,
                 e.cycles if npc else 0, float(e.bank_cmd) if npc else 0.0, e.pred_impact if npc else _NO_PREDICTION,
                 fsw.k, fsw.t_s, g.phi_r, g.phidot_r, fsw.bank_err_rad, g.sigma_RN, fsw.u_cal_B,
                 fsw.tau_alloc_B, fsw.control.theta_hat, health.eta, health.state)
 
     def fill(self, fsw, u: np.ndarray) -> None:
         """The outputs of the cycle ``fsw`` has just run, whose jet command is ``u``."""
-        _fill(self.one, u, fsw.alloc_short, *self.fill_args(fsw))
+        _fill(self.one, self.target_flag, u, fsw.alloc_short, *self.fill_args(fsw))

@@ -29,7 +29,7 @@ from .controllability import Controllability, velocity_dir_B
 from .fdir import Fdir
 from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
-from .jetdriver import JetDriver, _drive
+from .jetdriver import JetDriver, drive_jets
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation, frame_vectors
@@ -79,14 +79,14 @@ def finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kg
                  k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
     """The control cycle's tail after the allocation, in one compiled call: the allocated
     torque ``tau_B`` copied to ``tau_alloc_B``, the bank-shortfall test (``bank_short``), the
-    jet driver (jetdriver.py ``_drive``: its arrays ``inhibit`` .. ``dt_s``), the answer noted in
+    jet driver (jetdriver.py ``drive_jets``: its arrays ``inhibit`` .. ``dt_s``), the answer noted in
     the ring (``note_sent``) and the output record ``r`` filled (output.py ``fill_record``: the
     arguments from ``r`` on). Returns (propellant used [kg], bank axis short); the events
     those call for are the Python caller's."""
     for i in range(3):
         tau_alloc_B[i] = tau_B[i]
     short = bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac)
-    used = _drive(u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s)
+    used = drive_jets(u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s)
     note_sent(sent, sent_k, k, last)
     fill_record(r, target_flag, last, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
                 k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)

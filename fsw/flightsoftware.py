@@ -13,6 +13,7 @@ need it.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from common.events import EventLog
 from common.frames import wrap_pi
@@ -28,11 +29,11 @@ from .controllability import Controllability, velocity_dir_B
 from .fdir import Fdir
 from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
-from .jetdriver import JetDriver
+from .jetdriver import JetDriver, drive_jets
 from .modes import FailsafeAction, Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation, frame_vectors
-from .output import OutputFiller
+from .output import OutputFiller, fill_record
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
 from .params import Param, ParamRegistry, periods
@@ -40,6 +41,56 @@ from . import executive
 
 COMMAND_RING_S = 1.28   # answers kept for FDIR (64 at 50 Hz, 256 at 200 Hz): a command held longer is not judged
 _ZERO3 = (0.0, 0.0, 0.0)   # a zero torque as Python floats
+
+
+@njit(cache=True)
+def note_sent(sent, sent_k, k, u):
+    """Note ``u`` as the answer to frame ``k`` in the ring (``sent`` rows, ``sent_k`` their frame
+    indices). A second, different answer under the same index (jets held off on a rejected
+    frame after the last good one was answered) leaves the plant holding either: the slot is
+    marked ambiguous (-k-3, which matches no index) and the period it reports is no evidence."""
+    i = k % sent_k.shape[0]
+    k_slot = sent_k[i]
+    if k_slot == k:
+        for j in range(u.shape[0]):
+            if sent[i, j] != u[j]:
+                sent_k[i] = -k - 3
+                break
+    elif k_slot != -k - 3:
+        for j in range(u.shape[0]):
+            sent[i, j] = u[j]
+        sent_k[i] = k
+
+
+@njit(cache=True)
+def bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac):
+    """The bank axis fell short: the torque delivered about it falls short of a demand above
+    ``short_min_Nm`` by more than ``short_frac`` of that demand."""
+    a = bank_axis_B
+    d = a[0] * u_cal_B[0] + a[1] * u_cal_B[1] + a[2] * u_cal_B[2]
+    got = a[0] * tau_alloc_B[0] + a[1] * tau_alloc_B[1] + a[2] * tau_alloc_B[2]
+    return abs(d) > short_min_Nm and (d - got) * (1.0 if d > 0.0 else -1.0) > short_frac * abs(d)
+
+
+@njit(cache=True)
+def finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s, sent, sent_k,
+                 bank_axis_B, short_min_Nm, short_frac,
+                 r, target_flag, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
+                 k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
+    """The control cycle's tail after the allocation, in one compiled call: the allocated
+    torque ``tau_B`` copied to ``tau_alloc_B``, the bank-shortfall test (``bank_short``), the
+    jet driver (jetdriver.py ``drive_jets``: its arrays ``inhibit`` .. ``dt_s``), the answer noted in
+    the ring (``note_sent``) and the output record ``r`` filled (output.py ``fill_record``: the
+    arguments from ``r`` on). Returns (propellant used [kg], bank axis short); the events
+    those call for are the Python caller's."""
+    for i in range(3):
+        tau_alloc_B[i] = tau_B[i]
+    short = bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac)
+    used = drive_jets(u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s)
+    note_sent(sent, sent_k, k, last)
+    fill_record(r, target_flag, last, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
+                k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)
+    return used, short
 
 
 def declarations() -> tuple[tuple[str, list[Param]], ...]:
@@ -124,7 +175,6 @@ class FlightSoftware(GroundCommands):
         # control.shortfall_frac of a demand worth two or more of the largest jet increments
         # (the rule SAMI's saturation awareness applies per body axis)
         self.bank_axis_B = velocity_dir_B(veh.aero.alpha_trim_rad)
-        self._bank_axis = tuple(float(a) for a in self.bank_axis_B)
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
         # while the bank axis falls short, the duty-cycle LP's average realised over cycles
         # (fsw/allocation/dutycycle.py) instead of one pattern per cycle
@@ -154,7 +204,8 @@ class FlightSoftware(GroundCommands):
         # older one than the last sent (a late answer: the plant held the one before)
         self._ring = periods(COMMAND_RING_S, self.dt_s)
         self._sent = np.zeros((self._ring, self.driver.n), dtype=np.uint8)
-        self._sent_k = [-2] * self._ring       # the frame index of each slot's answer
+        self._sent_k = np.full(self._ring, -2, dtype=np.int64)    # the frame index of each slot's answer
+        self._drive_state = self.driver.state_arrays()
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self.realtime = realtime
@@ -167,9 +218,7 @@ class FlightSoftware(GroundCommands):
     def control_step(self, frame) -> np.ndarray:
         """One control cycle on a SENSORS record; returns the jet command (uint8, one per jet).
         Its outputs are in ``output`` afterwards."""
-        u = self._run_cycle(frame)
-        self._output.fill(self, u)
-        return u
+        return self._run_cycle(frame)
 
     def _run_cycle(self, frame) -> np.ndarray:
         self.cycles += 1
@@ -177,7 +226,7 @@ class FlightSoftware(GroundCommands):
         t_s = float(frame["t_ns"]) * 1e-9     # a Python float (a 0-d field times 1e-9 is a NumPy scalar)
         ok = self.monitor.check(t_s, frame)
         if not ok or self.monitor.stale:
-            return self._sent_for(self._hold_off(t_s))
+            return self._held_off(t_s)
         fv = self._frame_views
         if fv[0] is not frame:     # field views of the record, made once per record object
             fv = self._frame_views = (frame, frame_vectors(frame), frame["chamber"])
@@ -199,7 +248,7 @@ class FlightSoftware(GroundCommands):
         self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
         if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,
                                    tracking_error_rad=self.bank_err_rad) == FailsafeAction.HOLD_JETS_OFF:
-            return self._sent_for(self._hold_off(t_s))
+            return self._held_off(t_s)
         mode = self.modes.mode
         if mode == Mode.ENTRY:
             # no learning while FDIR holds a detection not yet reconfigured: the torque
@@ -215,16 +264,34 @@ class FlightSoftware(GroundCommands):
         self.dutycycle.short_frac = self.params["control.shortfall_frac"]
         u_alloc = self.dutycycle.solve(self.allocator, self.u_cal_B)
         self.alloc_ns = self.dutycycle.solve_ns
-        self.tau_alloc_B[:] = self.dutycycle.tau_B
         if self.allocator.tables_version != self._tables_version:      # new tables in use
             self._tables_version = self.allocator.tables_version
             self.dutycycle.reset()
             self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
         if self.allocator.degraded:
             self.events.emit(t_s, EV.ALLOC_DEGRADED)
-        self._tau_last = self._check_bank_shortfall(t_s)       # this cycle's torque, as floats
+        return self._finish(t_s, u_alloc)
+
+    def _finish(self, t_s: float, u_alloc: np.ndarray) -> np.ndarray:
+        """The rest of the cycle in one compiled call (``finish_cycle``), the events it calls
+        for here; returns the command sent."""
+        driver, out = self.driver, self._output
+        used, short = finish_cycle(self.dutycycle.tau_B, u_alloc, driver.armed and self.modes.jets_enabled,
+                                   *self._drive_state, self._sent, self._sent_k,
+                                   self.bank_axis_B, self._bank_short_min_Nm, self.params["control.shortfall_frac"],
+                                   out.one, out.target_flag, *out.fill_args(self))
+        driver.count(used)
+        self._check_bank_shortfall(t_s, short)
+        self._tau_last = tuple(self.tau_alloc_B.tolist())       # this cycle's torque, as floats
         self._have_prev = True
-        return self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))
+        return driver.last_command
+
+    def _held_off(self, t_s: float) -> np.ndarray:
+        """The cycle's answer when the jets are held off (a rejected frame, stale sensors, a
+        failsafe), noted and its outputs filled."""
+        u = self._sent_for(self._hold_off(t_s))
+        self._output.fill(self, u)
+        return u
 
     def rehearse(self, frame, demand_B: np.ndarray) -> None:
         """Real time, shortly before a release (fsw/topology.py): the compiled kernels the
@@ -244,18 +311,8 @@ class FlightSoftware(GroundCommands):
         self.allocator.rehearse(demand_B)
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
-        """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,
-        different answer under the same index (jets held off on a rejected frame after the
-        last good one was answered) leaves the plant holding either: the slot is marked
-        ambiguous (-k-3, which matches no index) and the period it reports is no evidence."""
-        i = self.k % self._ring
-        k_slot = self._sent_k[i]
-        if k_slot == self.k:
-            if not np.array_equal(self._sent[i], u):
-                self._sent_k[i] = -self.k - 3
-        elif k_slot != -self.k - 3:
-            self._sent[i] = u
-            self._sent_k[i] = self.k
+        """Note ``u`` as this frame's answer (frame index self.k; ``note_sent``); returns u."""
+        note_sent(self._sent, self._sent_k, self.k, u)
         return u
 
     def _command_in_force(self, u_k: int) -> np.ndarray | None:
@@ -267,20 +324,12 @@ class FlightSoftware(GroundCommands):
         i = u_k % self._ring
         return self._sent[i] if self._sent_k[i] == u_k else None
 
-    def _check_bank_shortfall(self, t_s: float) -> tuple[float, float, float]:
-        """Note whether the bank axis fell short this cycle; returns tau_alloc_B as floats."""
-        # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
-        a0, a1, a2 = self._bank_axis
-        u0, u1, u2 = self.u_cal_B.tolist()
-        tau = t0, t1, t2 = tuple(self.tau_alloc_B.tolist())
-        d = a0 * u0 + a1 * u1 + a2 * u2
-        got = a0 * t0 + a1 * t1 + a2 * t2
-        self.alloc_short = (abs(d) > self._bank_short_min_Nm
-                            and (d - got) * (1.0 if d > 0.0 else -1.0) > self.params["control.shortfall_frac"] * abs(d))
-        if self.alloc_short:
+    def _check_bank_shortfall(self, t_s: float, short: bool) -> None:
+        """Note whether the bank axis fell short this cycle (``bank_short``)."""
+        self.alloc_short = short
+        if short:
             self.alloc_short_cycles += 1
             self.events.emit(t_s, EV.ALLOC_SHORT)
-        return tau
 
     def no_frame(self, t_s: float) -> np.ndarray:
         """A control cycle in which no fresh sensor frame arrived (SIL): counts towards

@@ -21,7 +21,7 @@ from .params import Param
 
 
 @njit(cache=True)
-def _drive(u_on, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s):
+def drive_jets(u_on, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s):
     """Write the command into ``last`` (uint8), count 0->1 transitions against the previous
     content of ``last``, add on-time; returns the propellant used over this period [kg]."""
     used = 0.0
@@ -102,6 +102,13 @@ class JetDriver:
         self.inhibit[sel] = on
         self.events.emit(t_s, EV.JET_INHIBIT, jets=jet, inhibit=on)
 
+    def state_arrays(self) -> tuple:
+        """``drive_jets``'s arguments after ``u_on`` and ``gate`` (the arrays this driver owns, made once
+        and only ever written in place, and dt), for a compiled caller that drives the jets
+        inside its own kernel (fsw/flightsoftware.py ``finish_cycle``); it adds what ``drive_jets``
+        returns to ``propellant_kg`` and counts ``seq`` as ``command`` does."""
+        return (self.inhibit, self.last_command, self.pulses, self.on_time_s, self._mdot_kgps, self.dt_s)
+
     def command(self, u_alloc: np.ndarray, jets_enabled: bool) -> np.ndarray:
         """The command actually sent for the next period: u_alloc (> 0.5 = on; NaN = off)
         unless disarmed or not enabled by the mode, inhibited jets off. Returns
@@ -112,7 +119,11 @@ class JetDriver:
         if u.dtype != np.uint8:
             np.greater(u, 0.5, out=self._u8, casting="unsafe")      # NaN -> off
             u = self._u8
-        self.propellant_kg += _drive(u, self.armed and bool(jets_enabled), self.inhibit, self.last_command,
-                                     self.pulses, self.on_time_s, self._mdot_kgps, self.dt_s)
-        self.seq += 1
+        self.count(drive_jets(u, self.armed and bool(jets_enabled), self.inhibit, self.last_command,
+                          self.pulses, self.on_time_s, self._mdot_kgps, self.dt_s))
         return self.last_command
+
+    def count(self, used_kg: float) -> None:
+        """One command issued, using ``used_kg`` of propellant (what ``drive_jets`` returned)."""
+        self.propellant_kg += used_kg
+        self.seq += 1

@@ -41,6 +41,7 @@ import time
 
 import numpy as np
 
+from .dutylp import solve_duty_lp
 from .model import N_AXES
 
 
@@ -73,9 +74,16 @@ class DutyCycleRealiser:
         self._uf = np.zeros(n)
         self._rhs = np.zeros(N_AXES)
         self._rows = np.arange(N_AXES, dtype=np.int32)
+        self.fell_back = False                    # the last LP was solved by HiGHS (the kernel failed)
+        self.fallbacks = 0
         self._tables = None                       # the allocator tables the LP was built for
         self._h = None
         self._idx = np.zeros(0, dtype=np.int64)   # usable jets (the LP's first columns)
+        # the kernel's work arrays (fsw/allocation/dutylp.py); the per-model ones in _build
+        self._basis = np.zeros(N_AXES, dtype=np.int64)
+        self._Binv = np.zeros((N_AXES, N_AXES))
+        self._y = np.zeros(N_AXES)
+        self._work = np.zeros((N_AXES, 2 * N_AXES))
         self._cols = np.zeros((N_AXES, n))
         self._bias = np.zeros(N_AXES)
 
@@ -92,9 +100,7 @@ class DutyCycleRealiser:
 
     def _build(self, allocator) -> None:
         """The LP of the allocator's active tables: columns [d (p), r+ (3), r- (3)],
-        rows C d - r+ + r- = u - b."""
-        import highspy
-        from fsw.lp import set_colwise_matrix
+        rows C d - r+ + r- = u - b; the next solve starts cold."""
         t = allocator._tables
         self._tables = t
         self._idx = np.flatnonzero(t.usable)
@@ -103,35 +109,59 @@ class DutyCycleRealiser:
         self.u[:] = 0
         self.acc[:] = 0.0
         p = len(self._idx)
-        M = np.zeros((N_AXES, p + 2 * N_AXES))
-        M[:, :p] = t.cols[:, self._idx]
-        M[:, p:p + N_AXES] = -np.eye(N_AXES)
-        M[:, p + N_AXES:] = np.eye(N_AXES)
-        lp = highspy.HighsLp()
-        lp.num_col_ = p + 2 * N_AXES
-        lp.num_row_ = N_AXES
-        lp.col_cost_ = np.concatenate([allocator.penalty_per_N * self._thrust[self._idx], t.w, t.w])
-        lp.col_lower_ = np.zeros(p + 2 * N_AXES)
-        lp.col_upper_ = np.concatenate([np.ones(p), np.full(2 * N_AXES, highspy.kHighsInf)])
-        lp.row_lower_ = np.zeros(N_AXES)
-        lp.row_upper_ = np.zeros(N_AXES)
-        set_colwise_matrix(lp, M)
-        h = highspy.Highs()
-        h.setOptionValue("output_flag", False)
-        h.setOptionValue("threads", 1)
-        h.passModel(lp)
-        self._h = h
+        ncol = p + 2 * N_AXES
+        self._A = np.zeros((N_AXES, ncol))
+        self._A[:, :p] = t.cols[:, self._idx]
+        self._A[:, p:p + N_AXES] = -np.eye(N_AXES)
+        self._A[:, p + N_AXES:] = np.eye(N_AXES)
+        self._cost = np.concatenate([allocator.penalty_per_N * self._thrust[self._idx], t.w, t.w])
+        self._upper = np.concatenate([np.ones(p), np.full(2 * N_AXES, np.inf)])
+        self._x = np.zeros(ncol)
+        self._state = np.zeros(ncol, dtype=np.int8)
+        self._dj = np.zeros(ncol)
+        self._alpha = np.zeros(ncol)
+        self._cold = True
+        self._h = None                            # HiGHS, built at a first fallback
+
+    def _solve_highs(self) -> None:
+        """The fallback: the same LP through HiGHS (single-threaded), into ``_x``."""
+        if self._h is None:
+            import highspy
+            from fsw.lp import set_colwise_matrix
+            ncol = self._A.shape[1]
+            lp = highspy.HighsLp()
+            lp.num_col_ = ncol
+            lp.num_row_ = N_AXES
+            lp.col_cost_ = self._cost.copy()
+            lp.col_lower_ = np.zeros(ncol)
+            lp.col_upper_ = np.where(np.isfinite(self._upper), self._upper, highspy.kHighsInf)
+            lp.row_lower_ = self._rhs.copy()
+            lp.row_upper_ = self._rhs.copy()
+            set_colwise_matrix(lp, self._A)
+            h = highspy.Highs()
+            h.setOptionValue("output_flag", False)
+            h.setOptionValue("threads", 1)
+            h.passModel(lp)
+            self._h = h
+        self._h.changeRowsBounds(N_AXES, self._rows, self._rhs, self._rhs)
+        self._h.run()
+        self._x[:] = self._h.getSolution().col_value
 
     def duty_cycles(self, allocator, u_B: np.ndarray) -> np.ndarray:
         """d (n jets; 0 for unusable ones): the LP's optimum for demand ``u_B`` on the
-        allocator's active model. Sets ``avg_B`` = b + C d."""
+        allocator's active model (fsw/allocation/dutylp.py's kernel, warm from the last
+        cycle's basis; HiGHS if it fails, counted in ``fallbacks``). Sets ``avg_B`` = b + C d."""
         if self._tables is not allocator._tables:
             self._build(allocator)
         np.subtract(u_B, self._bias, out=self._rhs)
-        h = self._h
-        h.changeRowsBounds(N_AXES, self._rows, self._rhs, self._rhs)
-        h.run()
-        x = h.getSolution().col_value
+        pivots = solve_duty_lp(self._rhs, self._A, self._cost, self._upper, self._basis, self._state, self._x,
+                               self._Binv, self._y, self._dj, self._alpha, self._work, self._cold)
+        self.fell_back = pivots < 0
+        if self.fell_back:
+            self.fallbacks += 1
+            self._solve_highs()
+        self._cold = self.fell_back            # a failed basis is no warm start
+        x = self._x
         self.d[:] = 0.0
         for q, k in enumerate(self._idx):
             v = x[q]

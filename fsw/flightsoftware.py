@@ -222,6 +222,8 @@ class FlightSoftware(GroundCommands):
             self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
         if self.allocator.degraded:
             self.events.emit(t_s, EV.ALLOC_DEGRADED)
+        if self.dutycycle.fell_back:
+            self.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
         self._tau_last = self._check_bank_shortfall(t_s)       # this cycle's torque, as floats
         self._have_prev = True
         return self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))

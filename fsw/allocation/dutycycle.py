@@ -15,8 +15,9 @@ allocator's own problem without its per-cycle box,
     minimise   sum_i w_i |u_i - (b + C d)_i| + sum_k c_k d_k   over 0 <= d <= 1,
 
 C the usable jets' columns eta_k T_k, b the stuck-on bias, w and c the allocator's weights and
-penalties (HiGHS, single-threaded, the model built once per health and warm-started from the
-previous cycle's basis), and fires each jet by a first-order sigma-delta on its duty cycle:
+penalties (a bounded dual simplex compiled for this 3-row LP, fsw/allocation/dutylp.py, warm from
+the previous cycle's basis; HiGHS solves the cycle's LP if the kernel fails, an event),
+and fires each jet by a first-order sigma-delta on its duty cycle:
 acc_k += d_k; fire when acc_k >= 1/2; acc_k -= fired. The accumulator stays in [-1/2, 1/2), so
 over any run of N short cycles the jets' mean firing equals the mean d within 1/N per jet, and
 the mean torque b + C mean(d) within sum_k |C_k| / N. A cycle that is not short flies the exact
@@ -29,8 +30,8 @@ FSW's own rule modulates only the cycles where one pattern cannot deliver the ba
 demand one pattern delivers within that rule is left to the attitude loop, which integrates the
 rest (docs/decisions.md keeps the figures).
 
-Cost: one HiGHS solve per modulated cycle (about ten times the exact allocator's query), the LP
-model built at the first short cycle after a change of tables.
+Cost: one kernel call per modulated cycle (a pivot or two from the previous basis), the LP's
+arrays built at the first short cycle after a change of tables.
 
 The paper's sign box (allocator.spill_jets 0) is flown as before: no modulation. While an
 asynchronous reconfiguration is pending (real time: the interim model) neither.
@@ -41,12 +42,12 @@ import time
 
 import numpy as np
 
-from .dutylp import solve_duty_lp
+from .dutylp import solve_duty_lp, warm_kernel
 from .model import N_AXES
 
 
 class DutyCycleRealiser:
-    """Wraps one allocator's answer; arrays preallocated (HiGHS's solution copy aside)."""
+    """Wraps one allocator's answer; arrays preallocated (per model: at its first short cycle)."""
 
     def __init__(self, bank_axis_B: np.ndarray, torque_matrix_Nm: np.ndarray, thrust_N: np.ndarray) -> None:
         T = np.asarray(torque_matrix_Nm, dtype=float)
@@ -84,6 +85,8 @@ class DutyCycleRealiser:
         self._Binv = np.zeros((N_AXES, N_AXES))
         self._y = np.zeros(N_AXES)
         self._work = np.zeros((N_AXES, 2 * N_AXES))
+        self.pivots = 0                           # pivots of the last LP (from the previous basis)
+        warm_kernel()
         self._cols = np.zeros((N_AXES, n))
         self._bias = np.zeros(N_AXES)
 
@@ -157,6 +160,7 @@ class DutyCycleRealiser:
         pivots = solve_duty_lp(self._rhs, self._A, self._cost, self._upper, self._basis, self._state, self._x,
                                self._Binv, self._y, self._dj, self._alpha, self._work, self._cold)
         self.fell_back = pivots < 0
+        self.pivots = pivots
         if self.fell_back:
             self.fallbacks += 1
             self._solve_highs()
@@ -182,6 +186,7 @@ class DutyCycleRealiser:
     def _solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
         jets = allocator.solve(u_B)
         self.demand_B[:] = u_B
+        self.fell_back = False
         if (allocator.rejected or allocator.reconfig_pending or not allocator._tables.spill_box
                 or not self._short(u_B, allocator.tau_B)):
             self.tau_B[:] = allocator.tau_B

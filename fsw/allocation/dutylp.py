@@ -195,3 +195,19 @@ def solve_duty_lp(rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work
         state[q] = BASIC
         basis[r] = q
     return ITERATION_LIMIT
+
+
+def warm_kernel() -> None:
+    """Compile (or load from the cache) the kernel and run its branches once (cold start, a
+    pivot, a warm start), on a one-jet LP, so the first short cycle in flight meets no JIT."""
+    A = np.array([[1.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+                  [0.5, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0],
+                  [0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 1.0]])
+    cost = np.array([0.1, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+    upper = np.array([1.0, np.inf, np.inf, np.inf, np.inf, np.inf, np.inf])
+    n = A.shape[1]
+    basis, state = np.zeros(3, dtype=np.int64), np.zeros(n, dtype=np.int8)
+    x, dj, alpha = np.zeros(n), np.zeros(n), np.zeros(n)
+    Binv, y, work = np.zeros((3, 3)), np.zeros(3), np.zeros((3, 6))
+    for rhs, cold in ((np.array([2.0, 1.0, -1.0]), True), (np.array([-0.5, 0.2, 0.0]), False)):
+        solve_duty_lp(rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work, cold)

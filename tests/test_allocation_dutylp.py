@@ -230,7 +230,7 @@ def test_the_realiser_solves_its_lp_without_highs(monkeypatch):
 def test_a_failed_kernel_falls_back_to_highs_counted_and_restarts_cold(monkeypatch):
     al, dc = _setup()
     dc.duty_cycles(al, DEMANDS[0])
-    monkeypatch.setattr(dutycycle_module, "solve_duty_lp", lambda *args: ITERATION_LIMIT)
+    monkeypatch.setattr(dutycycle_module, "duty_cycles_kernel", lambda *args: ITERATION_LIMIT)
     for u in DEMANDS[1:3]:
         dc.duty_cycles(al, u)
         assert dc.fell_back

@@ -42,7 +42,7 @@ import time
 
 import numpy as np
 
-from .dutylp import solve_duty_lp, warm_kernel
+from .dutylp import duty_cycles_kernel, scatter_duty_cycles, sigma_delta, warm_kernel
 from .model import N_AXES
 
 
@@ -126,8 +126,9 @@ class DutyCycleRealiser:
         self._cold = True
         self._h = None                            # HiGHS, built at a first fallback
 
-    def _solve_highs(self) -> None:
+    def _solve_highs(self, u_B: np.ndarray) -> None:
         """The fallback: the same LP through HiGHS (single-threaded), into ``_x``."""
+        np.subtract(u_B, self._bias, out=self._rhs)
         if self._h is None:
             import highspy
             from fsw.lp import set_colwise_matrix
@@ -156,22 +157,16 @@ class DutyCycleRealiser:
         cycle's basis; HiGHS if it fails, counted in ``fallbacks``). Sets ``avg_B`` = b + C d."""
         if self._tables is not allocator._tables:
             self._build(allocator)
-        np.subtract(u_B, self._bias, out=self._rhs)
-        pivots = solve_duty_lp(self._rhs, self._A, self._cost, self._upper, self._basis, self._state, self._x,
-                               self._Binv, self._y, self._dj, self._alpha, self._work, self._cold)
-        self.fell_back = pivots < 0
+        pivots = duty_cycles_kernel(u_B, self._bias, self._idx, self._cols, self.d, self.avg_B, self._rhs, self._A,
+                                    self._cost, self._upper, self._basis, self._state, self._x, self._Binv, self._y,
+                                    self._dj, self._alpha, self._work, self._cold)
         self.pivots = pivots
+        self.fell_back = pivots < 0
         if self.fell_back:
             self.fallbacks += 1
-            self._solve_highs()
+            self._solve_highs(u_B)
+            scatter_duty_cycles(self._x, self._idx, self._cols, self._bias, self.d, self.avg_B)
         self._cold = self.fell_back            # a failed basis is no warm start
-        x = self._x
-        self.d[:] = 0.0
-        for q, k in enumerate(self._idx):
-            v = x[q]
-            self.d[k] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
-        np.dot(self._cols, self.d, out=self.avg_B)
-        self.avg_B += self._bias
         return self.d
 
     def solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
@@ -195,14 +190,8 @@ class DutyCycleRealiser:
                 self.modulated = False
             return jets
         self.duty_cycles(allocator, u_B)
-        self.acc += self.d
         u = self.u
-        for k in self._idx:
-            if self.acc[k] >= 0.5:
-                u[k] = 1
-                self.acc[k] -= 1.0
-            else:
-                u[k] = 0
+        sigma_delta(self.d, self._idx, self.acc, u)
         self._uf[:] = u
         np.dot(self._cols, self._uf, out=self.tau_B)
         self.tau_B += self._bias

@@ -197,8 +197,55 @@ def solve_duty_lp(rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work
     return ITERATION_LIMIT
 
 
+@njit(cache=True)
+def duty_cycles_kernel(u_B, bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha,
+                       work, cold):
+    """The realiser's LP for demand u_B: rhs = u_B - bias, ``solve_duty_lp``, then the duty
+    cycles d (n jets: column q of the LP is jet jets[q], clipped to [0, 1]; 0 for the others) and
+    avg_B = bias + cols d. Returns what ``solve_duty_lp`` returns; on a failure d and avg_B are
+    left to the caller's fallback."""
+    for i in range(rhs.shape[0]):
+        rhs[i] = u_B[i] - bias[i]
+    pivots = solve_duty_lp(rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work, cold)
+    if pivots < 0:
+        return pivots
+    scatter_duty_cycles(x, jets, cols, bias, d, avg_B)
+    return pivots
+
+
+@njit(cache=True)
+def scatter_duty_cycles(x, jets, cols, bias, d, avg_B):
+    """d[jets[q]] = x[q] clipped to [0, 1], 0 for the other jets; avg_B = bias + cols d."""
+    for k in range(d.shape[0]):
+        d[k] = 0.0
+    for q in range(jets.shape[0]):
+        v = x[q]
+        d[jets[q]] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
+    for i in range(avg_B.shape[0]):
+        s = bias[i]
+        for k in range(d.shape[0]):
+            s += cols[i, k] * d[k]
+        avg_B[i] = s
+
+
+@njit(cache=True)
+def sigma_delta(d, jets, acc, u):
+    """One cycle of the first-order sigma-delta on duty cycles d: acc_k += d_k; jet k fires
+    (u_k = 1) when acc_k >= 1/2, and then acc_k -= 1. Only jets ``jets`` fire; the others' u_k
+    is left as it is."""
+    for k in range(acc.shape[0]):
+        acc[k] += d[k]
+    for q in range(jets.shape[0]):
+        k = jets[q]
+        if acc[k] >= 0.5:
+            u[k] = 1
+            acc[k] -= 1.0
+        else:
+            u[k] = 0
+
+
 def warm_kernel() -> None:
-    """Compile (or load from the cache) the kernel and run its branches once (cold start, a
+    """Compile (or load from the cache) the kernels and run their branches once (cold start, a
     pivot, a warm start), on a one-jet LP, so the first short cycle in flight meets no JIT."""
     A = np.array([[1.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0],
                   [0.5, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0],
@@ -209,5 +256,11 @@ def warm_kernel() -> None:
     basis, state = np.zeros(3, dtype=np.int64), np.zeros(n, dtype=np.int8)
     x, dj, alpha = np.zeros(n), np.zeros(n), np.zeros(n)
     Binv, y, work = np.zeros((3, 3)), np.zeros(3), np.zeros((3, 6))
-    for rhs, cold in ((np.array([2.0, 1.0, -1.0]), True), (np.array([-0.5, 0.2, 0.0]), False)):
-        solve_duty_lp(rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work, cold)
+    jets, cols, bias = np.zeros(1, dtype=np.int64), A[:, :2].copy(), np.zeros(3)
+    d, acc, avg_B, rhs = np.zeros(2), np.zeros(2), np.zeros(3), np.zeros(3)
+    u = np.zeros(2, dtype=np.uint8)
+    for u_B, cold in ((np.array([2.0, 1.0, -1.0]), True), (np.array([-0.5, 0.2, 0.0]), False)):
+        duty_cycles_kernel(u_B, bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj,
+                           alpha, work, cold)
+        sigma_delta(d, jets, acc, u)
+    scatter_duty_cycles(x, jets, cols, bias, d, avg_B)

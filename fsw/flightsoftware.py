@@ -234,8 +234,8 @@ class FlightSoftware(GroundCommands):
         answers discarded -- the frame check, the jet monitor and navigation on ``frame``
         (the record of the last frame this instance took), SAMI on a copy of its state with
         the last cycle's navigation and reference, and the allocator's query on its own
-        tables for ``demand_B`` (the spare's demand on that frame). Nothing the next cycle
-        reads changes."""
+        tables for ``demand_B`` (the spare's demand on that frame), after a modulated cycle
+        the duty-cycle LP's too. Nothing the next cycle reads changes."""
         fv = self._frame_views
         if fv[0] is frame:
             self.monitor.rehearse(frame)
@@ -244,6 +244,7 @@ class FlightSoftware(GroundCommands):
             if self._have_prev:
                 self.control.rehearse(self.nav.state, self.guidance, self.tau_alloc_B)
         self.allocator.rehearse(demand_B)
+        self.dutycycle.rehearse(self.allocator, demand_B)
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k); returns u. A second,

@@ -240,3 +240,22 @@ def test_a_failed_kernel_falls_back_to_highs_counted_and_restarts_cold(monkeypat
     monkeypatch.undo()
     dc.duty_cycles(al, DEMANDS[3])
     assert not dc.fell_back and dc.fallbacks == 2
+
+
+def test_a_rehearsal_between_modulated_cycles_changes_no_answer():
+    """Real time rehearses the LP before each release for a demand near the next one: the flown
+    jets, torques, duty cycles and accumulators equal those of a flight never rehearsed."""
+    (al, dc), (ref_al, ref) = _setup(), _setup()
+    rng = np.random.default_rng(5)
+    u = -300.0 * AXIS
+    modulated = 0
+    for _ in range(120):
+        dc.rehearse(al, u + rng.normal(0.0, 30.0, 3))
+        u = u + rng.normal(0.0, 15.0, 3)
+        jets, ref_jets = dc.solve(al, u), ref.solve(ref_al, u)
+        modulated += dc.modulated
+        assert dc.modulated == ref.modulated
+        for a, b in ((jets, ref_jets), (dc.tau_B, ref.tau_B), (dc.d, ref.d), (dc.acc, ref.acc),
+                     (dc._basis, ref._basis), (dc._state, ref._state)):
+            assert np.array_equal(a, b)
+    assert modulated > 60 and np.any(dc._d_r != 0.0)      # modulated flights, and rehearsals that solved

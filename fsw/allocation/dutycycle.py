@@ -86,6 +86,13 @@ class DutyCycleRealiser:
         self._y = np.zeros(N_AXES)
         self._work = np.zeros((N_AXES, 2 * N_AXES))
         self.pivots = 0                           # pivots of the last LP (from the previous basis)
+        # the rehearsal's copies of what a solve reads and its scratch outputs
+        self._basis_r = np.zeros(N_AXES, dtype=np.int64)
+        self._state_r = np.zeros(0, dtype=np.int8)
+        self._acc_r = np.zeros(n)
+        self._d_r = np.zeros(n)
+        self._avg_r = np.zeros(N_AXES)
+        self._u_r = np.zeros(n, dtype=np.uint8)
         warm_kernel()
         self._cols = np.zeros((N_AXES, n))
         self._bias = np.zeros(N_AXES)
@@ -121,6 +128,7 @@ class DutyCycleRealiser:
         self._upper = np.concatenate([np.ones(p), np.full(2 * N_AXES, np.inf)])
         self._x = np.zeros(ncol)
         self._state = np.zeros(ncol, dtype=np.int8)
+        self._state_r = np.zeros(ncol, dtype=np.int8)
         self._dj = np.zeros(ncol)
         self._alpha = np.zeros(ncol)
         self._cold = True
@@ -198,6 +206,23 @@ class DutyCycleRealiser:
         self.modulated = True
         self.modulated_cycles += 1
         return u
+
+    def rehearse(self, allocator, u_B: np.ndarray) -> None:
+        """Real time, just before a release, after a modulated cycle: the LP and the sigma-delta
+        for a demand near the next one, the answer discarded, so the kernels and the model the
+        next modulated cycle reads are in the caches. Changes nothing an answer depends on: the
+        warm-start basis and the accumulators are copied, the duty cycles and jets go to scratch,
+        and the kernel's work arrays are rewritten by every solve before they are read."""
+        if (not self.modulated or self._tables is not allocator._tables or allocator.reconfig_pending
+                or type(u_B) is not np.ndarray or u_B.dtype != np.float64 or u_B.shape != (N_AXES,)):
+            return
+        self._basis_r[:] = self._basis
+        self._state_r[:] = self._state
+        self._acc_r[:] = self.acc
+        if duty_cycles_kernel(u_B, self._bias, self._idx, self._cols, self._d_r, self._avg_r, self._rhs, self._A,
+                              self._cost, self._upper, self._basis_r, self._state_r, self._x, self._Binv, self._y,
+                              self._dj, self._alpha, self._work, self._cold) >= 0:
+            sigma_delta(self._d_r, self._idx, self._acc_r, self._u_r)
 
     def reset(self) -> None:
         self.acc[:] = 0.0

@@ -270,6 +270,8 @@ class FlightSoftware(GroundCommands):
             self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
         if self.allocator.degraded:
             self.events.emit(t_s, EV.ALLOC_DEGRADED)
+        if self.dutycycle.fell_back:
+            self.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
         return self._finish(t_s, u_alloc)
 
     def _finish(self, t_s: float, u_alloc: np.ndarray) -> np.ndarray:
@@ -299,8 +301,8 @@ class FlightSoftware(GroundCommands):
         answers discarded -- the frame check, the jet monitor and navigation on ``frame``
         (the record of the last frame this instance took), SAMI on a copy of its state with
         the last cycle's navigation and reference, and the allocator's query on its own
-        tables for ``demand_B`` (the spare's demand on that frame). Nothing the next cycle
-        reads changes."""
+        tables for ``demand_B`` (the spare's demand on that frame), after a modulated cycle
+        the duty-cycle LP's too. Nothing the next cycle reads changes."""
         fv = self._frame_views
         if fv[0] is frame:
             self.monitor.rehearse(frame)
@@ -309,6 +311,7 @@ class FlightSoftware(GroundCommands):
             if self._have_prev:
                 self.control.rehearse(self.nav.state, self.guidance, self.tau_alloc_B)
         self.allocator.rehearse(demand_B)
+        self.dutycycle.rehearse(self.allocator, demand_B)
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k; ``note_sent``); returns u."""

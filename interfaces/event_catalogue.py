@@ -255,6 +255,8 @@ class EV:
                          "The allocation problem was infeasible; the best effort was sent.", 1.0)
     ALLOC_SHORT = _ev(603, "allocator", WARNING, "ALLOCATION SHORT ON BANK AXIS",
                       "The allocated torque fell short of the demand on the bank axis.", 1.0)
+    ALLOC_LP_FALLBACK = _ev(604, "allocator", WARNING, "DUTY-CYCLE LP SOLVED BY FALLBACK",
+                            "The duty-cycle LP's compiled solver failed; HiGHS solved the cycle's LP.", 1.0)
     # guidance (fsw/authority.py, fsw/guidance/npc.py, their background jobs: fsw/jobs.py)
     CONTROLLABILITY = _ev(701, "guidance", NOTICE, "AUTH +{auth_pos:.2f}/-{auth_neg:.2f} DEG/S2 BIAS {bias_Nm:.0f}NM "
                                               "TRIM {trim}DEG",

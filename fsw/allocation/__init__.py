@@ -6,6 +6,8 @@ build      the table build's numba kernels (enumeration, octant tables, tree)
 query      the solve kernels over one configuration's tables
 allocator  the Allocator: parameters, table cache, switching, interim model
 rebuild    the background table builder (real time)
+dutycycle  the duty-cycle realisation while the bank axis is short (an LP, a sigma-delta)
+dutylp     that LP's compiled solver (a bounded dual simplex) and the sigma-delta's kernel
 reference  HiGHS and enumeration solvers: test and benchmark references, not flown
 """
 from .allocator import PARAMS, Allocator

@@ -15,8 +15,9 @@ allocator's own problem without its per-cycle box,
     minimise   sum_i w_i |u_i - (b + C d)_i| + sum_k c_k d_k   over 0 <= d <= 1,
 
 C the usable jets' columns eta_k T_k, b the stuck-on bias, w and c the allocator's weights and
-penalties (HiGHS, single-threaded, the model built once per health and warm-started from the
-previous cycle's basis), and fires each jet by a first-order sigma-delta on its duty cycle:
+penalties (a bounded dual simplex compiled for this 3-row LP, fsw/allocation/dutylp.py, warm from
+the previous cycle's basis; HiGHS solves the cycle's LP if the kernel fails, an event),
+and fires each jet by a first-order sigma-delta on its duty cycle:
 acc_k += d_k; fire when acc_k >= 1/2; acc_k -= fired. The accumulator stays in [-1/2, 1/2), so
 over any run of N short cycles the jets' mean firing equals the mean d within 1/N per jet, and
 the mean torque b + C mean(d) within sum_k |C_k| / N. A cycle that is not short flies the exact
@@ -29,8 +30,8 @@ FSW's own rule modulates only the cycles where one pattern cannot deliver the ba
 demand one pattern delivers within that rule is left to the attitude loop, which integrates the
 rest (docs/decisions.md keeps the figures).
 
-Cost: one HiGHS solve per modulated cycle (about ten times the exact allocator's query), the LP
-model built at the first short cycle after a change of tables.
+Cost: one kernel call per modulated cycle (a pivot or two from the previous basis), the LP's
+arrays built at the first short cycle after a change of tables.
 
 The paper's sign box (allocator.spill_jets 0) is flown as before: no modulation. While an
 asynchronous reconfiguration is pending (real time: the interim model) neither.
@@ -41,11 +42,12 @@ import time
 
 import numpy as np
 
+from .dutylp import duty_cycles_kernel, scatter_duty_cycles, sigma_delta, warm_kernel
 from .model import N_AXES
 
 
 class DutyCycleRealiser:
-    """Wraps one allocator's answer; arrays preallocated (HiGHS's solution copy aside)."""
+    """Wraps one allocator's answer; arrays preallocated (per model: at its first short cycle)."""
 
     def __init__(self, bank_axis_B: np.ndarray, torque_matrix_Nm: np.ndarray, thrust_N: np.ndarray) -> None:
         T = np.asarray(torque_matrix_Nm, dtype=float)
@@ -73,9 +75,25 @@ class DutyCycleRealiser:
         self._uf = np.zeros(n)
         self._rhs = np.zeros(N_AXES)
         self._rows = np.arange(N_AXES, dtype=np.int32)
+        self.fell_back = False                    # the last LP was solved by HiGHS (the kernel failed)
+        self.fallbacks = 0
         self._tables = None                       # the allocator tables the LP was built for
         self._h = None
         self._idx = np.zeros(0, dtype=np.int64)   # usable jets (the LP's first columns)
+        # the kernel's work arrays (fsw/allocation/dutylp.py); the per-model ones in _build
+        self._basis = np.zeros(N_AXES, dtype=np.int64)
+        self._Binv = np.zeros((N_AXES, N_AXES))
+        self._y = np.zeros(N_AXES)
+        self._work = np.zeros((N_AXES, 2 * N_AXES))
+        self.pivots = 0                           # pivots of the last LP (from the previous basis)
+        # the rehearsal's copies of what a solve reads and its scratch outputs
+        self._basis_r = np.zeros(N_AXES, dtype=np.int64)
+        self._state_r = np.zeros(0, dtype=np.int8)
+        self._acc_r = np.zeros(n)
+        self._d_r = np.zeros(n)
+        self._avg_r = np.zeros(N_AXES)
+        self._u_r = np.zeros(n, dtype=np.uint8)
+        warm_kernel()
         self._cols = np.zeros((N_AXES, n))
         self._bias = np.zeros(N_AXES)
 
@@ -92,9 +110,7 @@ class DutyCycleRealiser:
 
     def _build(self, allocator) -> None:
         """The LP of the allocator's active tables: columns [d (p), r+ (3), r- (3)],
-        rows C d - r+ + r- = u - b."""
-        import highspy
-        from fsw.lp import set_colwise_matrix
+        rows C d - r+ + r- = u - b; the next solve starts cold."""
         t = allocator._tables
         self._tables = t
         self._idx = np.flatnonzero(t.usable)
@@ -103,41 +119,62 @@ class DutyCycleRealiser:
         self.u[:] = 0
         self.acc[:] = 0.0
         p = len(self._idx)
-        M = np.zeros((N_AXES, p + 2 * N_AXES))
-        M[:, :p] = t.cols[:, self._idx]
-        M[:, p:p + N_AXES] = -np.eye(N_AXES)
-        M[:, p + N_AXES:] = np.eye(N_AXES)
-        lp = highspy.HighsLp()
-        lp.num_col_ = p + 2 * N_AXES
-        lp.num_row_ = N_AXES
-        lp.col_cost_ = np.concatenate([allocator.penalty_per_N * self._thrust[self._idx], t.w, t.w])
-        lp.col_lower_ = np.zeros(p + 2 * N_AXES)
-        lp.col_upper_ = np.concatenate([np.ones(p), np.full(2 * N_AXES, highspy.kHighsInf)])
-        lp.row_lower_ = np.zeros(N_AXES)
-        lp.row_upper_ = np.zeros(N_AXES)
-        set_colwise_matrix(lp, M)
-        h = highspy.Highs()
-        h.setOptionValue("output_flag", False)
-        h.setOptionValue("threads", 1)
-        h.passModel(lp)
-        self._h = h
+        ncol = p + 2 * N_AXES
+        self._A = np.zeros((N_AXES, ncol))
+        self._A[:, :p] = t.cols[:, self._idx]
+        self._A[:, p:p + N_AXES] = -np.eye(N_AXES)
+        self._A[:, p + N_AXES:] = np.eye(N_AXES)
+        self._cost = np.concatenate([allocator.penalty_per_N * self._thrust[self._idx], t.w, t.w])
+        self._upper = np.concatenate([np.ones(p), np.full(2 * N_AXES, np.inf)])
+        self._x = np.zeros(ncol)
+        self._state = np.zeros(ncol, dtype=np.int8)
+        self._state_r = np.zeros(ncol, dtype=np.int8)
+        self._dj = np.zeros(ncol)
+        self._alpha = np.zeros(ncol)
+        self._cold = True
+        self._h = None                            # HiGHS, built at a first fallback
+
+    def _solve_highs(self, u_B: np.ndarray) -> None:
+        """The fallback: the same LP through HiGHS (single-threaded), into ``_x``."""
+        np.subtract(u_B, self._bias, out=self._rhs)
+        if self._h is None:
+            import highspy
+            from fsw.lp import set_colwise_matrix
+            ncol = self._A.shape[1]
+            lp = highspy.HighsLp()
+            lp.num_col_ = ncol
+            lp.num_row_ = N_AXES
+            lp.col_cost_ = self._cost.copy()
+            lp.col_lower_ = np.zeros(ncol)
+            lp.col_upper_ = np.where(np.isfinite(self._upper), self._upper, highspy.kHighsInf)
+            lp.row_lower_ = self._rhs.copy()
+            lp.row_upper_ = self._rhs.copy()
+            set_colwise_matrix(lp, self._A)
+            h = highspy.Highs()
+            h.setOptionValue("output_flag", False)
+            h.setOptionValue("threads", 1)
+            h.passModel(lp)
+            self._h = h
+        self._h.changeRowsBounds(N_AXES, self._rows, self._rhs, self._rhs)
+        self._h.run()
+        self._x[:] = self._h.getSolution().col_value
 
     def duty_cycles(self, allocator, u_B: np.ndarray) -> np.ndarray:
         """d (n jets; 0 for unusable ones): the LP's optimum for demand ``u_B`` on the
-        allocator's active model. Sets ``avg_B`` = b + C d."""
+        allocator's active model (fsw/allocation/dutylp.py's kernel, warm from the last
+        cycle's basis; HiGHS if it fails, counted in ``fallbacks``). Sets ``avg_B`` = b + C d."""
         if self._tables is not allocator._tables:
             self._build(allocator)
-        np.subtract(u_B, self._bias, out=self._rhs)
-        h = self._h
-        h.changeRowsBounds(N_AXES, self._rows, self._rhs, self._rhs)
-        h.run()
-        x = h.getSolution().col_value
-        self.d[:] = 0.0
-        for q, k in enumerate(self._idx):
-            v = x[q]
-            self.d[k] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
-        np.dot(self._cols, self.d, out=self.avg_B)
-        self.avg_B += self._bias
+        pivots = duty_cycles_kernel(u_B, self._bias, self._idx, self._cols, self.d, self.avg_B, self._rhs, self._A,
+                                    self._cost, self._upper, self._basis, self._state, self._x, self._Binv, self._y,
+                                    self._dj, self._alpha, self._work, self._cold)
+        self.pivots = pivots
+        self.fell_back = pivots < 0
+        if self.fell_back:
+            self.fallbacks += 1
+            self._solve_highs(u_B)
+            scatter_duty_cycles(self._x, self._idx, self._cols, self._bias, self.d, self.avg_B)
+        self._cold = self.fell_back            # a failed basis is no warm start
         return self.d
 
     def solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
@@ -152,6 +189,7 @@ class DutyCycleRealiser:
     def _solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
         jets = allocator.solve(u_B)
         self.demand_B[:] = u_B
+        self.fell_back = False
         if (allocator.rejected or allocator.reconfig_pending or not allocator._tables.spill_box
                 or not self._short(u_B, allocator.tau_B)):
             self.tau_B[:] = allocator.tau_B
@@ -160,20 +198,31 @@ class DutyCycleRealiser:
                 self.modulated = False
             return jets
         self.duty_cycles(allocator, u_B)
-        self.acc += self.d
         u = self.u
-        for k in self._idx:
-            if self.acc[k] >= 0.5:
-                u[k] = 1
-                self.acc[k] -= 1.0
-            else:
-                u[k] = 0
+        sigma_delta(self.d, self._idx, self.acc, u)
         self._uf[:] = u
         np.dot(self._cols, self._uf, out=self.tau_B)
         self.tau_B += self._bias
         self.modulated = True
         self.modulated_cycles += 1
         return u
+
+    def rehearse(self, allocator, u_B: np.ndarray) -> None:
+        """Real time, just before a release, after a modulated cycle: the LP and the sigma-delta
+        for a demand near the next one, the answer discarded, so the kernels and the model the
+        next modulated cycle reads are in the caches. Changes nothing an answer depends on: the
+        warm-start basis and the accumulators are copied, the duty cycles and jets go to scratch,
+        and the kernel's work arrays are rewritten by every solve before they are read."""
+        if (not self.modulated or self._tables is not allocator._tables or allocator.reconfig_pending
+                or type(u_B) is not np.ndarray or u_B.dtype != np.float64 or u_B.shape != (N_AXES,)):
+            return
+        self._basis_r[:] = self._basis
+        self._state_r[:] = self._state
+        self._acc_r[:] = self.acc
+        if duty_cycles_kernel(u_B, self._bias, self._idx, self._cols, self._d_r, self._avg_r, self._rhs, self._A,
+                              self._cost, self._upper, self._basis_r, self._state_r, self._x, self._Binv, self._y,
+                              self._dj, self._alpha, self._work, self._cold) >= 0:
+            sigma_delta(self._d_r, self._idx, self._acc_r, self._u_r)
 
     def reset(self) -> None:
         self.acc[:] = 0.0

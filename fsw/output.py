@@ -68,13 +68,6 @@ def fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc,
     q.guid_flags = flags
 
 
-@njit(cache=True)
-def _fill(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
-          k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
-    fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
-                k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)
-
-
 class OutputFiller:
     """Fills ``rec`` (an FSW_STATE record) from a FlightSoftware after its control cycle; the
     fields of FSW_STATE_SHELL are left to the rate-group driver (fsw/topology.py)."""
@@ -107,4 +100,4 @@ class OutputFiller:
 
     def fill(self, fsw, u: np.ndarray) -> None:
         """The outputs of the cycle ``fsw`` has just run, whose jet command is ``u``."""
-        _fill(self.one, self.target_flag, u, fsw.alloc_short, *self.fill_args(fsw))
+        fill_record(self.one, self.target_flag, u, fsw.alloc_short, *self.fill_args(fsw))

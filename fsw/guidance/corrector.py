@@ -267,7 +267,8 @@ class Corrector:
         self._p_e0_jpkg = math.nan       # energy at which bank0's profile starts
         self._shp = None                 # the reference shaper's state the predictions start from
         self._out = np.zeros(N_O)
-        self._c_reach = np.zeros_like(self.constants)   # _reach's: the prediction flown on to the box's edge
+        self._c_reach = np.zeros_like(self.constants)   # _reach's: the prediction flown on to the box's edge ...
+        self._out_reach = np.zeros(N_O)                  # ... and its output (self._out keeps the answer's)
         self._reach_end = trigger_reach_end(scenario, params)
         self.reach_rad = math.nan        # the last answer's lateral magnitude (_reach), NaN: none
 
@@ -303,16 +304,16 @@ class Corrector:
             return central_angle(x[:3], out[:3]) * self.radius_m - s_togo
         return z
 
-    def _predict(self, x, b0, bf, e0, sign, out, t_switch=0.0):
+    def _predict(self, x, b0, bf, e0, sign, out, t_switch=0.0, constants=None):
         """The corrector's prediction: from the reference shaper's state when one is given
         (the transition in progress flown within the attitude chain's limits; a reversal to
         ``sign`` commanded at t_switch > 0), else the law from the start (a reversal to ``sign``
-        in effect at t_switch)."""
+        in effect at t_switch). ``constants``: the predictor's, None: self.constants."""
+        c = self.constants if constants is None else constants
         if self._shp is None:
-            predict(x, self.constants, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"], out,
-                    float(t_switch))
+            predict(x, c, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"], out, float(t_switch))
         else:
-            predict_shaped(x, self.constants, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"],
+            predict_shaped(x, c, b0, bf, e0, self.e_deploy_jpkg, sign, self.params["npc.dt_pred_s"],
                            out, self._shp, float(t_switch))
 
     def _floor_bank(self, x, e0, s_togo, sign, h_floor, b_hi, h_hi):
@@ -377,14 +378,10 @@ class Corrector:
         not fire at the target there: the target passed above the box (fired at its entry, behind
         it), or not reached before the trigger's Mach or altitude floor (short), or fired below
         h_fire, or the box entered below h_floor (the range solution's own altitude criteria)."""
-        c, out = self._c_reach, self._out
+        c, out = self._c_reach, self._out_reach
         c[:] = self.constants
         c[C_MACH_F], c[C_H_FLOOR] = self._reach_end
-        dt, ef = self.params["npc.dt_pred_s"], self.e_deploy_jpkg
-        if self._shp is None:
-            predict(x, c, b0, bf, e0, ef, sign, dt, out, 0.0)
-        else:
-            predict_shaped(x, c, b0, bf, e0, ef, sign, dt, out, self._shp, 0.0)
+        self._predict(x, b0, bf, e0, sign, out, constants=c)
         if out[O_FLAG] != REACHED and out[O_FLAG] != GROUND or out[O_H_BOX] < h_floor:
             return math.nan
         # not fired: O_R_TRIG is the final position (predict)
@@ -583,13 +580,14 @@ class Corrector:
                 phi, nr = self._reach(x, e0, sign, b0, bf, h_floor, h_fire, n_max)
                 n += nr
                 self.reach_rad = phi
-                self._predict(x, b0 if math.isnan(phi) else phi, bf if math.isnan(phi) else phi, e0, sign, self._out)
-                if not math.isnan(phi) and self._out[O_FLAG] == REACHED:
-                    reach = True
-                    b0 = bf = phi
-                    zb = central_angle(x[:3], self._out[:3]) * self.radius_m - s_aim
-                elif not math.isnan(phi):
-                    self._predict(x, b0, bf, e0, sign, self._out)
+                if not math.isnan(phi):
+                    self._predict(x, phi, phi, e0, sign, self._out)
+                    if self._out[O_FLAG] == REACHED:
+                        reach = True
+                        b0 = bf = phi
+                        zb = central_angle(x[:3], self._out[:3]) * self.radius_m - s_aim
+                    else:                   # the answer's prediction again
+                        self._predict(x, b0, bf, e0, sign, self._out)
             else:
                 self.reach_rad = math.nan
         rf = self._out[:3].copy()

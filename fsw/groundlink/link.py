@@ -603,6 +603,9 @@ class GroundLink:
         self.streams.send_due(now, ms)
         self._send_param_lists()
         self._send_events(self._reply_budget)                 # what answers left
+        # the events left for a later tick, each counted once a tick it waits
+        if not self._pack_only:
+            self.stats["events_deferred"] += max(0, fsw.events.total - self._event_index)
         self._reply_budget = self.max_tx_per_tick - EVENT_SHARE
 
     def flush_events(self, max_frames: int = 256) -> None:
@@ -620,7 +623,7 @@ class GroundLink:
         ``events_missed``). Inside a tick each event is begun only when its recent cost fits
         the tick's time, the first ``forced`` whatever is left (the events never wait for
         good, however a flood or the streams use the budget); the rest wait for the next
-        tick (counted: ``events_deferred``, each event once a tick it waits)."""
+        tick (``send_due`` counts them)."""
         events = self.fsw.events
         if self._event_index > events.total:      # a new event log
             self._event_index = 0
@@ -632,7 +635,6 @@ class GroundLink:
             if frames + n > budget:
                 break
             if k >= forced and not self._fits(est):
-                self.stats["events_deferred"] += len(new) - k
                 break
             t = self.budget.elapsed_ns()
             self._send_event(ev)

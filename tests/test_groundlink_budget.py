@@ -21,30 +21,21 @@ import pytest
 from fsw.groundlink.schedule import COST_SAMPLES, DUE_SLACK, END_RESERVE, RecentCost, StreamSchedule, TickBudget
 from fsw.groundlink.streams import ATTITUDE_GROUP, ATTITUDE_UNITS
 from interfaces.event_catalogue import EV
-from tests.rig import ACCEPTED, PricedReads, flown
+from tests.rig import ACCEPTED, NsClock, PricedReads, flown
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing.sign import Signer
 
 FRAME_NS = 250_000                 # what one frame costs on the injected clock
 
 
-class FrameClock:
-    """A ns clock that moves only when the link packs a frame."""
-
-    def __init__(self) -> None:
-        self.t = 0
-
-    def __call__(self) -> int:
-        return self.t
-
-
 @pytest.fixture
 def priced(tmp_path):
-    """A flown rig whose link runs on FrameClock, every stream due every tick: (rig, clock,
-    turns per stream); ``rig.log`` lists each stream's turn and each frame, in order."""
+    """A flown rig whose link runs on an NsClock that moves only when it packs a frame, every
+    stream due every tick: (rig, clock, turns per stream); ``rig.log`` lists each stream's
+    turn and each frame, in order."""
     with flown(tmp_path) as rig:
         gl = rig.gl
-        clock = FrameClock()
+        clock = NsClock()                                # moves when the link packs a frame
         gl.budget.clock_ns = clock
         for name in gl.rates_hz:
             gl.rates_hz[name] = gl.max_rate_hz

@@ -16,18 +16,10 @@ import pytest
 from fsw.groundlink.schedule import END_RESERVE
 from interfaces.event_catalogue import EV
 from interfaces.mavlink import dialect as mav
-from tests.rig import ACCEPTED, Keyless, flown
+from tests.rig import ACCEPTED, Keyless, NsClock, flown
 
 FRAME_NS = 100_000                 # what one packed frame costs on the injected clock
 VERIFY_NS = 50_000                 # what verifying and handling one received frame costs besides
-
-
-class NsClock:
-    def __init__(self) -> None:
-        self.t = 0
-
-    def __call__(self) -> int:
-        return self.t
 
 
 @pytest.fixture

@@ -50,7 +50,7 @@ import numpy as np
 DUE_SLACK = 0.05                 # a stream may go out up to 5 % of its period early
 TICK_BUDGET_FRAC = 0.15          # the link's share of a control period
 COST_RING = 1024                 # ticks whose cost is kept for the percentiles
-RECEIVE_FLOOR = 0.25             # the budget's share receiving keeps whatever the streams owe
+RECEIVE_FLOOR = 0.5              # the share of the time to work in receiving keeps whatever the streams owe
 END_RESERVE = 0.3                # the budget's share no work is begun in: the tail's room (docs/decisions.md)
 COST_SAMPLES = 8                 # recent costs of a piece of work its estimate is taken from
 

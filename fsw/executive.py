@@ -108,7 +108,8 @@ class RealTimeClock:
 
     def __init__(self, period_ns: int, *, spin_ns: int = 0,
                  now_ns: Callable[[], int] = time.monotonic_ns,
-                 sleep_until: Callable[[int], None] | None = None):
+                 sleep_until: Callable[[int], None] | None = None,
+                 cpu_ns: Callable[[], int] = time.thread_time_ns):
         if period_ns <= 0 or spin_ns < 0 or spin_ns >= period_ns:
             raise ValueError(f"RealTimeClock: need period_ns > 0 and 0 <= spin_ns < period_ns, "
                              f"got {period_ns}, {spin_ns}")
@@ -126,6 +127,15 @@ class RealTimeClock:
         self.rehearsal_ns = [0] * self.LEAD_WINDOW    # the last rehearsals' durations (a ring)
         self.lead_ns = 0                 # the lead the next rehearsal starts at
         self.lead_max_ns = 0             # the longest lead taken since set_rehearsal
+        # the last release's flight recorder (plain attributes, overwritten each release: no
+        # allocation): when the call began (the previous cycle's end), the rehearsal's planned
+        # and actual start, its end, the final sleep's target and its wake-up, the return; and
+        # this thread's CPU time at the rehearsal's start and end and at the return, so that
+        # a late release says whether the thread was off its CPU (explain_late_release)
+        self.cpu_ns = cpu_ns
+        self.tr_enter = self.tr_reh_target = self.tr_reh_start = self.tr_reh_end = 0
+        self.tr_wake_target = self.tr_woke = self.tr_return = 0
+        self.tr_cpu_reh_start = self.tr_cpu_reh_end = self.tr_cpu_woke = self.tr_cpu_return = 0
 
     def set_rehearsal(self, fn: Callable[[], None] | None, lead_ns: int) -> None:
         """Run ``fn()`` ``lead_ns`` before each release (None or lead_ns 0: no rehearsal)."""
@@ -166,25 +176,36 @@ class RealTimeClock:
         k = self._k + 1
         t_rel = self.t0_ns + k * self.period_ns
         now = self.now_ns()
+        self.tr_enter = now
+        self.tr_reh_target = self.tr_reh_start = self.tr_reh_end = 0
         if now >= t_rel + self.period_ns:
             k_now = (now - self.t0_ns) // self.period_ns
             self.missed += k_now - k
             k, t_rel = k_now, self.t0_ns + k_now * self.period_ns
+            self.tr_wake_target = self.tr_woke = now
+            self.tr_cpu_woke = self.cpu_ns()
         else:
             wake = t_rel - self.spin_ns
             if self.rehearse is not None:
                 t_reh = t_rel - max(self.lead_ns, self.spin_ns)
                 if now < t_reh:
-                    t_reh = self._sleep_to(t_reh, now)
+                    self.tr_reh_target = t_reh
+                    t_reh = self.tr_reh_start = self._sleep_to(t_reh, now)
+                    self.tr_cpu_reh_start = self.cpu_ns()
                     self.rehearse()
-                    now = wake = self.now_ns()   # no sleep between the rehearsal and the release: spin
+                    now = wake = self.tr_reh_end = self.now_ns()   # no sleep between the rehearsal and the release: spin
+                    self.tr_cpu_reh_end = self.cpu_ns()
                     self._size_lead(now - t_reh)
                     self.rehearsals += 1
                 else:
                     self.rehearsals_skipped += 1
-            now = self._sleep_to(wake, now)
+            self.tr_wake_target = wake
+            now = self.tr_woke = self._sleep_to(wake, now)
+            self.tr_cpu_woke = self.cpu_ns()
             while now < t_rel:
                 now = self.now_ns()
+        self.tr_return = now
+        self.tr_cpu_return = self.cpu_ns()
         self._k = k
         return k, t_rel
 
@@ -194,6 +215,42 @@ class RealTimeClock:
             self.sleep_until(t_ns)
             now = self.now_ns()
         return now
+
+
+# the causes a late release is put down to (explain_late_release): the first two are the loop's
+# own work, the other two the host's (or a thread above the loop's priority)
+OWN_CAUSES = ("previous_cycle", "rehearsal")
+HOST_CAUSES = ("late_wakeup", "preempted")
+
+
+def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int) -> dict:
+    """Where a late release's time went, from the clock's flight recorder of that release
+    [us]: ``previous_cycle`` (the call came after the release: the previous cycle, or what ran
+    after it, overran into this one), ``late_wakeup`` (a sleep -- to the rehearsal or to the
+    release -- ended after its target: the kernel woke the thread late), ``preempted`` (the
+    thread was off its CPU while it rehearsed or spun: the host, or a thread above the
+    loop's priority), ``rehearsal`` (the rehearsal's own CPU time beyond the lead it was
+    given: ours). ``cause`` is the largest; ``own`` whether it is the loop's own work."""
+    reh = clock.tr_reh_target != 0
+    lead = t_rel - clock.tr_reh_target if reh else 0
+    reh_wall = clock.tr_reh_end - clock.tr_reh_start if reh else 0
+    reh_cpu = clock.tr_cpu_reh_end - clock.tr_cpu_reh_start if reh else 0
+    spin_wall = clock.tr_return - clock.tr_woke
+    spin_cpu = clock.tr_cpu_return - clock.tr_cpu_woke
+    shares = {
+        "previous_cycle": max(0, clock.tr_enter - t_rel),
+        "late_wakeup": max(0, clock.tr_reh_start - clock.tr_reh_target) + max(0, clock.tr_woke - clock.tr_wake_target),
+        "preempted": max(0, reh_wall - reh_cpu) + max(0, spin_wall - spin_cpu),
+        "rehearsal": max(0, reh_cpu - lead),
+    }
+    cause = max(shares, key=shares.get)
+    if shares[cause] == 0:
+        cause = "other"
+    out = {"jitter_us": (t_start - t_rel) / 1e3, "cause": cause, "own": cause in OWN_CAUSES,
+           "enter_us": (clock.tr_enter - t_rel) / 1e3, "lead_us": lead / 1e3,
+           "rehearsal_us": reh_wall / 1e3, "rehearsal_cpu_us": reh_cpu / 1e3}
+    out.update({f"{name}_us": v / 1e3 for name, v in shares.items()})
+    return out
 
 
 # --------------------------------------------------------------------------- statistics
@@ -283,6 +340,8 @@ class Executive:
     """
 
     SLIP_RECORDS = 32
+    LATE_RECORDS = 64            # late releases kept with their flight recorder's breakdown
+    LATE_RELEASE_NS = 200_000    # a release later than this is explained (explain_late_release)
 
     def __init__(self, period_ns: int, clock: LockstepClock | RealTimeClock,
                  divisors: tuple[int, ...] = (1, 5, 50), *, events: EventLog | None = None,
@@ -312,6 +371,11 @@ class Executive:
         # what each of the first SLIP_RECORDS late cycles spent where (a slip is rare: the
         # dict is built only then): the evidence a user needs to find its cause
         self.slip_records: list[dict] = []
+        # releases later than LATE_RELEASE_NS (real time): counts by cause, and the first
+        # LATE_RECORDS with their breakdown and what the cycle before them ran
+        self.late_releases: dict[str, int] = {}
+        self.late_records: list[dict] = []
+        self._traced = isinstance(clock, RealTimeClock)
         self.event_time: Callable[[], float] | None = None
 
     @classmethod
@@ -350,6 +414,8 @@ class Executive:
         cyc.k, cyc.t_release_ns, cyc.t_start_ns, cyc.frame = k, t_rel, t_start, frame
 
         st = self.stats
+        if self._traced and t_start - t_rel > self.LATE_RELEASE_NS:
+            self._note_late(k, t_rel, t_start)
         i = st.n % st.capacity
         task_row = st.task_ns[i]
         task_row[:] = -1
@@ -394,6 +460,19 @@ class Executive:
                              deadline_ms=self.deadline_ns / 1e6, task=self._names[worst], task_ms=task_row[worst] / 1e6)
         return not late
 
+    def _note_late(self, k: int, t_rel: int, t_start: int) -> None:
+        """A late release (rare: the dict is built only then): counted by cause, and the first
+        LATE_RECORDS kept with the previous cycle's tasks and the slips' kind of evidence."""
+        rec = explain_late_release(self.clock, t_rel, t_start)
+        self.late_releases[rec["cause"]] = self.late_releases.get(rec["cause"], 0) + 1
+        if len(self.late_records) < self.LATE_RECORDS:
+            st = self.stats
+            rec["k"] = int(k)
+            if st.n:
+                prev = st.task_ns[(st.n - 1) % st.capacity]
+                rec["previous_tasks_us"] = {name: prev[j] / 1e3 for j, name in enumerate(self._names) if prev[j] >= 0}
+            self.late_records.append(rec)
+
     def _t_s(self, t_s: float | None, t_rel_ns: int) -> float:
         """The time stamp of an event: the tick's own, else the owner's clock (``event_time``,
         e.g. the FSW's mission time), else the release time."""
@@ -429,6 +508,11 @@ class Executive:
                "task_errors": self.task_errors, "mode": self.clock.mode}
         if self.slip_records:
             out["slip_records"] = self.slip_records
+        if self._traced:
+            out["late_releases"] = dict(self.late_releases)
+            out["late_release_us"] = self.LATE_RELEASE_NS / 1e3
+            if self.late_records:
+                out["late_records"] = self.late_records
         if st is None:
             return out
         for field in ("jitter_ns", "compute_ns"):

@@ -248,7 +248,7 @@ def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int) -> dict
         cause = "other"
     out = {"jitter_us": (t_start - t_rel) / 1e3, "cause": cause, "own": cause in OWN_CAUSES,
            "enter_us": (clock.tr_enter - t_rel) / 1e3, "lead_us": lead / 1e3,
-           "rehearsal_us": reh_wall / 1e3, "rehearsal_cpu_us": reh_cpu / 1e3}
+           "rehearsal_took_us": reh_wall / 1e3, "rehearsal_cpu_us": reh_cpu / 1e3}
     out.update({f"{name}_us": v / 1e3 for name, v in shares.items()})
     return out
 
@@ -304,26 +304,39 @@ class Cycle:
 
 
 def own_slips(records: list[dict], period_us: float, last_k: int | None = None) -> list[dict]:
-    """The slip records the FSW's own work explains: not a late release (the CPU was
-    elsewhere: a higher-priority thread, the host), or a late release whose tasks still took
-    half the period or more. With ``last_k`` (the plant's last step), a slip after it is no
-    one's deadline: the plant had gone (its leaving costs Zenoh's threads, one priority above
-    the loop, time the loop cannot use). A record the process shell gave ``off_cpu_us`` (the
-    time the loop's thread was off its CPU after its input task, from taking the frame to the
-    cycle's end) is the host's when the release jitter, the input task (the wait for the
-    plant's frame) and that time cover its lateness: released on time, with the frame on
-    time and its CPU throughout, the cycle met its deadline."""
-    return [r for r in records
-            if (last_k is None or r["k"] <= last_k)
-            and (r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us)
-            and not _host_explains(r)]
+    """The slip records the FSW's own work explains (``slip_is_own``). With ``last_k`` (the
+    plant's last step), a slip after it is no one's deadline: the plant had gone (its leaving
+    costs Zenoh's threads, one priority above the loop, time the loop cannot use)."""
+    return [r for r in records if (last_k is None or r["k"] <= last_k) and slip_is_own(r, period_us)]
+
+
+def slip_is_own(r: dict, period_us: float) -> bool:
+    """Whether a slip record is the FSW's own work rather than the host's.
+
+    The host's when the time the host took covers the cycle's lateness (``_host_explains``):
+    released on time, its frame on time and its CPU throughout, the cycle would have met its
+    deadline. Otherwise, a record with the release's flight recorder (``release_host_us``: the
+    share of its release jitter the host took, a late wake-up or preemption; the rest was the
+    loop's own, a rehearsal or the previous cycle running into the release) is the loop's own.
+    Without one (older records), a late release is the host's unless the cycle's tasks still
+    took half the period or more."""
+    if _host_explains(r):
+        return False
+    if "release_host_us" in r:
+        return True
+    return r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us
 
 
 def _host_explains(r: dict) -> bool:
-    off = r.get("off_cpu_us")
+    """The host's time in a slip record covers its lateness: the release jitter the host took
+    (``release_host_us``, else all of it), the time the loop's thread was off its CPU after the
+    release (``off_cpu_us``, the process shell's from taking the frame; else the executive's
+    ``compute_off_cpu_us`` over the tasks) and the input task (the wait for the plant's frame)."""
+    off = r.get("off_cpu_us", r.get("compute_off_cpu_us"))
     if off is None or "late_us" not in r:
         return False
-    return r.get("jitter_us", 0.0) + off + r["tasks_us"].get("input", 0.0) >= r["late_us"]
+    release = r.get("release_host_us", r.get("jitter_us", 0.0))
+    return release + off + r["tasks_us"].get("input", 0.0) >= r["late_us"]
 
 
 class Executive:
@@ -366,6 +379,7 @@ class Executive:
         self.cycle = Cycle()
         self.cycles = 0
         self.slips = 0
+        self.host_slips = 0      # slips the host's time explains (slip_is_own on the executive's evidence)
         self.task_errors = 0
         self.last_slip_k = -1
         # what each of the first SLIP_RECORDS late cycles spent where (a slip is rare: the
@@ -447,15 +461,24 @@ class Executive:
             self.slips += 1
             self.last_slip_k = k
             worst = int(np.argmax(task_row))
+            # the larger share decides: the loop started late (the CPU was elsewhere: a
+            # higher-priority thread, the host) or its own tasks ran long
+            cause = "late_release" if t_start - t_rel > t_end - t_start else "overrun"
+            rec = {"k": int(k), "cause": cause, "late_us": (t_end - t_rel - self.deadline_ns) / 1e3,
+                   "jitter_us": (t_start - t_rel) / 1e3,
+                   "tasks_us": {name: task_row[j] / 1e3 for j, name in enumerate(self._names)
+                                if task_row[j] >= 0}}
+            if self._traced:
+                # what of the lateness the host took: its share of the release's jitter (the
+                # flight recorder's) and the thread's time off its CPU over the tasks
+                clock = self.clock
+                why = explain_late_release(clock, t_rel, t_start)
+                rec["release_host_us"] = min(rec["jitter_us"], sum(why[f"{c}_us"] for c in HOST_CAUSES))
+                rec["compute_off_cpu_us"] = max(0, (t_end - t_start) - (clock.cpu_ns() - clock.tr_cpu_return)) / 1e3
+                if not slip_is_own(rec, self.period_ns / 1e3):
+                    self.host_slips += 1
             if len(self.slip_records) < self.SLIP_RECORDS:
-                # the larger share decides: the loop started late (the CPU was elsewhere: a
-                # higher-priority thread, the host) or its own tasks ran long
-                cause = "late_release" if t_start - t_rel > t_end - t_start else "overrun"
-                self.slip_records.append({
-                    "k": int(k), "cause": cause, "late_us": (t_end - t_rel - self.deadline_ns) / 1e3,
-                    "jitter_us": (t_start - t_rel) / 1e3,
-                    "tasks_us": {name: task_row[j] / 1e3 for j, name in enumerate(self._names)
-                                 if task_row[j] >= 0}})
+                self.slip_records.append(rec)
             self.events.emit(self._t_s(t_s, t_rel), EV.CYCLE_SLIP, tick=k, took_ms=(t_end - t_rel) / 1e6,
                              deadline_ms=self.deadline_ns / 1e6, task=self._names[worst], task_ms=task_row[worst] / 1e6)
         return not late
@@ -504,7 +527,8 @@ class Executive:
     def telemetry(self) -> dict:
         """Loop timing for telemetry: counts, and p50/p99/max of jitter and compute [us]."""
         st = self.stats
-        out = {"cycles": self.cycles, "slips": self.slips, "missed_releases": self.clock.missed,
+        out = {"cycles": self.cycles, "slips": self.slips, "host_slips": self.host_slips,
+               "missed_releases": self.clock.missed,
                "task_errors": self.task_errors, "mode": self.clock.mode}
         if self.slip_records:
             out["slip_records"] = self.slip_records

@@ -223,23 +223,32 @@ OWN_CAUSES = ("previous_cycle", "rehearsal")
 HOST_CAUSES = ("late_wakeup", "preempted")
 
 
-def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int) -> dict:
+def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int, carried_host_ns: int = 0) -> dict:
     """Where a late release's time went, from the clock's flight recorder of that release
     [us]: ``previous_cycle`` (the call came after the release: the previous cycle, or what ran
     after it, overran into this one), ``late_wakeup`` (a sleep -- to the rehearsal or to the
     release -- ended after its target: the kernel woke the thread late), ``preempted`` (the
     thread was off its CPU while it rehearsed or spun: the host, or a thread above the
     loop's priority), ``rehearsal`` (the rehearsal's own CPU time beyond the lead it was
-    given: ours). ``cause`` is the largest; ``own`` whether it is the loop's own work."""
+    given: ours). A previous cycle that overran only because the host released it late
+    (``carried_host_ns``, the host's share of that release) hands that share on as the host's.
+    ``cause`` is the largest; ``own`` whether it is the loop's own work."""
     reh = clock.tr_reh_target != 0
     lead = t_rel - clock.tr_reh_target if reh else 0
     reh_wall = clock.tr_reh_end - clock.tr_reh_start if reh else 0
     reh_cpu = clock.tr_cpu_reh_end - clock.tr_cpu_reh_start if reh else 0
     spin_wall = clock.tr_return - clock.tr_woke
     spin_cpu = clock.tr_cpu_return - clock.tr_cpu_woke
+    # a sleep's lateness counts only when the call came before its target (else it never slept);
+    # the previous cycle's overrun into this release less what the host took from that cycle
+    # (``carried_host_ns``: its own release's host share, a cascade from one late wake-up)
+    overrun = max(0, clock.tr_enter - t_rel)
+    carried = min(overrun, carried_host_ns)
+    slept = clock.tr_enter < clock.tr_wake_target
     shares = {
-        "previous_cycle": max(0, clock.tr_enter - t_rel),
-        "late_wakeup": max(0, clock.tr_reh_start - clock.tr_reh_target) + max(0, clock.tr_woke - clock.tr_wake_target),
+        "previous_cycle": overrun - carried,
+        "late_wakeup": (max(0, clock.tr_reh_start - clock.tr_reh_target)
+                        + (max(0, clock.tr_woke - clock.tr_wake_target) if slept else 0) + carried),
         "preempted": max(0, reh_wall - reh_cpu) + max(0, spin_wall - spin_cpu),
         "rehearsal": max(0, reh_cpu - lead),
     }
@@ -390,6 +399,7 @@ class Executive:
         self.late_releases: dict[str, int] = {}
         self.late_records: list[dict] = []
         self._traced = isinstance(clock, RealTimeClock)
+        self._host_ns = 0        # the host's share of the last release's jitter (a cascade's start)
         self.event_time: Callable[[], float] | None = None
 
     @classmethod
@@ -428,8 +438,11 @@ class Executive:
         cyc.k, cyc.t_release_ns, cyc.t_start_ns, cyc.frame = k, t_rel, t_start, frame
 
         st = self.stats
-        if self._traced and t_start - t_rel > self.LATE_RELEASE_NS:
-            self._note_late(k, t_rel, t_start)
+        if self._traced:
+            if t_start - t_rel > self.LATE_RELEASE_NS:
+                self._note_late(k, t_rel, t_start)
+            else:
+                self._host_ns = 0
         i = st.n % st.capacity
         task_row = st.task_ns[i]
         task_row[:] = -1
@@ -472,8 +485,7 @@ class Executive:
                 # what of the lateness the host took: its share of the release's jitter (the
                 # flight recorder's) and the thread's time off its CPU over the tasks
                 clock = self.clock
-                why = explain_late_release(clock, t_rel, t_start)
-                rec["release_host_us"] = min(rec["jitter_us"], sum(why[f"{c}_us"] for c in HOST_CAUSES))
+                rec["release_host_us"] = min(rec["jitter_us"], self._host_ns / 1e3)
                 rec["compute_off_cpu_us"] = max(0, (t_end - t_start) - (clock.cpu_ns() - clock.tr_cpu_return)) / 1e3
                 if not slip_is_own(rec, self.period_ns / 1e3):
                     self.host_slips += 1
@@ -486,7 +498,8 @@ class Executive:
     def _note_late(self, k: int, t_rel: int, t_start: int) -> None:
         """A late release (rare: the dict is built only then): counted by cause, and the first
         LATE_RECORDS kept with the previous cycle's tasks and the slips' kind of evidence."""
-        rec = explain_late_release(self.clock, t_rel, t_start)
+        rec = explain_late_release(self.clock, t_rel, t_start, self._host_ns)
+        self._host_ns = int(1e3 * min(rec["jitter_us"], sum(rec[f"{c}_us"] for c in HOST_CAUSES)))
         self.late_releases[rec["cause"]] = self.late_releases.get(rec["cause"], 0) + 1
         if len(self.late_records) < self.LATE_RECORDS:
             st = self.stats

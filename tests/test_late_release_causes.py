@@ -117,7 +117,7 @@ def test_slips_own_compute_against_the_hosts_late_wake_up():
     assert ex.host_slips == 1
     assert [r["k"] for r in own_slips(ex.slip_records, PERIOD / 1e3)] == [1, 5]
     assert recs[3]["cause"] == "late_release" and recs[3]["release_host_us"] >= 4_300
-    assert recs[5]["cause"] == "late_release" and recs[5]["release_host_us"] == 0
+    assert recs[5]["cause"] == "late_release" and recs[5]["release_host_us"] <= 5
     assert ex.telemetry()["host_slips"] == 1
 
 

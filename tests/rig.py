@@ -34,6 +34,16 @@ class Clock:
         return self.t
 
 
+class NsClock:
+    """A ns clock that moves only when a test (or what it prices) moves it."""
+
+    def __init__(self) -> None:
+        self.t = 0
+
+    def __call__(self) -> int:
+        return self.t
+
+
 class PricedReads:
     """A socket whose each read costs ``read_ns`` on ``clock`` (anything with a ns ``t``):
     an injected clock's price for the intake's socket read."""

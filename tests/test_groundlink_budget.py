@@ -4,7 +4,7 @@ host. Proven: a tick stops sending once its budget is spent, over by at most the
 sending; what it did not send stays due and is counted; under a short budget every stream
 still gets its turn (the longest-waiting first), events and a mode change go out first; with
 time to spare nothing is deferred; receiving leaves the send side its recent cost, at most
-half the budget, and the cost of the streams a period overdue, keeping a quarter; those go
+half the budget, and the cost of the streams a period overdue, keeping half; those go
 first; a signed command sent before each tick is answered in that tick however much the
 streams owe; the cycle's deadline shortens the budget; receiving is given its share less what
 the tick spent before it and what it recently took past the intake's budget; a unit needs
@@ -21,30 +21,21 @@ import pytest
 from fsw.groundlink.schedule import COST_SAMPLES, DUE_SLACK, END_RESERVE, RecentCost, StreamSchedule, TickBudget
 from fsw.groundlink.streams import ATTITUDE_GROUP, ATTITUDE_UNITS
 from interfaces.event_catalogue import EV
-from tests.rig import ACCEPTED, PricedReads, flown
+from tests.rig import ACCEPTED, NsClock, PricedReads, flown
 from interfaces.mavlink import dialect as mav
 from interfaces.mavlink.signing.sign import Signer
 
 FRAME_NS = 250_000                 # what one frame costs on the injected clock
 
 
-class FrameClock:
-    """A ns clock that moves only when the link packs a frame."""
-
-    def __init__(self) -> None:
-        self.t = 0
-
-    def __call__(self) -> int:
-        return self.t
-
-
 @pytest.fixture
 def priced(tmp_path):
-    """A flown rig whose link runs on FrameClock, every stream due every tick: (rig, clock,
-    turns per stream); ``rig.log`` lists each stream's turn and each frame, in order."""
+    """A flown rig whose link runs on an NsClock that moves only when it packs a frame, every
+    stream due every tick: (rig, clock, turns per stream); ``rig.log`` lists each stream's
+    turn and each frame, in order."""
     with flown(tmp_path) as rig:
         gl = rig.gl
-        clock = FrameClock()
+        clock = NsClock()                                # moves when the link packs a frame
         gl.budget.clock_ns = clock
         for name in gl.rates_hz:
             gl.rates_hz[name] = gl.max_rate_hz
@@ -99,8 +90,9 @@ def test_a_short_budget_stops_the_tick_defers_the_rest_and_every_stream_gets_its
     runs = "".join("t" if e == "turn" else "f" for e in rig.log).split("t")
     largest_unit = max(len(r) for r in runs[1:]) * FRAME_NS
     assert largest_unit >= len(ATTITUDE_GROUP) * FRAME_NS
-    assert max(costs) >= budget                          # the clock did price the frames: the budget was used
-    assert max(costs) <= budget + largest_unit           # over only by the unit under way
+    usable = budget - int(END_RESERVE * budget)          # the budget less its end reserve
+    assert max(costs) >= usable - largest_unit           # the clock did price the frames: the budget was used
+    assert max(costs) <= usable + largest_unit           # into the reserve only by the unit under way
     assert gl.stats["tx_deferred"] > deferred0           # it could not send everything ...
     sent = sum(turns.values())
     assert sent < wanted * n                             # ... and did not
@@ -120,19 +112,26 @@ def test_with_time_to_spare_every_stream_goes_every_tick_and_nothing_waits(price
     assert all(turns[name] >= 19 for name in rig.gl.rates_hz)
 
 
-def test_events_go_out_in_a_tick_with_no_budget_left(priced):
+def test_with_no_budget_left_one_event_goes_a_tick_the_others_wait_counted_and_none_is_lost(priced):
     rig, clock, turns = priced
     gl = rig.gl
     gl.budget.budget_ns = 1                             # spent by the first frame
     _ticks(rig, 3)
     n0 = len(rig.gcs.state.events)
+    deferred0 = gl.stats["events_deferred"]
     for i in range(3):
         rig.fsw.events.emit(rig.fsw.t_s, EV.REVERSAL_WAY, miss_km=float(i))   # not throttled
     turns.clear()
-    _ticks(rig, 1)
-    rig.gcs.poll(0.05)
-    assert len(rig.gcs.state.events) == n0 + 3          # every event of the tick, over the budget
-    assert sum(turns.values()) == 0                     # and no stream: the budget is spent
+    got = []
+    for _ in range(3):
+        _ticks(rig, 1)
+        rig.gcs.poll(0.05)
+        got.append(len(rig.gcs.state.events) - n0)
+    assert got == [1, 2, 3]                             # the tick's first event, over the budget; the rest wait
+    assert gl.stats["events_deferred"] - deferred0 == 2 + 1     # waiting: two events, then one
+    texts = [e.text for e in list(rig.gcs.state.events)[n0:]]
+    assert texts == [f"REVERSAL TURNED ROUND: MISS +{i}.0 KM" for i in range(3)]   # in order, none lost
+    assert sum(turns.values()) <= 3                     # the most overdue unit a tick, no more
 
 
 def test_a_mode_change_is_the_first_stream_a_short_tick_sends(priced):
@@ -149,11 +148,11 @@ def test_a_mode_change_is_the_first_stream_a_short_tick_sends(priced):
 def test_receiving_leaves_the_send_side_its_recent_cost_at_most_half_the_budget():
     t = [0]
     b = TickBudget(1000, lambda: t[0])
-    b.start()
-    assert b.receive_ns(300) == 700 and b.receive_ns(0) == 1000
-    assert b.receive_ns(900) == 500                      # a heavy send side: half the budget
-    b.start(cap_ns=400)                                  # the cycle's deadline is nearer
-    assert b.limit_ns == 400 and b.receive_ns(300) == 200
+    b.start()                                            # work is begun in 700 (the end reserve: 300)
+    assert b.receive_ns(300) == 400 and b.receive_ns(0) == 700
+    assert b.receive_ns(900) == 350                      # a heavy send side: half
+    b.start(cap_ns=400)                                  # the cycle's deadline is nearer: 280 to work in
+    assert b.limit_ns == 400 and b.receive_ns(300) == 140
     b.start(cap_ns=-5)                                   # the deadline is past: nothing
     assert b.left_ns() <= 0 and b.receive_ns(0) == 0
     t[0] += 1500
@@ -179,16 +178,15 @@ def test_a_budget_that_is_no_share_of_the_period_is_refused(tmp_path):
                 GroundLink(rig.fsw, rig.key, bind="udp:127.0.0.1:0", tick_budget_frac=frac)
 
 
-def test_receiving_leaves_the_overdue_streams_their_cost_keeping_a_quarter_and_work_stops_short_of_the_end():
+def test_receiving_leaves_the_overdue_streams_their_cost_keeping_half_and_work_stops_short_of_the_end():
     b = TickBudget(1000, lambda: 0)
     b.start()
-    assert b.left_ns() == 1000 - 80                      # the end reserve: 8 % of the budget
-    assert b.receive_ns(300, 0) == 700                   # the overdue streams and the reserve:
-    assert b.receive_ns(300, 500) == 1000 - 500 - 80     # ... more than the recent cost
-    assert b.receive_ns(900, 600) == 1000 - 600 - 80     # ... more than half
-    assert b.receive_ns(0, 5000) == 250                  # ... but receiving keeps a quarter
+    assert b.left_ns() == 1000 - 300                     # the end reserve: 30 % of the budget
+    assert b.receive_ns(300, 0) == 700 - 300             # the overdue streams:
+    assert b.receive_ns(0, 300) == 700 - 300             # ... more than the recent cost
+    assert b.receive_ns(0, 5000) == 350                  # ... but receiving keeps half
     b.start(cap_ns=500)
-    assert b.left_ns() == 500 - 40 and b.receive_ns(0, 5000) == 125
+    assert b.left_ns() == 500 - 150 and b.receive_ns(0, 5000) == 175
 
 
 def test_a_stream_a_period_overdue_goes_before_a_slower_one_waiting_longer(priced):
@@ -239,7 +237,7 @@ def test_receiving_is_given_its_share_less_what_the_tick_spent_before_it():
     b = TickBudget(1000, lambda: t[0])
     b.start()
     t[0] = 100                                           # the schedule's own work
-    assert b.receive_ns(300) == 1000 - 300 - 100
+    assert b.receive_ns(300) == 1000 - 300 - 300 - 100  # the end reserve: 300
     t[0] = 900
     assert b.receive_ns(300) == 0
 
@@ -289,10 +287,10 @@ def test_what_receiving_takes_past_the_intakes_budget_is_taken_from_its_next_sha
         clock.t += budget_ns + 40_000
         return poll(handle, 0)
     gl.intake.poll = late_poll
-    budget = gl.budget.budget_ns
+    usable = gl.budget.budget_ns - int(END_RESERVE * gl.budget.budget_ns)
     costs = _ticks(rig, 4)
-    assert given == [budget] + [budget - 40_000] * 3
-    assert costs == [budget + 40_000] + [budget] * 3
+    assert given == [usable] + [usable - 40_000] * 3
+    assert costs == [usable + 40_000] + [usable] * 3
 
 
 def test_a_unit_waits_when_what_is_left_covers_its_estimate_but_not_the_recent_misses(priced):

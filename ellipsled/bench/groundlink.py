@@ -63,6 +63,9 @@ FLOOD_PER_S = 2500                   # datagrams a second in the flood regime (t
 RATES_HZ = (50, 200)                 # control rates the link's budget is measured at
 ANSWER_PACE_HZ = 5.0                 # signed commands a second in the real-time runs
 PRIORITY = 50                        # SCHED_FIFO priority of the measured loop, when permitted
+# the link's counters of work a tick put off to a later one, per kind (fsw/groundlink/schedule.py),
+# and the received frames handled (what a flood leaves the intake room for)
+DEFERRED = ("tx_deferred", "rx_deferred", "rx_budget_hits", "events_deferred", "params_deferred", "ftp_deferred")
 
 
 def _flood_datagrams(n: int) -> list[bytes]:
@@ -136,7 +139,8 @@ def _at_rate(hz: int, quick: bool) -> dict:
             for stream in gl.rates_hz:
                 gl.rates_hz[stream] = gl.max_rate_hz if name == "all_streams_at_fastest" else defaults[stream]
             ns = []
-            b0, d0, over0 = gl.stats["tx_bytes"], gl.stats["tx_deferred"], gl.budget.over
+            b0, over0 = gl.stats["tx_bytes"], gl.budget.over
+            st0 = {k: gl.stats.get(k, 0) for k in (*DEFERRED, "rx_messages")}
             for _ in range(n):
                 for _ in range(divisor - 1):
                     step()
@@ -150,8 +154,10 @@ def _at_rate(hz: int, quick: bool) -> dict:
                 gl.tick(frame)
                 ns.append(time.perf_counter_ns() - t0)
                 drain()
+            delta = {k: gl.stats.get(k, 0) - v for k, v in st0.items()}
             out[name] = {**_pct(ns), "tx_bytes_per_tick": (gl.stats["tx_bytes"] - b0) / n,
-                         "over_budget": gl.budget.over - over0, "tx_deferred": gl.stats["tx_deferred"] - d0}
+                         "over_budget": gl.budget.over - over0, "tx_deferred": delta["tx_deferred"],
+                         "deferred": {k: delta[k] for k in DEFERRED}, "rx_messages_per_tick": delta["rx_messages"] / n}
     finally:
         rt.restore()
         if gc_was:
@@ -207,7 +213,9 @@ def rows(res: dict) -> list[Row]:
                            f"{', SCHED_FIFO' if r.get('sched_fifo') else ''}); "
                            f"control step p99 {fmt(r.get('baseline_control_step_p99_us'))}",
                            f"{fmt(ratio(x.get('p99_us'), r.get('budget_us')))} of the budget; "
-                           f"{x.get('tx_deferred', 'n/m')} stream sends deferred", "p99 <= budget",
+                           f"{x.get('tx_deferred', 'n/m')} stream sends deferred"
+                           + (f", {d['events_deferred']} event sends, {d['rx_budget_hits']} reads"
+                              if (d := x.get("deferred")) else ""), "p99 <= budget",
                            le(x.get("p99_us"), r.get("budget_us"))))
     for hz in RATES_HZ:
         a = (gl.get(f"{hz}Hz") or {}).get("answers")

@@ -117,22 +117,21 @@ class GroundLink(link.GroundLink):
         for reply in replies:
             self._reply(reply, addr)
 
-    def _send_events(self, budget: int) -> None:
-        """The new events, at most ``budget`` frames: each one's EVENT (when it has one)
-        and STATUSTEXT (link.GroundLink), then CURRENT_EVENT_SEQUENCE when due."""
-        log, down = self.fsw.events, self.event_downlink
-        _, new = log.since(0 if self._event_index > log.total else self._event_index)
-        n = frames = 0
-        for ev in new:
-            carried = down.carried(ev)
-            if frames + 1 + (carried is not None) > budget:
-                break
-            frames += 1 + (carried is not None)
-            n += 1
-            if carried is not None:
-                self._send(down.message(ev, carried, keep=not self._pack_only))
-        super()._send_events(n)
-        now = self.clock()
+    def _event_frames(self, ev) -> int:
+        return 1 + (self.event_downlink.carried(ev) is not None)
+
+    def _send_event(self, ev) -> None:
+        """Event ``ev``'s EVENT (when it has one), then its STATUSTEXT (link.GroundLink)."""
+        carried = self.event_downlink.carried(ev)
+        if carried is not None:
+            self._send(self.event_downlink.message(ev, carried, keep=not self._pack_only))
+        super()._send_event(ev)
+
+    def _send_events(self, budget: int, forced: int = 0) -> None:
+        """The new events as link.GroundLink sends them (each event's EVENT then its
+        STATUSTEXT), then CURRENT_EVENT_SEQUENCE when due."""
+        super()._send_events(budget, forced)
+        down, now = self.event_downlink, self.clock()
         if now >= self._sequence_due or self._pack_only:
             self._send(down.current_sequence())
             if self._pack_only:              # warm-up: encode the answer to a re-request once too

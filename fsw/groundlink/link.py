@@ -89,7 +89,10 @@ MAX_PARAM_LISTS = 4              # parameter lists queued at once (one per reque
 STAT_NAMES = ("rx_datagrams", "rx_bytes", "rx_messages", "tx_frames", "tx_bytes", "tx_errors", "refused_early",
               "kernel_drops", "rx_budget_hits", "rx_poll_max_us", "rx_deferred", "ftp_deferred", "tx_deferred",
               "reads_limited", "reads_unknown", "peers_added", "refused_senders", "commands_accepted", "params_set",
-              "unsigned_writes", "unsigned_reads")
+              "unsigned_writes", "unsigned_reads", "events_deferred", "events_missed", "params_deferred")
+# the kinds of work a tick begins item by item against their own recent cost (schedule.RecentCost):
+# an event (its frames), a parameter-list entry, an FTP reply
+ITEM_KINDS = ("event", "param", "ftp")
 
 
 class GroundLink:
@@ -176,6 +179,7 @@ class GroundLink:
         self.stats["rx_poll_max_us"] = 0.0
         self.send_ns_peak = self.send_overhead_ns = 0
         self.rx_tail = RecentCost()                    # what receiving takes past the intake's budget [ns]
+        self.item_cost = {kind: RecentCost() for kind in ITEM_KINDS}   # what one item of each kind costs [ns]
         self._rx_skipped = False                       # the last tick had no time to receive
 
     # -------------------------------------------------------------- configuration
@@ -449,13 +453,24 @@ class GroundLink:
         self._param_lists[addr] = (deque(self.params_in.names), signed)
 
     def _send_param_lists(self) -> None:
+        """The queued parameter lists' next entries, each begun only when its recent cost
+        fits the tick's time; a list the time cut waits for the next tick (counted once a
+        tick: ``params_deferred``)."""
+        est = self.item_cost["param"]
         for addr in list(self._param_lists):
             names, signed = self._param_lists[addr]
-            while names and self._reply_budget > 0 and self._time_left() and (signed or self._take_read(addr)):
+            while names and self._reply_budget > 0:
+                if not self._fits(est):
+                    self.stats["params_deferred"] += 1
+                    return
+                if not (signed or self._take_read(addr)):
+                    break
+                t = self.budget.elapsed_ns()
                 self._reply(self.params_in.value_msg(names.popleft()), addr)
+                self._cost(est, t)
             if not names:
                 del self._param_lists[addr]
-            if self._reply_budget <= 0 or not self._time_left():
+            if self._reply_budget <= 0:
                 return
 
     def _add_peer(self, addr) -> None:
@@ -474,12 +489,16 @@ class GroundLink:
 
     def _ftp(self, msg, addr, signed: bool = True) -> None:
         """One MAVLink FTP request; what this tick can no longer send is dropped unanswered
-        (the client retries). Unsigned, a burst is also cut to the sender's read budget
-        (its request took one unit: the first reply)."""
+        (counted: ``ftp_deferred``; the client retries). A burst is cut to the replies whose
+        recent cost the tick's time still covers (at least one: the request was begun) and,
+        unsigned, to the sender's read budget (its request took one unit: the first reply)."""
         if self._ftp_budget <= 0:
             self.stats["ftp_deferred"] += 1
             return
+        est = self.item_cost["ftp"]
         budget = self._ftp_budget
+        if self.in_tick and est.ns > 0:
+            budget = max(1, min(budget, self.budget.left_ns() // est.ns))
         if not signed:                      # a burst's replies beyond the first, from the read budget
             payload = bytes(msg.payload)
             want = self.ftp.burst_packets if len(payload) > 3 and payload[3] == ftp.BURST else 1
@@ -489,12 +508,14 @@ class GroundLink:
             self.reads.give_back(addr, budget - max(1, len(replies)))
         self._ftp_budget -= len(replies)
         for payload in replies:
+            t = self.budget.elapsed_ns()
             reply = mav.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(),
                                                                list(payload))
             if signed:
                 self._send(reply, only=addr)
             else:
                 self._reply(reply, addr)
+            self._cost(est, t)
 
     def component_metadata(self):
         """COMPONENT_METADATA: where the general metadata file is, and its CRC."""
@@ -548,9 +569,16 @@ class GroundLink:
         """Stream ``name`` is due at the next tick (its rate was just changed)."""
         self.schedule.now(name)
 
-    def _time_left(self) -> bool:
-        """Inside a tick: its budget is not spent (outside one, e.g. a warm-up: always)."""
-        return not self.in_tick or self.budget.left_ns() > 0
+    def _fits(self, est: RecentCost) -> bool:
+        """Inside a tick: an item of the kind ``est`` estimates may be begun (it ends short
+        of the budget's end reserve, schedule.py); outside one (a warm-up, a flush): always."""
+        return not self.in_tick or self.budget.fits(est.ns)
+
+    def _cost(self, est: RecentCost, t0_ns: int) -> None:
+        """An item begun at ``t0_ns`` (budget.elapsed_ns) is done: its cost, to ``est``
+        (inside a tick only: a warm-up's first encodings would inflate it)."""
+        if self.in_tick:
+            est.add(self.budget.elapsed_ns() - t0_ns)
 
     def system_status(self) -> int:
         return tm.system_status(self.fsw)
@@ -569,12 +597,15 @@ class GroundLink:
         self._ftp_budget = FTP_REPLIES_PER_TICK
         ms = int(max(0.0, fsw.t_s) * 1000.0) & 0xFFFFFFFF
         self.fsw.events.release_held(fsw.t_s)
-        self._send_events(EVENT_SHARE)
+        self._send_events(EVENT_SHARE, forced=1)
         if fsw.modes.mode != self.streams.mode_sent and self.rates_hz["CURRENT_MODE"] > 0.0:
             self.schedule_now("CURRENT_MODE")                 # a mode change is told at once
         self.streams.send_due(now, ms)
         self._send_param_lists()
-        self._send_events(self._reply_budget if self._time_left() else 0)   # what answers left
+        self._send_events(self._reply_budget)                 # what answers left
+        # the events left for a later tick, each counted once a tick it waits
+        if not self._pack_only:
+            self.stats["events_deferred"] += max(0, fsw.events.total - self._event_index)
         self._reply_budget = self.max_tx_per_tick - EVENT_SHARE
 
     def flush_events(self, max_frames: int = 256) -> None:
@@ -585,15 +616,37 @@ class GroundLink:
         except Exception:                       # shutting down: never raise from here
             log.exception("ground link: flushing events failed")
 
-    def _send_events(self, budget: int) -> None:
-        """Every event of the FSW's event history as a STATUSTEXT, at most ``budget`` (read
-        by sequence number, so another consumer may ``drain()`` the queue; events the
-        history's ring dropped before they went out are skipped)."""
+    def _send_events(self, budget: int, forced: int = 0) -> None:
+        """The events of the FSW's event history not sent yet, in order, at most ``budget``
+        frames (read by sequence number, so another consumer may ``drain()`` the queue;
+        events the history's ring dropped before they went out are skipped, counted:
+        ``events_missed``). Inside a tick each event is begun only when its recent cost fits
+        the tick's time, the first ``forced`` whatever is left (the events never wait for
+        good, however a flood or the streams use the budget); the rest wait for the next
+        tick (``send_due`` counts them)."""
         events = self.fsw.events
         if self._event_index > events.total:      # a new event log
             self._event_index = 0
         first, new = events.since(self._event_index)
-        for ev in new[:max(0, budget)]:
-            self._send(tm.statustext(ev.severity, ev.text))
+        self.stats["events_missed"] += first - self._event_index if new else 0
+        est, frames = self.item_cost["event"], 0
+        for k, ev in enumerate(new):
+            n = self._event_frames(ev)
+            if frames + n > budget:
+                break
+            if k >= forced and not self._fits(est):
+                break
+            t = self.budget.elapsed_ns()
+            self._send_event(ev)
+            self._cost(est, t)
+            frames += n
             first += 1
         self._event_index = first
+
+    def _event_frames(self, ev) -> int:
+        """The frames event ``ev`` goes down as."""
+        return 1
+
+    def _send_event(self, ev) -> None:
+        """Event ``ev`` to the ground: a STATUSTEXT."""
+        self._send(tm.statustext(ev.severity, ev.text))

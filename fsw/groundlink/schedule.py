@@ -2,29 +2,38 @@
 
 The link's tick is one task of a control cycle (RG2), so its cost comes out of that cycle's
 period. ``TickBudget`` bounds it: ``tick_budget_frac`` of the control period (0.15: 0.75 ms at
-200 Hz, 3 ms at 50 Hz). Within it, receiving (and answering what arrived) may take all but
-the send side's recent cost, and never more than half the budget when sending wants more
-(so a flood cannot starve the telemetry, nor heavy telemetry the commands); when streams are
-a period overdue (they go first, the most overdue whatever the budget), receiving also leaves their cost,
-keeping at least ``RECEIVE_FLOOR`` of the budget, so sending them does not carry the tick
-past its budget; what the tick spent before receiving is taken from receiving's share (and,
-link.py, what receiving recently took past the intake's budget); sending takes what receiving
-left, in this order:
+200 Hz, 3 ms at 50 Hz). Within it, less its end reserve (below), receiving (and answering
+what arrived) may take all but the send side's recent cost, and never more than half when
+sending wants more (so a flood cannot starve the telemetry, nor heavy telemetry the
+commands); when streams are a period overdue (they go first, the most overdue whatever the
+budget), receiving also leaves their cost, keeping at least ``RECEIVE_FLOOR``, so sending
+them does not carry the tick past its budget; what the tick spent before receiving is taken
+from receiving's share (and, link.py, what receiving recently took past the intake's
+budget); sending takes what receiving left, in this order:
 
-1. events, their share of frames (``EVENT_SHARE``) whatever the budget: what the flight
-   software reports reaches the ground even in a tick whose budget a flood used up;
+1. events, each while its recent cost fits (the first of the tick whatever the budget: what
+   the flight software reports reaches the ground even in a tick whose budget a flood used
+   up; the others wait, counted: ``events_deferred``), at most ``EVENT_SHARE`` frames;
 2. the telemetry streams that are due, those a period overdue first, then the
    longest-waiting, while budget is left for each (its ``RecentCost`` and the units' recent
    estimate misses); a stream not sent stays due and goes out at a
    later tick (counted: ``tx_deferred``), so under a short budget every stream still gets
    its turn and none is dropped;
-3. answers to requests (parameter lists) and further events, from the reply budget;
+3. answers to requests (parameter lists) and further events, from the reply budget, each
+   while its recent cost fits (a list cut short waits, counted: ``params_deferred``);
 
 then, when the intake stopped on its budget (datagrams wait), receiving reads on in what
 sending left (link.py).
 
-Work is begun only while time is left short of ``END_RESERVE`` of the budget: what follows
-the last check (the tick's bookkeeping) lands inside the budget.
+Work is begun only while its estimate fits short of ``END_RESERVE`` of the budget (receiving
+too: its share never reaches into the reserve): what follows the last check (the tick's
+bookkeeping) and what items cost beyond their estimates (a cache-cold unit, a frame that
+took a page fault) land in the reserve, so the tick's tail, not only its median, stays
+inside the budget. Every kind of work that can wait is begun item by item against its
+own estimate (``RecentCost``): streams (streams.py), received frames (the intake), events,
+parameter-list entries and FTP replies (link.py); what does not fit waits for the next
+tick, counted per kind in the link's ``stats`` (``tx_deferred``, ``rx_deferred`` and
+``rx_budget_hits``, ``events_deferred``, ``params_deferred``, ``ftp_deferred``).
 
 ``StreamSchedule`` keeps when each stream is next due; a stream may go out up to
 ``DUE_SLACK`` of its period early (tick jitter must not skip a period).
@@ -41,8 +50,8 @@ import numpy as np
 DUE_SLACK = 0.05                 # a stream may go out up to 5 % of its period early
 TICK_BUDGET_FRAC = 0.15          # the link's share of a control period
 COST_RING = 1024                 # ticks whose cost is kept for the percentiles
-RECEIVE_FLOOR = 0.25             # the budget's share receiving keeps whatever the streams owe
-END_RESERVE = 0.08               # the budget's share kept for what follows the last check of a tick
+RECEIVE_FLOOR = 0.5              # the share of the time to work in receiving keeps whatever the streams owe
+END_RESERVE = 0.3                # the budget's share no work is begun in: the tail's room (docs/decisions.md)
 COST_SAMPLES = 8                 # recent costs of a piece of work its estimate is taken from
 
 
@@ -105,20 +114,27 @@ class TickBudget:
     def elapsed_ns(self) -> int:
         return self.clock_ns() - self.t0_ns
 
+    def fits(self, estimate_ns: int) -> bool:
+        """An item of work estimated at ``estimate_ns`` may be begun: it ends short of the
+        end reserve."""
+        return self.left_ns() >= estimate_ns
+
     def left_ns(self) -> int:
         """Time left to begin more work: the limit less the end reserve (the tick's
         bookkeeping after its last check: parameter lists, events, the cost ring)."""
         return self.limit_ns - self.reserve_ns - self.elapsed_ns()
 
     def receive_ns(self, send_ns_recent: int, overdue_ns: int = 0) -> int:
-        """What receiving may take: all but the send side's recent cost, at least half;
-        and all but what sending the streams a period overdue costs (they go this tick) with
-        the end reserve, at least RECEIVE_FLOOR of the budget; less what the tick has spent
-        already (the schedule's own work before receiving is the tick's too)."""
-        owed = int(overdue_ns) + self.reserve_ns if overdue_ns > 0 else 0
-        keep = max(min(int(send_ns_recent), self.limit_ns // 2),
-                   min(owed, self.limit_ns - int(RECEIVE_FLOOR * self.limit_ns)))
-        return max(0, self.limit_ns - keep - self.elapsed_ns())
+        """What receiving may take of the time work may be begun in (the budget less its
+        end reserve: with nothing to send, a flood would otherwise fill the whole budget
+        and its tail run past it): all of it but the send side's recent cost, at least
+        half; and all but what sending the streams a period overdue costs (they go this
+        tick), at least RECEIVE_FLOOR of it; less what the tick has spent already (the
+        schedule's own work before receiving is the tick's too)."""
+        usable = self.limit_ns - self.reserve_ns
+        keep = max(min(int(send_ns_recent), usable // 2),
+                   min(max(0, int(overdue_ns)), usable - int(RECEIVE_FLOOR * usable)))
+        return max(0, usable - keep - self.elapsed_ns())
 
 
 class StreamSchedule:

@@ -23,7 +23,9 @@ latest answer kept (``keep=LATEST``), it also makes stale an answer still being 
 not yet taken (the newest request wins). ``keep=EVERY`` keeps every finished answer by its
 tag until taken (table builds: each one is worth caching). ``skip_while_busy``: a request
 made while the previous one is still computing is refused and counted instead (the owner
-keeps its cadence rather than queueing behind a slow job).
+keeps its cadence rather than queueing behind a slow job) -- in real time only: ``AWAITED``
+lets the previous one finish first and takes the request, so that how fast the thread ran
+never decides what a lockstep or batch run flies.
 
 A function that raises never stops the loop or the thread: it is counted (``faults``), and
 ``take`` reports it as an event and hands the owner no answer (its previous one stands).
@@ -112,6 +114,10 @@ class BackgroundJob:
         deadline, taken whenever it is there). False when refused (``skip_while_busy``:
         counted, reported at ``t_s``)."""
         with self._cv:
+            if self.skip_while_busy and self.mode == AWAITED:
+                # the thread's progress must not decide (lockstep and batch are deterministic):
+                # the previous request is let finish, as if it had been quick, then this one goes
+                self._cv.wait_for(lambda: not self._busy() or self._stop)
             refused = self.skip_while_busy and self._busy()
             if refused:
                 self.skipped += 1

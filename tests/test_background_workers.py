@@ -432,6 +432,19 @@ def test_a_request_while_busy_is_refused_and_counted_when_the_job_keeps_its_cade
     assert w.take(2.0).value == "held" and jobs.calls == ["held"]
 
 
+def test_awaited_a_request_while_busy_waits_for_the_previous_one_and_is_taken_however_slow_it_ran(jobs, runner):
+    """Batch and lockstep: whether the previous request still computes depends on the host,
+    so it must not decide whether this one is refused -- the previous one finishes first."""
+    w = runner(mode=AWAITED, skip_while_busy=True)
+    assert w.submit("held", t_s=1.0, due_t=1.5)
+    jobs.started("held")
+    threading.Timer(0.05, jobs.go, ("held",)).start()
+    assert w.submit("next", t_s=2.0, due_t=2.5)          # waits for "held", then goes
+    assert (w.released, w.skipped) == (2, 0)
+    jobs.go("next")
+    assert w.take(2.5).value == "next" and jobs.calls == ["held", "next"]
+
+
 @pytest.mark.parametrize("mode", [IN_PLACE, REALTIME])
 def test_a_job_that_raises_is_a_counted_fault_and_an_event_and_the_runner_serves_on(runner, mode):
     def job(x):

@@ -119,7 +119,6 @@ class Allocator:
         self._warm_u = np.zeros(self.n_jets, dtype=np.uint8)    # rehearse's answer, discarded
         self._warm_tau = np.zeros(N_AXES)
         self._warm_obj = np.zeros(1)
-        self.objective = float("nan")
         self.degraded = False
         self.rejected = False
         self.rebuild_time_s = 0.0          # build time of the tables adopted last [s]
@@ -411,14 +410,19 @@ class Allocator:
                 np.add(t.bias, self._delta, out=self.tau_B)
             else:
                 self.tau_B[:] = t.bias
-            self.objective = float("nan")
-            self.degraded = False
-            self.rejected = True
-        else:
-            self.objective = float(self._obj[0])
-            self.degraded = status == STATUS_DEGRADED
-            self.rejected = False
+        self.note_status(status)
         return self.u
+
+    @property
+    def objective(self) -> float:
+        """The objective of the last answer (NaN for a rejected demand: the query writes NaN)."""
+        return float(self._obj[0])
+
+    def note_status(self, status: int) -> None:
+        """``degraded`` and ``rejected`` of a query's status (also for the realiser's compiled
+        call, fsw/allocation/dutycycle.py, which queries these tables without ``solve``)."""
+        self.degraded = status == STATUS_DEGRADED
+        self.rejected = status == STATUS_REJECTED
 
 
 def _as_demand(tau_d) -> np.ndarray:

@@ -41,9 +41,123 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from numba import njit
 
 from .dutylp import duty_cycles_kernel, scatter_duty_cycles, sigma_delta, warm_kernel
-from .model import N_AXES
+from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE
+from .query import STATUS_DEGRADED, STATUS_REJECTED, ZERO3, solve_kernel, solve_tree_kernel
+
+# what the compiled cycle (``realise_tree`` / ``realise_sign``) returns: the query's status in
+# the low bits, then flags, then the LP's pivots + PIVOT_BIAS from bit 8
+STATUS_MASK = 3
+MODULATED = 4             # the answer flown is the sigma-delta's (realiser's ``u``)
+NEED_LP = 8               # short, but the LP is not built for these tables: the caller builds it
+LP_FAILED = 16            # the LP kernel failed: the caller solves it by HiGHS
+RARE = STATUS_DEGRADED | STATUS_REJECTED | NEED_LP | LP_FAILED
+PIVOT_SHIFT = 8
+PIVOT_BIAS = 16           # > the kernel's failure codes' magnitude
+
+
+@njit(cache=True)
+def bank_axis_short(axis, u_B, tau_B, short_min_Nm, short_frac, round_Nm):
+    """The realiser's gate (DutyCycleRealiser's docstring): the bank torque ``tau_B`` delivers
+    less of a demand above ``short_min_Nm`` than the rule allows (the larger of ``round_Nm``
+    and ``short_frac`` of the demand)."""
+    d = axis[0] * u_B[0] + axis[1] * u_B[1] + axis[2] * u_B[2]
+    got = axis[0] * tau_B[0] + axis[1] * tau_B[1] + axis[2] * tau_B[2]
+    if abs(d) <= short_min_Nm:
+        return False
+    lim = round_Nm
+    v = short_frac * abs(d)
+    if v > lim:
+        lim = v
+    return ((d - got) if d >= 0.0 else (got - d)) > lim
+
+
+@njit(cache=True)
+def _flown_exact(tau_q, tau_B, acc):
+    """A cycle flown on the exact answer: its torque, and the accumulators cleared (they are
+    zero already unless the cycle before was modulated)."""
+    for i in range(3):
+        tau_B[i] = tau_q[i]
+    for k in range(acc.shape[0]):
+        acc[k] = 0.0
+
+
+@njit(cache=True)
+def modulate(u_B, cold, bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work,
+             acc, u, uf, tau_B):
+    """A modulated cycle: the LP (``duty_cycles_kernel``), the sigma-delta into ``u`` and its
+    modelled torque ``tau_B`` = cols u + bias (np.dot: the BLAS product NumPy's own is, bit
+    for bit). Returns the LP's pivots, or its failure code with nothing after the LP done."""
+    pivots = duty_cycles_kernel(u_B, bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj,
+                                alpha, work, cold)
+    if pivots < 0:
+        return pivots
+    modulated_torque(d, jets, acc, u, uf, cols, bias, tau_B)
+    return pivots
+
+
+@njit(cache=True)
+def modulated_torque(d, jets, acc, u, uf, cols, bias, tau_B):
+    """The sigma-delta on duty cycles ``d`` into ``u`` and the torque of ``u``."""
+    sigma_delta(d, jets, acc, u)
+    for k in range(u.shape[0]):
+        uf[k] = u[k]
+    np.dot(cols, uf, tau_B)
+    for i in range(3):
+        tau_B[i] += bias[i]
+
+
+@njit(cache=True)
+def realise_tree(u_B, short_frac, cold, lp_ready,
+                 w, spill, nlo, nhi, nminpen, nstart, nend, n_internal, cand_tau, cand_pen, cand_pat, ties, tie_obj,
+                 tbias, stack_k, stack_lb, u_q, tau_q, obj,
+                 axis, short_min_Nm, round_Nm, demand_B, tau_B, acc, u, uf,
+                 bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work):
+    """One cycle of DutyCycleRealiser.solve on spill-box tables with no reconfiguration pending,
+    in one call: the allocator's query (``solve_tree_kernel`` into ``u_q``, ``tau_q``, ``obj``),
+    the gate (``bank_axis_short``), then either the exact answer's torque or, if the LP is built
+    for these tables (``lp_ready``), the modulated cycle (``modulate``). Returns the code
+    (STATUS_MASK, MODULATED, NEED_LP, LP_FAILED, the pivots from PIVOT_SHIFT)."""
+    status = solve_tree_kernel(u_B, w, spill, nlo, nhi, nminpen, nstart, nend, n_internal, cand_tau, cand_pen,
+                               cand_pat, ties, tie_obj, 0, ZERO3, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
+                               stack_k, stack_lb, u_q, tau_q, obj)
+    for i in range(3):
+        demand_B[i] = u_B[i]
+    if status == STATUS_REJECTED:
+        for i in range(3):
+            tau_q[i] = tbias[i]
+    if status == STATUS_REJECTED or not bank_axis_short(axis, u_B, tau_q, short_min_Nm, short_frac, round_Nm):
+        _flown_exact(tau_q, tau_B, acc)
+        return status
+    if not lp_ready:
+        return status | NEED_LP
+    pivots = modulate(u_B, cold, bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha,
+                      work, acc, u, uf, tau_B)
+    if pivots < 0:
+        return status | LP_FAILED | ((pivots + PIVOT_BIAS) << PIVOT_SHIFT)
+    return status | MODULATED | ((pivots + PIVOT_BIAS) << PIVOT_SHIFT)
+
+
+@njit(cache=True)
+def realise_sign(u_B, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch, u_q, tau_q, obj,
+                 bias, demand_B, tau_B, acc):
+    """One cycle of DutyCycleRealiser.solve on the paper's sign-box tables (never modulated) with
+    no reconfiguration pending: the query (``solve_kernel``) and the answer's torque."""
+    status = solve_kernel(u_B, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch,
+                          0, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u_q, tau_q, obj)
+    for i in range(3):
+        demand_B[i] = u_B[i]
+    if status == STATUS_REJECTED:
+        for i in range(3):
+            tau_q[i] = bias[i]
+    _flown_exact(tau_q, tau_B, acc)
+    return status
+
+
+_F64 = np.dtype(np.float64)
+_SHAPE3 = (N_AXES,)
 
 
 class DutyCycleRealiser:
@@ -59,7 +173,7 @@ class DutyCycleRealiser:
         # the FSW's own rule for a short bank axis (FlightSoftware._check_bank_shortfall, which
         # sets both): a demand above short_min_Nm that gets less than (1 - short_frac) of
         # itself; 0, 0 (stand-alone use): any shortfall beyond rounding
-        self.short_min_Nm = 0.0
+        self._short_min_Nm = 0.0
         self.short_frac = 0.0
         self._thrust = np.asarray(thrust_N, dtype=float)
         n = T.shape[1]
@@ -96,6 +210,31 @@ class DutyCycleRealiser:
         warm_kernel()
         self._cols = np.zeros((N_AXES, n))
         self._bias = np.zeros(N_AXES)
+        self._demand_r = np.zeros(N_AXES)
+        self._tau_r = np.zeros(N_AXES)
+        self._uf_r = np.zeros(n)
+        self._A = np.zeros((N_AXES, 2 * N_AXES))
+        self._cost = np.zeros(2 * N_AXES)
+        self._upper = np.zeros(2 * N_AXES)
+        self._x = np.zeros(2 * N_AXES)
+        self._state = np.zeros(2 * N_AXES, dtype=np.int8)
+        self._dj = np.zeros(2 * N_AXES)
+        self._alpha = np.zeros(2 * N_AXES)
+        self._cold = True
+        self.rare = True                          # the last solve may call for events (``solve``)
+        self._version = -1                        # allocator.tables_version the compiled call's arguments are of
+        self._tree = False
+        self._args = ()
+        self._args_r = ()
+
+    @property
+    def short_min_Nm(self) -> float:
+        return self._short_min_Nm
+
+    @short_min_Nm.setter
+    def short_min_Nm(self, value: float) -> None:
+        self._short_min_Nm = float(value)
+        self._version = -1                        # the compiled call's arguments bind it
 
     def _short(self, u_B: np.ndarray, tau_B: np.ndarray) -> bool:
         # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
@@ -168,6 +307,11 @@ class DutyCycleRealiser:
         pivots = duty_cycles_kernel(u_B, self._bias, self._idx, self._cols, self.d, self.avg_B, self._rhs, self._A,
                                     self._cost, self._upper, self._basis, self._state, self._x, self._Binv, self._y,
                                     self._dj, self._alpha, self._work, self._cold)
+        self._lp_done(u_B, pivots)
+        return self.d
+
+    def _lp_done(self, u_B: np.ndarray, pivots: int) -> None:
+        """After the LP kernel: its pivots noted, HiGHS's answer if it failed, the next start."""
         self.pivots = pivots
         self.fell_back = pivots < 0
         if self.fell_back:
@@ -175,16 +319,100 @@ class DutyCycleRealiser:
             self._solve_highs(u_B)
             scatter_duty_cycles(self._x, self._idx, self._cols, self._bias, self.d, self.avg_B)
         self._cold = self.fell_back            # a failed basis is no warm start
-        return self.d
 
     def solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
         """The jets array to fly for demand ``u_B`` [N m]: the allocator's exact answer, or while
         the bank axis is short the sigma-delta of the LP's duty cycles. ``tau_B`` is the
-        modelled torque of the answer flown; ``solve_ns`` the time this call took."""
+        modelled torque of the answer flown; ``solve_ns`` the time this call took; ``rare``
+        whether the caller has events to look for (a switch of tables, a degraded answer, a
+        fallback to HiGHS): False on the compiled path's ordinary answers.
+
+        The common case (the tables bound here, no reconfiguration pending, a demand of three
+        floats) is one compiled call (``realise_tree`` / ``realise_sign``) on arrays bound
+        once per tables (``_bind``); the rest is ``_solve``, the allocator's ``solve`` and the
+        steps after it one by one."""
         t0 = time.perf_counter_ns()
-        u = self._solve(allocator, u_B)
+        if (allocator.tables_version == self._version and not allocator.reconfig_pending and type(u_B) is np.ndarray
+                and u_B.dtype is _F64 and u_B.shape == _SHAPE3):
+            if self._tree:
+                code = realise_tree(u_B, self.short_frac, self._cold, *self._args)
+            else:
+                code = realise_sign(u_B, *self._args)
+            if code & RARE:
+                u = self._after_rare(allocator, u_B, code)
+            else:
+                if self.rare:                     # the flags the last, rare, answer left
+                    self.rare = False
+                    self.fell_back = False
+                    allocator.interim = False
+                    allocator.note_status(0)
+                if code & MODULATED:
+                    self.pivots = (code >> PIVOT_SHIFT) - PIVOT_BIAS
+                    self._cold = False
+                    self.modulated = True
+                    self.modulated_cycles += 1
+                    u = self.u
+                else:
+                    self.modulated = False
+                    u = allocator.u
+        else:
+            u = self._solve(allocator, u_B)
+            self.rare = True
+            if not allocator.reconfig_pending:
+                self._bind(allocator)
         self.solve_ns = time.perf_counter_ns() - t0
         return u
+
+    def _after_rare(self, allocator, u_B: np.ndarray, code: int) -> np.ndarray:
+        """The compiled call's rare endings: a degraded or rejected answer (noted on the
+        allocator), a short cycle whose LP is to be built (then solved as ``duty_cycles``
+        does), an LP the kernel failed (HiGHS solves it); the steps after as ``_solve``."""
+        self.rare = True
+        allocator.interim = False
+        allocator.note_status(code & STATUS_MASK)
+        self.fell_back = False
+        if not code & (NEED_LP | LP_FAILED | MODULATED):
+            self.modulated = False
+            return allocator.u
+        if code & NEED_LP:
+            self.duty_cycles(allocator, u_B)
+            self._bind(allocator)
+        elif code & LP_FAILED:
+            self._lp_done(u_B, (code >> PIVOT_SHIFT) - PIVOT_BIAS)
+        else:
+            self.pivots = (code >> PIVOT_SHIFT) - PIVOT_BIAS
+            self._cold = False
+        if code & (NEED_LP | LP_FAILED):
+            modulated_torque(self.d, self._idx, self.acc, self.u, self._uf, self._cols, self._bias, self.tau_B)
+        self.modulated = True
+        self.modulated_cycles += 1
+        return self.u
+
+    def _bind(self, allocator) -> None:
+        """The compiled call's arguments for the allocator's active tables (and the LP, when it
+        is built for them), and the rehearsal's, whose outputs are scratch copies."""
+        t = allocator._tables
+        self._version = allocator.tables_version
+        self._tree = t.spill_box
+        if not self._tree:
+            self._args = (t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen, t.pat, t.scratch,
+                          allocator.u, allocator.tau_B, allocator._obj, t.bias, self.demand_B, self.tau_B, self.acc)
+            self._args_r = (t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen, t.pat, t.scratch,
+                            allocator._warm_u, allocator._warm_tau, allocator._warm_obj, t.bias, self._demand_r,
+                            self._tau_r, self._acc_r)
+            return
+        query = (self._tables is t, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend, t.n_internal, t.tau,
+                 t.pen, t.pat, t.ties, t.scratch, t.bias, allocator._stack_k, allocator._stack_lb)
+        lp = (self._bias, self._idx, self._cols, self.d, self.avg_B, self._rhs, self._A, self._cost, self._upper)
+        work = (self._x, self._Binv, self._y, self._dj, self._alpha, self._work)
+        self._args = (query + (allocator.u, allocator.tau_B, allocator._obj, self.axis, self.short_min_Nm,
+                               self.round_Nm, self.demand_B, self.tau_B, self.acc, self.u, self._uf)
+                      + lp + (self._basis, self._state) + work)
+        lp_r = (self._bias, self._idx, self._cols, self._d_r, self._avg_r, self._rhs, self._A, self._cost, self._upper)
+        self._args_r = (query + (allocator._warm_u, allocator._warm_tau, allocator._warm_obj, self.axis,
+                                 self.short_min_Nm, self.round_Nm, self._demand_r, self._tau_r, self._acc_r, self._u_r,
+                                 self._uf_r)
+                        + lp_r + (self._basis_r, self._state_r) + work)
 
     def _solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
         jets = allocator.solve(u_B)
@@ -198,31 +426,32 @@ class DutyCycleRealiser:
                 self.modulated = False
             return jets
         self.duty_cycles(allocator, u_B)
-        u = self.u
-        sigma_delta(self.d, self._idx, self.acc, u)
-        self._uf[:] = u
-        np.dot(self._cols, self._uf, out=self.tau_B)
-        self.tau_B += self._bias
+        modulated_torque(self.d, self._idx, self.acc, self.u, self._uf, self._cols, self._bias, self.tau_B)
         self.modulated = True
         self.modulated_cycles += 1
-        return u
+        return self.u
 
     def rehearse(self, allocator, u_B: np.ndarray) -> None:
-        """Real time, just before a release, after a modulated cycle: the LP and the sigma-delta
-        for a demand near the next one, the answer discarded, so the kernels and the model the
-        next modulated cycle reads are in the caches. Changes nothing an answer depends on: the
-        warm-start basis and the accumulators are copied, the duty cycles and jets go to scratch,
-        and the kernel's work arrays are rewritten by every solve before they are read."""
-        if (not self.modulated or self._tables is not allocator._tables or allocator.reconfig_pending
-                or type(u_B) is not np.ndarray or u_B.dtype != np.float64 or u_B.shape != (N_AXES,)):
+        """Real time, just before a release: the cycle's compiled call for a demand near the
+        next one, the answer discarded, so the kernels, the tables and (after a modulated
+        cycle) the LP's model the next cycle reads are in the caches. Changes nothing an
+        answer depends on: the warm-start basis and the accumulators are copied, every output
+        goes to scratch, and the work arrays (the query's ties and stacks, the LP's) are
+        rewritten by every solve before they are read. Off the compiled path (tables not bound
+        here, a reconfiguration pending): the allocator's own rehearsal."""
+        if type(u_B) is not np.ndarray or u_B.dtype != np.float64 or u_B.shape != (N_AXES,):
+            return
+        if allocator.tables_version != self._version or allocator.reconfig_pending:
+            allocator.rehearse(u_B)
+            return
+        if not self._tree:
+            realise_sign(u_B, *self._args_r)
             return
         self._basis_r[:] = self._basis
         self._state_r[:] = self._state
         self._acc_r[:] = self.acc
-        if duty_cycles_kernel(u_B, self._bias, self._idx, self._cols, self._d_r, self._avg_r, self._rhs, self._A,
-                              self._cost, self._upper, self._basis_r, self._state_r, self._x, self._Binv, self._y,
-                              self._dj, self._alpha, self._work, self._cold) >= 0:
-            sigma_delta(self._d_r, self._idx, self._acc_r, self._u_r)
+        # the LP rehearsed after a modulated cycle only, as the gate would take it
+        realise_tree(u_B, self.short_frac, self._cold, self.modulated and self._args[0], *self._args_r[1:])
 
     def reset(self) -> None:
         self.acc[:] = 0.0

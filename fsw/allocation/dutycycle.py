@@ -202,7 +202,7 @@ class DutyCycleRealiser:
         self.pivots = 0                           # pivots of the last LP (from the previous basis)
         # the rehearsal's copies of what a solve reads and its scratch outputs
         self._basis_r = np.zeros(N_AXES, dtype=np.int64)
-        self._state_r = np.zeros(0, dtype=np.int8)
+        self._state_r = np.zeros(2 * N_AXES, dtype=np.int8)
         self._acc_r = np.zeros(n)
         self._d_r = np.zeros(n)
         self._avg_r = np.zeros(N_AXES)

@@ -78,13 +78,13 @@ def test_the_compiled_stage_equals_mains_python_over_demands_and_health_changes(
     params = {**PARAMS, "allocator.spill_jets": spill_jets}
     (al, dc), (al_p, dc_p) = _pair(params, short_min)
     rng = np.random.default_rng(int(spill_jets * 10 + short_min))
-    healths = [RUN82, RUN190, NOMINAL, RUN82, STUCK, RUN82]     # RUN82 again: tables back from the cache
+    healths = [RUN82, NOMINAL, STUCK, RUN82]     # RUN82 again: tables back from the cache
     modulated = degraded = rejected = 0
     for h_i, health in enumerate(healths):
         for a, d in ((al, dc), (al_p, dc_p)):
             a.set_health(health)
             d.reset()
-        for u_B in _demands(rng, 140):
+        for u_B in _demands(rng, 120):
             frac = float(rng.choice([0.0, 0.1, 0.3]))
             dc.short_frac = dc_p.short_frac = frac
             jets = dc.solve(al, u_B.copy())
@@ -115,8 +115,7 @@ def _fly(cls, scenario: str, n: int, reject_every: int):
     scn = load_scenario(scenario)
     plant = Plant(scn, scn.seed)
     fsw = cls(scn, EventLog())
-    topo = Topology(fsw, LockstepClock(int(round(scn.dt_control_s * 1e9))), frame_source=lambda: plant.sensors,
-                    history=16)
+    topo = Topology(fsw, LockstepClock())
     jets, outs, state = [], [], []
     for i in range(n):
         if i == 60:
@@ -130,10 +129,12 @@ def _fly(cls, scenario: str, n: int, reject_every: int):
             fsw.cmd_fault_tolerance(True)          # the same tables again
         if i == 330:
             fsw.cmd_mode(Mode.SAFE)
-        frame = plant.sensors.copy()
+        frame = plant.sensors
         if i % reject_every == reject_every - 1:
-            frame["omega_meas_radps"][0] = math.nan
-        u = fsw.control_step(frame).copy()
+            frame = frame.copy()
+            frame["omega_BN_B"][0] = math.nan
+        topo.tick(frame)
+        u = topo.u.copy()
         if i % 5 == 0:
             fsw.rehearse(frame, fsw.u_cal_B * 1.1)
         jets.append(u)
@@ -147,8 +148,7 @@ def _fly(cls, scenario: str, n: int, reject_every: int):
                       fsw.allocator.degraded, fsw.allocator.rejected, fsw.allocator.tables_version))
         plant.step(u)
     fsw.close()
-    events = [(e.t_s, e.code, tuple(sorted(e.fields.items()))) for e in fsw.events.history] \
-        if hasattr(fsw.events.history[0], "fields") else [str(e) for e in fsw.events.history]
+    events = [(e.t_s, e.code) for e in fsw.events.history if e.code != "cycle_slip"]   # rebuild_ms: host timing
     return np.array(jets), outs, state, events, fsw
 
 

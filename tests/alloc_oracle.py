@@ -1,5 +1,5 @@
 """The allocation stage as Python code, the way main flew it before it became one compiled call
-(fsw/allocation/dutycycle.py ``realise_tree`` / ``realise_sign``): ``Allocator.solve``'s wrapper
+(fsw/allocation/dutycycle.py ``realise``): ``Allocator.solve``'s wrapper
 and ``DutyCycleRealiser.solve`` step by step, the truth the compiled call is held to bit for bit.
 ``PythonAllocFlightSoftware`` is a FlightSoftware whose allocation runs this code and makes all
 three event checks every cycle (also the "before" of the timing script in docs/changelog.md)."""

@@ -1,4 +1,4 @@
-"""fsw/allocation/dutycycle.py's compiled allocation stage (``realise_tree`` / ``realise_sign``:
+"""fsw/allocation/dutycycle.py's compiled allocation stage (``realise``, packed buffers:
 the allocator's query, the bank gate, the duty-cycle LP and the sigma-delta in one call) gives,
 bit for bit, what main's Python stage gives (tests/alloc_oracle.py): over sequences of demands
 (modulating, delivered, rejected, degraded) through health changes and back, on the spill box and

@@ -44,10 +44,12 @@ import numpy as np
 from numba import njit
 
 from .dutylp import duty_cycles_kernel, scatter_duty_cycles, sigma_delta, warm_kernel
+from .allocator import allocator_views
 from .model import N_AXES, TIE_REL, TOL_BOX_NM, TOL_PEN, TOL_TIE
 from .query import STATUS_DEGRADED, STATUS_REJECTED, ZERO3, solve_kernel, solve_tree_kernel
+from .tables import H_NINT, H_NODES, table_views
 
-# what the compiled cycle (``realise_tree`` / ``realise_sign``) returns: the query's status in
+# what the compiled cycle (``realise``) returns: the query's status in
 # the low bits, then flags, then the LP's pivots + PIVOT_BIAS from bit 8
 STATUS_MASK = 3
 MODULATED = 4             # the answer flown is the sigma-delta's (realiser's ``u``)
@@ -109,18 +111,77 @@ def modulated_torque(d, jets, acc, u, uf, cols, bias, tau_B):
         tau_B[i] += bias[i]
 
 
+# The realiser's arrays are views into two buffers, the floats ``rf`` and the int64s ``ri``, so the
+# compiled stage takes the realiser in two arguments (each array argument costs ~40 ns of
+# dispatch); ``realiser_views`` is the one layout. rf: the gate's scalars and axis, then 3-vectors,
+# the LP's inverse and work, the rehearsal's 3-vectors; n-vectors (the rehearsal's too); the jets'
+# columns; the LP's columns (room for every jet). ri: sizes and flags, the bases, the usable jets,
+# then as bytes the LP's column states and the answers flown (the rehearsal's after each).
+RF_SHORT_FRAC, RF_SHORT_MIN, RF_ROUND, RF_AXIS = 0, 1, 2, 3
+RF_TAU, RF_DEMAND, RF_AVG, RF_RHS, RF_BIAS, RF_Y = 6, 9, 12, 15, 18, 21
+RF_BINV, RF_WORK, RF_TAU_R, RF_DEMAND_R, RF_AVG_R, RF_N = 24, 33, 51, 54, 57, 60
+RI_N, RI_P, RI_COLD, RI_LP, RI_MOD, RI_BASIS, RI_BASIS_R, RI_IDX = 0, 1, 2, 3, 4, 5, 8, 11
+
+
+def realiser_buffers(n: int) -> tuple[np.ndarray, np.ndarray]:
+    nc = n + 2 * N_AXES
+    ri = np.zeros(RI_IDX + n + -(-(2 * nc + 2 * n) // 8), dtype=np.int64)
+    ri[RI_N] = n
+    ri[RI_COLD] = 1
+    return np.zeros(RF_N + 9 * n + 8 * nc), ri
+
+
 @njit(cache=True)
-def realise_tree(u_B, short_frac, cold, lp_ready,
-                 w, spill, nlo, nhi, nminpen, nstart, nend, n_internal, cand_tau, cand_pen, cand_pat, ties, tie_obj,
-                 tbias, stack_k, stack_lb, u_q, tau_q, obj,
-                 axis, short_min_Nm, round_Nm, demand_B, tau_B, acc, u, uf,
-                 bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha, work):
-    """One cycle of DutyCycleRealiser.solve on spill-box tables with no reconfiguration pending,
-    in one call: the allocator's query (``solve_tree_kernel`` into ``u_q``, ``tau_q``, ``obj``),
-    the gate (``bank_axis_short``), then either the exact answer's torque or, if the LP is built
-    for these tables (``lp_ready``), the modulated cycle (``modulate``). Returns the code
-    (STATUS_MASK, MODULATED, NEED_LP, LP_FAILED, the pivots from PIVOT_SHIFT)."""
-    status = solve_tree_kernel(u_B, w, spill, nlo, nhi, nminpen, nstart, nend, n_internal, cand_tau, cand_pen,
+def realiser_views(rf, ri, warm):
+    """(axis, tau_B, demand_B, avg_B, rhs, bias, y, Binv, work, d, acc, uf, cols, cost, upper, x, dj,
+    alpha, A, basis, jets, state, u) of the buffers ``realiser_buffers`` made, the LP's for its
+    ``ri[RI_P]`` usable jets; the rehearsal's tau_B, demand_B, avg_B, d, acc, uf, basis, state, u
+    if ``warm``."""
+    n, p = ri[RI_N], ri[RI_P]
+    nc, ncol = n + 2 * N_AXES, p + 2 * N_AXES
+    o3 = RF_TAU_R - RF_TAU if warm else 0
+    on = RF_N + (3 * n if warm else 0)
+    oc = RF_N + 9 * n
+    b = ri.view(np.uint8)
+    ob = (RI_IDX + n) * 8
+    ou = ob + 2 * nc + (n if warm else 0)
+    os = ob + (nc if warm else 0)
+    obas = RI_BASIS_R if warm else RI_BASIS
+    return (rf[RF_AXIS:RF_AXIS + 3], rf[RF_TAU + o3:RF_TAU + o3 + 3], rf[RF_DEMAND + o3:RF_DEMAND + o3 + 3],
+            rf[RF_AVG + o3:RF_AVG + o3 + 3], rf[RF_RHS:RF_RHS + 3], rf[RF_BIAS:RF_BIAS + 3], rf[RF_Y:RF_Y + 3],
+            rf[RF_BINV:RF_BINV + 9].reshape((N_AXES, N_AXES)),
+            rf[RF_WORK:RF_WORK + 18].reshape((N_AXES, 2 * N_AXES)),
+            rf[on:on + n], rf[on + n:on + 2 * n], rf[on + 2 * n:on + 3 * n],
+            rf[RF_N + 6 * n:RF_N + 9 * n].reshape((N_AXES, n)),
+            rf[oc:oc + ncol], rf[oc + nc:oc + nc + ncol], rf[oc + 2 * nc:oc + 2 * nc + ncol],
+            rf[oc + 3 * nc:oc + 3 * nc + ncol], rf[oc + 4 * nc:oc + 4 * nc + ncol],
+            rf[oc + 5 * nc:oc + 5 * nc + N_AXES * ncol].reshape((N_AXES, ncol)),
+            ri[obas:obas + 3], ri[RI_IDX:RI_IDX + p], b[os:os + ncol].view(np.int8), b[ou:ou + n])
+
+
+@njit(cache=True)
+def _realise_tree(u_B, tf, ti, af, ai, rf, ri, warm):
+    """One cycle of DutyCycleRealiser.solve on spill-box tables with no reconfiguration pending:
+    the allocator's query (``solve_tree_kernel`` into its u, tau_B, objective), the gate
+    (``bank_axis_short``), then either the exact answer's torque or, if the LP is built for these
+    tables (ri[RI_LP]), the modulated cycle (``modulate``). ``warm``: the rehearsal, every output
+    to the buffers' scratch copies, the LP's start and the accumulators copied there first, the
+    LP only after a modulated cycle. Returns the code (STATUS_MASK, MODULATED, NEED_LP,
+    LP_FAILED, the pivots from PIVOT_SHIFT)."""
+    (w, spill, tbias, cand_tau, cand_pen, tie_obj, nlo, nhi, nminpen, _, _, _, _, _, cand_pat, ties, nstart, nend,
+     _, _, _) = table_views(tf, ti)
+    stack_k, stack_lb, u_q, tau_q, obj = allocator_views(af, ai, ri[RI_N], warm)
+    (axis, tau_B, demand_B, avg_B, rhs, bias, y, Binv, work, d, acc, uf, cols, cost, upper, x, dj, alpha, A, basis,
+     jets, state, u) = realiser_views(rf, ri, warm)
+    lp_ready = ri[RI_LP] != 0
+    if warm:
+        lp_ready = lp_ready and ri[RI_MOD] != 0
+        (_, _, _, _, _, _, _, _, _, _, acc0, _, _, _, _, _, _, _, _, basis0, _, state0, _) = realiser_views(rf, ri,
+                                                                                                           False)
+        basis[:] = basis0
+        state[:] = state0
+        acc[:] = acc0
+    status = solve_tree_kernel(u_B, w, spill, nlo, nhi, nminpen, nstart, nend, ti[H_NINT], cand_tau, cand_pen,
                                cand_pat, ties, tie_obj, 0, ZERO3, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN,
                                stack_k, stack_lb, u_q, tau_q, obj)
     for i in range(3):
@@ -128,32 +189,61 @@ def realise_tree(u_B, short_frac, cold, lp_ready,
     if status == STATUS_REJECTED:
         for i in range(3):
             tau_q[i] = tbias[i]
-    if status == STATUS_REJECTED or not bank_axis_short(axis, u_B, tau_q, short_min_Nm, short_frac, round_Nm):
+    if status == STATUS_REJECTED or not bank_axis_short(axis, u_B, tau_q, rf[RF_SHORT_MIN], rf[RF_SHORT_FRAC],
+                                                        rf[RF_ROUND]):
         _flown_exact(tau_q, tau_B, acc)
+        if not warm:
+            ri[RI_MOD] = 0
         return status
     if not lp_ready:
         return status | NEED_LP
-    pivots = modulate(u_B, cold, bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv, y, dj, alpha,
-                      work, acc, u, uf, tau_B)
+    pivots = modulate(u_B, ri[RI_COLD] != 0, bias, jets, cols, d, avg_B, rhs, A, cost, upper, basis, state, x, Binv,
+                      y, dj, alpha, work, acc, u, uf, tau_B)
     if pivots < 0:
         return status | LP_FAILED | ((pivots + PIVOT_BIAS) << PIVOT_SHIFT)
+    if not warm:
+        ri[RI_MOD] = 1
+        ri[RI_COLD] = 0
     return status | MODULATED | ((pivots + PIVOT_BIAS) << PIVOT_SHIFT)
 
 
 @njit(cache=True)
-def realise_sign(u_B, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch, u_q, tau_q, obj,
-                 bias, demand_B, tau_B, acc):
+def _realise_sign(u_B, tf, ti, af, ai, rf, ri, warm):
     """One cycle of DutyCycleRealiser.solve on the paper's sign-box tables (never modulated) with
-    no reconfiguration pending: the query (``solve_kernel``) and the answer's torque."""
+    no reconfiguration pending: the query (``solve_kernel``) and the answer's torque; ``warm`` as
+    ``_realise_tree``'s."""
+    (w, _, tbias, cand_tau, cand_pen, scratch, _, _, _, X, S, P, bmin, _, cand_pat, _, _, _, start, R,
+     bstart) = table_views(tf, ti)
+    _, _, u_q, tau_q, obj = allocator_views(af, ai, ri[RI_N], warm)
+    (_, tau_B, demand_B, _, _, _, _, _, _, _, acc, _, _, _, _, _, _, _, _, _, _, _, _) = realiser_views(rf, ri, warm)
     status = solve_kernel(u_B, w, start, X, S, P, R, bstart, bmin, cand_tau, cand_pen, cand_pat, scratch,
                           0, TOL_BOX_NM, TOL_TIE, TIE_REL, TOL_PEN, u_q, tau_q, obj)
     for i in range(3):
         demand_B[i] = u_B[i]
     if status == STATUS_REJECTED:
         for i in range(3):
-            tau_q[i] = bias[i]
+            tau_q[i] = tbias[i]
     _flown_exact(tau_q, tau_B, acc)
+    if not warm:
+        ri[RI_MOD] = 0
     return status
+
+
+@njit(cache=True)
+def realise(u_B, tf, ti, af, ai, rf, ri):
+    """One cycle of DutyCycleRealiser.solve's common path, in one call: the table set (tf, ti),
+    the allocator's (af, ai) and the realiser's (rf, ri) buffers; the tree's or the sign box's."""
+    if ti[H_NODES] > 0:
+        return _realise_tree(u_B, tf, ti, af, ai, rf, ri, False)
+    return _realise_sign(u_B, tf, ti, af, ai, rf, ri, False)
+
+
+@njit(cache=True)
+def rehearse_stage(u_B, tf, ti, af, ai, rf, ri):
+    """``realise`` for the rehearsal: the same reads, every output to scratch."""
+    if ti[H_NODES] > 0:
+        return _realise_tree(u_B, tf, ti, af, ai, rf, ri, True)
+    return _realise_sign(u_B, tf, ti, af, ai, rf, ri, True)
 
 
 _F64 = np.dtype(np.float64)
@@ -165,76 +255,73 @@ class DutyCycleRealiser:
 
     def __init__(self, bank_axis_B: np.ndarray, torque_matrix_Nm: np.ndarray, thrust_N: np.ndarray) -> None:
         T = np.asarray(torque_matrix_Nm, dtype=float)
-        self.axis = np.asarray(bank_axis_B, dtype=float).copy()
+        n = T.shape[1]
+        # every array below a view into two buffers (``realiser_views``)
+        self._rf, self._ri = realiser_buffers(n)
+        self._views()
+        self.axis[:] = np.asarray(bank_axis_B, dtype=float)
         self._axis = tuple(self.axis.tolist())
         inc = np.abs(self.axis @ T)
         # the bank shortfall that rounding to the finest jet explains: half its increment
         self.round_Nm = 0.5 * float(np.min(inc[inc > 0.0]))
+        self._rf[RF_ROUND] = self.round_Nm
         # the FSW's own rule for a short bank axis (FlightSoftware._check_bank_shortfall, which
         # sets both): a demand above short_min_Nm that gets less than (1 - short_frac) of
         # itself; 0, 0 (stand-alone use): any shortfall beyond rounding
-        self._short_min_Nm = 0.0
+        self.short_min_Nm = 0.0
         self.short_frac = 0.0
         self._thrust = np.asarray(thrust_N, dtype=float)
-        n = T.shape[1]
-        self.u = np.zeros(n, dtype=np.uint8)      # the answer flown (modulated cycles)
-        self.tau_B = np.zeros(N_AXES)             # modelled torque of the answer flown [N m]
-        self.demand_B = np.zeros(N_AXES)          # the demand it was solved for [N m]
-        self.avg_B = np.zeros(N_AXES)             # b + C d of the last LP [N m]
-        self.d = np.zeros(n)                      # duty cycles of the last LP (0 for unusable jets)
-        self.acc = np.zeros(n)                    # sigma-delta accumulators
+        # u: the answer flown (modulated cycles); tau_B: its modelled torque [N m]; demand_B: the
+        # demand it was solved for [N m]; avg_B: b + C d of the last LP [N m]; d: duty cycles of
+        # the last LP (0 for unusable jets); acc: sigma-delta accumulators; _idx: usable jets
+        # (the LP's first columns); _basis .. _work: the kernel's work arrays (fsw/allocation/dutylp.py);
+        # the _r arrays: the rehearsal's copies of what a solve reads and its scratch outputs
         self.modulated = False                    # the last answer came from the modulator
         self.modulated_cycles = 0
         self.solve_ns = 0                         # compute time of the last ``solve`` [ns]
-        self._uf = np.zeros(n)
-        self._rhs = np.zeros(N_AXES)
         self._rows = np.arange(N_AXES, dtype=np.int32)
         self.fell_back = False                    # the last LP was solved by HiGHS (the kernel failed)
         self.fallbacks = 0
         self._tables = None                       # the allocator tables the LP was built for
         self._h = None
-        self._idx = np.zeros(0, dtype=np.int64)   # usable jets (the LP's first columns)
-        # the kernel's work arrays (fsw/allocation/dutylp.py); the per-model ones in _build
-        self._basis = np.zeros(N_AXES, dtype=np.int64)
-        self._Binv = np.zeros((N_AXES, N_AXES))
-        self._y = np.zeros(N_AXES)
-        self._work = np.zeros((N_AXES, 2 * N_AXES))
         self.pivots = 0                           # pivots of the last LP (from the previous basis)
-        # the rehearsal's copies of what a solve reads and its scratch outputs
-        self._basis_r = np.zeros(N_AXES, dtype=np.int64)
-        self._state_r = np.zeros(2 * N_AXES, dtype=np.int8)
-        self._acc_r = np.zeros(n)
-        self._d_r = np.zeros(n)
-        self._avg_r = np.zeros(N_AXES)
-        self._u_r = np.zeros(n, dtype=np.uint8)
         warm_kernel()
-        self._cols = np.zeros((N_AXES, n))
-        self._bias = np.zeros(N_AXES)
-        self._demand_r = np.zeros(N_AXES)
-        self._tau_r = np.zeros(N_AXES)
-        self._uf_r = np.zeros(n)
-        self._A = np.zeros((N_AXES, 2 * N_AXES))
-        self._cost = np.zeros(2 * N_AXES)
-        self._upper = np.zeros(2 * N_AXES)
-        self._x = np.zeros(2 * N_AXES)
-        self._state = np.zeros(2 * N_AXES, dtype=np.int8)
-        self._dj = np.zeros(2 * N_AXES)
-        self._alpha = np.zeros(2 * N_AXES)
-        self._cold = True
         self.rare = True                          # the last solve may call for events (``solve``)
         self._version = -1                        # allocator.tables_version the compiled call's arguments are of
-        self._tree = False
         self._args = ()
-        self._args_r = ()
+
+    def _views(self) -> None:
+        """The attributes as views into the buffers (again after the LP's size changes)."""
+        (self.axis, self.tau_B, self.demand_B, self.avg_B, self._rhs, self._bias, self._y, self._Binv, self._work,
+         self.d, self.acc, self._uf, self._cols, self._cost, self._upper, self._x, self._dj, self._alpha, self._A,
+         self._basis, self._idx, self._state, self.u) = realiser_views(self._rf, self._ri, False)
+        (_, self._tau_r, self._demand_r, self._avg_r, _, _, _, _, _, self._d_r, self._acc_r, self._uf_r, _, _, _, _,
+         _, _, _, self._basis_r, _, self._state_r, self._u_r) = realiser_views(self._rf, self._ri, True)
 
     @property
     def short_min_Nm(self) -> float:
-        return self._short_min_Nm
+        return float(self._rf[RF_SHORT_MIN])
 
     @short_min_Nm.setter
     def short_min_Nm(self, value: float) -> None:
-        self._short_min_Nm = float(value)
-        self._version = -1                        # the compiled call's arguments bind it
+        self._rf[RF_SHORT_MIN] = value
+
+    @property
+    def short_frac(self) -> float:
+        return float(self._rf[RF_SHORT_FRAC])
+
+    @short_frac.setter
+    def short_frac(self, value: float) -> None:
+        self._rf[RF_SHORT_FRAC] = value
+
+    @property
+    def _cold(self) -> bool:
+        """The next LP starts from the residuals' basis (the compiled call clears it)."""
+        return bool(self._ri[RI_COLD])
+
+    @_cold.setter
+    def _cold(self, value: bool) -> None:
+        self._ri[RI_COLD] = value
 
     def _short(self, u_B: np.ndarray, tau_B: np.ndarray) -> bool:
         # in Python floats (the same operations as on NumPy scalars, a fraction of their cost)
@@ -252,24 +339,23 @@ class DutyCycleRealiser:
         rows C d - r+ + r- = u - b; the next solve starts cold."""
         t = allocator._tables
         self._tables = t
-        self._idx = np.flatnonzero(t.usable)
+        idx = np.flatnonzero(t.usable)
+        p = len(idx)
+        self._ri[RI_P] = p
+        self._views()
+        self._idx[:] = idx
         self._cols[:] = t.cols
         self._bias[:] = t.bias
         self.u[:] = 0
         self.acc[:] = 0.0
-        p = len(self._idx)
-        ncol = p + 2 * N_AXES
-        self._A = np.zeros((N_AXES, ncol))
+        self._A[:] = 0.0
         self._A[:, :p] = t.cols[:, self._idx]
         self._A[:, p:p + N_AXES] = -np.eye(N_AXES)
         self._A[:, p + N_AXES:] = np.eye(N_AXES)
-        self._cost = np.concatenate([allocator.penalty_per_N * self._thrust[self._idx], t.w, t.w])
-        self._upper = np.concatenate([np.ones(p), np.full(2 * N_AXES, np.inf)])
-        self._x = np.zeros(ncol)
-        self._state = np.zeros(ncol, dtype=np.int8)
-        self._state_r = np.zeros(ncol, dtype=np.int8)
-        self._dj = np.zeros(ncol)
-        self._alpha = np.zeros(ncol)
+        self._cost[:] = np.concatenate([allocator.penalty_per_N * self._thrust[self._idx], t.w, t.w])
+        self._upper[:] = np.concatenate([np.ones(p), np.full(2 * N_AXES, np.inf)])
+        for a in (self._x, self._state, self._state_r, self._dj, self._alpha):
+            a[:] = 0
         self._cold = True
         self._h = None                            # HiGHS, built at a first fallback
 
@@ -328,16 +414,13 @@ class DutyCycleRealiser:
         fallback to HiGHS): False on the compiled path's ordinary answers.
 
         The common case (the tables bound here, no reconfiguration pending, a demand of three
-        floats) is one compiled call (``realise_tree`` / ``realise_sign``) on arrays bound
-        once per tables (``_bind``); the rest is ``_solve``, the allocator's ``solve`` and the
+        floats) is one compiled call (``realise``) on the buffers bound once per tables
+        (``_bind``); the rest is ``_solve``, the allocator's ``solve`` and the
         steps after it one by one."""
         t0 = time.perf_counter_ns()
         if (allocator.tables_version == self._version and not allocator.reconfig_pending and type(u_B) is np.ndarray
                 and u_B.dtype is _F64 and u_B.shape == _SHAPE3):
-            if self._tree:
-                code = realise_tree(u_B, self.short_frac, self._cold, *self._args)
-            else:
-                code = realise_sign(u_B, *self._args)
+            code = realise(u_B, *self._args)
             if code & RARE:
                 u = self._after_rare(allocator, u_B, code)
             else:
@@ -348,7 +431,6 @@ class DutyCycleRealiser:
                     allocator.note_status(0)
                 if code & MODULATED:
                     self.pivots = (code >> PIVOT_SHIFT) - PIVOT_BIAS
-                    self._cold = False
                     self.modulated = True
                     self.modulated_cycles += 1
                     u = self.u
@@ -385,34 +467,18 @@ class DutyCycleRealiser:
         if code & (NEED_LP | LP_FAILED):
             modulated_torque(self.d, self._idx, self.acc, self.u, self._uf, self._cols, self._bias, self.tau_B)
         self.modulated = True
+        self._ri[RI_MOD] = 1                      # the compiled call notes its own modulated cycles
         self.modulated_cycles += 1
         return self.u
 
     def _bind(self, allocator) -> None:
-        """The compiled call's arguments for the allocator's active tables (and the LP, when it
-        is built for them), and the rehearsal's, whose outputs are scratch copies."""
+        """The compiled call's arguments for the allocator's active tables: the buffers, and
+        whether the LP is built for these tables."""
         t = allocator._tables
         self._version = allocator.tables_version
-        self._tree = t.spill_box
-        if not self._tree:
-            self._args = (t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen, t.pat, t.scratch,
-                          allocator.u, allocator.tau_B, allocator._obj, t.bias, self.demand_B, self.tau_B, self.acc)
-            self._args_r = (t.w, t.start, t.X, t.S, t.P, t.R, t.bstart, t.bmin, t.tau, t.pen, t.pat, t.scratch,
-                            allocator._warm_u, allocator._warm_tau, allocator._warm_obj, t.bias, self._demand_r,
-                            self._tau_r, self._acc_r)
-            return
-        query = (self._tables is t, t.w, t.spill, t.nlo, t.nhi, t.nminpen, t.nstart, t.nend, t.n_internal, t.tau,
-                 t.pen, t.pat, t.ties, t.scratch, t.bias, allocator._stack_k, allocator._stack_lb)
-        lp = (self._bias, self._idx, self._cols, self.d, self.avg_B, self._rhs, self._A, self._cost, self._upper)
-        work = (self._x, self._Binv, self._y, self._dj, self._alpha, self._work)
-        self._args = (query + (allocator.u, allocator.tau_B, allocator._obj, self.axis, self.short_min_Nm,
-                               self.round_Nm, self.demand_B, self.tau_B, self.acc, self.u, self._uf)
-                      + lp + (self._basis, self._state) + work)
-        lp_r = (self._bias, self._idx, self._cols, self._d_r, self._avg_r, self._rhs, self._A, self._cost, self._upper)
-        self._args_r = (query + (allocator._warm_u, allocator._warm_tau, allocator._warm_obj, self.axis,
-                                 self.short_min_Nm, self.round_Nm, self._demand_r, self._tau_r, self._acc_r, self._u_r,
-                                 self._uf_r)
-                        + lp_r + (self._basis_r, self._state_r) + work)
+        self._ri[RI_LP] = self._tables is t
+        self._ri[RI_MOD] = self.modulated
+        self._args = (t.tf, t.ti, allocator._af, allocator._ai, self._rf, self._ri)
 
     def _solve(self, allocator, u_B: np.ndarray) -> np.ndarray:
         jets = allocator.solve(u_B)
@@ -444,15 +510,9 @@ class DutyCycleRealiser:
         if allocator.tables_version != self._version or allocator.reconfig_pending:
             allocator.rehearse(u_B)
             return
-        if not self._tree:
-            realise_sign(u_B, *self._args_r)
-            return
-        self._basis_r[:] = self._basis
-        self._state_r[:] = self._state
-        self._acc_r[:] = self.acc
-        # the LP rehearsed after a modulated cycle only, as the gate would take it
-        realise_tree(u_B, self.short_frac, self._cold, self.modulated and self._args[0], *self._args_r[1:])
+        rehearse_stage(u_B, *self._args)
 
     def reset(self) -> None:
         self.acc[:] = 0.0
         self.modulated = False
+        self._ri[RI_MOD] = 0

@@ -165,3 +165,42 @@ def test_a_flight_with_the_compiled_stage_equals_mains_python_bit_for_bit(scenar
     assert fc.allocator.tables_version >= 3
     if scenario == "guided-case2":
         assert fc.dutycycle.modulated_cycles > 0, "no modulated cycle flown"
+
+
+def _disjoint_views(views, buffers):
+    """Each view lies in one of ``buffers`` and no two share a byte: every view filled with its own
+    marker byte, each then reads back only its own."""
+    for v in views:
+        assert any(np.shares_memory(v, b) for b in buffers)
+    for b in buffers:
+        b.view(np.uint8)[:] = 0
+    for i, v in enumerate(views):
+        v.view(np.uint8)[...] = i + 1
+    for i, v in enumerate(views):
+        assert np.all(v.view(np.uint8) == i + 1), i
+
+
+@pytest.mark.parametrize("spill_jets", [0.0, 1.0])
+def test_the_packed_buffers_hold_every_array_apart(spill_jets):
+    """Tables', the allocator's and the realiser's arrays are views into their buffers, none
+    overlapping another (the realiser's for every size of the LP), so the compiled call's
+    unpacking by offsets reads what the Python paths wrote."""
+    from fsw.allocation.allocator import allocator_views
+    from fsw.allocation.dutycycle import RF_AXIS, RI_BASIS, RI_P, realiser_views
+    from fsw.allocation.tables import TABLES_HEAD, table_views
+    al = Allocator(T, THRUST, {**PARAMS, "allocator.spill_jets": spill_jets})
+    al.set_health(RUN82)
+    t = al._tables
+    assert t.spill_box == (spill_jets > 0.0)
+    _disjoint_views([t.ti[:TABLES_HEAD]] + [v for v in table_views(t.tf, t.ti) if v.size], [t.tf, t.ti])
+    n = al.n_jets
+    _disjoint_views(list(allocator_views(al._af, al._ai, n, False)) + list(allocator_views(al._af, al._ai, n, True))[2:],
+                    [al._af, al._ai])
+    dc = DutyCycleRealiser(AXIS, T, THRUST)
+    for p in (0, 1, n):
+        dc._ri[:] = 0
+        dc._ri[0], dc._ri[RI_P] = n, p
+        main, warm = realiser_views(dc._rf, dc._ri, False), realiser_views(dc._rf, dc._ri, True)
+        shared = {4, 5, 6, 7, 8, 12, 13, 14, 15, 16, 17, 18, 20}    # rhs .. work, cols, the LP's model, jets
+        views = [dc._rf[:RF_AXIS], dc._ri[:RI_BASIS]] + list(main) + [v for i, v in enumerate(warm) if i not in shared and i != 0]
+        _disjoint_views([v for v in views if v.size], [dc._rf, dc._ri])

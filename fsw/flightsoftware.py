@@ -297,16 +297,18 @@ class FlightSoftware(GroundCommands):
             u_cal = self._zero3
         self.u_cal_B[:] = u_cal
         self.dutycycle.short_frac = self.params["control.shortfall_frac"]
-        u_alloc = self.dutycycle.solve(self.allocator, self.u_cal_B)
-        self.alloc_ns = self.dutycycle.solve_ns
-        if self.allocator.tables_version != self._tables_version:      # new tables in use
-            self._tables_version = self.allocator.tables_version
-            self.dutycycle.reset()
-            self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
-        if self.allocator.degraded:
-            self.events.emit(t_s, EV.ALLOC_DEGRADED)
-        if self.dutycycle.fell_back:
-            self.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
+        dc = self.dutycycle
+        u_alloc = dc.solve(self.allocator, self.u_cal_B)
+        self.alloc_ns = dc.solve_ns
+        if dc.rare:                  # the compiled path's ordinary answers call for no event
+            if self.allocator.tables_version != self._tables_version:      # new tables in use
+                self._tables_version = self.allocator.tables_version
+                dc.reset()
+                self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
+            if self.allocator.degraded:
+                self.events.emit(t_s, EV.ALLOC_DEGRADED)
+            if dc.fell_back:
+                self.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
         return self._finish(t_s, u_alloc)
 
     def _rejected_format(self, frame) -> np.ndarray:
@@ -360,8 +362,7 @@ class FlightSoftware(GroundCommands):
             self._rehearse_intake(fv)
             if self._have_prev:
                 self.control.rehearse(self.nav.state, self.guidance, self.tau_alloc_B)
-        self.allocator.rehearse(demand_B)
-        self.dutycycle.rehearse(self.allocator, demand_B)
+        self.dutycycle.rehearse(self.allocator, demand_B)    # the allocation's compiled call
 
     @property
     def _frame_views(self) -> tuple:

@@ -36,6 +36,7 @@ import weakref
 from collections import OrderedDict
 
 import numpy as np
+from numba import njit
 
 from fsw.health import FAILED_OFF, JetHealth
 from fsw.params import Param
@@ -47,6 +48,27 @@ from .query import (STATUS_DEGRADED, STATUS_REJECTED, TREE_STACK, ZERO3, solve_k
                     solve_tree_kernel)
 
 CACHE_MAX_CONFIGS = 16     # health configurations whose tables are kept
+
+# The allocator's per-cycle arrays are views into two buffers, the floats ``af`` and the int64s
+# ``ai``, so the compiled allocation stage (fsw/allocation/dutycycle.py) takes them in two
+# arguments: af = [tau_B (3), objective, the rehearsal's tau_B (3) and objective, the tree
+# query's bound stack]; ai = [its node stack, then as bytes u and the rehearsal's u].
+AF_WARM = 4                # the rehearsal's outputs: after tau_B and the objective
+AF_STACK = 8
+
+
+def allocator_buffers(n_jets: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.zeros(AF_STACK + TREE_STACK), np.zeros(TREE_STACK + -(-2 * n_jets // 8), dtype=np.int64)
+
+
+@njit(cache=True)
+def allocator_views(af, ai, n_jets, warm):
+    """(stack_k, stack_lb, u, tau_B, objective) of the buffers ``allocator_buffers`` made; the
+    rehearsal's u, tau_B and objective if ``warm``."""
+    o = AF_WARM if warm else 0
+    ub = TREE_STACK * 8 + (n_jets if warm else 0)
+    return (ai[:TREE_STACK], af[AF_STACK:AF_STACK + TREE_STACK], ai.view(np.uint8)[ub:ub + n_jets],
+            af[o:o + N_AXES], af[o + N_AXES:o + N_AXES + 1])
 
 PARAMS: list[Param] = [
     Param("allocator.w_roll", 0.0, 1e3, "-", "weight of the roll-torque error in the objective"),
@@ -111,15 +133,12 @@ class Allocator:
         self._prebuild_keys: set = set()
         self._gen = 0                              # parameter generation (part of table keys)
         self._health = JetHealth(self.n_jets)
-        self.u = np.zeros(self.n_jets, dtype=np.uint8)     # reused output
-        self.tau_B = np.zeros(N_AXES)                         # modelled achieved torque [N m]
-        self._obj = np.zeros(1)
-        self._stack_k = np.zeros(TREE_STACK, dtype=np.int64)   # spill-box query work arrays
-        self._stack_lb = np.zeros(TREE_STACK)
-        self._warm_u = np.zeros(self.n_jets, dtype=np.uint8)    # rehearse's answer, discarded
-        self._warm_tau = np.zeros(N_AXES)
-        self._warm_obj = np.zeros(1)
-        self.objective = float("nan")
+        self._af, self._ai = allocator_buffers(self.n_jets)
+        # u: reused output; tau_B: modelled achieved torque [N m]; the stacks: spill-box query work arrays
+        self._stack_k, self._stack_lb, self.u, self.tau_B, self._obj = allocator_views(
+            self._af, self._ai, self.n_jets, False)
+        _, _, self._warm_u, self._warm_tau, self._warm_obj = allocator_views(   # rehearse's answer, discarded
+            self._af, self._ai, self.n_jets, True)
         self.degraded = False
         self.rejected = False
         self.rebuild_time_s = 0.0          # build time of the tables adopted last [s]
@@ -411,14 +430,19 @@ class Allocator:
                 np.add(t.bias, self._delta, out=self.tau_B)
             else:
                 self.tau_B[:] = t.bias
-            self.objective = float("nan")
-            self.degraded = False
-            self.rejected = True
-        else:
-            self.objective = float(self._obj[0])
-            self.degraded = status == STATUS_DEGRADED
-            self.rejected = False
+        self.note_status(status)
         return self.u
+
+    @property
+    def objective(self) -> float:
+        """The objective of the last answer (NaN for a rejected demand: the query writes NaN)."""
+        return float(self._obj[0])
+
+    def note_status(self, status: int) -> None:
+        """``degraded`` and ``rejected`` of a query's status (also for the realiser's compiled
+        call, fsw/allocation/dutycycle.py, which queries these tables without ``solve``)."""
+        self.degraded = status == STATUS_DEGRADED
+        self.rejected = status == STATUS_REJECTED
 
 
 def _as_demand(tau_d) -> np.ndarray:

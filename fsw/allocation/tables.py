@@ -8,6 +8,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from numba import njit
 
 from .build import (BLOCK, ROW, SORT_BUCKETS_MAX, enumerate_merged, group_columns, map_pages, octant_fill,
                     octant_members, tree_fill)
@@ -79,26 +80,70 @@ class Workspace:
                                       self.octm, self.code, self.order, self.code2, self.order2, self.ka, self.kb, self.ia, self.ib, self.count))
 
 
+# A table set is two buffers, the floats ``tf`` and the int64s ``ti``, so that the compiled
+# allocation stage (fsw/allocation/dutycycle.py) takes it in two arguments rather than twenty
+# (each array argument costs ~40 ns of dispatch); ``Tables``' arrays are views into them.
+# ti's head: the sizes, then each array's offset (floats in tf, ints in ti) in this order.
+H_N, H_NODES, H_NINT, H_TOTAL, H_NBLK = range(5)
+(O_W, O_SPILL, O_BIAS, O_TAU, O_PEN, O_SCRATCH, O_NLO, O_NHI, O_NMINPEN, O_X, O_S, O_P, O_BMIN, O_BMAX,
+ O_PAT, O_TIES, O_NSTART, O_NEND, O_START, O_R, O_BSTART) = range(5, 26)
+TABLES_HEAD = 26
+
+
+def _pack_tables(n: int, nodes: int, total: int, nblk: int) -> tuple[np.ndarray, np.ndarray]:
+    """Empty buffers for ``n`` candidates, a tree of ``nodes`` nodes, ``total`` octant rows in
+    ``nblk`` blocks, ti's head filled (the order ``table_views`` reads)."""
+    fsizes = (N_AXES, N_AXES, N_AXES, n * N_AXES, n, n, nodes * N_AXES, nodes * N_AXES, nodes,
+              total * N_AXES, total, total, nblk * N_AXES, nblk * N_AXES)
+    isizes = (n, n, nodes, nodes, 9, total, 9)
+    ti = np.zeros(TABLES_HEAD + sum(isizes), dtype=np.int64)
+    ti[H_N], ti[H_NODES], ti[H_NINT], ti[H_TOTAL], ti[H_NBLK] = n, nodes, (nodes - 1) // 2, total, nblk
+    ti[O_W:O_W + len(fsizes)] = np.concatenate([[0], np.cumsum(fsizes)[:-1]])
+    ti[O_PAT:O_PAT + len(isizes)] = TABLES_HEAD + np.concatenate([[0], np.cumsum(isizes)[:-1]])
+    return np.zeros(sum(fsizes)), ti
+
+
+@njit(cache=True)
+def table_views(tf, ti):
+    """The arrays of a table set packed by ``_pack_tables``: (w, spill, bias, tau, pen, scratch,
+    nlo, nhi, nminpen, X, S, P, bmin, bmax, pat, ties, nstart, nend, start, R, bstart), views
+    (the compiled stage unpacks its arguments with it; ``Tables`` names them)."""
+    n, nodes, total, nblk = ti[H_N], ti[H_NODES], ti[H_TOTAL], ti[H_NBLK]
+    return (tf[ti[O_W]:ti[O_W] + N_AXES], tf[ti[O_SPILL]:ti[O_SPILL] + N_AXES], tf[ti[O_BIAS]:ti[O_BIAS] + N_AXES],
+            tf[ti[O_TAU]:ti[O_TAU] + n * N_AXES].reshape((n, N_AXES)), tf[ti[O_PEN]:ti[O_PEN] + n],
+            tf[ti[O_SCRATCH]:ti[O_SCRATCH] + n],
+            tf[ti[O_NLO]:ti[O_NLO] + nodes * N_AXES].reshape((nodes, N_AXES)),
+            tf[ti[O_NHI]:ti[O_NHI] + nodes * N_AXES].reshape((nodes, N_AXES)),
+            tf[ti[O_NMINPEN]:ti[O_NMINPEN] + nodes],
+            tf[ti[O_X]:ti[O_X] + total * N_AXES].reshape((total, N_AXES)), tf[ti[O_S]:ti[O_S] + total],
+            tf[ti[O_P]:ti[O_P] + total],
+            tf[ti[O_BMIN]:ti[O_BMIN] + nblk * N_AXES].reshape((nblk, N_AXES)),
+            tf[ti[O_BMAX]:ti[O_BMAX] + nblk * N_AXES].reshape((nblk, N_AXES)),
+            ti[ti[O_PAT]:ti[O_PAT] + n], ti[ti[O_TIES]:ti[O_TIES] + n], ti[ti[O_NSTART]:ti[O_NSTART] + nodes],
+            ti[ti[O_NEND]:ti[O_NEND] + nodes], ti[ti[O_START]:ti[O_START] + 9], ti[ti[O_R]:ti[O_R] + total],
+            ti[ti[O_BSTART]:ti[O_BSTART] + 9])
+
+
 class Tables:
     """Candidate tables of one configuration: the health model they were built for
     (usable, cols, bias), the objective (w, per-jet penalty c) and the query structure:
-    octant tables for the sign box, a bounding-box tree for the spill box (the other's arrays empty)."""
-    __slots__ = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "bmax",
+    octant tables for the sign box, a bounding-box tree for the spill box (the other's arrays empty).
+    Every array but usable and cols is a view into the two buffers ``tf``, ``ti``."""
+    __slots__ = ("tf", "ti", "tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "bmax",
                  "nlo", "nhi", "nminpen", "nstart", "nend", "n_internal",
                  "scratch", "ties", "bias", "usable", "cols", "w", "spill", "spill_box", "n_raw", "build_s")
     _ARRAYS = ("tau", "pen", "pat", "start", "X", "S", "P", "R", "bstart", "bmin", "bmax",
                "nlo", "nhi", "nminpen", "nstart", "nend", "scratch", "ties")
 
-    def __init__(self, tau, pen, pat, octants, tree, usable, cols, bias, w, spill, n_raw, build_s):
-        self.tau, self.pen, self.pat = tau, pen, pat
-        (self.start, self.X, self.S, self.P, self.R, self.bstart, self.bmin, self.bmax) = octants
-        self.nlo, self.nhi, self.nminpen, self.nstart, self.nend = tree
-        self.n_internal = (len(self.nminpen) - 1) // 2
-        self.scratch = np.empty(len(pen))     # objective buffer of the exhaustive scans and ties
-        self.ties = np.empty(len(pen), dtype=np.int64)   # tied rows of a tree query
-        self.usable, self.cols, self.bias, self.w = usable, cols, bias, w
-        self.spill = spill                    # box allowance [N m]
-        self.spill_box = bool(np.any(spill != 0.0))   # queried through the tree
+    def __init__(self, tf, ti, usable, cols, n_raw, build_s):
+        self.tf, self.ti = tf, ti
+        (self.w, self.spill, self.bias, self.tau, self.pen, self.scratch, self.nlo, self.nhi, self.nminpen,
+         self.X, self.S, self.P, self.bmin, self.bmax, self.pat, self.ties, self.nstart, self.nend, self.start,
+         self.R, self.bstart) = table_views(tf, ti)
+        # scratch: objective buffer of the exhaustive scans and ties; ties: tied rows of a tree query
+        self.n_internal = int(ti[H_NINT])
+        self.usable, self.cols = usable, cols
+        self.spill_box = bool(np.any(self.spill != 0.0))   # queried through the tree (spill: box allowance [N m])
         self.n_raw = n_raw                    # multiplicity vectors enumerated
         self.build_s = build_s                # build time [s]
 
@@ -125,16 +170,11 @@ def build_tables(usable, cols, bias, c, w, spill, ws: Workspace) -> Tables:
             break
         ws.grow(min(n_raw, 4 * ws.rows))       # never more than n_raw distinct torques
     spill = np.array(spill, dtype=np.float64)
-    tau, pen, pat = np.empty((n, N_AXES)), np.empty(n), np.empty(n, dtype=np.int64)
     if np.any(spill != 0.0):
-        N = tree_nodes(n)
-        tree = (np.empty((N, N_AXES)), np.empty((N, N_AXES)), np.empty(N),
-                np.empty(N, dtype=np.int64), np.empty(N, dtype=np.int64))
+        tf, ti = _pack_tables(n, tree_nodes(n), 0, 0)
+        v = table_views(tf, ti)
         tree_fill(ws.tau, ws.pen, ws.pat, n, ws.code, ws.order, ws.code2, ws.order2, ws.count,
-                   tau, pen, pat, *tree)
-        octants = (np.zeros(9, dtype=np.int64), np.empty((0, N_AXES)), np.empty(0), np.empty(0),
-                   np.empty(0, dtype=np.int64), np.zeros(9, dtype=np.int64), np.empty((0, N_AXES)),
-                   np.empty((0, N_AXES)))
+                   v[3], v[4], v[14], v[6], v[7], v[8], v[16], v[17])
     else:
         lo = np.full(N_AXES, TOL_BOX_NM)
         start = octant_members(ws.tau, n, lo, ws.octm)
@@ -142,13 +182,12 @@ def build_tables(usable, cols, bias, c, w, spill, ws: Workspace) -> Tables:
         ws.grow_octants(total)
         bstart = np.zeros(9, dtype=np.int64)
         bstart[1:] = np.cumsum((np.diff(start) + BLOCK - 1) // BLOCK)
-        X, S, P, R = np.empty((total, N_AXES)), np.empty(total), np.empty(total), np.empty(total, dtype=np.int64)
-        bmin = np.empty((int(bstart[8]), N_AXES))
-        bmax = np.empty((int(bstart[8]), N_AXES))
-        octant_fill(ws.tau, ws.pen, ws.pat, n, w, lo, ws.octm, start, ws.ka, ws.ia, ws.kb,
-                     ws.ib, ws.count, tau, pen, pat, X, S, P, R, bstart, bmin, bmax)
-        octants = (start, X, S, P, R, bstart, bmin, bmax)
-        tree = (np.empty((0, N_AXES)), np.empty((0, N_AXES)), np.empty(0),
-                np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))
-    return Tables(tau, pen, pat, octants, tree, usable.copy(), cols.copy(), bias.copy(), w.copy(),
-                  spill, n_raw, time.perf_counter() - t0)
+        tf, ti = _pack_tables(n, 0, total, int(bstart[8]))
+        (_, _, _, tau, pen, _, _, _, _, X, S, P, bmin, bmax, pat, _, _, _, start_v, R, bstart_v) = table_views(tf, ti)
+        start_v[:] = start
+        bstart_v[:] = bstart
+        octant_fill(ws.tau, ws.pen, ws.pat, n, w, lo, ws.octm, start_v, ws.ka, ws.ia, ws.kb,
+                     ws.ib, ws.count, tau, pen, pat, X, S, P, R, bstart_v, bmin, bmax)
+    v = table_views(tf, ti)
+    v[0][:], v[1][:], v[2][:] = w, spill, bias
+    return Tables(tf, ti, usable.copy(), cols.copy(), n_raw, time.perf_counter() - t0)

@@ -25,6 +25,9 @@ from numba import njit
 from common.model import Vehicle, inertia_matrix, inertia_vector
 from common.mrp import B_mul, Bdot_mul, nearest_set_into, sigma_derivatives, sigma_dot_into
 from common.mrp import omega_from_sigma_dot_into as _Pa_mul   # P_a x = 4 B^T x / (1 + s.s)^2
+from fsw.authority import held_trim
+from fsw.guidance.reference import _guidance_kernel, profile_eval
+from fsw.modes import tracking_rule
 from fsw.params import Param
 
 # prm vector layout (derived from the parameters, see SamiController._derive)
@@ -351,6 +354,40 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
         theta[i] = th_new[i]
 
 
+@njit(cache=True)
+def law_cycle(t_nav, qbar, bank, V_mps, rho, alpha, beta, entry, have_del, freeze,
+              compiled, segs, phi0, phi, phid, phidd,
+              trim, trim_off, alpha_trim, omega_planet, mu, r_N, v_N, vrel_N, C_WN, C_BN, accel_B, sigma_BN, omega,
+              g_out, dt_s, fs, tau_del, kb, sb, chart, u_cal_B):
+    """The control law's stretch of the cycle after navigation, in one compiled call (the
+    Python it replaced, in order): the held trim (authority.py ``held_trim``, into ``trim_off``),
+    the bank reference (``profile_eval`` on the scheduled profile's ``segs`` when ``compiled``,
+    else the given ``phi``, ``phid``, ``phidd``), the reference attitude (guidance/reference.py
+    ``_guidance_kernel``, into ``g_out``), the bank error wrapped to (-pi, pi], the tracking
+    failsafe (modes.py ``tracking_rule`` on ``fs``) and, in ENTRY with no failsafe due, SAMI
+    (``sami_kernel`` on ``kb``/``sb``; ``chart[0]`` its chart flag), its command copied to
+    ``u_cal_B``. Returns (0: SAMI ran / 1: SAFE is due / 2: not in ENTRY, phi_r, phidot_r,
+    phiddot_r, bank error): 1 and 2 leave the mode's branch to the caller."""
+    if compiled:
+        phi, phid, phidd = profile_eval(segs, phi0, t_nav)
+    held_trim(trim, qbar, trim_off)
+    _guidance_kernel(phi, phid, phidd, alpha_trim + trim_off[0], trim_off[1], omega_planet, mu, r_N, v_N, vrel_N,
+                     C_WN, C_BN, accel_B, sigma_BN, g_out)
+    a = bank - phi                  # common/frames.py wrap_pi
+    err = a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+    if tracking_rule(err, entry, dt_s, fs):
+        return 1, phi, phid, phidd, err
+    if not entry:
+        return 2, phi, phid, phidd, err
+    sami_kernel(sigma_BN, omega, V_mps, rho, alpha, beta, g_out[0:3], g_out[9:12], g_out[12:15], tau_del, have_del,
+                freeze, chart[0] != 0.0, kb, sb)
+    if sb[_S_DIAG + _D_BAD] == 0.0:
+        chart[0] = 1.0
+    for i in range(3):
+        u_cal_B[i] = sb[_S_U + i]
+    return 0, phi, phid, phidd, err
+
+
 class SamiController:
     """SAMI adaptive controller with the robustness the spec requires beyond the paper.
 
@@ -431,6 +468,7 @@ class SamiController:
         self.u_cal_B = sb[_S_U:_S_U + 3]
         self._sigma_c = sb[_S_SIGC:_S_SIGC + 3]
         self._diag = sb[_S_DIAG:_S_DIAG + 7]
+        self.chart = np.zeros(1)              # 1.0: the chart holds a valid sigma_c (``law_cycle``)
         self._zero3 = np.zeros(3)
         self._u_safe = np.zeros(3)
         self._lv = np.zeros(3)
@@ -505,7 +543,19 @@ class SamiController:
         self._sigma_c[:] = 0.0
         self._have_chart = False
         self._diag[:] = 0.0
-        self.V_lyap = 0.0
+
+    @property
+    def _have_chart(self) -> bool:
+        return bool(self.chart[0])
+
+    @_have_chart.setter
+    def _have_chart(self, v: bool) -> None:
+        self.chart[0] = 1.0 if v else 0.0
+
+    @property
+    def V_lyap(self) -> float:
+        """y^T P y of the last update."""
+        return float(self._diag[_D_V])
 
     # ------------------------------------------------------------------ cycle
     def update(self, nav, guid, tau_delivered_prev_B: np.ndarray | None) -> np.ndarray:
@@ -519,7 +569,6 @@ class SamiController:
                     self.freeze, self._have_chart, self._kb, self._sb)
         if self._diag[_D_BAD] == 0.0:
             self._have_chart = True
-        self.V_lyap = float(self._diag[_D_V])
         return self.u_cal_B
 
     def rehearse(self, nav, guid, tau_delivered_prev_B: np.ndarray | None) -> None:

@@ -355,6 +355,12 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
 
 
 @njit(cache=True)
+def wrap_pi(a):
+    """common/frames.py wrap_pi, compiled: the same arithmetic."""
+    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+
+
+@njit(cache=True)
 def law_cycle(t_nav, qbar, bank, V_mps, rho, alpha, beta, entry, have_del, freeze,
               compiled, segs, phi0, phi, phid, phidd,
               trim, trim_off, alpha_trim, omega_planet, mu, r_N, v_N, vrel_N, C_WN, C_BN, accel_B, sigma_BN, omega,
@@ -373,8 +379,7 @@ def law_cycle(t_nav, qbar, bank, V_mps, rho, alpha, beta, entry, have_del, freez
     held_trim(trim, qbar, trim_off)
     _guidance_kernel(phi, phid, phidd, alpha_trim + trim_off[0], trim_off[1], omega_planet, mu, r_N, v_N, vrel_N,
                      C_WN, C_BN, accel_B, sigma_BN, g_out)
-    a = bank - phi                  # common/frames.py wrap_pi
-    err = a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+    err = wrap_pi(bank - phi)
     if tracking_rule(err, entry, dt_s, fs):
         return 1, phi, phid, phidd, err
     if not entry:

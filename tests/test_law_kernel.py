@@ -15,6 +15,7 @@ import pytest
 from common.events import EventLog
 from common.model import load_scenario
 from fsw.authority import held_trim
+from fsw.control import wrap_pi
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
 from fsw.guidance.reference import BankProfile, profile_eval
@@ -24,7 +25,7 @@ from interfaces.records import FSW_STATE, FSW_STATE_SHELL
 from sim.plant import Plant
 
 from tests.front_oracle import (PythonFailsafes, PythonLawFlightSoftware, law_state, python_hold_trim,
-                                python_profile_evaluate)
+                                python_profile_evaluate, python_wrap_pi)
 
 TIMING = ("alloc_us",) + FSW_STATE_SHELL      # host timing and the loop's stamps: measured, not computed
 
@@ -62,6 +63,16 @@ def test_the_profile_kernel_evaluates_as_the_python_profile():
             assert _same(got, prof.evaluate(float(ts)))
 
 
+def test_the_bank_error_wraps_as_the_python_wrap():
+    rng = np.random.default_rng(5)
+    edges = [k * math.pi for k in range(-7, 8)]
+    xs = list(rng.uniform(-20.0, 20.0, 5000)) + edges
+    xs += [math.nextafter(e, math.inf) for e in edges] + [math.nextafter(e, -math.inf) for e in edges]
+    xs += [0.0, -0.0, 1e-300, -1e-300, 1e6 + 0.5]
+    for x in xs:
+        assert _same(wrap_pi(x), python_wrap_pi(x)), x
+
+
 class _Auth:
     def __init__(self, trim_ref, trim_max_deg):
         self._trim_ref = trim_ref
@@ -86,8 +97,12 @@ def test_the_trim_kernel_holds_the_trim_as_the_python_rule():
 
 def test_the_failsafe_kernel_counts_and_fires_as_the_python_rule():
     rng = np.random.default_rng(3)
-    params = {"fdir.safe_track_deg": 20.0, "fdir.safe_track_s": 0.5}
-    for case in range(40):
+    # (period, persistence): sums of the period that reach the persistence a rounding short of it
+    edge = ((0.02, 0.5), (0.1, 0.9), (0.005, 0.06), (0.005, 1.1), (0.02, 0.0))
+    errs = [0.0, 0.3, 0.349, math.radians(20.0), 0.35, 1.0, -2.0, math.nan, math.inf]
+    for case in range(60):
+        dt, persist = edge[case % len(edge)]
+        params = {"fdir.safe_track_deg": 20.0, "fdir.safe_track_s": persist}
         events = EventLog()
         modes = ModeManager(events)
         modes.request(0.0, Mode.ENTRY, "start")
@@ -95,9 +110,10 @@ def test_the_failsafe_kernel_counts_and_fires_as_the_python_rule():
         py_modes = ModeManager(EventLog())
         py_modes.request(0.0, Mode.ENTRY, "start")
         py = PythonFailsafes(Failsafes(params, py_modes))
-        dt = (0.02, 0.005, 0.1)[case % 3]
-        for i in range(200):
-            e = float(rng.choice([0.0, 0.3, 0.349, math.radians(20.0), 0.35, 1.0, -2.0, math.nan, math.inf]))
+        e, fired = 0.0, 0
+        for i in range(400):
+            if rng.random() < 0.05:         # an error held for a while (long enough to persist)
+                e = float(rng.choice(errs))
             if i % 50 == 49:       # the ground takes it back to ENTRY
                 modes.request(i * dt, Mode.ENTRY, "ground")
                 py.fs.modes.request(i * dt, Mode.ENTRY, "ground")
@@ -107,8 +123,10 @@ def test_the_failsafe_kernel_counts_and_fires_as_the_python_rule():
                 fs.enter_safe(i * dt)
             act = py.evaluate(i * dt, dt, e)
             assert due == (act != 0), (case, i)
+            fired += due
             assert fs.state[0] == py.above_s and fs.last_rule == py.last_rule
             assert modes.mode == py.fs.modes.mode
+        assert fired or persist > 1.0, case
 
 
 def _flight_events(fsw) -> list:

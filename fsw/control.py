@@ -25,9 +25,6 @@ from numba import njit
 from common.model import Vehicle, inertia_matrix, inertia_vector
 from common.mrp import B_mul, Bdot_mul, nearest_set_into, sigma_derivatives, sigma_dot_into
 from common.mrp import omega_from_sigma_dot_into as _Pa_mul   # P_a x = 4 B^T x / (1 + s.s)^2
-from fsw.authority import held_trim
-from fsw.guidance.reference import _guidance_kernel, profile_eval
-from fsw.modes import tracking_rule
 from fsw.params import Param
 
 # prm vector layout (derived from the parameters, see SamiController._derive)
@@ -352,45 +349,6 @@ def sami_kernel(sigma_nav, omega, V_mps, rho, alpha, beta, sigma_RN, omega_RN_R,
         sigma_c[i] = sig[i]
     for i in range(9):
         theta[i] = th_new[i]
-
-
-@njit(cache=True)
-def wrap_pi(a):
-    """common/frames.py wrap_pi, compiled: the same arithmetic."""
-    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
-
-
-@njit(cache=True)
-def law_cycle(t_nav, qbar, bank, V_mps, rho, alpha, beta, entry, have_del, freeze,
-              compiled, segs, phi0, phi, phid, phidd,
-              trim, trim_off, alpha_trim, omega_planet, mu, r_N, v_N, vrel_N, C_WN, C_BN, accel_B, sigma_BN, omega,
-              g_out, dt_s, fs, tau_del, kb, sb, chart, u_cal_B):
-    """The control law's stretch of the cycle after navigation, in one compiled call (the
-    Python it replaced, in order): the held trim (authority.py ``held_trim``, into ``trim_off``),
-    the bank reference (``profile_eval`` on the scheduled profile's ``segs`` when ``compiled``,
-    else the given ``phi``, ``phid``, ``phidd``), the reference attitude (guidance/reference.py
-    ``_guidance_kernel``, into ``g_out``), the bank error wrapped to (-pi, pi], the tracking
-    failsafe (modes.py ``tracking_rule`` on ``fs``) and, in ENTRY with no failsafe due, SAMI
-    (``sami_kernel`` on ``kb``/``sb``; ``chart[0]`` its chart flag), its command copied to
-    ``u_cal_B``. Returns (0: SAMI ran / 1: SAFE is due / 2: not in ENTRY, phi_r, phidot_r,
-    phiddot_r, bank error): 1 and 2 leave the mode's branch to the caller."""
-    if compiled:
-        phi, phid, phidd = profile_eval(segs, phi0, t_nav)
-    held_trim(trim, qbar, trim_off)
-    _guidance_kernel(phi, phid, phidd, alpha_trim + trim_off[0], trim_off[1], omega_planet, mu, r_N, v_N, vrel_N,
-                     C_WN, C_BN, accel_B, sigma_BN, g_out)
-    err = wrap_pi(bank - phi)
-    if tracking_rule(err, entry, dt_s, fs):
-        return 1, phi, phid, phidd, err
-    if not entry:
-        return 2, phi, phid, phidd, err
-    sami_kernel(sigma_BN, omega, V_mps, rho, alpha, beta, g_out[0:3], g_out[9:12], g_out[12:15], tau_del, have_del,
-                freeze, chart[0] != 0.0, kb, sb)
-    if sb[_S_DIAG + _D_BAD] == 0.0:
-        chart[0] = 1.0
-    for i in range(3):
-        u_cal_B[i] = sb[_S_U + i]
-    return 0, phi, phid, phidd, err
 
 
 class SamiController:

@@ -23,12 +23,13 @@ from .allocation import Allocator
 from .allocation.dutycycle import DutyCycleRealiser
 from .authority import AuthoritySupervisor
 from .commands import GroundCommands
-from .control import SamiController, law_cycle
+from .control import SamiController
 from .controllability import Controllability, velocity_dir_B
 from .fdir import Fdir
 from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
 from .jetdriver import JetDriver, drive_jets
+from .law import LAW_DONE, LAW_SAFE_DUE, law_cycle
 from .modes import Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor
 from .navigation import Navigation, frame_vectors
@@ -220,7 +221,7 @@ class FlightSoftware(GroundCommands):
                     nav_s.C_WN, nav_s.C_BN, nav_s.accel_B, nav_s.sigma_BN, nav_s.omega_BN_B)
         self._law_args = (self.authority.trim, g.trim_offset, *fixed_in, g._out, self.dt_s, self.failsafes.state,
                           self.tau_alloc_B, ctl._kb, ctl._sb, ctl.chart, self.u_cal_B)
-        self._law_scratch = (np.zeros(2), np.zeros(18), np.zeros(4), np.zeros_like(ctl._sb), np.zeros(1), np.zeros(3))
+        self._law_scratch = (np.zeros(2), np.zeros(18), np.zeros(4), ctl._rb, np.zeros(1), np.zeros(3))
         sc = self._law_scratch
         self._law_rehearse_args = (self.authority.trim, sc[0], *fixed_in, sc[1], self.dt_s, sc[2],
                                    self.tau_alloc_B, ctl._kb, sc[3], sc[4], sc[5])
@@ -256,7 +257,7 @@ class FlightSoftware(GroundCommands):
         if self.deploy is not None:
             self.deploy.update(nav, t_s, self.entry.estimator.k_rho if self.entry is not None else 1.0)
         # the held trim, the reference, the bank error, the tracking failsafe and SAMI in one
-        # compiled call (control.py ``law_cycle``); a failsafe due or another mode than ENTRY
+        # compiled call (law.py ``law_cycle``); a failsafe due or another mode than ENTRY
         # comes back here. No learning while FDIR holds a detection not yet reconfigured: the
         # torque commanded through the faulty jets is not what the tracking error saw.
         g = self.guidance
@@ -271,10 +272,10 @@ class FlightSoftware(GroundCommands):
             code, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
                 nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
                 entry, self._have_prev, pending, False, _NO_SEGS, 0.0, *g.profile.evaluate(nav.t_s), *self._law_args)
-        if code == 0:
+        if code == LAW_DONE:
             self.control.freeze = pending
         else:
-            if code == 1:
+            if code == LAW_SAFE_DUE:
                 self.failsafes.enter_safe(t_s)
             mode = self.modes.mode
             if mode == Mode.ENTRY:

@@ -1,6 +1,6 @@
 """The control law's stretch of the cycle (after navigation, up to the command handed to the
 allocation) as Python code, the way main flew it before it became one compiled call
-(fsw/control.py ``law_cycle``): the truth the kernel is held to bit for bit.
+(fsw/law.py ``law_cycle``): the truth the kernel is held to bit for bit.
 ``PythonLawFlightSoftware`` is a FlightSoftware whose cycle runs this Python code with its own
 Python state (the failsafe's persistence, the held trim's offsets, SAMI's chart flag), so
 nothing of the compiled path is shared but the kernels main already had (``_guidance_kernel``,

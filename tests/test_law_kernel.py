@@ -1,4 +1,4 @@
-"""The control law's stretch of the cycle in one compiled call (fsw/control.py ``law_cycle``:
+"""The control law's stretch of the cycle in one compiled call (fsw/law.py ``law_cycle``:
 the held trim, the scheduled bank reference, the reference attitude, the bank error, the
 tracking failsafe, SAMI) decides bit for bit as main's Python (tests/front_oracle.py): each
 kernel against the rule it replaced, and whole flights side by side through faults,
@@ -15,7 +15,7 @@ import pytest
 from common.events import EventLog
 from common.model import load_scenario
 from fsw.authority import held_trim
-from fsw.control import wrap_pi
+from fsw.law import wrap_pi
 from fsw.executive import LockstepClock
 from fsw.flightsoftware import FlightSoftware
 from fsw.guidance.reference import BankProfile, profile_eval

@@ -411,7 +411,7 @@ class SamiController:
         # deliverable to within shortfall_frac unless authority is missing (saturation)
         self._kb = kb = np.zeros(_K_N)       # the kernel's constants and state (views below)
         self._sb = sb = np.zeros(_S_N + _W_N)
-        self._rb = np.zeros(_S_N + _W_N)     # rehearse's copy of the state
+        self._rb = np.zeros(_S_N + _W_N)     # the rehearsal's copy of the state (fsw/law.py ``law_cycle``)
         self.u_sat_min_B = kb[_K_USAT:_K_USAT + 3]
         self.u_sat_min_B[:] = 2.0 * absT.max(axis=1)
         a = vehicle.aero
@@ -533,16 +533,6 @@ class SamiController:
         if self._diag[_D_BAD] == 0.0:
             self._have_chart = True
         return self.u_cal_B
-
-    def rehearse(self, nav, guid, tau_delivered_prev_B: np.ndarray | None) -> None:
-        """Real time, just before a release: ``update``'s kernel on a copy of the state (the
-        estimates, integrator and chart unchanged), so the next update finds its data warm."""
-        have_del = tau_delivered_prev_B is not None
-        tau = tau_delivered_prev_B if have_del else self._zero3
-        np.copyto(self._rb, self._sb)
-        sami_kernel(nav.sigma_BN, nav.omega_BN_B, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
-                    guid.sigma_RN, guid.omega_RN_R, guid.domega_RN_R, tau, have_del,
-                    self.freeze, self._have_chart, self._kb, self._rb)
 
     @property
     def adapting(self) -> bool:

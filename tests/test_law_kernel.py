@@ -1,6 +1,6 @@
 """The control law's stretch of the cycle in one compiled call (fsw/law.py ``law_cycle``:
 the held trim, the scheduled bank reference, the reference attitude, the bank error, the
-tracking failsafe, SAMI) decides bit for bit as main's Python (tests/front_oracle.py): each
+tracking failsafe, SAMI) decides bit for bit as main's Python (tests.law_oracle.py): each
 kernel against the rule it replaced, and whole flights side by side through faults,
 reconfiguration, a held trim, frozen adaptation, rejected frames, SAFE mode and the npc shaper,
 the compiled instance rehearsing before every cycle."""
@@ -24,7 +24,7 @@ from fsw.topology import Topology
 from interfaces.records import FSW_STATE, FSW_STATE_SHELL
 from sim.plant import Plant
 
-from tests.front_oracle import (PythonFailsafes, PythonLawFlightSoftware, law_state, python_hold_trim,
+from tests.law_oracle import (PythonFailsafes, PythonLawFlightSoftware, law_state, python_hold_trim,
                                 python_profile_evaluate, python_wrap_pi)
 
 TIMING = ("alloc_us",) + FSW_STATE_SHELL      # host timing and the loop's stamps: measured, not computed

@@ -108,7 +108,8 @@ class RealTimeClock:
 
     def __init__(self, period_ns: int, *, spin_ns: int = 0,
                  now_ns: Callable[[], int] = time.monotonic_ns,
-                 sleep_until: Callable[[int], None] | None = None):
+                 sleep_until: Callable[[int], None] | None = None,
+                 cpu_ns: Callable[[], int] = time.thread_time_ns):
         if period_ns <= 0 or spin_ns < 0 or spin_ns >= period_ns:
             raise ValueError(f"RealTimeClock: need period_ns > 0 and 0 <= spin_ns < period_ns, "
                              f"got {period_ns}, {spin_ns}")
@@ -126,6 +127,15 @@ class RealTimeClock:
         self.rehearsal_ns = [0] * self.LEAD_WINDOW    # the last rehearsals' durations (a ring)
         self.lead_ns = 0                 # the lead the next rehearsal starts at
         self.lead_max_ns = 0             # the longest lead taken since set_rehearsal
+        # the last release's flight recorder (plain attributes, overwritten each release: no
+        # allocation): when the call began (the previous cycle's end), the rehearsal's planned
+        # and actual start, its end, the final sleep's target and its wake-up, the return; and
+        # this thread's CPU time at the rehearsal's start and end and at the return, so that
+        # a late release says whether the thread was off its CPU (explain_late_release)
+        self.cpu_ns = cpu_ns
+        self.tr_enter = self.tr_reh_target = self.tr_reh_start = self.tr_reh_end = 0
+        self.tr_wake_target = self.tr_woke = self.tr_return = 0
+        self.tr_cpu_reh_start = self.tr_cpu_reh_end = self.tr_cpu_woke = self.tr_cpu_return = 0
 
     def set_rehearsal(self, fn: Callable[[], None] | None, lead_ns: int) -> None:
         """Run ``fn()`` ``lead_ns`` before each release (None or lead_ns 0: no rehearsal)."""
@@ -166,25 +176,36 @@ class RealTimeClock:
         k = self._k + 1
         t_rel = self.t0_ns + k * self.period_ns
         now = self.now_ns()
+        self.tr_enter = now
+        self.tr_reh_target = self.tr_reh_start = self.tr_reh_end = 0
         if now >= t_rel + self.period_ns:
             k_now = (now - self.t0_ns) // self.period_ns
             self.missed += k_now - k
             k, t_rel = k_now, self.t0_ns + k_now * self.period_ns
+            self.tr_wake_target = self.tr_woke = now
+            self.tr_cpu_woke = self.cpu_ns()
         else:
             wake = t_rel - self.spin_ns
             if self.rehearse is not None:
                 t_reh = t_rel - max(self.lead_ns, self.spin_ns)
                 if now < t_reh:
-                    t_reh = self._sleep_to(t_reh, now)
+                    self.tr_reh_target = t_reh
+                    t_reh = self.tr_reh_start = self._sleep_to(t_reh, now)
+                    self.tr_cpu_reh_start = self.cpu_ns()
                     self.rehearse()
-                    now = wake = self.now_ns()   # no sleep between the rehearsal and the release: spin
+                    now = wake = self.tr_reh_end = self.now_ns()   # no sleep between the rehearsal and the release: spin
+                    self.tr_cpu_reh_end = self.cpu_ns()
                     self._size_lead(now - t_reh)
                     self.rehearsals += 1
                 else:
                     self.rehearsals_skipped += 1
-            now = self._sleep_to(wake, now)
+            self.tr_wake_target = wake
+            now = self.tr_woke = self._sleep_to(wake, now)
+            self.tr_cpu_woke = self.cpu_ns()
             while now < t_rel:
                 now = self.now_ns()
+        self.tr_return = now
+        self.tr_cpu_return = self.cpu_ns()
         self._k = k
         return k, t_rel
 
@@ -194,6 +215,51 @@ class RealTimeClock:
             self.sleep_until(t_ns)
             now = self.now_ns()
         return now
+
+
+# the causes a late release is put down to (explain_late_release): the first two are the loop's
+# own work, the other two the host's (or a thread above the loop's priority)
+OWN_CAUSES = ("previous_cycle", "rehearsal")
+HOST_CAUSES = ("late_wakeup", "preempted")
+
+
+def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int, carried_host_ns: int = 0) -> dict:
+    """Where a late release's time went, from the clock's flight recorder of that release
+    [us]: ``previous_cycle`` (the call came after the release: the previous cycle, or what ran
+    after it, overran into this one), ``late_wakeup`` (a sleep -- to the rehearsal or to the
+    release -- ended after its target: the kernel woke the thread late), ``preempted`` (the
+    thread was off its CPU while it rehearsed or spun: the host, or a thread above the
+    loop's priority), ``rehearsal`` (the rehearsal's own CPU time beyond the lead it was
+    given: ours). A previous cycle that overran only because the host released it late
+    (``carried_host_ns``, the host's share of that release) hands that share on as the host's.
+    ``cause`` is the largest; ``own`` whether it is the loop's own work."""
+    reh = clock.tr_reh_target != 0
+    lead = t_rel - clock.tr_reh_target if reh else 0
+    reh_wall = clock.tr_reh_end - clock.tr_reh_start if reh else 0
+    reh_cpu = clock.tr_cpu_reh_end - clock.tr_cpu_reh_start if reh else 0
+    spin_wall = clock.tr_return - clock.tr_woke
+    spin_cpu = clock.tr_cpu_return - clock.tr_cpu_woke
+    # a sleep's lateness counts only when the call came before its target (else it never slept);
+    # the previous cycle's overrun into this release less what the host took from that cycle
+    # (``carried_host_ns``: its own release's host share, a cascade from one late wake-up)
+    overrun = max(0, clock.tr_enter - t_rel)
+    carried = min(overrun, carried_host_ns)
+    slept = clock.tr_enter < clock.tr_wake_target
+    shares = {
+        "previous_cycle": overrun - carried,
+        "late_wakeup": (max(0, clock.tr_reh_start - clock.tr_reh_target)
+                        + (max(0, clock.tr_woke - clock.tr_wake_target) if slept else 0) + carried),
+        "preempted": max(0, reh_wall - reh_cpu) + max(0, spin_wall - spin_cpu),
+        "rehearsal": max(0, reh_cpu - lead),
+    }
+    cause = max(shares, key=shares.get)
+    if shares[cause] == 0:
+        cause = "other"
+    out = {"jitter_us": (t_start - t_rel) / 1e3, "cause": cause, "own": cause in OWN_CAUSES,
+           "enter_us": (clock.tr_enter - t_rel) / 1e3, "lead_us": lead / 1e3,
+           "rehearsal_took_us": reh_wall / 1e3, "rehearsal_cpu_us": reh_cpu / 1e3}
+    out.update({f"{name}_us": v / 1e3 for name, v in shares.items()})
+    return out
 
 
 # --------------------------------------------------------------------------- statistics
@@ -247,26 +313,39 @@ class Cycle:
 
 
 def own_slips(records: list[dict], period_us: float, last_k: int | None = None) -> list[dict]:
-    """The slip records the FSW's own work explains: not a late release (the CPU was
-    elsewhere: a higher-priority thread, the host), or a late release whose tasks still took
-    half the period or more. With ``last_k`` (the plant's last step), a slip after it is no
-    one's deadline: the plant had gone (its leaving costs Zenoh's threads, one priority above
-    the loop, time the loop cannot use). A record the process shell gave ``off_cpu_us`` (the
-    time the loop's thread was off its CPU after its input task, from taking the frame to the
-    cycle's end) is the host's when the release jitter, the input task (the wait for the
-    plant's frame) and that time cover its lateness: released on time, with the frame on
-    time and its CPU throughout, the cycle met its deadline."""
-    return [r for r in records
-            if (last_k is None or r["k"] <= last_k)
-            and (r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us)
-            and not _host_explains(r)]
+    """The slip records the FSW's own work explains (``slip_is_own``). With ``last_k`` (the
+    plant's last step), a slip after it is no one's deadline: the plant had gone (its leaving
+    costs Zenoh's threads, one priority above the loop, time the loop cannot use)."""
+    return [r for r in records if (last_k is None or r["k"] <= last_k) and slip_is_own(r, period_us)]
+
+
+def slip_is_own(r: dict, period_us: float) -> bool:
+    """Whether a slip record is the FSW's own work rather than the host's.
+
+    The host's when the time the host took covers the cycle's lateness (``_host_explains``):
+    released on time, its frame on time and its CPU throughout, the cycle would have met its
+    deadline. Otherwise, a record with the release's flight recorder (``release_host_us``: the
+    share of its release jitter the host took, a late wake-up or preemption; the rest was the
+    loop's own, a rehearsal or the previous cycle running into the release) is the loop's own.
+    Without one (older records), a late release is the host's unless the cycle's tasks still
+    took half the period or more."""
+    if _host_explains(r):
+        return False
+    if "release_host_us" in r:
+        return True
+    return r["cause"] != "late_release" or sum(r["tasks_us"].values()) >= 0.5 * period_us
 
 
 def _host_explains(r: dict) -> bool:
-    off = r.get("off_cpu_us")
+    """The host's time in a slip record covers its lateness: the release jitter the host took
+    (``release_host_us``, else all of it), the time the loop's thread was off its CPU after the
+    release (``off_cpu_us``, the process shell's from taking the frame; else the executive's
+    ``compute_off_cpu_us`` over the tasks) and the input task (the wait for the plant's frame)."""
+    off = r.get("off_cpu_us", r.get("compute_off_cpu_us"))
     if off is None or "late_us" not in r:
         return False
-    return r.get("jitter_us", 0.0) + off + r["tasks_us"].get("input", 0.0) >= r["late_us"]
+    release = r.get("release_host_us", r.get("jitter_us", 0.0))
+    return release + off + r["tasks_us"].get("input", 0.0) >= r["late_us"]
 
 
 class Executive:
@@ -283,6 +362,8 @@ class Executive:
     """
 
     SLIP_RECORDS = 32
+    LATE_RECORDS = 64            # late releases kept with their flight recorder's breakdown
+    LATE_RELEASE_NS = 200_000    # a release later than this is explained (explain_late_release)
 
     def __init__(self, period_ns: int, clock: LockstepClock | RealTimeClock,
                  divisors: tuple[int, ...] = (1, 5, 50), *, events: EventLog | None = None,
@@ -307,11 +388,18 @@ class Executive:
         self.cycle = Cycle()
         self.cycles = 0
         self.slips = 0
+        self.host_slips = 0      # slips the host's time explains (slip_is_own on the executive's evidence)
         self.task_errors = 0
         self.last_slip_k = -1
         # what each of the first SLIP_RECORDS late cycles spent where (a slip is rare: the
         # dict is built only then): the evidence a user needs to find its cause
         self.slip_records: list[dict] = []
+        # releases later than LATE_RELEASE_NS (real time): counts by cause, and the first
+        # LATE_RECORDS with their breakdown and what the cycle before them ran
+        self.late_releases: dict[str, int] = {}
+        self.late_records: list[dict] = []
+        self._traced = isinstance(clock, RealTimeClock)
+        self._host_ns = 0        # the host's share of the last release's jitter (a cascade's start)
         self.event_time: Callable[[], float] | None = None
 
     @classmethod
@@ -350,6 +438,11 @@ class Executive:
         cyc.k, cyc.t_release_ns, cyc.t_start_ns, cyc.frame = k, t_rel, t_start, frame
 
         st = self.stats
+        if self._traced:
+            if t_start - t_rel > self.LATE_RELEASE_NS:
+                self._note_late(k, t_rel, t_start)
+            else:
+                self._host_ns = 0
         i = st.n % st.capacity
         task_row = st.task_ns[i]
         task_row[:] = -1
@@ -381,18 +474,40 @@ class Executive:
             self.slips += 1
             self.last_slip_k = k
             worst = int(np.argmax(task_row))
+            # the larger share decides: the loop started late (the CPU was elsewhere: a
+            # higher-priority thread, the host) or its own tasks ran long
+            cause = "late_release" if t_start - t_rel > t_end - t_start else "overrun"
+            rec = {"k": int(k), "cause": cause, "late_us": (t_end - t_rel - self.deadline_ns) / 1e3,
+                   "jitter_us": (t_start - t_rel) / 1e3,
+                   "tasks_us": {name: task_row[j] / 1e3 for j, name in enumerate(self._names)
+                                if task_row[j] >= 0}}
+            if self._traced:
+                # what of the lateness the host took: its share of the release's jitter (the
+                # flight recorder's) and the thread's time off its CPU over the tasks
+                clock = self.clock
+                rec["release_host_us"] = min(rec["jitter_us"], self._host_ns / 1e3)
+                rec["compute_off_cpu_us"] = max(0, (t_end - t_start) - (clock.cpu_ns() - clock.tr_cpu_return)) / 1e3
+                if not slip_is_own(rec, self.period_ns / 1e3):
+                    self.host_slips += 1
             if len(self.slip_records) < self.SLIP_RECORDS:
-                # the larger share decides: the loop started late (the CPU was elsewhere: a
-                # higher-priority thread, the host) or its own tasks ran long
-                cause = "late_release" if t_start - t_rel > t_end - t_start else "overrun"
-                self.slip_records.append({
-                    "k": int(k), "cause": cause, "late_us": (t_end - t_rel - self.deadline_ns) / 1e3,
-                    "jitter_us": (t_start - t_rel) / 1e3,
-                    "tasks_us": {name: task_row[j] / 1e3 for j, name in enumerate(self._names)
-                                 if task_row[j] >= 0}})
+                self.slip_records.append(rec)
             self.events.emit(self._t_s(t_s, t_rel), EV.CYCLE_SLIP, tick=k, took_ms=(t_end - t_rel) / 1e6,
                              deadline_ms=self.deadline_ns / 1e6, task=self._names[worst], task_ms=task_row[worst] / 1e6)
         return not late
+
+    def _note_late(self, k: int, t_rel: int, t_start: int) -> None:
+        """A late release (rare: the dict is built only then): counted by cause, and the first
+        LATE_RECORDS kept with the previous cycle's tasks and the slips' kind of evidence."""
+        rec = explain_late_release(self.clock, t_rel, t_start, self._host_ns)
+        self._host_ns = int(1e3 * min(rec["jitter_us"], sum(rec[f"{c}_us"] for c in HOST_CAUSES)))
+        self.late_releases[rec["cause"]] = self.late_releases.get(rec["cause"], 0) + 1
+        if len(self.late_records) < self.LATE_RECORDS:
+            st = self.stats
+            rec["k"] = int(k)
+            if st.n:
+                prev = st.task_ns[(st.n - 1) % st.capacity]
+                rec["previous_tasks_us"] = {name: prev[j] / 1e3 for j, name in enumerate(self._names) if prev[j] >= 0}
+            self.late_records.append(rec)
 
     def _t_s(self, t_s: float | None, t_rel_ns: int) -> float:
         """The time stamp of an event: the tick's own, else the owner's clock (``event_time``,
@@ -425,10 +540,16 @@ class Executive:
     def telemetry(self) -> dict:
         """Loop timing for telemetry: counts, and p50/p99/max of jitter and compute [us]."""
         st = self.stats
-        out = {"cycles": self.cycles, "slips": self.slips, "missed_releases": self.clock.missed,
+        out = {"cycles": self.cycles, "slips": self.slips, "host_slips": self.host_slips,
+               "missed_releases": self.clock.missed,
                "task_errors": self.task_errors, "mode": self.clock.mode}
         if self.slip_records:
             out["slip_records"] = self.slip_records
+        if self._traced:
+            out["late_releases"] = dict(self.late_releases)
+            out["late_release_us"] = self.LATE_RELEASE_NS / 1e3
+            if self.late_records:
+                out["late_records"] = self.late_records
         if st is None:
             return out
         for field in ("jitter_ns", "compute_ns"):

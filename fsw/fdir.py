@@ -140,6 +140,37 @@ def _jet_monitor(u, p, iso_state, cnt, sum_dg, thr, persist_n, new_kind, eta_new
     return n_new, n_bad
 
 
+# flags of ``jet_step``: what its caller's Python (``Fdir.settle``) has to do
+STEP_UNKNOWN, STEP_NONFINITE, STEP_DECLARED, STEP_DUE = 1, 2, 4, 8
+
+
+@njit(cache=True)
+def jet_step(u_k, sent, sent_k, zero_u, p, oracle, t_s, next_apply, iso_state, cnt, sum_dg, thr, persist,
+             new_kind, eta_new):
+    """``Fdir.update``'s per-period part with the command in force looked up: the answer to
+    frame ``u_k`` in the ring (``sent`` rows, ``sent_k`` their frame indices), ``zero_u`` for
+    -1; then the jet monitor (``_jet_monitor``, not in oracle mode) on the chamber pressures
+    ``p`` (``persist``: its persistence, one int). Returns STEP_* flags: the command not known (no evidence), non-finite samples,
+    declarations in ``new_kind``, a detection's reconfiguration due by ``t_s``; 0 = none."""
+    flags = 0
+    if u_k == -1:
+        u = zero_u
+    else:
+        i = u_k % sent_k.shape[0]
+        u = sent[i]
+        if sent_k[i] != u_k:
+            flags = STEP_UNKNOWN
+    if flags == 0 and not oracle:
+        n_new, n_bad = _jet_monitor(u, p, iso_state, cnt, sum_dg, thr, persist[0], new_kind, eta_new)
+        if n_bad:
+            flags += STEP_NONFINITE
+        if n_new:
+            flags += STEP_DECLARED
+    if t_s + _T_EPS_S >= next_apply:
+        flags += STEP_DUE
+    return flags
+
+
 @njit(cache=True)
 def _residual_step(w, w0, dt_s, tau_cmd, tau_aero, I, a, res_f):
     """r = I (w - w0)/dt + wm x I wm - tau_aero - tau_cmd with wm = (w + w0)/2; res_f += a (r - res_f).
@@ -209,6 +240,8 @@ class Fdir:
         self.n = n_jets
         self.p = _check_params(params, JET_MONITOR_PARAMS)
         self._check_consistency(self.p)
+        self._thr = np.zeros(4)
+        self._persist = np.zeros(1, dtype=np.int64)
         self._load_thresholds()
         self.oracle = self.p["fdir.mode"] == "oracle"
         if self.oracle:
@@ -261,9 +294,9 @@ class Fdir:
 
     def _load_thresholds(self) -> None:
         p = self.p
-        self._thr = np.array([p["fdir.off_threshold"], p["fdir.on_threshold"],
-                              p["fdir.degraded_lo"], p["fdir.degraded_hi"]])
-        self._persist_n = periods(p["fdir.persist_s"], self.dt_s)
+        # in place: the compiled callers hold the array
+        self._thr[:] = (p["fdir.off_threshold"], p["fdir.on_threshold"], p["fdir.degraded_lo"], p["fdir.degraded_hi"])
+        self._persist[0] = periods(p["fdir.persist_s"], self.dt_s)
         self.delay_s = p["fdir.delay_s"]
 
     def set_param(self, name: str, value: float) -> float:
@@ -295,8 +328,7 @@ class Fdir:
         pressure measured over it. Non-finite chamber samples are ignored for their jet (and
         reported, rate-limited). Returns True when ``health_active`` changed during this call."""
         if u_cmd_prev is None:
-            self.unknown_command_periods += 1
-            return self._apply_due(t_s) if t_s + _T_EPS_S >= self._next_apply else False
+            return self.settle(t_s, STEP_UNKNOWN)
         if u_cmd_prev.shape != (self.n,) or chamber.shape != (self.n,):
             raise ValueError(f"fdir.update: u_cmd_prev and chamber must have shape ({self.n},), "
                              f"got {u_cmd_prev.shape} and {chamber.shape}")
@@ -307,29 +339,39 @@ class Fdir:
         if chamber.dtype != np.float64:
             chamber = chamber.astype(np.float64)
         if self.oracle:       # identification comes from identified() alone
-            n_new = n_bad = 0
-        else:
-            n_new, n_bad = _jet_monitor(u, chamber, self.health_isolated.state, self._cnt, self._sum_dg,
-                                        self._thr, self._persist_n, self._new_kind, self._eta_new)
-        if n_bad:
-            self._report_nonfinite(t_s, n_bad)
-        if n_new:
+            return self.settle(t_s, 0)
+        n_new, n_bad = _jet_monitor(u, chamber, self.health_isolated.state, self._cnt, self._sum_dg,
+                                    self._thr, self._persist[0], self._new_kind, self._eta_new)
+        return self.settle(t_s, (STEP_NONFINITE if n_bad else 0) + (STEP_DECLARED if n_new else 0))
+
+    def settle(self, t_s: float, flags: int) -> bool:
+        """What the jet monitor's period calls for (``jet_step``'s STEP_* ``flags``): the
+        unknown command counted, non-finite samples reported, declarations made, and the
+        reconfigurations due applied. Returns True when ``health_active`` changed."""
+        if flags & STEP_UNKNOWN:
+            self.unknown_command_periods += 1
+        if flags & STEP_NONFINITE:
+            self._report_nonfinite(t_s, int(np.count_nonzero(self._new_kind == -1)))
+        if flags & STEP_DECLARED:
             self._declare(t_s)
         if t_s + _T_EPS_S >= self._next_apply:
             return self._apply_due(t_s)
         return False
 
-    def rehearse(self, u_cmd_prev: np.ndarray | None, chamber: np.ndarray) -> None:
-        """Real time, just before a release: the jet monitor's kernel on copies of its counters
-        (the spare of the rehearsal flies FDIR in oracle mode, which never runs it), so the
-        next ``update`` finds it warm. Changes nothing: declarations go to scratch arrays."""
-        if (self.oracle or u_cmd_prev is None or u_cmd_prev.dtype != np.uint8 or chamber.dtype != np.float64
-                or u_cmd_prev.shape != (self.n,) or chamber.shape != (self.n,)):
-            return
+    def step_arrays(self, scratch: bool = False) -> tuple:
+        """The arrays ``jet_step`` works on after ``next_apply``, in its order; the parameters
+        are refilled in place, so the tuple stays valid. ``scratch``: the rehearsal's, whose
+        counters ``rehearsal_copy`` refreshes and whose declarations nothing reads."""
+        if scratch:
+            return (self.health_isolated.state, self._r_cnt, self._r_sum_dg, self._thr, self._persist,
+                    self._r_kind, self._r_eta)
+        return (self.health_isolated.state, self._cnt, self._sum_dg, self._thr, self._persist,
+                self._new_kind, self._eta_new)
+
+    def rehearsal_copy(self) -> None:
+        """The counters copied to the rehearsal's scratch (``step_arrays(scratch=True)``)."""
         np.copyto(self._r_cnt, self._cnt)
         np.copyto(self._r_sum_dg, self._sum_dg)
-        _jet_monitor(u_cmd_prev, chamber, self.health_isolated.state, self._r_cnt, self._r_sum_dg,
-                     self._thr, self._persist_n, self._r_kind, self._r_eta)
 
     def identified(self, t_s: float, jet: int, kind: str, eta: float = 1.0) -> None:
         """Oracle mode (a test mode): the fault of ``jet`` is known as of ``t_s`` (the time the

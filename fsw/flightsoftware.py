@@ -25,14 +25,14 @@ from .authority import AuthoritySupervisor
 from .commands import GroundCommands
 from .control import SamiController
 from .controllability import Controllability, velocity_dir_B
-from .fdir import Fdir
+from .fdir import Fdir, jet_step
 from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
 from .jetdriver import JetDriver, drive_jets
 from .law import LAW_DONE, LAW_SAFE_DUE, law_cycle
 from .modes import Failsafes, Mode, ModeManager
-from .monitors import SensorMonitor
-from .navigation import Navigation, frame_vectors
+from .monitors import SensorMonitor, frame_check
+from .navigation import Navigation, _nav_kernel
 from .output import OutputFiller, fill_record
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
@@ -92,6 +92,29 @@ def finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kg
     fill_record(r, target_flag, last, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
                 k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)
     return used, short
+
+
+@njit(cache=True)
+def intake_cycle(x, ki, stale, next_apply, lims, out, seq, sent, sent_k, zero_u, oracle,
+                 iso_state, cnt, sum_dg, thr, persist, new_kind, eta_new,
+                 omega_planet, radius_m, model, rho0, H_m, nav_buf):
+    """The control cycle's head in one compiled call, on a SENSORS record's floats ``x`` and
+    its (k, t_ns, u_k) ``ki``: the frame check (monitors.py ``frame_check``: ``lims`` ..
+    ``seq``, ``stale``), FDIR's jet monitor on the command in force (fdir.py ``jet_step``:
+    ``sent`` .. ``eta_new``, ``next_apply``) and navigation (navigation.py ``_nav_kernel``:
+    the planet's constants, the NavState buffer). Returns (code, t_s, k, V_rel, h, alpha,
+    beta, bank, rho, qbar, mach): code < 0 a rejected frame (``frame_check``'s code; nothing
+    past the check ran, the navigation figures are zeros), else frame_check's flags plus 4
+    times jet_step's (0: nothing for the Python caller to report or apply)."""
+    k = ki[0]
+    t_s = float(ki[1]) * 1e-9
+    code = frame_check(x, k, lims, out, seq, stale)
+    if code < 0:
+        return code, t_s, k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    step = jet_step(ki[2], sent, sent_k, zero_u, x[15:], oracle, t_s, next_apply, iso_state, cnt, sum_dg, thr,
+                    persist, new_kind, eta_new)
+    V, h, alpha, beta, bank, rho, qbar, mach = _nav_kernel(x, omega_planet, radius_m, model, rho0, H_m, nav_buf)
+    return code + 4 * step, t_s, k, V, h, alpha, beta, bank, rho, qbar, mach
 
 
 def declarations() -> tuple[tuple[str, list[Param]], ...]:
@@ -198,7 +221,6 @@ class FlightSoftware(GroundCommands):
         self.reconfig_times: list[float] = []
         self.cycles = 0
         self.bank_err_rad = 0.0
-        self._frame_views: tuple = (None,)
         self._zero_u = np.zeros(self.driver.n, dtype=np.uint8)   # jets off
         # the commands this FSW answered frames with, by frame index: FDIR judges each jet by
         # the command the plant reports it held (SENSORS.u_k), which in real time can be an
@@ -207,6 +229,12 @@ class FlightSoftware(GroundCommands):
         self._sent = np.zeros((self._ring, self.driver.n), dtype=np.uint8)
         self._sent_k = np.full(self._ring, -2, dtype=np.int64)    # the frame index of each slot's answer
         self._drive_state = self.driver.state_arrays()
+        # intake_cycle's arrays and constants after next_apply, the flight's and the rehearsal's
+        mon, fd, nav = self.monitor, self.fdir, self.nav
+        ring = (self._sent, self._sent_k, self._zero_u, fd.oracle)
+        self._intake_args = (mon._lims, mon._out, mon._seq, *ring, *fd.step_arrays(), *nav.kernel_args())
+        self._intake_scratch = (mon._lims, mon._out, *ring, *fd.step_arrays(scratch=True),
+                                *nav.kernel_args(nav._r_buf))
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self.realtime = realtime
@@ -235,20 +263,27 @@ class FlightSoftware(GroundCommands):
     def _run_cycle(self, frame) -> np.ndarray:
         self.cycles += 1
         self._count_torque()
-        t_s = float(frame["t_ns"]) * 1e-9     # a Python float (a 0-d field times 1e-9 is a NumPy scalar)
-        ok = self.monitor.check(t_s, frame)
-        if not ok or self.monitor.stale:
+        v = self.monitor.views(frame)
+        if v is None:
+            return self._rejected_format(frame)
+        code, t_s, k, V, h, alpha, beta, bank, rho, qbar, mach = intake_cycle(
+            v[0], v[1], self.monitor.stale, self.fdir._next_apply, *self._intake_args)
+        if code < 0:
+            self.monitor.settle(t_s, code, k)
             return self._held_off(t_s)
-        fv = self._frame_views
-        if fv[0] is not frame:     # field views of the record, made once per record object
-            fv = self._frame_views = (frame, frame_vectors(frame), frame["chamber"])
-        self.k = self.monitor.last_k
+        self.k = k
         self.t_s = t_s
-        reconfigured = self.fdir.update(t_s, self._command_in_force(int(frame["u_k"])), fv[2])
-        if reconfigured:
-            self.allocator.set_health(self.fdir.health_active)
-            self.reconfig_times.append(t_s)
-        nav = self.nav.update_packed(t_s, fv[1])
+        reconfigured = code != 0 and self._intake_reports(t_s, code, k)
+        nav = self.nav.state
+        nav.t_s = t_s
+        nav.V_rel_mps = V
+        nav.h_m = h
+        nav.alpha_rad = alpha
+        nav.beta_rad = beta
+        nav.bank_rad = bank
+        nav.rho_kgpm3 = rho
+        nav.qbar_pa = qbar
+        nav.mach = mach
         if reconfigured or self.authority.due(t_s):
             self.authority.step(t_s, reconfigured)      # assessed with this cycle's navigation
         if self.entry is not None:
@@ -265,17 +300,17 @@ class FlightSoftware(GroundCommands):
         pending = self.fdir.reconfig_pending
         if g.compiled_profile:
             prof = g.profile
-            code, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
+            law, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
                 nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
                 entry, self._have_prev, pending, True, prof.seg_array, prof.phi0_rad, 0.0, 0.0, 0.0, *self._law_args)
         else:
-            code, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
+            law, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
                 nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
                 entry, self._have_prev, pending, False, _NO_SEGS, 0.0, *g.profile.evaluate(nav.t_s), *self._law_args)
-        if code == LAW_DONE:
+        if law == LAW_DONE:
             self.control.freeze = pending
         else:
-            if code == LAW_SAFE_DUE:
+            if law == LAW_SAFE_DUE:
                 self.failsafes.enter_safe(t_s)
             mode = self.modes.mode
             if mode == Mode.ENTRY:
@@ -299,6 +334,23 @@ class FlightSoftware(GroundCommands):
         if self.dutycycle.fell_back:
             self.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
         return self._finish(t_s, u_alloc)
+
+    def _rejected_format(self, frame) -> np.ndarray:
+        """Not a usable SENSORS record (the monitor's views refused it): rejected as a format error."""
+        t_s = float(frame["t_ns"]) * 1e-9
+        self.monitor.check(t_s, frame)
+        return self._held_off(t_s)
+
+    def _intake_reports(self, t_s: float, code: int, k: int) -> bool:
+        """What ``intake_cycle``'s flags ``code`` (> 0) call for: the monitor's and FDIR's
+        reports and declarations, and the allocator told of a reconfiguration. True when FDIR
+        reconfigured."""
+        self.monitor.settle(t_s, code & 3, k)
+        reconfigured = self.fdir.settle(t_s, code >> 2)
+        if reconfigured:
+            self.allocator.set_health(self.fdir.health_active)
+            self.reconfig_times.append(t_s)
+        return reconfigured
 
     def _finish(self, t_s: float, u_alloc: np.ndarray) -> np.ndarray:
         """The rest of the cycle in one compiled call (``finish_cycle``), the events it calls
@@ -331,27 +383,31 @@ class FlightSoftware(GroundCommands):
         the duty-cycle LP's too. Nothing the next cycle reads changes."""
         fv = self._frame_views
         if fv[0] is frame:
-            self.monitor.rehearse(frame)
-            self.fdir.rehearse(self._command_in_force(int(frame["u_k"])), fv[2])
-            self.nav.rehearse(fv[1])
+            self._rehearse_intake(fv)
             if self._have_prev:
                 self._rehearse_law()
         self.allocator.rehearse(demand_B)
         self.dutycycle.rehearse(self.allocator, demand_B)
 
+    @property
+    def _frame_views(self) -> tuple:
+        """(record, its dtype, float view, view of k, t_ns, u_k) of the last record the monitor viewed."""
+        return self.monitor._fviews
+
+    def _rehearse_intake(self, fv: tuple) -> None:
+        """``intake_cycle`` on the rehearsal's copies of the record's floats ``fv[2]``, the
+        monitor's sequence (as if the frame were new), FDIR's counters and the navigation
+        state; its answers discarded."""
+        x, seq = self.monitor.rehearsal_copy(fv[2])
+        self.fdir.rehearsal_copy()
+        self.nav.rehearsal_copy()
+        a = self._intake_scratch
+        intake_cycle(x, fv[3], False, self.fdir._next_apply, a[0], a[1], seq, *a[2:])
+
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k; ``note_sent``); returns u."""
         note_sent(self._sent, self._sent_k, self.k, u)
         return u
-
-    def _command_in_force(self, u_k: int) -> np.ndarray | None:
-        """The command the plant held over the period just ended: the answer to frame
-        ``u_k``, jets off for -1, None when this FSW has no record of it (then FDIR takes the
-        period as no evidence)."""
-        if u_k == -1:
-            return self._zero_u
-        i = u_k % self._ring
-        return self._sent[i] if self._sent_k[i] == u_k else None
 
     def _check_bank_shortfall(self, t_s: float, short: bool) -> None:
         """Note whether the bank axis fell short this cycle (``bank_short``)."""

@@ -46,7 +46,9 @@ _N_CH = SENSORS.fields["chamber"][0].shape[0]
 _N_F = 15 + _N_CH
 assert all(SENSORS.fields[f][1] == _F0 + 24 * i for i, f in enumerate(_VEC_FIELDS))
 assert SENSORS.fields["chamber"][1] == _F0 + 120 and SENSORS.itemsize == _F0 + 8 * _N_F
-assert SENSORS.fields["k"][0] == np.dtype("<i8") and _K0 % 8 == 0
+# ... and k, t_ns, u_k one run of int64 before it
+assert all(SENSORS.fields[f][0] == np.dtype("<i8") and SENSORS.fields[f][1] == _K0 + 8 * i
+           for i, f in enumerate(("k", "t_ns", "u_k"))) and _K0 % 8 == 0
 
 
 @njit(cache=True)
@@ -86,6 +88,37 @@ def _frame_kernel(x, lims, n_vec, out):
     return 0
 
 
+# codes of ``frame_check``: a rejection is negative, an accepted frame 0 or the sum of what it
+# calls for (the events are the Python caller's)
+REJ_K, REJ_DUPLICATE, REJ_OUT_OF_ORDER = -1, -2, -3   # k < 0; k == last; k < last
+REJ_VECTOR = -1000        # -1000 - frame kernel code: a vector non-finite or out of range
+ACC_CHAMBER, ACC_RECOVER = 1, 2     # bad chamber entries to report; stale, now recovered
+# the monitor's sequence state, one int64 array the kernel updates: the last accepted step
+# index (-1: none yet), frames accepted, consecutive periods without fresh data
+_SEQ_LAST, _SEQ_ACCEPTED, _SEQ_MISSED = 0, 1, 2
+
+
+@njit(cache=True)
+def frame_check(x, k, lims, out, seq, stale):
+    """The frame check of one record (``x`` its floats, ``k`` its step index) as ``check``
+    does it: the vector and chamber checks (``_frame_kernel``), then the sequence against
+    ``seq``; an accepted frame updates ``seq``. Returns a REJ_* code (nothing updated; for
+    REJ_VECTOR the frame kernel's code is added) or ACC_* flags (0: nothing to report)."""
+    if k < 0:
+        return REJ_K
+    code = _frame_kernel(x, lims, 5, out)
+    if code != 0:
+        return REJ_VECTOR - code
+    last = seq[_SEQ_LAST]
+    if last >= 0 and k <= last:
+        return REJ_DUPLICATE if k == last else REJ_OUT_OF_ORDER
+    seq[_SEQ_LAST] = k
+    seq[_SEQ_ACCEPTED] += 1
+    seq[_SEQ_MISSED] = 0
+    flags = ACC_CHAMBER if out[1] != 0.0 or out[2] != 0.0 else 0
+    return flags + ACC_RECOVER if stale else flags
+
+
 class SensorMonitor:
     PARAMS = [
         Param("fdir.stale_s", 1e-3, 20.0, "s", "no fresh frame this long (whole control periods, at least one) "
@@ -120,13 +153,29 @@ class SensorMonitor:
         self._lims = np.zeros((6, 2))
         self._apply()
         self._out = np.zeros(5)
-        self._r_x = np.zeros(_N_F)     # rehearse's copy of a frame's floats
-        self._fviews: tuple = (None, None, None, None)   # (frame, its dtype, float view, k view) of the last frame
+        self._r_x = np.zeros(_N_F)                          # the rehearsal's copy of a frame's floats
+        self._r_seq = np.zeros(3, dtype=np.int64)           # ... and of the sequence state
+        # (frame, its dtype, float view, view of k, t_ns, u_k) of the last frame
+        self._fviews: tuple = (None, None, None, None)
         self.counts: dict[str, int] = {r: 0 for r in REASONS}
-        self.accepted = 0
-        self.last_k: int | None = None
-        self.missed = 0            # consecutive periods without fresh data
+        self._seq = np.array([-1, 0, 0], dtype=np.int64)    # frame_check's sequence state
         self.stale = False
+
+    # the sequence state as numbers (frame_check keeps it in ``_seq``)
+    @property
+    def last_k(self) -> int | None:
+        """Step index of the last accepted frame (None: none yet, or a restarted source)."""
+        k = int(self._seq[_SEQ_LAST])
+        return None if k < 0 else k
+
+    @property
+    def accepted(self) -> int:
+        return int(self._seq[_SEQ_ACCEPTED])
+
+    @property
+    def missed(self) -> int:
+        """Consecutive periods without fresh data."""
+        return int(self._seq[_SEQ_MISSED])
 
     def _apply(self) -> None:
         """Limits of the frame checks from the parameters (in place: the kernel reads them)."""
@@ -153,7 +202,7 @@ class SensorMonitor:
     def restart_sequence(self) -> None:
         """A new sensor source (a restarted plant) counts its steps from 0 again: forget
         the last step index so its frames are not rejected as out of order."""
-        self.last_k = None
+        self._seq[_SEQ_LAST] = -1
 
     def _reject(self, t_s: float, reason: str, event: EventDef, **args) -> bool:
         self.counts[reason] += 1
@@ -162,63 +211,71 @@ class SensorMonitor:
         return False
 
     def _no_fresh(self, t_s: float) -> None:
-        self.missed += 1
-        if not self.stale and self.missed >= self.stale_n:
+        self._seq[_SEQ_MISSED] += 1
+        missed = int(self._seq[_SEQ_MISSED])
+        if not self.stale and missed >= self.stale_n:
             self.stale = True
-            self.events.emit(t_s, EV.SENSORS_STALE, periods=self.missed)
+            self.events.emit(t_s, EV.SENSORS_STALE, periods=missed)
 
     def tick(self, t_s: float, got_frame: bool = False) -> None:
         """End of a control period; ``got_frame`` False = no frame arrived at all."""
         if not got_frame:
             self._no_fresh(t_s)
 
+    def views(self, frame) -> tuple | None:
+        """(float view, step-index view) of a SENSORS record, made once per record object;
+        None when ``frame`` is not a writable, contiguous 0-d SENSORS record."""
+        fv = self._fviews
+        if frame is fv[0] and frame.dtype is fv[1] and frame.shape == () and frame.flags.writeable:
+            return fv[2], fv[3]              # the same record as last time (a plant's sensors)
+        if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != () \
+                or not frame.flags.c_contiguous or not frame.flags.writeable:
+            return None
+        x = np.ndarray((_N_F,), dtype=np.float64, buffer=frame, offset=_F0)
+        ki = np.ndarray((3,), dtype=np.int64, buffer=frame, offset=_K0)
+        self._fviews = (frame, frame.dtype, x, ki)
+        return x, ki
+
     def check(self, t_s: float, frame) -> bool:
         """Validate one SENSORS record; True = accepted (fresh and credible). Bad chamber
         entries are set to NaN in the record (see the module docstring)."""
-        fv = self._fviews
-        if frame is fv[0] and frame.dtype is fv[1] and frame.shape == () and frame.flags.writeable:
-            x, k = fv[2], int(fv[3][0])          # the same record as last time (a plant's sensors)
-        else:
-            if not isinstance(frame, np.ndarray) or frame.dtype != SENSORS or frame.shape != () \
-                    or not frame.flags.c_contiguous or not frame.flags.writeable:
-                return self._reject(t_s, "format", EV.FRAME_FORMAT)
-            x = np.ndarray((_N_F,), dtype=np.float64, buffer=frame, offset=_F0)
-            ki = np.ndarray((1,), dtype=np.int64, buffer=frame, offset=_K0)
-            self._fviews = (frame, frame.dtype, x, ki)
-            k = int(ki[0])
+        v = self.views(frame)
+        if v is None:
+            return self._reject(t_s, "format", EV.FRAME_FORMAT)
+        k = int(v[1][0])
         # one pass over the floats: vectors finite and credible, bad chamber entries -> NaN
-        code = _frame_kernel(x, self._lims, 5, self._out) if k >= 0 else -1
-        if code == -1:
+        return self.settle(t_s, frame_check(v[0], k, self._lims, self._out, self._seq, self.stale), k)
+
+    def settle(self, t_s: float, code: int, k: int) -> bool:
+        """What ``frame_check``'s ``code`` for the frame of step ``k`` calls for: the rejection
+        counted and reported, or the accepted frame's reports; True = accepted."""
+        if code == 0:
+            return True
+        if code == REJ_K:
             return self._reject(t_s, "range", EV.FRAME_RANGE, k=k)
-        if 1 <= code <= 5:
-            return self._reject(t_s, "nonfinite", EV.FRAME_NONFINITE, vector=code - 1)
-        if code > 100:
-            return self._reject(t_s, "range", EV.FRAME_RANGE, vector=code - 101, value=self._out[0])
-        if self.last_k is not None and k <= self.last_k:
-            if k == self.last_k:
-                return self._reject(t_s, "duplicate", EV.FRAME_DUPLICATE, k=k)
+        if code == REJ_DUPLICATE:
+            return self._reject(t_s, "duplicate", EV.FRAME_DUPLICATE, k=k)
+        if code == REJ_OUT_OF_ORDER:
             return self._reject(t_s, "out_of_order", EV.FRAME_OUT_OF_ORDER, k=k)
-        if self._out[1] or self._out[2]:
+        if code < 0:
+            code = REJ_VECTOR - code
+            if code <= 5:
+                return self._reject(t_s, "nonfinite", EV.FRAME_NONFINITE, vector=code - 1)
+            return self._reject(t_s, "range", EV.FRAME_RANGE, vector=code - 101, value=self._out[0])
+        if code & ACC_CHAMBER:
             self._report_chamber(t_s)
-        self.last_k = k
-        self.accepted += 1
-        self.missed = 0
-        if self.stale:
+        if code & ACC_RECOVER:
             self.stale = False
             self.events.emit(t_s, EV.SENSORS_RECOVERED)
         return True
 
-    def rehearse(self, frame) -> None:
-        """Real time, just before a release: the frame check's kernel on a copy of the last
-        checked frame's floats (``frame``, when it is that record) with this monitor's limits,
-        so the next ``check`` finds its data warm. Changes nothing: the frame is not written
-        (bad chamber entries become NaN in the copy), and ``_out`` is scratch that ``check``
-        writes before it reads."""
-        fv = self._fviews
-        if frame is not fv[0] or fv[2] is None:
-            return
-        np.copyto(self._r_x, fv[2])
-        _frame_kernel(self._r_x, self._lims, 5, self._out)
+    def rehearsal_copy(self, x: np.ndarray) -> tuple:
+        """The rehearsal's copies of a frame's floats ``x`` and of the sequence state, the
+        last step index forgotten so that the copy of the last frame checks as a new one."""
+        np.copyto(self._r_x, x)
+        np.copyto(self._r_seq, self._seq)
+        self._r_seq[_SEQ_LAST] = -1
+        return self._r_x, self._r_seq
 
     def _report_chamber(self, t_s: float) -> None:
         n_nf, n_out = int(self._out[1]), int(self._out[2])

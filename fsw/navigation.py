@@ -138,9 +138,12 @@ class Navigation:
          n.mach) = _nav_kernel(x, om, R, model, rho0, H, n.buf)
         return n
 
-    def rehearse(self, x: np.ndarray) -> None:
-        """Real time, just before a release: ``update_packed``'s kernel on ``x`` into a copy
-        of the state's buffer, so the next update finds its data warm. The state is unchanged."""
+    def kernel_args(self, buf: np.ndarray | None = None) -> tuple:
+        """``_nav_kernel``'s arguments after the packed frame: the planet's constants and the
+        buffer it writes (the state's, or ``buf``)."""
+        return (*self._consts, self.state.buf if buf is None else buf)
+
+    def rehearsal_copy(self) -> np.ndarray:
+        """The rehearsal's copy of the state's buffer, refreshed (its update writes there)."""
         np.copyto(self._r_buf, self.state.buf)
-        om, R, model, rho0, H = self._consts
-        _nav_kernel(x, om, R, model, rho0, H, self._r_buf)
+        return self._r_buf

@@ -13,10 +13,9 @@ import math
 import numpy as np
 
 from fsw.control import _D_BAD, sami_kernel
-from fsw.flightsoftware import FlightSoftware
+from fsw.flightsoftware import FlightSoftware, intake_cycle
 from fsw.guidance.reference import BankProfile, _eval_quintic, _guidance_kernel
 from fsw.modes import FailsafeAction, Mode
-from fsw.navigation import frame_vectors
 from interfaces.event_catalogue import EV
 
 
@@ -80,23 +79,30 @@ class PythonLawFlightSoftware(FlightSoftware):
         self._py_chart = False
         self.trim_offsets: list[tuple[float, float]] = []      # each cycle's, to prove a trim was flown
 
-    def _run_cycle(self, frame) -> np.ndarray:      # main's, the law's stretch in Python
+    def _run_cycle(self, frame) -> np.ndarray:      # main's (its compiled head), the law's stretch in Python
         self.cycles += 1
         self._count_torque()
-        t_s = float(frame["t_ns"]) * 1e-9
-        ok = self.monitor.check(t_s, frame)
-        if not ok or self.monitor.stale:
+        v = self.monitor.views(frame)
+        if v is None:
+            return self._rejected_format(frame)
+        code, t_s, k, V, h, alpha, beta, bank, rho, qbar, mach = intake_cycle(
+            v[0], v[1], self.monitor.stale, self.fdir._next_apply, *self._intake_args)
+        if code < 0:
+            self.monitor.settle(t_s, code, k)
             return self._held_off(t_s)
-        fv = self._frame_views
-        if fv[0] is not frame:
-            fv = self._frame_views = (frame, frame_vectors(frame), frame["chamber"])
-        self.k = self.monitor.last_k
+        self.k = k
         self.t_s = t_s
-        reconfigured = self.fdir.update(t_s, self._command_in_force(int(frame["u_k"])), fv[2])
-        if reconfigured:
-            self.allocator.set_health(self.fdir.health_active)
-            self.reconfig_times.append(t_s)
-        nav = self.nav.update_packed(t_s, fv[1])
+        reconfigured = code != 0 and self._intake_reports(t_s, code, k)
+        nav = self.nav.state
+        nav.t_s = t_s
+        nav.V_rel_mps = V
+        nav.h_m = h
+        nav.alpha_rad = alpha
+        nav.beta_rad = beta
+        nav.bank_rad = bank
+        nav.rho_kgpm3 = rho
+        nav.qbar_pa = qbar
+        nav.mach = mach
         self.authority.step(t_s, reconfigured)
         if self.entry is not None:
             self.entry.steer(nav)

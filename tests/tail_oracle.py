@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from fsw.flightsoftware import FlightSoftware
+from tests.front_oracle import PythonFrontFlightSoftware
 from interfaces.event_catalogue import EV
 from interfaces.records import FSW_STATE, GUID_NPC, GUID_PREDICTION, GUID_TARGET, new
 
@@ -95,10 +95,10 @@ class PythonOutputFiller:
         v["guid_flags"][()] = flags
 
 
-class PythonTailFlightSoftware(FlightSoftware):
+class PythonTailFlightSoftware(PythonFrontFlightSoftware):
     """FlightSoftware whose cycle ends in main's Python tail: the torque copy, the shortfall
-    test, ``JetDriver.command``, the ring noted in Python, the Python output filler. The
-    front half (up to the allocation) is FlightSoftware's own."""
+    test, ``JetDriver.command``, the ring noted in Python, the Python output filler. Its head
+    is main's Python head too (tests/front_oracle.py), which reads the Python ring."""
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)

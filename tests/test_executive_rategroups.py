@@ -23,13 +23,24 @@ class FakeTime:
         self.t = t0
         self.per_read_ns = per_read_ns      # time that passes at each read (for spin loops)
         self.sleeps: list[int] = []
+        self.off_cpu = 0        # time passed asleep or stalled: not on the thread's CPU
 
     def now(self) -> int:
         self.t += self.per_read_ns
         return self.t
 
+    def cpu(self) -> int:
+        """The thread's CPU time: all time but the time off its CPU."""
+        return self.t - self.off_cpu
+
+    def stall(self, ns: int) -> None:
+        """Time passes with the thread off its CPU (the host's)."""
+        self.t += ns
+        self.off_cpu += ns
+
     def sleep_until(self, t: int) -> None:
         self.sleeps.append(t)
+        self.off_cpu += max(0, t - self.t)
         self.t = max(self.t, t)
 
 
@@ -69,7 +80,7 @@ def test_lockstep_ticks_follow_the_frame_step_index_and_hand_the_frame_to_tasks(
 def test_an_overrunning_task_is_a_cycle_slip_counted_and_reported_once():
     ft = FakeTime()
     period = 20 * MS
-    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=ft.sleep_until)
+    clock = RealTimeClock(period, now_ns=ft.now, sleep_until=ft.sleep_until, cpu_ns=ft.cpu)
     events = EventLog()
     ex = Executive(period, clock, (1, 5, 50), events=events)
     cost = {"nav": 1 * MS, "control": 4 * MS}
@@ -104,7 +115,9 @@ def test_an_overrunning_task_is_a_cycle_slip_counted_and_reported_once():
     assert tm["slips"] == 1 and tm["compute_max_us"] == 26_000 and tm["jitter_max_us"] == 6_000
     # the late cycle's own record: where its time went
     assert tm["slip_records"] == [{"k": 7, "cause": "overrun", "late_us": 6_000.0, "jitter_us": 0.0,
-                                   "tasks_us": {"nav": 1_000.0, "control": 25_000.0}}]
+                                   "tasks_us": {"nav": 1_000.0, "control": 25_000.0},
+                                   "release_host_us": 0.0, "compute_off_cpu_us": 0.0}]
+    assert tm["host_slips"] == 0 and tm["late_releases"] == {"previous_cycle": 1}
 
 
 def test_overrun_beyond_a_period_skips_missed_releases_and_keeps_the_phase():

@@ -358,7 +358,7 @@ def test_bad_shapes_and_params_raise():
     with pytest.raises(ValueError):
         fdir.set_param("fdir.degraded_hi", 0.1)             # below degraded_lo
     assert fdir.p["fdir.degraded_hi"] == params()["fdir.degraded_hi"]
-    assert fdir.set_param("fdir.persist_s", 0.16) == 0.16 and fdir._persist_n == round(0.16 / DT)
+    assert fdir.set_param("fdir.persist_s", 0.16) == 0.16 and fdir._persist[0] == round(0.16 / DT)
     with pytest.raises(ValueError):
         fdir.set_param("fdir.nope", 1.0)
 
@@ -410,6 +410,6 @@ def test_every_key_in_the_defaults_file_is_declared_by_one_owner():
 
 
 def test_persistence_is_a_time_whatever_the_control_rate():
-    assert Fdir(params(), 0.02, EventLog())._persist_n == 5          # 0.1 s at 50 Hz
-    assert Fdir(params(), 0.005, EventLog())._persist_n == 20        # ... and at 200 Hz
-    assert Fdir(params(persist_s=0.001), 0.005, EventLog())._persist_n == 1     # never below one sample
+    assert Fdir(params(), 0.02, EventLog())._persist[0] == 5          # 0.1 s at 50 Hz
+    assert Fdir(params(), 0.005, EventLog())._persist[0] == 20        # ... and at 200 Hz
+    assert Fdir(params(persist_s=0.001), 0.005, EventLog())._persist[0] == 1     # never below one sample

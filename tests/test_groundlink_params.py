@@ -118,7 +118,7 @@ def test_param_set_within_bounds_changes_the_fsw(rig):
     v = _set_and_wait(rig, "C_LAMBDA_RADPS", 1.25)
     assert v == 1.25 and rig.fsw.params["control.lambda_radps"] == 1.25
     v = _set_and_wait(rig, "F_PERSIST_S", 0.14)
-    assert v == pytest.approx(0.14) and rig.fsw.fdir._persist_n == 7      # 0.14 s at 50 Hz
+    assert v == pytest.approx(0.14) and rig.fsw.fdir._persist[0] == 7      # 0.14 s at 50 Hz
     v = _set_and_wait(rig, "A_FAULT_TOLERANC", 0)
     assert v == 0 and rig.fsw.allocator.fault_tolerance is False
 

@@ -169,18 +169,24 @@ def test_a_failing_rehearsal_while_waiting_is_counted_and_the_flight_goes_on():
     assert topo.fsw.cycles == 4
 
 
-def test_fdir_rehearse_computes_the_next_update_on_copies():
-    fsw = FlightSoftware(load_scenario("nominal"), EventLog())
+def test_the_rehearsal_runs_the_jet_monitor_on_copies_of_its_counters():
+    """FlightSoftware.rehearse: intake_cycle's jet monitor on scratch counters -- FDIR's own
+    untouched, the scratch holding what the next cycle then computes on the same frame."""
+    scn = load_scenario("nominal")
+    plant = Plant(scn, scn.seed)
+    fsw = FlightSoftware(scn, EventLog())
+    frame = plant.sensors
+    for _ in range(30):
+        frame = plant.step(fsw.control_step(frame))
     fd = fsw.fdir
-    u = np.zeros(fd.n, dtype=np.uint8)
-    u[0] = 1
-    chamber = np.zeros(fd.n)                 # jet 1 commanded on, no pressure: failed-off evidence
-    fd.update(0.02, u, chamber)
+    held = fsw._sent[int(frame["u_k"]) % fsw._ring]
+    assert held.any()
+    frame["chamber"][held != 0] = 0.0          # the jets in force gave nothing: failed-off evidence
     cnt, sums = fd._cnt.copy(), fd._sum_dg.copy()
-    fd.rehearse(u, chamber)
+    fsw.rehearse(frame, fsw.u_cal_B.copy())
     np.testing.assert_array_equal(fd._cnt, cnt)               # the counters untouched
     np.testing.assert_array_equal(fd._sum_dg, sums)
-    fd.update(0.04, u, chamber)
+    fsw.control_step(frame)
     assert fd._cnt.sum() > cnt.sum()                          # evidence accumulated ...
     np.testing.assert_array_equal(fd._r_cnt, fd._cnt)         # ... as the rehearsal computed it
 

@@ -225,7 +225,8 @@ def rate_rows(res: dict) -> list[Row]:
         return g(s, "extra", "fsw_control_us", q)
     own, missed = _own(fast), _missed(fast)
     ct99 = g(res, "jitter", "idle_200hz", "cyclictest_p99_us")
-    target, ok, absolute = jitter_verdict("idle", fast.get("jitter_p99_us"), fast.get("jitter_max_us"), ct99)
+    # judged by the rate headroom's target (p99 against cyclictest at 5 ms); its max beside it
+    target, ok, absolute = jitter_verdict("fast", fast.get("jitter_p99_us"), fast.get("jitter_max_us"), ct99)
     return [
         row("real-time SIL at 200 Hz: cycle slips by the FSW's own work (all); commands missed",
             f"{fmt(own)} ({fmt(fast.get('slips'))}); {_answered(fast) or 'n/m'}",
@@ -234,7 +235,8 @@ def rate_rows(res: dict) -> list[Row]:
             else own == RATE_TARGETS["slips"] and missed == RATE_TARGETS["missed_commands"]),
         row("real-time SIL at 200 Hz: release jitter p50 / p99 / max [us]",
             f"{fmt(fast.get('jitter_p50_us'))} / {fmt(fast.get('jitter_p99_us'))} / {fmt(fast.get('jitter_max_us'))}",
-            f"cyclictest at 5 ms p99 {fmt(ct99)}; 50 Hz {fmt(base.get('jitter_p99_us'))}",
+            f"cyclictest at 5 ms p99 {fmt(ct99)} max {fmt(g(res, 'jitter', 'idle_200hz', 'cyclictest_max_us'))}; "
+            f"50 Hz {fmt(base.get('jitter_p99_us'))}",
             f"{fmt(ratio(fast.get('jitter_p99_us'), ct99))}x (p99)", target, ok, absolute=absolute,
             machine=speed(res)),
         row("real-time SIL at 200 Hz: control task p50 / p99 [us]", f"{fmt(ctl(fast, 'p50'))} / {fmt(ctl(fast, 'p99'))}",

@@ -320,6 +320,9 @@ class Launcher:
                "jitter_max_us": fsw_info["jitter_max_us"], "slips": fsw_info["cycle_slips"],
                # the slips the FSW's own work explains (fsw.executive.own_slips) among those recorded
                **own_slip_counts(fsw_info, scn.dt_control_s, sim_info.get("steps")),
+               # releases later than 200 us by cause, the loop's own or the host's
+               # (fsw.executive.explain_late_release; the records are in fsw.json)
+               "late_releases": (fsw_info.get("executive") or {}).get("late_releases"),
                "sim_counts": sim_info["counts"], "sim_rejects": sim_info["rejects"],
                "fsw_sensor_rejects": fsw_info["sensor_rejects"], "end_reason": sim_info["end_reason"],
                "message": sim_info["message"], "rt": fsw_info.get("rt"), "sim_rt": sim_info.get("rt"),

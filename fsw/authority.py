@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 from common.events import EventLog
 from common.model import Scenario
@@ -31,6 +32,28 @@ if TYPE_CHECKING:
     from .control import SamiController
     from .guidance.reference import Guidance
     from .navigation import Navigation
+
+
+# the held trim as the compiled cycle reads it (``held_trim``): [dalpha, beta [rad], qbar [Pa] of
+# the LP's trim, 1.0 when one is held, guidance.trim_max_deg in rad]
+_T_HELD, _T_MAX = 3, 4
+
+
+@njit(cache=True)
+def held_trim(trim, qbar_pa, off):
+    """``AuthoritySupervisor.hold_trim``'s rule, compiled: the offset ``off`` (alpha, beta [rad])
+    the reference flies for the held trim ``trim`` (layout above) at dynamic pressure ``qbar_pa``."""
+    if trim[_T_HELD] == 0.0:
+        off[0] = 0.0
+        off[1] = 0.0
+        return
+    k = trim[2] / qbar_pa if qbar_pa > 0.0 and math.isfinite(qbar_pa) else math.inf
+    a0, a1 = abs(trim[0]), abs(trim[1])
+    x = trim[_T_MAX] / (a1 if a1 > a0 else a0)       # the order of Python's max and min
+    if x < k:
+        k = x
+    off[0] = trim[0] * k
+    off[1] = trim[1] * k
 
 
 class AuthoritySupervisor:
@@ -60,17 +83,24 @@ class AuthoritySupervisor:
         self.health, self.now_s = health, now_s
         self.controllability: Controllability | None = None   # the LP's answer at the last reconfiguration
         self._trim_ref = None          # (dalpha, beta [rad], qbar [Pa]) of the LP's trim, None: none
+        self.trim = np.zeros(5)        # the same for the compiled cycle (``held_trim``)
+        self.trim[_T_MAX] = math.radians(params["guidance.trim_max_deg"])
         self.lp = BackgroundJob(controllability, "controllability", mode=REALTIME if realtime else IN_PLACE,
                                 events=events, overrun_event=EV.CONTROLLABILITY_OVERRUN,
                                 fault_event=EV.CONTROLLABILITY_FAULT)
 
     # ---------------------------------------------------------------- the cycle
     def step(self, t_s: float, health_changed: bool) -> None:
-        """Every control cycle, after navigation: assess a health FDIR changed this cycle;
-        apply an answer that has become ready."""
+        """After navigation, in a cycle where FDIR changed the health or an answer is due
+        (``due``): assess the new health; apply an answer that has become ready."""
         if health_changed:
             self.assess(t_s)
         self._take(t_s)
+
+    def due(self, t_s: float) -> bool:
+        """An answer of the LP may be taken at ``t_s`` (else ``step`` does nothing without a
+        health change)."""
+        return t_s >= self.lp.due_t
 
     def hold_trim(self, qbar_pa: float) -> None:
         """The reference's alpha/beta offset that lets the aerodynamic moment absorb the part of
@@ -196,6 +226,8 @@ class AuthoritySupervisor:
         trim = (math.radians(r.trim_alpha_deg), math.radians(r.trim_beta_deg))
         self._trim_ref = ((trim[0], trim[1], r.qbar_pa) if all(map(math.isfinite, (*trim, r.qbar_pa)))
                           and max(map(abs, trim)) > 0.0 and r.qbar_pa > 0.0 else None)
+        tr = self._trim_ref
+        self.trim[0:4] = (0.0, 0.0, 0.0, 0.0) if tr is None else (tr[0], tr[1], tr[2], 1.0)
 
     def _reference_limit(self, need: float, r: Controllability) -> tuple[float, bool]:
         """(the reference's acceleration limit for the LP's answer, True when that is the
@@ -243,6 +275,7 @@ class AuthoritySupervisor:
         reference uses it now."""
         if self.controllability is not None:
             self.assess(self.now_s())
+        self.trim[_T_MAX] = math.radians(self.params["guidance.trim_max_deg"])   # (not if assess refused it)
 
     def warm(self, timeout_s: float) -> bool:
         """Before the first real-time cycle: the LP solved once on this thread (the loop's, where

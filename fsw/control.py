@@ -411,7 +411,7 @@ class SamiController:
         # deliverable to within shortfall_frac unless authority is missing (saturation)
         self._kb = kb = np.zeros(_K_N)       # the kernel's constants and state (views below)
         self._sb = sb = np.zeros(_S_N + _W_N)
-        self._rb = np.zeros(_S_N + _W_N)     # rehearse's copy of the state
+        self._rb = np.zeros(_S_N + _W_N)     # the rehearsal's copy of the state (fsw/law.py ``law_cycle``)
         self.u_sat_min_B = kb[_K_USAT:_K_USAT + 3]
         self.u_sat_min_B[:] = 2.0 * absT.max(axis=1)
         a = vehicle.aero
@@ -431,6 +431,7 @@ class SamiController:
         self.u_cal_B = sb[_S_U:_S_U + 3]
         self._sigma_c = sb[_S_SIGC:_S_SIGC + 3]
         self._diag = sb[_S_DIAG:_S_DIAG + 7]
+        self.chart = np.zeros(1)              # 1.0: the chart holds a valid sigma_c (``law_cycle``)
         self._zero3 = np.zeros(3)
         self._u_safe = np.zeros(3)
         self._lv = np.zeros(3)
@@ -505,7 +506,19 @@ class SamiController:
         self._sigma_c[:] = 0.0
         self._have_chart = False
         self._diag[:] = 0.0
-        self.V_lyap = 0.0
+
+    @property
+    def _have_chart(self) -> bool:
+        return bool(self.chart[0])
+
+    @_have_chart.setter
+    def _have_chart(self, v: bool) -> None:
+        self.chart[0] = 1.0 if v else 0.0
+
+    @property
+    def V_lyap(self) -> float:
+        """y^T P y of the last update."""
+        return float(self._diag[_D_V])
 
     # ------------------------------------------------------------------ cycle
     def update(self, nav, guid, tau_delivered_prev_B: np.ndarray | None) -> np.ndarray:
@@ -519,18 +532,7 @@ class SamiController:
                     self.freeze, self._have_chart, self._kb, self._sb)
         if self._diag[_D_BAD] == 0.0:
             self._have_chart = True
-        self.V_lyap = float(self._diag[_D_V])
         return self.u_cal_B
-
-    def rehearse(self, nav, guid, tau_delivered_prev_B: np.ndarray | None) -> None:
-        """Real time, just before a release: ``update``'s kernel on a copy of the state (the
-        estimates, integrator and chart unchanged), so the next update finds its data warm."""
-        have_del = tau_delivered_prev_B is not None
-        tau = tau_delivered_prev_B if have_del else self._zero3
-        np.copyto(self._rb, self._sb)
-        sami_kernel(nav.sigma_BN, nav.omega_BN_B, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
-                    guid.sigma_RN, guid.omega_RN_R, guid.domega_RN_R, tau, have_del,
-                    self.freeze, self._have_chart, self._kb, self._rb)
 
     @property
     def adapting(self) -> bool:

@@ -16,7 +16,6 @@ import numpy as np
 from numba import njit
 
 from common.events import EventLog
-from common.frames import wrap_pi
 from common.model import Scenario
 from interfaces.event_catalogue import EV
 
@@ -30,7 +29,8 @@ from .fdir import Fdir, jet_step
 from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
 from .jetdriver import JetDriver, drive_jets
-from .modes import FailsafeAction, Failsafes, Mode, ModeManager
+from .law import LAW_DONE, LAW_SAFE_DUE, law_cycle
+from .modes import Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor, frame_check
 from .navigation import Navigation, _nav_kernel
 from .output import OutputFiller, fill_record
@@ -41,6 +41,7 @@ from . import executive
 
 COMMAND_RING_S = 1.28   # answers kept for FDIR (64 at 50 Hz, 256 at 200 Hz): a command held longer is not judged
 _ZERO3 = (0.0, 0.0, 0.0)   # a zero torque as Python floats
+_NO_SEGS = np.zeros((0, 10))   # law_cycle's profile segments when the profile is not a schedule
 
 
 @njit(cache=True)
@@ -241,6 +242,17 @@ class FlightSoftware(GroundCommands):
         # every reader takes: refilled in place at the end of control_step and no_frame
         self._output = OutputFiller(scenario)
         self.output = self._output.rec
+        # law_cycle's arguments that are the same arrays every cycle (each owner updates its
+        # own in place), and scratch copies of the state it writes, for the rehearsal
+        nav_s, g, ctl = self.nav.state, self.guidance, self.control
+        fixed_in = (g.alpha_trim_rad, g.omega_planet_radps, g.mu_m3ps2, nav_s.r_N, nav_s.v_N, nav_s.vrel_N,
+                    nav_s.C_WN, nav_s.C_BN, nav_s.accel_B, nav_s.sigma_BN, nav_s.omega_BN_B)
+        self._law_args = (self.authority.trim, g.trim_offset, *fixed_in, g._out, self.dt_s, self.failsafes.state,
+                          self.tau_alloc_B, ctl._kb, ctl._sb, ctl.chart, self.u_cal_B)
+        self._law_scratch = (np.zeros(2), np.zeros(18), np.zeros(4), ctl._rb, np.zeros(1), np.zeros(3))
+        sc = self._law_scratch
+        self._law_rehearse_args = (self.authority.trim, sc[0], *fixed_in, sc[1], self.dt_s, sc[2],
+                                   self.tau_alloc_B, ctl._kb, sc[3], sc[4], sc[5])
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
@@ -272,30 +284,44 @@ class FlightSoftware(GroundCommands):
         nav.rho_kgpm3 = rho
         nav.qbar_pa = qbar
         nav.mach = mach
-        self.authority.step(t_s, reconfigured)          # assessed with this cycle's navigation
+        if reconfigured or self.authority.due(t_s):
+            self.authority.step(t_s, reconfigured)      # assessed with this cycle's navigation
         if self.entry is not None:
             self.entry.steer(nav)
             self.entry.shaper.observe(nav.bank_rad)
         if self.deploy is not None:
             self.deploy.update(nav, t_s, self.entry.estimator.k_rho if self.entry is not None else 1.0)
-        self.authority.hold_trim(nav.qbar_pa)
-        self.guidance.update(nav)
-        self.bank_err_rad = wrap_pi(nav.bank_rad - self.guidance.phi_r)
-        if self.failsafes.evaluate(t_s, self.dt_s, sensors_stale=False,
-                                   tracking_error_rad=self.bank_err_rad) == FailsafeAction.HOLD_JETS_OFF:
-            return self._held_off(t_s)
-        mode = self.modes.mode
-        if mode == Mode.ENTRY:
-            # no learning while FDIR holds a detection not yet reconfigured: the torque
-            # commanded through the faulty jets is not what the tracking error saw
-            self.control.freeze = not self.modes.adaptation_enabled or self.fdir.reconfig_pending
-            u_cal = self.control.update(nav, self.guidance, self.tau_alloc_B if self._have_prev else None)
-        elif mode == Mode.SAFE:
-            self.control.freeze = True
-            u_cal = self.control.safe_torque(nav)
+        # the held trim, the reference, the bank error, the tracking failsafe and SAMI in one
+        # compiled call (law.py ``law_cycle``); a failsafe due or another mode than ENTRY
+        # comes back here. No learning while FDIR holds a detection not yet reconfigured: the
+        # torque commanded through the faulty jets is not what the tracking error saw.
+        g = self.guidance
+        entry = self.modes.mode is Mode.ENTRY
+        pending = self.fdir.reconfig_pending
+        if g.compiled_profile:
+            prof = g.profile
+            law, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
+                nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
+                entry, self._have_prev, pending, True, prof.seg_array, prof.phi0_rad, 0.0, 0.0, 0.0, *self._law_args)
         else:
-            u_cal = self._zero3
-        self.u_cal_B[:] = u_cal
+            law, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
+                nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
+                entry, self._have_prev, pending, False, _NO_SEGS, 0.0, *g.profile.evaluate(nav.t_s), *self._law_args)
+        if law == LAW_DONE:
+            self.control.freeze = pending
+        else:
+            if law == LAW_SAFE_DUE:
+                self.failsafes.enter_safe(t_s)
+            mode = self.modes.mode
+            if mode == Mode.ENTRY:
+                self.control.freeze = not self.modes.adaptation_enabled or pending
+                u_cal = self.control.update(nav, g, self.tau_alloc_B if self._have_prev else None)
+            elif mode == Mode.SAFE:
+                self.control.freeze = True
+                u_cal = self.control.safe_torque(nav)
+            else:
+                u_cal = self._zero3
+            self.u_cal_B[:] = u_cal
         self.dutycycle.short_frac = self.params["control.shortfall_frac"]
         dc = self.dutycycle
         u_alloc = dc.solve(self.allocator, self.u_cal_B)
@@ -352,16 +378,16 @@ class FlightSoftware(GroundCommands):
     def rehearse(self, frame, demand_B: np.ndarray) -> None:
         """Real time, shortly before a release (fsw/topology.py): the compiled kernels the
         rehearsal's spare warms as code run once more on this instance's own data, their
-        answers discarded -- the frame check, the jet monitor and navigation on ``frame``
-        (the record of the last frame this instance took), SAMI on a copy of its state with
-        the last cycle's navigation and reference, and the allocator's query on its own
-        tables for ``demand_B`` (the spare's demand on that frame), after a modulated cycle
-        the duty-cycle LP's too. Nothing the next cycle reads changes."""
+        answers discarded -- the cycle's head (``intake_cycle``: frame check, jet monitor,
+        navigation) on ``frame`` (the record of the last frame this instance took), the law's
+        stretch (``law_cycle``) on copies of its state with the last cycle's navigation and
+        reference, and the allocation's compiled call on its own tables for ``demand_B`` (the
+        spare's demand on that frame). Nothing the next cycle reads changes."""
         fv = self._frame_views
         if fv[0] is frame:
             self._rehearse_intake(fv)
             if self._have_prev:
-                self.control.rehearse(self.nav.state, self.guidance, self.tau_alloc_B)
+                self._rehearse_law()
         self.dutycycle.rehearse(self.allocator, demand_B)    # the allocation's compiled call
 
     @property
@@ -424,6 +450,19 @@ class FlightSoftware(GroundCommands):
         self._tau_last = _ZERO3
         self.alloc_short = False
         return self.driver.command(self._zero_u, False)
+
+    def _rehearse_law(self) -> None:
+        """``law_cycle`` on scratch copies of the state it writes (failsafes, SAMI, chart), with
+        the last cycle's navigation and reference inputs; nothing the next cycle reads changes."""
+        nav, g, sc, ctl = self.nav.state, self.guidance, self._law_scratch, self.control
+        np.copyto(sc[2], self.failsafes.state)
+        np.copyto(sc[3], ctl._sb)
+        np.copyto(sc[4], ctl.chart)
+        compiled = g.compiled_profile
+        law_cycle(nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
+                  self.modes.mode is Mode.ENTRY, self._have_prev, ctl.freeze, compiled,
+                  g.profile.seg_array if compiled else _NO_SEGS, g.profile.phi0_rad if compiled else 0.0,
+                  g.phi_r, g.phidot_r, g.phiddot_r, *self._law_rehearse_args)
 
     # ---------------------------------------------------------------- RG2
     def slow_step(self) -> None:

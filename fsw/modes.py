@@ -22,6 +22,9 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
+import numpy as np
+from numba import njit
+
 from common.events import EventLog
 from interfaces.event_catalogue import EV
 from interfaces.vocabulary import Mode
@@ -87,6 +90,29 @@ class FailsafeAction(IntEnum):
     SAFE = 2            # switch to SAFE (rate damping, adaptation frozen)
 
 
+# the failsafes' state as the compiled cycle reads it (``tracking_rule``): seconds beyond the
+# tracking limit, the rule that matched last (_RULES), the limit [rad], the persistence [s]
+_F_ABOVE, _F_RULE, _F_LIMIT, _F_PERSIST = range(4)
+_RULES = ("", "sensors_stale", "tracking_error")
+
+
+@njit(cache=True)
+def tracking_rule(tracking_error_rad, entry, dt_s, st):
+    """Rule 2 of ``Failsafes.evaluate`` with fresh sensors, compiled, on its state ``st``
+    (layout above; ``entry``: the mode is ENTRY). True when SAFE is due: the caller requests it."""
+    beyond = not (math.isfinite(tracking_error_rad) and abs(tracking_error_rad) <= st[_F_LIMIT])
+    if entry and beyond:
+        st[_F_ABOVE] += dt_s
+        if st[_F_ABOVE] >= st[_F_PERSIST] - 1e-9:
+            st[_F_ABOVE] = 0.0
+            st[_F_RULE] = 2.0
+            return True
+    else:
+        st[_F_ABOVE] = 0.0
+    st[_F_RULE] = 0.0
+    return False
+
+
 class Failsafes:
     """The ordered failsafe list above. ``evaluate`` returns the action of the first rule
     that holds and applies a SAFE transition through the ModeManager itself."""
@@ -97,13 +123,25 @@ class Failsafes:
     ]
 
     def __init__(self, params: dict[str, float], modes: ModeManager) -> None:
+        self.state = np.zeros(4)          # (``tracking_rule``)
         for p in self.PARAMS:
             if p.name not in params:
                 raise ValueError(f"{p.name}: missing")
             self.set_param(p.name, params[p.name])
         self.modes = modes
-        self._above_s = 0.0
-        self.last_rule = ""
+
+    @property
+    def last_rule(self) -> str:
+        """The rule that matched at the last evaluation ("" none)."""
+        return _RULES[int(self.state[_F_RULE])]
+
+    @property
+    def limit_rad(self) -> float:
+        return float(self.state[_F_LIMIT])
+
+    @property
+    def persist_s(self) -> float:
+        return float(self.state[_F_PERSIST])
 
     def set_param(self, name: str, value: float) -> float:
         """Owner's hook: a new limit, used from the next evaluation on; ValueError if not ours."""
@@ -112,26 +150,22 @@ class Failsafes:
             raise ValueError(f"{name}: not a failsafe parameter")
         v = q.check(value)
         if name == "fdir.safe_track_deg":
-            self.limit_rad = math.radians(v)
+            self.state[_F_LIMIT] = math.radians(v)
         else:
-            self.persist_s = v
+            self.state[_F_PERSIST] = v
         return v
 
     def evaluate(self, t_s: float, dt_s: float, *, sensors_stale: bool, tracking_error_rad: float) -> FailsafeAction:
         """Once per control period. A non-finite tracking error counts as beyond the limit."""
         if sensors_stale:                                                   # rule 1
-            self._above_s = 0.0
-            self.last_rule = "sensors_stale"
+            self.state[_F_ABOVE] = 0.0
+            self.state[_F_RULE] = 1.0
             return FailsafeAction.HOLD_JETS_OFF
-        beyond = not (math.isfinite(tracking_error_rad) and abs(tracking_error_rad) <= self.limit_rad)
-        if self.modes.mode == Mode.ENTRY and beyond:                        # rule 2
-            self._above_s += dt_s
-            if self._above_s >= self.persist_s - 1e-9:
-                self._above_s = 0.0
-                self.last_rule = "tracking_error"
-                self.modes.request(t_s, Mode.SAFE, "track err")
-                return FailsafeAction.SAFE
-        else:
-            self._above_s = 0.0
-        self.last_rule = ""
+        if tracking_rule(tracking_error_rad, self.modes.mode == Mode.ENTRY, dt_s, self.state):   # rule 2
+            self.enter_safe(t_s)
+            return FailsafeAction.SAFE
         return FailsafeAction.NONE
+
+    def enter_safe(self, t_s: float) -> None:
+        """Rule 2 matched (``tracking_rule`` said so): SAFE requested."""
+        self.modes.request(t_s, Mode.SAFE, "track err")

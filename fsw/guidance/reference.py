@@ -22,6 +22,7 @@ from common.mrp import from_dcm_into, nearest_set_into, sigma_derivatives
 # max s' = 15/8 at x = 1/2; max |s''| = 10/sqrt(3) at x = 1/2 -+ sqrt(3)/6.
 _S1_MAX = 15.0 / 8.0
 _S2_MAX = 10.0 / math.sqrt(3.0)
+_SEG_W = 10          # columns of BankProfile.seg_array
 
 
 def _quintic(phi0: float, v0: float, a0: float, phi1: float, T: float) -> tuple:
@@ -176,6 +177,13 @@ class BankProfile:
         self._starts = starts
         self._segs = segs
         self.lag_s = lag
+        # the same segments as one array for the compiled cycle (``profile_eval``): t_start,
+        # duration, c0..c5, phi_to, 1.0 when it ends at rest
+        arr = np.zeros((len(segs), _SEG_W))
+        for i, (t0, T, c, _, b, _, rest) in enumerate(segs):
+            arr[i, 0], arr[i, 1], arr[i, 8], arr[i, 9] = t0, T, b, 1.0 if rest else 0.0
+            arr[i, 2:8] = c
+        self.seg_array = arr
 
     def replan(self, t_now: float, rate_limit_radps: float, accel_limit_radps2: float) -> bool:
         """New limits from ``t_now``: for every transition that has not started and for the one
@@ -211,6 +219,31 @@ class BankProfile:
         if x >= 1.0 and rest:
             return b, 0.0, 0.0
         return _eval_quintic(c, T, x)
+
+
+@njit(cache=True)
+def profile_eval(segs, phi0, t_s):
+    """BankProfile.evaluate on its ``seg_array`` (``phi0``: the schedule's first bank): the same
+    bisection (bisect_right) and the same quintic arithmetic, compiled."""
+    lo, hi = 0, segs.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t_s < segs[mid, 0]:
+            hi = mid
+        else:
+            lo = mid + 1
+    i = lo - 1
+    if i < 0:
+        return phi0, 0.0, 0.0
+    T = segs[i, 1]
+    x = (t_s - segs[i, 0]) / T
+    if x >= 1.0 and segs[i, 9] != 0.0:
+        return segs[i, 8], 0.0, 0.0
+    c0, c1, c2, c3, c4, c5 = segs[i, 2], segs[i, 3], segs[i, 4], segs[i, 5], segs[i, 6], segs[i, 7]
+    phi = c0 + x * (c1 + x * (c2 + x * (c3 + x * (c4 + x * c5))))
+    d1 = (c1 + x * (2.0 * c2 + x * (3.0 * c3 + x * (4.0 * c4 + x * 5.0 * c5)))) / T
+    d2 = (2.0 * c2 + x * (6.0 * c3 + x * (12.0 * c4 + x * 20.0 * c5))) / (T * T)
+    return phi, d1, d2
 
 
 @njit(cache=True)
@@ -319,8 +352,8 @@ class Guidance:
         self.alpha_trim_rad = float(alpha_trim_rad)
         # offsets of the reference's alpha and beta from the aerodynamic trim: the attitude at
         # which the aerodynamic moment absorbs a stuck-on bias the jets cannot cancel
-        self.trim_offset_alpha_rad = 0.0
-        self.trim_offset_beta_rad = 0.0
+        # (one array the compiled cycle writes: fsw/authority.py ``held_trim``)
+        self.trim_offset = np.zeros(2)
         self.omega_planet_radps = float(omega_planet_radps)
         self.mu_m3ps2 = float(mu_m3ps2)
         self._out = np.zeros(18)
@@ -331,6 +364,25 @@ class Guidance:
         self.domega_RN_R = self._out[12:15]
         self.omega_WN_W = self._out[15:18]
         self.phi_r, self.phidot_r, self.phiddot_r = profile.evaluate(0.0)
+        # a scheduled profile is evaluated inside the compiled cycle (``profile_eval``); any
+        # other (the npc shaper) by its own evaluate
+        self.compiled_profile = isinstance(profile, BankProfile)
+
+    @property
+    def trim_offset_alpha_rad(self) -> float:
+        return float(self.trim_offset[0])
+
+    @trim_offset_alpha_rad.setter
+    def trim_offset_alpha_rad(self, v: float) -> None:
+        self.trim_offset[0] = v
+
+    @property
+    def trim_offset_beta_rad(self) -> float:
+        return float(self.trim_offset[1])
+
+    @trim_offset_beta_rad.setter
+    def trim_offset_beta_rad(self, v: float) -> None:
+        self.trim_offset[1] = v
 
     def update(self, nav) -> None:
         """Fill the reference for nav.t_s (nav: fsw.navigation.NavState)."""

@@ -143,6 +143,9 @@ class Topology:
         for f in (frame, nxt):
             spare.control_step(f)
             spare.slow_step()
+        # the flying instance's own rehearsal (its stages' compiled calls on scratch copies)
+        # is code no cycle runs: loaded here too, on the spare, which has flown
+        spare.rehearse(nxt, spare.u_cal_B)
         spare.close()
         if self.rehearsal is not None:
             # the rehearsal's own first call is cold too (its spare's first cycle, the flying

@@ -7,6 +7,8 @@ changes nothing either, also through a fault's detection, and also repeated whil
 task waits for its frame."""
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -91,6 +93,42 @@ def test_warm_up_runs_the_rehearsal_once_and_changes_nothing_in_the_flight():
         for name in a.dtype.names:
             if name not in ("t_release_ns", "jitter_us", "compute_us", "alloc_us"):
                 np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def _compiled_overloads() -> dict:
+    """Every numba dispatcher of the flight code's modules loaded so far -> how many compiled
+    versions it holds (a first call loads one from the cache or compiles it: tens of ms)."""
+    from numba.core.dispatcher import Dispatcher
+    out = {}
+    for name, mod in list(sys.modules.items()):
+        if mod is None or not name.startswith(("fsw", "common", "interfaces", "sim")):
+            continue
+        for attr, obj in vars(mod).items():
+            if isinstance(obj, Dispatcher):
+                out[f"{name}.{attr}"] = len(obj.overloads)
+    return out
+
+
+def test_after_warm_up_the_first_rehearsal_in_flight_loads_no_compiled_code():
+    """The flying instance's own rehearsal runs kernels no cycle runs (its stages on scratch
+    copies): warm_up must have loaded them, or the first release in real time waits the
+    ~15 ms a first call costs (seen: the bench's jitter max 15.6 ms, one release a run)."""
+    scn = load_scenario("nominal")
+    plant = Plant(scn, scn.seed)
+    fsw = FlightSoftware(scn, EventLog(), param_overrides={"executive.rehearse_us": 800.0})
+    ft = FakeTime()
+    clock = RealTimeClock(int(round(fsw.dt_s * 1e9)), now_ns=ft.now, sleep_until=ft.sleep_until)
+    topo = Topology(fsw, clock, frame_source=lambda: plant.sensors)
+    topo.add(1, "plant", lambda c: plant.step(topo.u))
+    topo.warm_up(plant.sensors)
+    clock.start()
+    topo.tick()                              # the first cycle: a frame taken, nothing rehearsed yet
+    before = _compiled_overloads()
+    assert len(before) > 10                  # the flight's kernels are seen
+    topo.tick()                              # the first release with a rehearsal before it
+    assert clock.rehearsals == 2 and topo.rehearsal_errors == 0
+    assert _compiled_overloads() == before
+    topo.close()
 
 
 def test_the_flying_instances_rehearsal_changes_nothing_through_a_detection():

@@ -156,15 +156,21 @@ class PythonFrontFlightSoftware(FlightSoftware):
         else:
             u_cal = self._zero3
         self.u_cal_B[:] = u_cal
-        self.dutycycle.short_frac = self.params["control.shortfall_frac"]
-        u_alloc = self.dutycycle.solve(self.allocator, self.u_cal_B)
-        self.alloc_ns = self.dutycycle.solve_ns
-        if self.allocator.tables_version != self._tables_version:
-            self._tables_version = self.allocator.tables_version
-            self.dutycycle.reset()
-            self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
-        if self.allocator.degraded:
-            self.events.emit(t_s, EV.ALLOC_DEGRADED)
-        if self.dutycycle.fell_back:
-            self.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
-        return self._finish(t_s, u_alloc)
+        return python_allocation_stage(self, t_s)
+
+
+def python_allocation_stage(fsw, t_s: float) -> np.ndarray:
+    """Main's allocation stage as it was in Python before the compiled call, then the tail
+    (FlightSoftware's own ``_finish``): the oracles' shared end of the cycle."""
+    fsw.dutycycle.short_frac = fsw.params["control.shortfall_frac"]
+    u_alloc = fsw.dutycycle.solve(fsw.allocator, fsw.u_cal_B)
+    fsw.alloc_ns = fsw.dutycycle.solve_ns
+    if fsw.allocator.tables_version != fsw._tables_version:
+        fsw._tables_version = fsw.allocator.tables_version
+        fsw.dutycycle.reset()
+        fsw.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=fsw.allocator.rebuild_time_s * 1e3)
+    if fsw.allocator.degraded:
+        fsw.events.emit(t_s, EV.ALLOC_DEGRADED)
+    if fsw.dutycycle.fell_back:
+        fsw.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
+    return fsw._finish(t_s, u_alloc)

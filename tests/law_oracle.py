@@ -16,7 +16,7 @@ from fsw.control import _D_BAD, sami_kernel
 from fsw.flightsoftware import FlightSoftware, intake_cycle
 from fsw.guidance.reference import BankProfile, _eval_quintic, _guidance_kernel
 from fsw.modes import FailsafeAction, Mode
-from interfaces.event_catalogue import EV
+from tests.front_oracle import python_allocation_stage
 
 
 def python_wrap_pi(a: float) -> float:
@@ -138,18 +138,7 @@ class PythonLawFlightSoftware(FlightSoftware):
         else:
             u_cal = self._zero3
         self.u_cal_B[:] = u_cal
-        self.dutycycle.short_frac = self.params["control.shortfall_frac"]
-        u_alloc = self.dutycycle.solve(self.allocator, self.u_cal_B)
-        self.alloc_ns = self.dutycycle.solve_ns
-        if self.allocator.tables_version != self._tables_version:
-            self._tables_version = self.allocator.tables_version
-            self.dutycycle.reset()
-            self.events.emit(t_s, EV.RECONFIGURED, rebuild_ms=self.allocator.rebuild_time_s * 1e3)
-        if self.allocator.degraded:
-            self.events.emit(t_s, EV.ALLOC_DEGRADED)
-        if self.dutycycle.fell_back:
-            self.events.emit(t_s, EV.ALLOC_LP_FALLBACK)
-        return self._finish(t_s, u_alloc)
+        return python_allocation_stage(self, t_s)
 
 
 def law_state(fsw) -> np.ndarray:

@@ -68,6 +68,9 @@ def fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc,
     q.guid_flags = flags
 
 
+TAU_ALLOC_ARG = 15    # the index of tau_alloc_B in ``OutputFiller.fill_args`` (a rehearsal swaps in scratch)
+
+
 class OutputFiller:
     """Fills ``rec`` (an FSW_STATE record) from a FlightSoftware after its control cycle; the
     fields of FSW_STATE_SHELL are left to the rate-group driver (fsw/topology.py)."""

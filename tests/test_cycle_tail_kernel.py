@@ -163,17 +163,17 @@ def test_the_tails_rehearsal_writes_only_its_scratch_and_computes_what_the_cycle
     fsw._sent[slot] = 0
     fsw.output["k"] = -7
     fsw.tau_alloc_B[:] = 0.0
-    real = [a.copy() for a in d.packed()] + [fsw.output.copy(), fsw.tau_alloc_B.copy()]
+    real = [a.copy() for a in d.packed()] + [fsw.output.copy(), fsw.torques.copy()]   # tau_alloc_B's buffer
     counts = (d.propellant_kg, d.seq, fsw.alloc_short_cycles, len(fsw.events.history))
     fsw.rehearse(frame, fsw.u_cal_B.copy())
-    for a, b in zip([*d.packed(), fsw.output, fsw.tau_alloc_B], real):
+    for a, b in zip([*d.packed(), fsw.output, fsw.torques], real):
         assert a.tobytes() == b.tobytes()
     assert (d.propellant_kg, d.seq, fsw.alloc_short_cycles, len(fsw.events.history)) == counts
-    jb, jc, jr, rec, tau = fsw._tail_scratch
+    jb, jc, jr, rec, torques = fsw._tail_scratch
     n = d.n
     np.testing.assert_array_equal(jb[1], u)                               # the command, re-driven
     np.testing.assert_array_equal(jb[2 + slot], done["sent"])
     assert jc[n + slot] == fsw.k
     np.testing.assert_array_equal(jr[:n], done["on"] + np.where(u != 0, fsw.dt_s, 0.0))
-    np.testing.assert_array_equal(tau, done["tau"])
+    np.testing.assert_array_equal(torques[3:6], done["tau"])
     assert rec.reshape(()).tobytes() == done["out"].tobytes()

@@ -11,7 +11,7 @@ from numba import njit
 
 from fsw.flightsoftware import FlightSoftware, bank_short, note_sent
 from fsw.jetdriver import drive_jets
-from fsw.output import _NO_PREDICTION
+from fsw.output import _NO_PREDICTION, fill_record
 from tests.front_oracle import PythonFrontFlightSoftware
 from interfaces.event_catalogue import EV
 from interfaces.records import FSW_STATE, GUID_NPC, GUID_PREDICTION, GUID_TARGET, new
@@ -140,67 +140,20 @@ class PythonTailFlightSoftware(PythonFrontFlightSoftware):
 
 
 @njit(cache=True)
-def main_fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd,
-                pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta,
-                health):
-    """main's ``fill_record`` (fsw/output.py) before the torques came in one buffer: write one cycle's
-    outputs into ``r[0]`` (FSW_STATE). Entry guidance (``npc``): a value
-    not available (no answer yet, non-finite) is 0 with its guid_flags bit clear; profile
-    mode reports none of them."""
-    q = r[0]
-    q.k = k
-    q.t_ns = np.int64(np.rint(t_s * 1e9))     # round half to even, as Python's round()
-    q.bank_ref_rad = phi_r
-    q.bankdot_ref_radps = phidot_r
-    q.bank_err_rad = bank_err_rad
-    for i in range(3):
-        q.sigma_RN[i] = sigma_RN[i]
-        q.u_cal_B[i] = u_cal_B[i]
-        q.tau_alloc_B[i] = tau_alloc_B[i]
-    for i in range(theta_hat.shape[0]):
-        q.theta_hat[i] = theta_hat[i]
-    for i in range(eta.shape[0]):
-        q.eta_hat[i] = eta[i]
-        q.health[i] = health[i]
-        q.jets_cmd[i] = u[i]
-    q.alloc_us = alloc_ns * 1e-3
-    q.mode = mode
-    q.alloc_degraded = degraded
-    q.alloc_short = short
-    q.deploy = deploy
-    flags = target_flag
-    if npc:
-        flags |= GUID_NPC
-        q.guid_cycles = guid_cycles
-        q.bank_cmd_rad = bank_cmd if math.isfinite(bank_cmd) else 0.0
-        if guid_cycles > 0 and math.isfinite(pred[0]) and math.isfinite(pred[1]):
-            flags |= GUID_PREDICTION
-            q.pred_lat_rad = pred[0]
-            q.pred_lon_rad = pred[1]
-        else:
-            q.pred_lat_rad = 0.0
-            q.pred_lon_rad = 0.0
-    else:
-        q.guid_cycles = 0
-        q.bank_cmd_rad = 0.0
-        q.pred_lat_rad = 0.0
-        q.pred_lon_rad = 0.0
-    q.guid_flags = flags
-
-
-@njit(cache=True)
 def main_finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s, sent, sent_k,
                       bank_axis_B, short_min_Nm, short_frac,
                       r, target_flag, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
                       k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
-    """main's ``finish_cycle`` before its arrays were packed (35 arguments, each array its own)."""
+    """main's ``finish_cycle`` before its arrays were packed (35 arguments, 18 arrays). Today's
+    ``fill_record`` takes the torques' buffer: it comes in ``u_cal_B``'s place (u_cal_B is its
+    first three)."""
     for i in range(3):
         tau_alloc_B[i] = tau_B[i]
     short = bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac)
     used = drive_jets(u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s)
     note_sent(sent, sent_k, k, last)
-    main_fill_record(r, target_flag, last, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
-                k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)
+    fill_record(r, target_flag, last, short, u_cal_B, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd,
+                pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, theta_hat, eta, health)
     return used, short
 
 
@@ -228,7 +181,8 @@ class UnpackedTailFlightSoftware(FlightSoftware):
         return driver.last_command
 
     def _main_fill_args(self) -> tuple:
-        """main's ``OutputFiller.fill_args`` (19 items: u_cal_B and tau_alloc_B each its own)."""
+        """main's ``OutputFiller.fill_args`` (19 items: u_cal_B -- here the torques' buffer, whose first
+        three it is -- and tau_alloc_B each its own)."""
         g = self.guidance
         health = self.health
         e = self.entry
@@ -236,7 +190,7 @@ class UnpackedTailFlightSoftware(FlightSoftware):
         return (self.alloc_ns, int(self.modes.mode), self.allocator.degraded,
                 self.deploy.code if self.deploy is not None else 0, npc,
                 e.cycles if npc else 0, float(e.bank_cmd) if npc else 0.0, e.pred_impact if npc else _NO_PREDICTION,
-                self.k, self.t_s, g.phi_r, g.phidot_r, self.bank_err_rad, g.sigma_RN, self.u_cal_B,
+                self.k, self.t_s, g.phi_r, g.phidot_r, self.bank_err_rad, g.sigma_RN, self.torques,
                 self.tau_alloc_B, self.control.theta_hat, health.eta, health.state)
 
     def _rehearse_tail(self) -> None:

@@ -319,10 +319,11 @@ def run_below_loop() -> dict:
         return {"policy": None, "priority": None, "message": str(e)}
 
 
-def other_threads(cpus: list[int] | None, priority: int | None, python_priority: int | None = None) -> dict:
+def other_threads(cpus: list[int] | None, priority: int | None, python_priority: int | None = None,
+                  python_cpus: list[int] | None = None) -> dict:
     """Give every thread of this process but the calling one the CPU set ``cpus`` and
     SCHED_FIFO ``priority`` (None: leave that setting); Python threads (they take the GIL)
-    get ``python_priority`` instead when given. For threads that libraries started before
+    get ``python_priority`` and ``python_cpus`` instead when given. For threads that libraries started before
     ``apply`` ran (Zenoh's and its Python binding's runtimes start some at import, and
     those do not inherit later changes). Returns {threads: [(tid, name, priority, cpus)],
     messages} read back from the kernel."""
@@ -342,8 +343,9 @@ def other_threads(cpus: list[int] | None, priority: int | None, python_priority:
         except OSError:
             continue                        # ended meanwhile
         try:
-            if cpus is not None:
-                os.sched_setaffinity(tid, set(int(c) for c in cpus))
+            mine = python_cpus if tid in pythons and python_cpus is not None else cpus
+            if mine is not None:
+                os.sched_setaffinity(tid, set(int(c) for c in mine))
             prio = python_priority if tid in pythons and python_priority is not None else priority
             if prio is not None:
                 os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(int(prio)))

@@ -174,7 +174,7 @@ def test_timer_slack_is_set_and_read_back_for_a_normal_thread():
 
 
 THREADS_CHILD = r"""
-import json, os, threading, time
+import json, os, sys, threading, time
 from common import rt
 import zenoh                                   # its runtime starts native threads at import/open
 from interfaces import transport
@@ -182,7 +182,8 @@ ev = threading.Event()
 py = threading.Thread(target=ev.wait, name="py-worker", daemon=True)
 py.start()
 ses = transport.open_session("sim", None, None)
-rep = rt.other_threads([0], 12, python_priority=11)
+rep = rt.other_threads([0], 12, python_priority=11,
+                       python_cpus=[int(sys.argv[1])] if len(sys.argv) > 1 else None)
 def kernel(tid):
     st = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
     aff = [l for l in open(f"/proc/self/task/{tid}/status") if l.startswith("Cpus_allowed_list")][0]
@@ -196,11 +197,16 @@ ses.close()
 
 
 @pytest.mark.skipif(not _can_rt(), reason="needs root (CAP_SYS_NICE)")
-def test_other_threads_get_io_priority_and_python_threads_their_own():
+@pytest.mark.parametrize("python_cpu", [None, 1])
+def test_other_threads_get_io_priority_and_python_threads_their_own(python_cpu):
     """SIL nodes put Zenoh's native threads one FIFO priority above the main loop and our
-    Python threads (background jobs: they take the GIL) one below it; checked in /proc for every thread."""
-    out = subprocess.run([sys.executable, "-c", THREADS_CHILD], cwd=ROOT, capture_output=True, text=True,
-                         timeout=120)
+    Python threads (background jobs: they take the GIL) one below it, each on its own CPU set
+    when told (the flight software's transport threads beside the plant, its jobs on its loop's
+    CPU: ellipsled/sil/common.py RT_PLACEMENT); checked in /proc for every thread."""
+    if python_cpu is not None and (os.cpu_count() or 1) < 2:
+        pytest.skip("needs two CPUs")
+    out = subprocess.run([sys.executable, "-c", THREADS_CHILD, *([str(python_cpu)] if python_cpu is not None else [])],
+                         cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     r = json.loads(out.stdout.strip().splitlines()[-1])
     assert r["messages"] == []
@@ -208,8 +214,9 @@ def test_other_threads_get_io_priority_and_python_threads_their_own():
     native = {t: v for t, v in r["threads"].items() if int(t) != r["py"]}
     assert len(native) >= 2                                              # Zenoh's runtime threads
     for tid, (name, prio, (policy, kprio, cpus)) in r["threads"].items():
-        want = 11 if int(tid) == r["py"] else 12
-        assert prio == want == kprio and policy == 1 and cpus == "0", (name, prio, kprio, policy, cpus)
+        py = int(tid) == r["py"]
+        want, want_cpus = (11, str(python_cpu if python_cpu is not None else 0)) if py else (12, "0")
+        assert prio == want == kprio and policy == 1 and cpus == want_cpus, (name, prio, kprio, policy, cpus)
 
 
 BACKGROUND_CHILD = r"""

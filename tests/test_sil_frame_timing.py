@@ -4,7 +4,7 @@ its first publications, each tick flies its own step, and one frame that comes a
 tick's wait costs that tick only."""
 from __future__ import annotations
 
-from ellipsled.sil.frame_timing import due_step, phase_origin_ns, phase_steady, take_due_frame
+from ellipsled.sil.frame_timing import PhaseLock, due_step, phase_origin_ns, phase_steady, take_due_frame
 
 MS = 1_000_000
 PERIOD = 20 * MS
@@ -59,6 +59,50 @@ def test_a_catch_up_burst_is_not_a_schedule_the_frames_after_it_are():
     late = {1: 32 * MS, 2: 13 * MS}
     start = [(k, origin + k * PERIOD + late.get(k, 0) + (k % 3) * 10_000) for k in range(1, 11)]
     assert phase_steady(start, PERIOD)
+
+
+def _lock(lock: PhaseLock, frames, seen):
+    """Offer (step, publication) pairs seen at ``seen(k, t_pub)``; (origin, step) of the lock or None."""
+    for k, t in frames:
+        origin = lock.offer(k, t, seen(k, t))
+        if origin is not None:
+            return origin, k
+    return None
+
+
+def test_the_lock_waits_out_a_backlog_longer_than_its_wait():
+    """A plant stalled 3.3 s at its start (seen under load) publishes 166 steps at once, then keeps
+    its schedule. The FSW reads the backlog within milliseconds: however many frames it holds,
+    the lock takes the schedule after it (a wait counted in frames, 110 then, locked on the burst
+    and every release of that run came 13.4 ms late)."""
+    origin = 7 * MS
+    # never published before its time on the schedule: the backlog ends where the schedule is
+    burst = [(k, max(origin + 3300 * MS + k * 40_000, origin + k * PERIOD)) for k in range(1, 167)]
+    after = [(k, origin + k * PERIOD + (k % 3) * 10_000) for k in range(167, 200)]
+    lock = PhaseLock(PERIOD, 10, 2000 * MS)
+    got = _lock(lock, burst + after, seen=lambda k, t: t + 200_000)
+    assert got is not None and got[0] == origin and got[1] > 160     # after the backlog
+    # the frame-count wait it replaces: 10 + 2 s of frames, then the burst's origin (a period late)
+    assert phase_origin_ns(burst[100:110], PERIOD) - origin > 10 * MS
+
+
+def test_a_host_that_never_keeps_one_schedule_still_gets_a_lock_after_the_wait():
+    """Publications a third of a period early and late by turns: never steady, no burst; the
+    lock comes once the wait has passed, from the earliest origin of the last frames."""
+    origin = 3 * MS
+    frames = [(k, origin + k * PERIOD + (PERIOD // 3 if k % 2 else 0)) for k in range(1, 400)]
+    lock = PhaseLock(PERIOD, 10, 2000 * MS)
+    t_first = frames[0][1]
+    origin_got, k = _lock(lock, frames, seen=lambda k, t: t + 100_000)
+    assert origin_got == origin
+    assert frames[k - 1][1] + 100_000 >= t_first + 100_000 + 2000 * MS > frames[k - 2][1] + 100_000
+
+
+def test_the_usual_start_locks_on_the_tenth_frame():
+    origin = 5 * MS
+    late = {1: 32 * MS, 2: 13 * MS}
+    frames = [(k, origin + k * PERIOD + late.get(k, 0) + (k % 3) * 10_000) for k in range(1, 30)]
+    assert _lock(PhaseLock(PERIOD, 10, 2000 * MS), frames, seen=lambda k, t: t + 300_000) == (origin, 10)
 
 
 def test_a_release_takes_the_frame_due_when_it_comes_within_the_wait():

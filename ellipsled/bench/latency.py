@@ -18,9 +18,10 @@ transport. Zenoh's own default sends a payload through shared memory only from 3
 
 Two placements of the two processes:
 - ``default``: both SCHED_OTHER, anywhere (what a plain program gets);
-- ``sil``: as the real-time SIL places its nodes (``ellipsled run --realtime``, --rt): the
-  client (the plant's role) SCHED_FIFO 80 on CPU 0, the echo (the FSW's role) SCHED_FIFO 80
-  on CPU 1, Zenoh's threads one priority above on the same CPU, receiving as the nodes do
+- ``sil``: as the real-time SIL places its nodes (``ellipsled run --realtime``, --rt;
+  ellipsled/sil/common.py RT_PLACEMENT): the client (the plant's role) SCHED_FIFO 80 on CPU 0,
+  the echo (the FSW's role) SCHED_FIFO 80 on CPU 1, each one's Zenoh threads one priority
+  above on its role's I/O CPU (both on CPU 0), receiving as the nodes do
   (spinning when SCHED_FIFO is in force). The sensor-to-actuator target is a ratio to the
   UDP round trip of this placement: the SIL's latency includes one cross-CPU wake-up per
   hop by design, which a baseline free to run both ends on one CPU does not pay. Under
@@ -55,29 +56,34 @@ def _stats(rtt_ns: list[int], lost: int) -> dict:
 
 
 # --------------------------------------------------------------------------- echo processes
-ECHO_CPU, CLIENT_CPU, LOOP_PRIORITY = 1, 0, 80     # the SIL's: FSW on CPU 1, plant on CPU 0
+ECHO_ROLE, CLIENT_ROLE, LOOP_PRIORITY = "fsw", "sim", 80     # the echo plays the FSW, the client the plant
 
 
-def _place(placement: str, cpu: int) -> bool:
-    """Apply the SIL's real-time placement to this process (``sil``); True if SCHED_FIFO is in
-    force (then the receiving loops spin, as the SIL nodes do). Zenoh's threads are raised
-    separately, after the session exists (``_raise_zenoh_threads``)."""
+def _place(placement: str, role: str) -> bool:
+    """Apply the SIL's real-time placement of ``role`` (ellipsled/sil/common.py RT_PLACEMENT) to
+    this process (``sil``); True if SCHED_FIFO is in force (then the receiving loops spin, as
+    the SIL nodes do). Zenoh's threads are placed separately, after the session exists
+    (``_raise_zenoh_threads``)."""
     if placement != "sil":
         return False
     from common import rt
-    return bool(rt.apply([cpu], LOOP_PRIORITY)["sched_fifo"])
+    from ellipsled.sil.common import RT_PLACEMENT
+    return bool(rt.apply([RT_PLACEMENT[role][0]], LOOP_PRIORITY)["sched_fifo"])
 
 
-def _raise_zenoh_threads(fifo: bool, cpu: int) -> None:
+def _raise_zenoh_threads(fifo: bool, role: str) -> None:
+    """Zenoh's threads one priority above the loop on the role's I/O CPU, as the SIL nodes do."""
     if fifo:
         from common import rt
-        rt.other_threads([cpu], LOOP_PRIORITY + 1, python_priority=LOOP_PRIORITY - 1)
+        from ellipsled.sil.common import RT_PLACEMENT
+        cpu, io_cpu = RT_PLACEMENT[role]
+        rt.other_threads([io_cpu], LOOP_PRIORITY + 1, python_priority=LOOP_PRIORITY - 1, python_cpus=[cpu])
 
 
 def _echo_udp(port: int, placement: str = "default") -> None:
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.bind(("127.0.0.1", port))
-    _place(placement, ECHO_CPU)
+    _place(placement, ECHO_ROLE)
     print(READY, flush=True)
     while True:
         data, addr = s.recvfrom(2048)
@@ -115,12 +121,12 @@ def _echo_zenoh(port: int, placement: str = "default", rate_hz: float = 100.0, s
     from interfaces.codec import Codec
     from interfaces.keys import keys
     k = keys("bench-latency")
-    fifo = _place(placement, ECHO_CPU)
+    fifo = _place(placement, ECHO_ROLE)
     ses = transport.open_session("sim", [transport.loopback(port)], [], lowlatency=lowlatency)
     sub = transport.subscriber(ses, k.sensors)
     pub = transport.publisher(ses, k.jets)
     out = _Putter(pub, shm)
-    _raise_zenoh_threads(fifo, ECHO_CPU)
+    _raise_zenoh_threads(fifo, ECHO_ROLE)
     # as the FSW node under SCHED_FIFO: release 100 us before the next frame is due, then spin
     # for it (3 ms at most); never a continuous spin (the kernel's real-time throttling
     # would stop every FIFO thread of the CPU, Zenoh's too, for 50 ms each second)
@@ -184,7 +190,7 @@ def udp_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
     from interfaces.transport import free_port
     port = free_port()
     p = _start_echo("udp", port, placement)
-    _place(placement, CLIENT_CPU)
+    _place(placement, CLIENT_ROLE)
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.settimeout(1.0)
     rtt, lost = [], 0
@@ -228,7 +234,7 @@ def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default", shm: boo
     from interfaces.keys import keys
     port = transport.free_port()
     p = _start_echo("zenoh", port, placement, rate_hz, shm, lowlatency)
-    fifo = _place(placement, CLIENT_CPU)
+    fifo = _place(placement, CLIENT_ROLE)
     spin = 0.003 if fifo else 0.0        # the plant node spins 3 ms for its command under SCHED_FIFO
     k = keys("bench-latency")
     ses = pub = sub = None
@@ -238,7 +244,7 @@ def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default", shm: boo
         sub = transport.subscriber(ses, k.jets)
         pub = transport.publisher(ses, k.sensors)
         out = _Putter(pub, shm)
-        _raise_zenoh_threads(fifo, CLIENT_CPU)
+        _raise_zenoh_threads(fifo, CLIENT_ROLE)
         if not transport.wait_for_subscriber(pub, 10.0):
             raise RuntimeError("zenoh echo never matched the sensors publisher")
         enc, dec = Codec.for_schema("SENSORS"), Codec.for_schema("JETS")

@@ -68,21 +68,22 @@ def through_router(duration_s: float, start_timeout_s: float = 180.0) -> dict:
     from common.config import DATA_DIR
     from ellipsled.net import pki
     from interfaces import transport
+    from ellipsled.sil.common import rt_arguments
     zc = DATA_DIR / "zenoh"
     with tempfile.TemporaryDirectory(prefix="bench-router-") as tmp:
         d = Path(tmp)
         pki.init(d / "pki")
         ep = f"tls/localhost:{transport.free_port()}"
         out = d / "run"
-        node = ["nominal", "--realtime", "--rt", "--duration", f"{duration_s:g}",
+        node = ["nominal", "--realtime", "--duration", f"{duration_s:g}",
                 "--prefix", PREFIX, "--out", str(out), "--connect", ep, "--wait-peers", f"{start_timeout_s:g}"]
         pr = _Procs(d)
         try:
             pr.start("router", ["router", "--config", str(zc / "router.json5"), "--listen", ep, "--rt"])
             pr.wait_for("router", "listening on", start_timeout_s)
-            pr.start("fsw", ["fsw", *node, "--zenoh-config", str(zc / "fsw.json5"), "--cpu", "1"])
+            pr.start("fsw", ["fsw", *node, "--zenoh-config", str(zc / "fsw.json5"), *rt_arguments("fsw")])
             pr.wait_for("fsw", "waiting for the plant", start_timeout_s)
-            pr.start("sim", ["sim", *node, "--zenoh-config", str(zc / "sim.json5"), "--cpu", "0"])
+            pr.start("sim", ["sim", *node, "--zenoh-config", str(zc / "sim.json5"), *rt_arguments("sim")])
             try:
                 rc = pr.p["sim"].wait(duration_s + start_timeout_s)
             except subprocess.TimeoutExpired:

@@ -43,6 +43,8 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rt-priority", type=argtypes.rt_priority, default=80,
                    help="SCHED_FIFO priority of the main loop; Zenoh's I/O threads run one above it")
     p.add_argument("--cpu", type=argtypes.int_range(0, (os.cpu_count() or 1) - 1), default=None, help="pin to this CPU")
+    p.add_argument("--io-cpu", type=argtypes.int_range(0, (os.cpu_count() or 1) - 1), default=None,
+                   help="with --rt: the CPU of the transport's threads (Zenoh's I/O); default --cpu")
 
 
 class Stop:
@@ -83,22 +85,42 @@ def rt_in_force(rt_report: dict | None) -> bool:
     return bool(rt_report and rt_report.get("sched_fifo"))
 
 
+# Where the real-time SIL puts its nodes on a machine of two CPUs or more (``ellipsled run
+# --realtime``; the latency bench's "sil" placement): role -> (the loop's CPU, the CPU of its
+# transport threads). The flight software's loop has CPU 1 to itself; its Zenoh threads run on
+# CPU 0 with the plant's. On the loop's own CPU they preempted it in the wait for the frame
+# and left its caches cold: control task p99 at 200 Hz 30.2 -> 25.5 us, sensor-to-actuator
+# p99 265 -> 200 us, the two placements alternated in one run (docs/decisions.md).
+RT_PLACEMENT = {"sim": (0, 0), "fsw": (1, 0)}
+
+
+def rt_arguments(role: str) -> list[str]:
+    """A node's real-time options as ``RT_PLACEMENT`` places it."""
+    cpu, io_cpu = RT_PLACEMENT[role]
+    return ["--rt", "--cpu", str(cpu), "--io-cpu", str(io_cpu)]
+
+
 def open_node(role: str, args, rt_report: dict | None = None):
     """(session, keys) for a node, from its options. With SCHED_FIFO in force (``apply_rt``),
     every other thread of the process — Zenoh's I/O threads, the runtime threads its binding
-    starts at import — goes to this node's CPU one priority above the loop, so an arriving
-    sample preempts the loop's spin-wait instead of queueing behind it; our own Python
-    threads (background jobs: they take the GIL) one below the loop (common.rt.run_below_loop)."""
+    starts at import — goes to --io-cpu (default: this node's CPU) one priority above the loop,
+    so an arriving sample preempts whatever runs there instead of queueing behind it; our own
+    Python threads (background jobs: they take the GIL) stay on the loop's CPU one below the
+    loop (common.rt.run_below_loop)."""
     session = transport.open_session(role, args.listen, args.connect, args.zenoh_config,
                                      lowlatency=bool(getattr(args, "zenoh_lowlatency", True)))
     if rt_in_force(rt_report):
         from common import rt
-        others = rt.other_threads([args.cpu] if args.cpu is not None else None, rt_report["io_priority"],
-                                  python_priority=int(args.rt_priority) - 1)
+        loop_cpus = [args.cpu] if args.cpu is not None else None
+        io_cpu = getattr(args, "io_cpu", None)
+        io_cpus = [io_cpu] if io_cpu is not None else loop_cpus
+        others = rt.other_threads(io_cpus, rt_report["io_priority"], python_priority=int(args.rt_priority) - 1,
+                                  python_cpus=loop_cpus)
         rt_report["threads"] = [f"{name}:{prio}" for _, name, prio, _ in others["threads"]]
+        rt_report["io_cpus"] = io_cpus
         rt_report["messages"] += others["messages"]
-        say(role, f"real-time: loop SCHED_FIFO {rt_report['priority']}, I/O threads {rt_report['io_priority']}, "
-                  f"CPUs {rt_report['affinity']}, mlockall {rt_report['mlockall']}"
+        say(role, f"real-time: loop SCHED_FIFO {rt_report['priority']}, I/O threads {rt_report['io_priority']} "
+                  f"on CPUs {io_cpus}, CPUs {rt_report['affinity']}, mlockall {rt_report['mlockall']}"
                   + (f"; {'; '.join(rt_report['messages'])}" if rt_report["messages"] else ""))
     return session, keys(args.prefix)
 

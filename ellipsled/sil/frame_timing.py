@@ -24,6 +24,33 @@ def phase_steady(frames: list[tuple[int, int]], period_ns: int, n: int = 5) -> b
     return max(origins) - min(origins) <= period_ns // 4
 
 
+class PhaseLock:
+    """The phase lock's decision, frame by frame (``offer``): the plant's origin once the last
+    ``n_frames`` frames keep one schedule (``phase_steady``: not a catch-up burst), or -- a host
+    that never lets them -- once ``wait_ns`` has passed on the caller's clock since the first
+    frame. The wait is wall time, not a number of frames: a plant that stalled publishes its
+    whole backlog at once when it resumes, read within milliseconds, and a lock on those frames
+    alone puts every release of the run up to a period late (seen: a plant stalled 3.3 s at its
+    start under load; its 166-frame backlog outlasted a wait of 110 frames, and every frame of
+    that run reached the FSW 13.4 ms late)."""
+
+    def __init__(self, period_ns: int, n_frames: int, wait_ns: int):
+        self.period_ns, self.n_frames, self.wait_ns = int(period_ns), int(n_frames), int(wait_ns)
+        self.frames: list[tuple[int, int]] = []
+        self.t_give_up: int | None = None
+
+    def offer(self, k: int, t_pub_ns: int, now_ns: int) -> int | None:
+        """Frame ``k`` published at ``t_pub_ns``, seen at ``now_ns``: the origin to lock to, or None."""
+        if self.t_give_up is None:
+            self.t_give_up = now_ns + self.wait_ns
+        f = self.frames
+        f.append((int(k), int(t_pub_ns)))
+        del f[:-self.n_frames]
+        if len(f) < self.n_frames or not (phase_steady(f, self.period_ns) or now_ns >= self.t_give_up):
+            return None
+        return phase_origin_ns(f, self.period_ns)
+
+
 def due_step(next_k: int, cycle_k: int, locked_plant: bool) -> int:
     """The plant step a release waits for. While the plant is the one the ticks are locked
     to, tick k flies step k: a frame that came after its tick's wait must not make every

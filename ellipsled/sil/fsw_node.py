@@ -33,7 +33,7 @@ from interfaces.codec import Codec, SequenceGuard, event_record  # noqa: E402
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE, FAULT_KINDS, HEALTH_NAMES, NOMINAL  # noqa: E402
 
 from .common import DecodeRehearsal, Stop, add_common_arguments, apply_rt, now_ns, open_node, rt_in_force, say  # noqa: E402
-from .frame_timing import due_step, phase_origin_ns, phase_steady, take_due_frame  # noqa: E402
+from .frame_timing import PhaseLock, due_step, take_due_frame  # noqa: E402
 from .fsw_report import alloc_sample, fsw_report  # noqa: E402
 from .history import History, record_fsw  # noqa: E402
 from .variant import prepare_args  # noqa: E402
@@ -374,7 +374,7 @@ class FswNode:
         return None
 
     LOCK_FRAMES = 10        # real time: frames the phase lock takes the plant's schedule from
-    LOCK_WAIT_S = 2.0       # ... waiting at most this much longer for them to keep one schedule
+    LOCK_WAIT_S = 2.0       # ... waiting at most this long (wall time) for them to keep one schedule
 
     def run_realtime(self) -> None:
         # warm up on the plant's first frame (it offers that frame until we say ready, then
@@ -392,22 +392,20 @@ class FswNode:
             lock = self._next_good_frame()
         if lock is None:
             return
-        period = self.topo.executive.period_ns
         # the plant's schedule: step k published at origin + k * period, never earlier, often
         # later in its first steps (its own first-call costs: step 1 came 32 ms late, step 2
-        # 13 ms, then on time) — so the earliest origin over LOCK_FRAMES frames, not the first
-        # frames, and until the last of them keep one schedule (phase_steady: not a catch-up
-        # burst), at most LOCK_WAIT_S more; the origin from the last LOCK_FRAMES
-        frames = [(lock, self.dec_sensors.last_t_pub_ns)]
-        most = self.LOCK_FRAMES + int(self.LOCK_WAIT_S * 1e9 // period)
-        while len(frames) < self.LOCK_FRAMES or (not phase_steady(frames, period) and len(frames) < most):
+        # 13 ms, then on time) -- so the earliest origin over LOCK_FRAMES frames, not the first
+        # frames, once the last of them keep one schedule (not a catch-up burst); PhaseLock
+        period = self.topo.executive.period_ns
+        phase = PhaseLock(period, self.LOCK_FRAMES, int(self.LOCK_WAIT_S * 1e9))
+        origin = phase.offer(lock, self.dec_sensors.last_t_pub_ns, now_ns())
+        while origin is None:
             k = self._next_good_frame()
             if k is None:
                 return
-            frames.append((k, self.dec_sensors.last_t_pub_ns))
+            origin = phase.offer(k, self.dec_sensors.last_t_pub_ns, now_ns())
             lock = k
-        frames = frames[-self.LOCK_FRAMES:]
-        origin = phase_origin_ns(frames, period)
+        frames = phase.frames
         say(ROLE, f"phase lock on step {lock}: plant's publications "
                   f"{[round((t - k * period - origin) / 1e3) for k, t in frames]} us after the earliest")
         # tick k of the executive is the plant's step k; the first is the step after this

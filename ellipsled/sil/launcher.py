@@ -33,7 +33,7 @@ from ellipsled.terminal import RunProgress, files_written
 from interfaces import transport
 from interfaces.vocabulary import DEFAULT_GCS, DEFAULT_VEHICLE
 
-from .common import DEFAULT_PREFIX, say
+from .common import DEFAULT_PREFIX, rt_arguments, say
 from .history import History, merge
 from .progress import ProgressFile
 from .variant import add_variant_arguments, prepare_args, variant_argv
@@ -231,12 +231,12 @@ class Launcher:
         self.spawn("fsw", ["fsw"] + scen + mode + common + ["--connect", endpoint, "--listen", fsw_endpoint,
                                                            "--out", str(self.out), "--signing-key", key,
                                                            "--mavlink-bind", a.mavlink_bind, "--gcs", a.gcs]
-                   + (["--rt", "--cpu", "1"] if self.rt else [])
+                   + (rt_arguments("fsw") if self.rt else [])
                    + (["--rt-offset-us", f"{a.rt_offset_us:g}"] if a.rt_offset_us is not None else []))
         self.spawn("sim", ["sim"] + scen + mode + common + ["--listen", endpoint, "--out", str(self.out),
                                                            "--speed", str(a.speed), "--fsw-timeout", str(a.fsw_timeout),
                                                            "--progress-file", self.progress_path]
-                   + (["--wait-bridge"] if viz else []) + (["--rt", "--cpu", "0"] if self.rt else []))
+                   + (["--wait-bridge"] if viz else []) + (rt_arguments("sim") if self.rt else []))
         self.say(f"SIL {a.mode}: plant on {endpoint}; pids " +
                  ", ".join(f"{r} {p.pid}" for r, p in self.children.items()) + f"; logs in {self.out}")
         self.say(f"ground link: vehicle {a.mavlink_bind}, telemetry to {a.gcs}; signing key {key} "

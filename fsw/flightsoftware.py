@@ -28,7 +28,7 @@ from .controllability import Controllability, velocity_dir_B
 from .fdir import Fdir, jet_step
 from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
-from .jetdriver import JetDriver, drive_jets
+from .jetdriver import JetDriver, drive_jets, packed_views
 from .law import LAW_DONE, LAW_SAFE_DUE, law_cycle
 from .modes import Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor, frame_check
@@ -74,23 +74,25 @@ def bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac):
 
 
 @njit(cache=True)
-def finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s, sent, sent_k,
-                 bank_axis_B, short_min_Nm, short_frac,
-                 r, target_flag, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
-                 k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
+def finish_cycle(tau_B, u_alloc, gate, jb, jc, jr, torques, short_frac, r, target_flag, alloc_ns, mode, degraded,
+                 deploy, npc, guid_cycles, bank_cmd, pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, theta_hat,
+                 eta, health):
     """The control cycle's tail after the allocation, in one compiled call: the allocated
-    torque ``tau_B`` copied to ``tau_alloc_B``, the bank-shortfall test (``bank_short``), the
-    jet driver (jetdriver.py ``drive_jets``: its arrays ``inhibit`` .. ``dt_s``), the answer noted in
-    the ring (``note_sent``) and the output record ``r`` filled (output.py ``fill_record``: the
-    arguments from ``r`` on). Returns (propellant used [kg], bank axis short); the events
-    those call for are the Python caller's."""
+    torque ``tau_B`` copied to ``tau_alloc_B``, the bank-shortfall test (``bank_short``; the torques,
+    the axis and its floor in ``torques``: FlightSoftware's layout), the
+    jet driver (jetdriver.py ``drive_jets`` on its buffers ``jb``, ``jc``, ``jr``: ``JetDriver.packed``),
+    the answer noted in the ring the driver keeps (``note_sent``) and the output record ``r``
+    filled (output.py ``fill_record``: the arguments from ``r`` on). Returns (propellant used
+    [kg], bank axis short); the events those call for are the Python caller's."""
+    inhibit, last, pulses, on_time_s, mdot_kgps, dt_s, sent, sent_k = packed_views(jb, jc, jr)
+    u_cal_B, tau_alloc_B = torques[0:3], torques[3:6]
     for i in range(3):
         tau_alloc_B[i] = tau_B[i]
-    short = bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac)
+    short = bank_short(torques[6:9], u_cal_B, tau_alloc_B, torques[9], short_frac)
     used = drive_jets(u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s)
     note_sent(sent, sent_k, k, last)
-    fill_record(r, target_flag, last, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
-                k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health)
+    fill_record(r, target_flag, last, short, torques, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd,
+                pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, theta_hat, eta, health)
     return used, short
 
 
@@ -165,7 +167,9 @@ class FlightSoftware(GroundCommands):
         self.control = SamiController(self.params, veh, self.dt_s)
         self.allocator = Allocator(veh.torque_matrix_Nm, veh.thrust_N, self.params, async_rebuild=realtime)
         self.fdir = Fdir(self.params, self.dt_s, self.events)
-        self.driver = JetDriver(veh.thrust_N, veh.isp_s, planet.g0_mps2, self.dt_s, self.events)
+        # the driver keeps the ring of answers (below) in its buffers, beside what it sent last
+        self.driver = JetDriver(veh.thrust_N, veh.isp_s, planet.g0_mps2, self.dt_s, self.events,
+                                ring=periods(COMMAND_RING_S, self.dt_s))
         self.modes = ModeManager(self.events)
         self.monitor = SensorMonitor(self.events, self.dt_s, self.params, planet.radius_m)
         self.failsafes = Failsafes(self.params, self.modes)
@@ -192,14 +196,20 @@ class FlightSoftware(GroundCommands):
 
         self.k = -1
         self.t_s = 0.0
-        self.u_cal_B = np.zeros(3)
-        self.tau_alloc_B = np.zeros(3)
+        # the torques and the bank-shortfall test's constants in one buffer the tail's compiled
+        # call takes whole (``finish_cycle``: [0:3] u_cal_B, [3:6] tau_alloc_B, [6:9] the bank
+        # axis, [9] its shortfall floor); the names are views into it
+        self.torques = np.zeros(10)
+        self.u_cal_B = self.torques[0:3]
+        self.tau_alloc_B = self.torques[3:6]
         # the bank axis (velocity direction at trim, body axes) and its jet quantum: a cycle is
         # short when the torque delivered about it falls short of the demand by more than
         # control.shortfall_frac of a demand worth two or more of the largest jet increments
         # (the rule SAMI's saturation awareness applies per body axis)
-        self.bank_axis_B = velocity_dir_B(veh.aero.alpha_trim_rad)
+        self.torques[6:9] = velocity_dir_B(veh.aero.alpha_trim_rad)
+        self.bank_axis_B = self.torques[6:9]
         self._bank_short_min_Nm = 2.0 * float(np.max(np.abs(self.bank_axis_B @ np.asarray(veh.torque_matrix_Nm))))
+        self.torques[9] = self._bank_short_min_Nm
         # while the bank axis falls short, the duty-cycle LP's average realised over cycles
         # (fsw/allocation/dutycycle.py) instead of one pattern per cycle
         self.dutycycle = DutyCycleRealiser(self.bank_axis_B, veh.torque_matrix_Nm, veh.thrust_N)
@@ -226,9 +236,11 @@ class FlightSoftware(GroundCommands):
         # the command the plant reports it held (SENSORS.u_k), which in real time can be an
         # older one than the last sent (a late answer: the plant held the one before)
         self._ring = periods(COMMAND_RING_S, self.dt_s)
-        self._sent = np.zeros((self._ring, self.driver.n), dtype=np.uint8)
-        self._sent_k = np.full(self._ring, -2, dtype=np.int64)    # the frame index of each slot's answer
-        self._drive_state = self.driver.state_arrays()
+        self._sent = self.driver.sent                 # (ring, jets) uint8: the answers
+        self._sent_k = self.driver.sent_k             # the frame index of each slot's answer
+        # finish_cycle's buffers: the driver's (with the ring), and scratch copies of them and of
+        # the record and tau_alloc_B for the tail's rehearsal
+        self._drive_state = self.driver.packed()      # finish_cycle's buffers
         # intake_cycle's arrays and constants after next_apply, the flight's and the rehearsal's
         mon, fd, nav = self.monitor, self.fdir, self.nav
         ring = (self._sent, self._sent_k, self._zero_u, fd.oracle)
@@ -242,6 +254,10 @@ class FlightSoftware(GroundCommands):
         # every reader takes: refilled in place at the end of control_step and no_frame
         self._output = OutputFiller(scenario)
         self.output = self._output.rec
+        # scratch copies of what finish_cycle writes (the driver's buffers, the record, the
+        # torques' buffer), for the tail's rehearsal
+        self._tail_scratch = (*(a.copy() for a in self._drive_state), self._output.one.copy(),
+                              self.torques.copy())
         # law_cycle's arguments that are the same arrays every cycle (each owner updates its
         # own in place), and scratch copies of the state it writes, for the rehearsal
         nav_s, g, ctl = self.nav.state, self.guidance, self.control
@@ -359,8 +375,7 @@ class FlightSoftware(GroundCommands):
         for here; returns the command sent."""
         driver, out = self.driver, self._output
         used, short = finish_cycle(self.dutycycle.tau_B, u_alloc, driver.armed and self.modes.jets_enabled,
-                                   *self._drive_state, self._sent, self._sent_k,
-                                   self.bank_axis_B, self._bank_short_min_Nm, self.params["control.shortfall_frac"],
+                                   *self._drive_state, self.torques, self.params["control.shortfall_frac"],
                                    out.one, out.target_flag, *out.fill_args(self))
         driver.count(used)
         self._check_bank_shortfall(t_s, short)
@@ -381,14 +396,33 @@ class FlightSoftware(GroundCommands):
         answers discarded -- the cycle's head (``intake_cycle``: frame check, jet monitor,
         navigation) on ``frame`` (the record of the last frame this instance took), the law's
         stretch (``law_cycle``) on copies of its state with the last cycle's navigation and
-        reference, and the allocation's compiled call on its own tables for ``demand_B`` (the
-        spare's demand on that frame). Nothing the next cycle reads changes."""
+        reference, the allocation's compiled call on its own tables for ``demand_B`` (the
+        spare's demand on that frame), and the tail (``finish_cycle``) on copies of what it
+        writes with the last cycle's answer and outputs. Nothing the next cycle reads changes."""
         fv = self._frame_views
         if fv[0] is frame:
             self._rehearse_intake(fv)
             if self._have_prev:
                 self._rehearse_law()
         self.dutycycle.rehearse(self.allocator, demand_B)    # the allocation's compiled call
+        if self._have_prev:
+            self._rehearse_tail()
+
+    def _rehearse_tail(self) -> None:
+        """``finish_cycle`` as the last cycle called it (its answer, the same read-only arrays and
+        outputs), writing into scratch copies of the driver's buffers, the record and the
+        torques' buffer; its answers discarded."""
+        jb, jc, jr, rec, torques = self._tail_scratch
+        live = self._drive_state
+        np.copyto(jb, live[0])
+        np.copyto(jc, live[1])
+        np.copyto(jr, live[2])
+        np.copyto(torques, self.torques)
+        out, dc = self._output, self.dutycycle
+        np.copyto(rec, out.one)
+        finish_cycle(dc.tau_B, dc.u if dc.modulated else self.allocator.u,
+                     self.driver.armed and self.modes.jets_enabled, jb, jc, jr, torques,
+                     self.params["control.shortfall_frac"], rec, out.target_flag, *out.fill_args(self))
 
     @property
     def _frame_views(self) -> tuple:

@@ -38,13 +38,24 @@ def drive_jets(u_on, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s):
     return used * dt_s
 
 
+@njit(cache=True)
+def packed_views(jb, jc, jr):
+    """``JetDriver.packed``'s buffers as the arrays they hold: (inhibit, the command in force,
+    pulses, on-time [s], propellant flow [kg/s], dt [s], the ring's answers, their frame indices)."""
+    n = jb.shape[1]
+    return jb[0], jb[1], jc[:n], jr[:n], jr[n:2 * n], jr[2 * n], jb[2:], jc[n:]
+
+
 class JetDriver:
     PARAMS = [
         Param("driver.arm_on_entry", 0, 1, "-", "1 = a ground request that enters ENTRY also arms the jets",
               integer=True),
     ]
 
-    def __init__(self, thrust_N: np.ndarray, isp_s: float, g0_mps2: float, dt_s: float, events: EventLog) -> None:
+    def __init__(self, thrust_N: np.ndarray, isp_s: float, g0_mps2: float, dt_s: float, events: EventLog,
+                 ring: int = 0) -> None:
+        """``ring``: rows of the ring of answers its owner notes by frame index (``sent``, ``sent_k``;
+        fsw/flightsoftware.py ``note_sent``), kept in this driver's buffers."""
         thrust_N = np.asarray(thrust_N, dtype=float)
         if thrust_N.ndim != 1 or thrust_N.size == 0 or not np.all(np.isfinite(thrust_N)) or np.any(thrust_N < 0):
             raise ValueError("thrust_N: must be a 1-D array of finite values >= 0")
@@ -56,16 +67,27 @@ class JetDriver:
         self.dt_s = float(dt_s)
         self.events = events
         self.thrust_N = thrust_N.copy()
-        self._mdot_kgps = thrust_N / (isp_s * g0_mps2)       # per jet, while on
         self.armed = False
         self.arm_on_entry = True
         self._params = {p.name: p for p in self.PARAMS}
-        self.inhibit = np.zeros(n, dtype=bool)
-        self.pulses = np.zeros(n, dtype=np.int64)
-        self.on_time_s = np.zeros(n)
+        # the arrays a cycle's tail reads and writes, in three buffers by type (a compiled caller
+        # takes three arguments, not nine: ``packed``); the names are views into them
+        ring = int(ring)
+        self._bytes = np.zeros((2 + ring, n), dtype=np.uint8)
+        self.inhibit = self._bytes[0].view(np.bool_)
+        self.last_command = self._bytes[1]                    # the command in force (sent last)
+        self.sent = self._bytes[2:]
+        self._counts = np.zeros(n + ring, dtype=np.int64)
+        self.pulses = self._counts[:n]
+        self.sent_k = self._counts[n:]
+        self.sent_k[:] = -2                                   # no frame answered
+        self._reals = np.zeros(2 * n + 1)
+        self.on_time_s = self._reals[:n]
+        self._reals[n:2 * n] = thrust_N / (isp_s * g0_mps2)   # per jet, while on
+        self._mdot_kgps = self._reals[n:2 * n]
+        self._reals[2 * n] = self.dt_s
         self.propellant_kg = 0.0
         self.seq = 0                                          # commands issued
-        self.last_command = np.zeros(n, dtype=np.uint8)       # the command in force (sent last)
         self._u8 = np.zeros(n, dtype=np.uint8)
 
     def _check_jet(self, jet) -> int:
@@ -102,12 +124,14 @@ class JetDriver:
         self.inhibit[sel] = on
         self.events.emit(t_s, EV.JET_INHIBIT, jets=jet, inhibit=on)
 
-    def state_arrays(self) -> tuple:
-        """``drive_jets``'s arguments after ``u_on`` and ``gate`` (the arrays this driver owns, made once
-        and only ever written in place, and dt), for a compiled caller that drives the jets
-        inside its own kernel (fsw/flightsoftware.py ``finish_cycle``); it adds what ``drive_jets``
-        returns to ``propellant_kg`` and counts ``seq`` as ``command`` does."""
-        return (self.inhibit, self.last_command, self.pulses, self.on_time_s, self._mdot_kgps, self.dt_s)
+    def packed(self) -> tuple:
+        """The driver's state in three buffers, made once and only ever written in place, for a
+        compiled caller that drives the jets inside its own kernel (fsw/flightsoftware.py
+        ``finish_cycle``, through ``packed_views``): uint8 rows (inhibit, the command in force,
+        the ring's answers), int64 (pulses, the ring's frame indices), float64 (on-time,
+        propellant flow per jet, dt). The caller adds what ``drive_jets`` returns to
+        ``propellant_kg`` and counts ``seq`` as ``command`` does."""
+        return self._bytes, self._counts, self._reals
 
     def command(self, u_alloc: np.ndarray, jets_enabled: bool) -> np.ndarray:
         """The command actually sent for the next period: u_alloc (> 0.5 = on; NaN = off)

@@ -21,12 +21,12 @@ _NO_PREDICTION = np.zeros(2)     # profile mode: no guidance answer to report
 
 
 @njit(cache=True)
-def fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd,
-                pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta,
-                health):
-    """Write one cycle's outputs into ``r[0]`` (FSW_STATE). Entry guidance (``npc``): a value
-    not available (no answer yet, non-finite) is 0 with its guid_flags bit clear; profile
-    mode reports none of them."""
+def fill_record(r, target_flag, u, short, torques, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd,
+                pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, theta_hat, eta, health):
+    """Write one cycle's outputs into ``r[0]`` (FSW_STATE). ``torques``: the SAMI torque and the
+    allocated one in its first six (fsw/flightsoftware.py FlightSoftware's torques' buffer).
+    Entry guidance (``npc``): a value not available (no answer yet, non-finite) is 0 with its
+    guid_flags bit clear; profile mode reports none of them."""
     q = r[0]
     q.k = k
     q.t_ns = np.int64(np.rint(t_s * 1e9))     # round half to even, as Python's round()
@@ -35,8 +35,8 @@ def fill_record(r, target_flag, u, short, alloc_ns, mode, degraded, deploy, npc,
     q.bank_err_rad = bank_err_rad
     for i in range(3):
         q.sigma_RN[i] = sigma_RN[i]
-        q.u_cal_B[i] = u_cal_B[i]
-        q.tau_alloc_B[i] = tau_alloc_B[i]
+        q.u_cal_B[i] = torques[i]
+        q.tau_alloc_B[i] = torques[3 + i]
     for i in range(theta_hat.shape[0]):
         q.theta_hat[i] = theta_hat[i]
     for i in range(eta.shape[0]):
@@ -84,10 +84,10 @@ class OutputFiller:
         self.rec["target_lon_rad"] = tlon if has_target else 0.0
 
     def fill_args(self, fsw) -> tuple:
-        """``fill_record``'s arguments after the record, ``target_flag``, ``u`` and ``short``: the
-        outputs of the cycle ``fsw`` has just run that are not the jet command's. (19 items: CPython
-        3.11 keeps every freed 20-item tuple on a free list it never takes them back from, up to
-        2,000 -- a new memory block each cycle, a pool every few dozen.)"""
+        """``fill_record``'s arguments after the record, ``target_flag``, ``u``, ``short`` and the
+        torques: the outputs of the cycle ``fsw`` has just run that are not the jet command's. (17
+        items: CPython 3.11 keeps every freed 20-item tuple on a free list it never takes them back
+        from, up to 2,000 -- a new memory block each cycle, a pool every few dozen.)"""
         g = fsw.guidance
         health = fsw.health
         e = fsw.entry
@@ -95,9 +95,9 @@ class OutputFiller:
         return (fsw.alloc_ns, int(fsw.modes.mode), fsw.allocator.degraded,
                 fsw.deploy.code if fsw.deploy is not None else 0, npc,
                 e.cycles if npc else 0, float(e.bank_cmd) if npc else 0.0, e.pred_impact if npc else _NO_PREDICTION,
-                fsw.k, fsw.t_s, g.phi_r, g.phidot_r, fsw.bank_err_rad, g.sigma_RN, fsw.u_cal_B,
-                fsw.tau_alloc_B, fsw.control.theta_hat, health.eta, health.state)
+                fsw.k, fsw.t_s, g.phi_r, g.phidot_r, fsw.bank_err_rad, g.sigma_RN, fsw.control.theta_hat, health.eta,
+                health.state)
 
     def fill(self, fsw, u: np.ndarray) -> None:
         """The outputs of the cycle ``fsw`` has just run, whose jet command is ``u``."""
-        fill_record(self.one, self.target_flag, u, fsw.alloc_short, *self.fill_args(fsw))
+        fill_record(self.one, self.target_flag, u, fsw.alloc_short, fsw.torques, *self.fill_args(fsw))

@@ -7,7 +7,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
+from fsw.flightsoftware import FlightSoftware, bank_short, note_sent
+from fsw.jetdriver import drive_jets
+from fsw.output import _NO_PREDICTION, fill_record
 from tests.front_oracle import PythonFrontFlightSoftware
 from interfaces.event_catalogue import EV
 from interfaces.records import FSW_STATE, GUID_NPC, GUID_PREDICTION, GUID_TARGET, new
@@ -133,3 +137,61 @@ class PythonTailFlightSoftware(PythonFrontFlightSoftware):
         u = self._sent_for(self.driver.command(u_alloc, self.modes.jets_enabled))
         self._output.fill(self, u)
         return u
+
+
+@njit(cache=True)
+def main_finish_cycle(tau_B, u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s, sent, sent_k,
+                      bank_axis_B, short_min_Nm, short_frac,
+                      r, target_flag, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd, pred,
+                      k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, u_cal_B, tau_alloc_B, theta_hat, eta, health):
+    """main's ``finish_cycle`` before its arrays were packed (35 arguments, 18 arrays). Today's
+    ``fill_record`` takes the torques' buffer: it comes in ``u_cal_B``'s place (u_cal_B is its
+    first three)."""
+    for i in range(3):
+        tau_alloc_B[i] = tau_B[i]
+    short = bank_short(bank_axis_B, u_cal_B, tau_alloc_B, short_min_Nm, short_frac)
+    used = drive_jets(u_alloc, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s)
+    note_sent(sent, sent_k, k, last)
+    fill_record(r, target_flag, last, short, u_cal_B, alloc_ns, mode, degraded, deploy, npc, guid_cycles, bank_cmd,
+                pred, k, t_s, phi_r, phidot_r, bank_err_rad, sigma_RN, theta_hat, eta, health)
+    return used, short
+
+
+class UnpackedTailFlightSoftware(FlightSoftware):
+    """FlightSoftware whose tail is main's before the packing: the 35-argument kernel, and no
+    rehearsal of the tail (the "before" of the tail's timing, docs/changelog.md)."""
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        d = self.driver
+        self._unpacked = (d.inhibit, d.last_command, d.pulses, d.on_time_s, d._mdot_kgps, d.dt_s, self._sent,
+                          self._sent_k)
+
+    def _finish(self, t_s: float, u_alloc: np.ndarray) -> np.ndarray:
+        driver, out = self.driver, self._output
+        used, short = main_finish_cycle(self.dutycycle.tau_B, u_alloc, driver.armed and self.modes.jets_enabled,
+                                        *self._unpacked,
+                                        self.bank_axis_B, self._bank_short_min_Nm,
+                                        self.params["control.shortfall_frac"],
+                                        out.one, out.target_flag, *self._main_fill_args())
+        driver.count(used)
+        self._check_bank_shortfall(t_s, short)
+        self._tau_last = tuple(self.tau_alloc_B.tolist())
+        self._have_prev = True
+        return driver.last_command
+
+    def _main_fill_args(self) -> tuple:
+        """main's ``OutputFiller.fill_args`` (19 items: u_cal_B -- here the torques' buffer, whose first
+        three it is -- and tau_alloc_B each its own)."""
+        g = self.guidance
+        health = self.health
+        e = self.entry
+        npc = e is not None
+        return (self.alloc_ns, int(self.modes.mode), self.allocator.degraded,
+                self.deploy.code if self.deploy is not None else 0, npc,
+                e.cycles if npc else 0, float(e.bank_cmd) if npc else 0.0, e.pred_impact if npc else _NO_PREDICTION,
+                self.k, self.t_s, g.phi_r, g.phidot_r, self.bank_err_rad, g.sigma_RN, self.torques,
+                self.tau_alloc_B, self.control.theta_hat, health.eta, health.state)
+
+    def _rehearse_tail(self) -> None:
+        pass

@@ -137,3 +137,43 @@ def test_a_flight_with_the_compiled_tail_equals_the_python_tail_bit_for_bit(scen
     assert rings_p.min() < -2, "no answer was made ambiguous by a rejected frame"
     assert fc.reconfig_times or scenario == "case1"
     assert dc.propellant_kg > 0.0
+
+
+def test_the_tails_rehearsal_writes_only_its_scratch_and_computes_what_the_cycle_did():
+    """FlightSoftware.rehearse runs ``finish_cycle`` with the last cycle's answer on scratch copies
+    of what it writes. The real state is set so that a rehearsal writing any of it would change
+    it (the command in force inverted, the ring's slot for this frame and the record's k spoilt,
+    tau_alloc_B zeroed); after the rehearsal all of it is as it was, and the scratch holds what
+    the last cycle's tail wrote (the ring, the record, tau_alloc_B) and one more period of
+    on-time for the jets on."""
+    scn = load_scenario("nominal")
+    plant = Plant(scn, scn.seed)
+    fsw = FlightSoftware(scn, EventLog())
+    frame = plant.sensors
+    for _ in range(30):
+        frame = plant.step(fsw.control_step(frame))
+    d = fsw.driver
+    u = d.last_command.copy()
+    assert u.any() and fsw._have_prev
+    slot = fsw.k % fsw._ring
+    done = {"sent": fsw._sent[slot].copy(), "out": fsw.output.copy(), "tau": fsw.tau_alloc_B.copy(),
+            "on": d.on_time_s.copy()}
+    d.last_command[:] = 1 - u
+    fsw._sent_k[slot] = -1
+    fsw._sent[slot] = 0
+    fsw.output["k"] = -7
+    fsw.tau_alloc_B[:] = 0.0
+    real = [a.copy() for a in d.packed()] + [fsw.output.copy(), fsw.torques.copy()]   # tau_alloc_B's buffer
+    counts = (d.propellant_kg, d.seq, fsw.alloc_short_cycles, len(fsw.events.history))
+    fsw.rehearse(frame, fsw.u_cal_B.copy())
+    for a, b in zip([*d.packed(), fsw.output, fsw.torques], real):
+        assert a.tobytes() == b.tobytes()
+    assert (d.propellant_kg, d.seq, fsw.alloc_short_cycles, len(fsw.events.history)) == counts
+    jb, jc, jr, rec, torques = fsw._tail_scratch
+    n = d.n
+    np.testing.assert_array_equal(jb[1], u)                               # the command, re-driven
+    np.testing.assert_array_equal(jb[2 + slot], done["sent"])
+    assert jc[n + slot] == fsw.k
+    np.testing.assert_array_equal(jr[:n], done["on"] + np.where(u != 0, fsw.dt_s, 0.0))
+    np.testing.assert_array_equal(torques[3:6], done["tau"])
+    assert rec.reshape(()).tobytes() == done["out"].tobytes()

@@ -28,11 +28,12 @@ from .controllability import Controllability, velocity_dir_B
 from .fdir import Fdir, jet_step
 from .guidance.reference import BankProfile, Guidance
 from .health import JetHealth
-from .jetdriver import JetDriver, drive_jets, packed_views
-from .law import LAW_DONE, LAW_SAFE_DUE, law_cycle
+from .jetdriver import JetDriver, drive_jets, packed_views, ring_views
+from .law import LAW_DONE, LAW_SAFE_DUE, LR_ALPHA_TRIM, LR_DT, LR_MU, LR_N, LR_OMEGA, LR_TRIM, LW_CHART, LW_FS, \
+    LW_N, LW_TRIM_OFF, law_cycle
 from .modes import Failsafes, Mode, ModeManager
 from .monitors import SensorMonitor, frame_check
-from .navigation import Navigation, _nav_kernel
+from .navigation import _S_T, Navigation, _nav_kernel
 from .output import OutputFiller, fill_record
 from .guidance.npc import PARAMS as NPC_PARAMS, EntryGuidance
 from .guidance.trigger import PARAMS as DEPLOY_PARAMS, DeployTrigger
@@ -96,28 +97,78 @@ def finish_cycle(tau_B, u_alloc, gate, jb, jc, jr, torques, short_frac, r, targe
     return used, short
 
 
+# intake_cycle's three buffers (numba's dispatch costs per array argument; the owners keep
+# views under their own names: FlightSoftware.__init__ binds them). ``ro``, what it only reads, bytes
+# holding: int64 [persist, model, oracle, n jets] (FDIR's persistence, navigation's density
+# model, FDIR in oracle mode, the size); float64 [the monitor's limits (6 x 2), FDIR's
+# thresholds (4), the planet's rotation rate, radius, rho0, scale height]; uint8 [jets off
+# (n), FDIR's isolated health state (n, int8)]. ``wf``, floats it writes: [the monitor's out
+# (5), FDIR's sum_dg (n), eta_new (n)]. ``wi``, int64 it writes: [the monitor's sequence (3),
+# FDIR's counters (3 x n), new_kind (n)]. The rehearsal has its own ``wf``, ``wi`` (scratch) and
+# reads ``ro``. The ring of answers FDIR judges by is the jet driver's, which the tail writes
+# (its buffers ``jb``, ``jc``: jetdriver.py ``ring_views``).
+RI_PERSIST, RI_MODEL, RI_ORACLE, RI_N, RI_END = 0, 1, 2, 3, 4
+RF_LIMS, RF_THR, RF_OMEGA, RF_RADIUS, RF_RHO0, RF_H, RF_N = 0, 12, 16, 17, 18, 19, 20
+WF_OUT, WF_SUM_DG = 0, 5
+WI_SEQ, WI_CNT = 0, 3
+
+
+def head_buffers(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``ro``, ``wf``, ``wi`` for ``n`` jets (zeros; the size set)."""
+    nb = 8 * (RI_END + RF_N) + 2 * n
+    ro = np.zeros(-(-nb // 8) * 8, dtype=np.uint8)
+    hi = ro[0:8 * RI_END].view(np.int64)
+    hi[RI_N] = n
+    return ro, np.zeros(WF_SUM_DG + 2 * n), np.zeros(WI_CNT + 4 * n, dtype=np.int64)
+
+
+def head_views(ro, wf, wi):
+    """(header ints, floats, lims, thr, zero_u, iso_state, out, sum_dg, eta_new, seq, cnt,
+    new_kind): views of ``head_buffers``' arrays (compiled too: ``intake_cycle`` unpacks its
+    arguments with it)."""
+    hi = ro[0:8 * RI_END].view(np.int64)
+    n = hi[RI_N]
+    o_b = 8 * (RI_END + RF_N)
+    fl = ro[8 * RI_END:o_b].view(np.float64)
+    return (hi, fl, fl[RF_LIMS:RF_LIMS + 12].reshape((6, 2)), fl[RF_THR:RF_THR + 4],
+            ro[o_b:o_b + n], ro[o_b + n:o_b + 2 * n].view(np.int8),
+            wf[WF_OUT:WF_OUT + 5], wf[WF_SUM_DG:WF_SUM_DG + n], wf[WF_SUM_DG + n:WF_SUM_DG + 2 * n],
+            wi[WI_SEQ:WI_SEQ + 3], wi[WI_CNT:WI_CNT + 3 * n].reshape((3, n)), wi[WI_CNT + 3 * n:WI_CNT + 4 * n])
+
+
+_head_views = njit(cache=True)(head_views)
+
+
 @njit(cache=True)
-def intake_cycle(x, ki, stale, next_apply, lims, out, seq, sent, sent_k, zero_u, oracle,
-                 iso_state, cnt, sum_dg, thr, persist, new_kind, eta_new,
-                 omega_planet, radius_m, model, rho0, H_m, nav_buf):
+def intake_cycle(x, ki, stale, next_apply, ro, wf, wi, nav_buf, jb, jc):
     """The control cycle's head in one compiled call, on a SENSORS record's floats ``x`` and
-    its (k, t_ns, u_k) ``ki``: the frame check (monitors.py ``frame_check``: ``lims`` ..
-    ``seq``, ``stale``), FDIR's jet monitor on the command in force (fdir.py ``jet_step``:
-    ``sent`` .. ``eta_new``, ``next_apply``) and navigation (navigation.py ``_nav_kernel``:
-    the planet's constants, the NavState buffer). Returns (code, t_s, k, V_rel, h, alpha,
-    beta, bank, rho, qbar, mach): code < 0 a rejected frame (``frame_check``'s code; nothing
-    past the check ran, the navigation figures are zeros), else frame_check's flags plus 4
-    times jet_step's (0: nothing for the Python caller to report or apply)."""
+    its (k, t_ns, u_k) ``ki``: the frame check (monitors.py ``frame_check``: the limits, out,
+    sequence, ``stale``), FDIR's jet monitor on the command in force (fdir.py ``jet_step``:
+    the driver's ring in ``jb``, ``jc``, FDIR's state and counters, ``next_apply``) and navigation
+    (navigation.py ``_nav_kernel``: the planet's constants, the NavState buffer ``nav_buf``, its
+    time slot too); the rest in ``ro``, ``wf``, ``wi`` (``head_views``). Returns (code, t_s, k, V_rel, h,
+    alpha, beta, bank, rho, qbar, mach): code < 0 a rejected frame (``frame_check``'s code;
+    nothing past the check ran, the navigation figures are zeros), else frame_check's flags
+    plus 4 times jet_step's (0: nothing for the Python caller to report or apply)."""
+    hi, fl, lims, thr, zero_u, iso_state, out, sum_dg, eta_new, seq, cnt, new_kind = _head_views(ro, wf, wi)
+    sent, sent_k = ring_views(jb, jc)
     k = ki[0]
     t_s = float(ki[1]) * 1e-9
     code = frame_check(x, k, lims, out, seq, stale)
     if code < 0:
         return code, t_s, k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    step = jet_step(ki[2], sent, sent_k, zero_u, x[15:], oracle, t_s, next_apply, iso_state, cnt, sum_dg, thr,
-                    persist, new_kind, eta_new)
-    V, h, alpha, beta, bank, rho, qbar, mach = _nav_kernel(x, omega_planet, radius_m, model, rho0, H_m, nav_buf)
+    step = jet_step(ki[2], sent, sent_k, zero_u, x[15:], hi[RI_ORACLE] != 0, t_s, next_apply, iso_state, cnt,
+                    sum_dg, thr, hi[RI_PERSIST:RI_PERSIST + 1], new_kind, eta_new)
+    nav_buf[_S_T] = t_s
+    V, h, alpha, beta, bank, rho, qbar, mach = _nav_kernel(x, fl[RF_OMEGA], fl[RF_RADIUS], hi[RI_MODEL],
+                                                           fl[RF_RHO0], fl[RF_H], nav_buf)
     return code + 4 * step, t_s, k, V, h, alpha, beta, bank, rho, qbar, mach
 
+
+def _adopt(owner, name: str, view: np.ndarray) -> None:
+    """``owner.name`` becomes ``view`` (a view of a packed buffer), holding its value."""
+    view[...] = getattr(owner, name)
+    setattr(owner, name, view)
 
 def declarations() -> tuple[tuple[str, list[Param]], ...]:
     """Every FSW parameter, by the owner that declares it and applies a new value."""
@@ -238,15 +289,30 @@ class FlightSoftware(GroundCommands):
         self._ring = periods(COMMAND_RING_S, self.dt_s)
         self._sent = self.driver.sent                 # (ring, jets) uint8: the answers
         self._sent_k = self.driver.sent_k             # the frame index of each slot's answer
-        # finish_cycle's buffers: the driver's (with the ring), and scratch copies of them and of
-        # the record and tau_alloc_B for the tail's rehearsal
-        self._drive_state = self.driver.packed()      # finish_cycle's buffers
-        # intake_cycle's arrays and constants after next_apply, the flight's and the rehearsal's
+        self._drive_state = self.driver.packed()      # finish_cycle's buffers (the ring's too)
+        # intake_cycle's buffers (``head_buffers``): the owners' arrays become views of them, under
+        # their own names; the rehearsal's scratch (FDIR's, the monitor's) views of the second pair
         mon, fd, nav = self.monitor, self.fdir, self.nav
-        ring = (self._sent, self._sent_k, self._zero_u, fd.oracle)
-        self._intake_args = (mon._lims, mon._out, mon._seq, *ring, *fd.step_arrays(), *nav.kernel_args())
-        self._intake_scratch = (mon._lims, mon._out, *ring, *fd.step_arrays(scratch=True),
-                                *nav.kernel_args(nav._r_buf))
+        ro, wf, wi = head_buffers(self.driver.n)
+        _, wf_r, wi_r = head_buffers(self.driver.n)
+        hi, fl, lims, thr, zero_u, iso, out, sum_dg, eta_new, seq, cnt, new_kind = head_views(ro, wf, wi)
+        om, radius, model, rho0, scale_h = nav._consts
+        fl[RF_OMEGA:RF_H + 1] = (om, radius, rho0, scale_h)
+        hi[RI_MODEL] = model
+        hi[RI_ORACLE] = fd.oracle
+        for owner, name, view in ((fd, "_persist", hi[RI_PERSIST:RI_PERSIST + 1]),
+                                  (self, "_zero_u", zero_u), (fd.health_isolated, "state", iso),
+                                  (mon, "_lims", lims), (fd, "_thr", thr), (mon, "_out", out), (fd, "_sum_dg", sum_dg),
+                                  (fd, "_eta_new", eta_new), (mon, "_seq", seq), (fd, "_cnt", cnt),
+                                  (fd, "_new_kind", new_kind)):
+            _adopt(owner, name, view)
+        v_r = head_views(ro, wf_r, wi_r)
+        for owner, name, view in ((fd, "_r_sum_dg", v_r[7]), (fd, "_r_eta", v_r[8]), (mon, "_r_seq", v_r[9]),
+                                  (fd, "_r_cnt", v_r[10]), (fd, "_r_kind", v_r[11])):
+            _adopt(owner, name, view)
+        jb, jc, _ = self._drive_state                  # the ring: read only in the head
+        self._intake_args = (ro, wf, wi, nav.state.buf, jb, jc)
+        self._intake_scratch = (ro, wf_r, wi_r, nav._r_buf, jb, jc)
         self._zero3 = np.zeros(3)
         self._residual_ready = False                   # RG2 has one earlier sample to difference
         self.realtime = realtime
@@ -258,17 +324,25 @@ class FlightSoftware(GroundCommands):
         # torques' buffer), for the tail's rehearsal
         self._tail_scratch = (*(a.copy() for a in self._drive_state), self._output.one.copy(),
                               self.torques.copy())
-        # law_cycle's arguments that are the same arrays every cycle (each owner updates its
-        # own in place), and scratch copies of the state it writes, for the rehearsal
-        nav_s, g, ctl = self.nav.state, self.guidance, self.control
-        fixed_in = (g.alpha_trim_rad, g.omega_planet_radps, g.mu_m3ps2, nav_s.r_N, nav_s.v_N, nav_s.vrel_N,
-                    nav_s.C_WN, nav_s.C_BN, nav_s.accel_B, nav_s.sigma_BN, nav_s.omega_BN_B)
-        self._law_args = (self.authority.trim, g.trim_offset, *fixed_in, g._out, self.dt_s, self.failsafes.state,
-                          self.tau_alloc_B, ctl._kb, ctl._sb, ctl.chart, self.u_cal_B)
-        self._law_scratch = (np.zeros(2), np.zeros(18), np.zeros(4), ctl._rb, np.zeros(1), np.zeros(3))
-        sc = self._law_scratch
-        self._law_rehearse_args = (self.authority.trim, sc[0], *fixed_in, sc[1], self.dt_s, sc[2],
-                                   self.tau_alloc_B, ctl._kb, sc[3], sc[4], sc[5])
+        # law_cycle's two buffers (law.py LR_*, LW_*): the owners' arrays become views of them;
+        # it reads tau_alloc_B from and writes u_cal_B into the torques' buffer. The rehearsal
+        # writes a scratch copy of ``lw``, of the reference's outputs, of SAMI's state and of the
+        # torques
+        g, ctl = self.guidance, self.control
+        lr, lw = np.zeros(LR_N), np.zeros(LW_N)
+        lr[LR_ALPHA_TRIM] = g.alpha_trim_rad
+        lr[LR_OMEGA] = g.omega_planet_radps
+        lr[LR_MU] = g.mu_m3ps2
+        lr[LR_DT] = self.dt_s
+        for owner, name, view in ((self.authority, "trim", lr[LR_TRIM:LR_TRIM + 5]),
+                                  (self.failsafes, "state", lw[LW_FS:LW_FS + 4]), (ctl, "chart", lw[LW_CHART:LW_CHART + 1]),
+                                  (g, "trim_offset", lw[LW_TRIM_OFF:LW_TRIM_OFF + 2])):
+            _adopt(owner, name, view)
+        self._law_w = lw
+        self._law_args = (lr, g._out, ctl._kb, ctl._sb, lw, self.torques)
+        self._law_scratch = (np.zeros(18), np.zeros(LW_N), np.zeros(10))
+        self._law_rehearse_args = (lr, self._law_scratch[0], ctl._kb, ctl._rb, self._law_scratch[1],
+                                   self._law_scratch[2])
 
     # ---------------------------------------------------------------- RG1
     def control_step(self, frame) -> np.ndarray:
@@ -317,12 +391,12 @@ class FlightSoftware(GroundCommands):
         if g.compiled_profile:
             prof = g.profile
             law, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
-                nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
-                entry, self._have_prev, pending, True, prof.seg_array, prof.phi0_rad, 0.0, 0.0, 0.0, *self._law_args)
+                nav.buf, entry, self._have_prev, pending, True, prof.seg_array, prof.phi0_rad, 0.0, 0.0, 0.0,
+                *self._law_args)
         else:
             law, g.phi_r, g.phidot_r, g.phiddot_r, self.bank_err_rad = law_cycle(
-                nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
-                entry, self._have_prev, pending, False, _NO_SEGS, 0.0, *g.profile.evaluate(nav.t_s), *self._law_args)
+                nav.buf, entry, self._have_prev, pending, False, _NO_SEGS, 0.0, *g.profile.evaluate(nav.t_s),
+                *self._law_args)
         if law == LAW_DONE:
             self.control.freeze = pending
         else:
@@ -436,8 +510,7 @@ class FlightSoftware(GroundCommands):
         x, seq = self.monitor.rehearsal_copy(fv[2])
         self.fdir.rehearsal_copy()
         self.nav.rehearsal_copy()
-        a = self._intake_scratch
-        intake_cycle(x, fv[3], False, self.fdir._next_apply, a[0], a[1], seq, *a[2:])
+        intake_cycle(x, fv[3], False, self.fdir._next_apply, *self._intake_scratch)
 
     def _sent_for(self, u: np.ndarray) -> np.ndarray:
         """Note ``u`` as this frame's answer (frame index self.k; ``note_sent``); returns u."""
@@ -488,13 +561,12 @@ class FlightSoftware(GroundCommands):
     def _rehearse_law(self) -> None:
         """``law_cycle`` on scratch copies of the state it writes (failsafes, SAMI, chart), with
         the last cycle's navigation and reference inputs; nothing the next cycle reads changes."""
-        nav, g, sc, ctl = self.nav.state, self.guidance, self._law_scratch, self.control
-        np.copyto(sc[2], self.failsafes.state)
-        np.copyto(sc[3], ctl._sb)
-        np.copyto(sc[4], ctl.chart)
+        g, ctl = self.guidance, self.control
+        np.copyto(self._law_scratch[1], self._law_w)
+        np.copyto(self._law_scratch[2], self.torques)
+        np.copyto(ctl._rb, ctl._sb)
         compiled = g.compiled_profile
-        law_cycle(nav.t_s, nav.qbar_pa, nav.bank_rad, nav.V_rel_mps, nav.rho_kgpm3, nav.alpha_rad, nav.beta_rad,
-                  self.modes.mode is Mode.ENTRY, self._have_prev, ctl.freeze, compiled,
+        law_cycle(self.nav.state.buf, self.modes.mode is Mode.ENTRY, self._have_prev, ctl.freeze, compiled,
                   g.profile.seg_array if compiled else _NO_SEGS, g.profile.phi0_rad if compiled else 0.0,
                   g.phi_r, g.phidot_r, g.phiddot_r, *self._law_rehearse_args)
 

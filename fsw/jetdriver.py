@@ -39,11 +39,18 @@ def drive_jets(u_on, gate, inhibit, last, pulses, on_time_s, mdot_kgps, dt_s):
 
 
 @njit(cache=True)
+def ring_views(jb, jc):
+    """The ring of answers in ``JetDriver.packed``'s buffers: (the answers, their frame indices)."""
+    return jb[2:], jc[jb.shape[1]:]
+
+
+@njit(cache=True)
 def packed_views(jb, jc, jr):
     """``JetDriver.packed``'s buffers as the arrays they hold: (inhibit, the command in force,
     pulses, on-time [s], propellant flow [kg/s], dt [s], the ring's answers, their frame indices)."""
     n = jb.shape[1]
-    return jb[0], jb[1], jc[:n], jr[:n], jr[n:2 * n], jr[2 * n], jb[2:], jc[n:]
+    sent, sent_k = ring_views(jb, jc)
+    return jb[0], jb[1], jc[:n], jr[:n], jr[n:2 * n], jr[2 * n], sent, sent_k
 
 
 class JetDriver:

@@ -24,8 +24,10 @@ _IN0 = SENSORS.fields["omega_BN_B"][1]
 assert all(SENSORS.fields[f][1] == _IN0 + 24 * i for i, f in enumerate(_IN_FIELDS))
 N_IN = 15
 # the NavState arrays, views of one buffer the kernel writes: sigma, omega, r, v, accel, vrel
-# (3 each), C_WN, C_BN (9 each, row-major)
-_S_SIGMA, _S_OMEGA, _S_R, _S_V, _S_ACC, _S_VREL, _S_CWN, _S_CBN, _S_N = 0, 3, 6, 9, 12, 15, 18, 27, 36
+# (3 each), C_WN, C_BN (9 each, row-major); then the scalars, for the compiled law that reads
+# them from here (fsw/law.py ``law_cycle``): t, V_rel, h, alpha, beta, bank, rho, qbar, mach
+_S_SIGMA, _S_OMEGA, _S_R, _S_V, _S_ACC, _S_VREL, _S_CWN, _S_CBN = 0, 3, 6, 9, 12, 15, 18, 27
+_S_T, _S_VR, _S_H, _S_ALPHA, _S_BETA, _S_BANK, _S_RHO, _S_QBAR, _S_MACH, _S_N = 36, 37, 38, 39, 40, 41, 42, 43, 44, 45
 
 
 def frame_vectors(frame: np.ndarray) -> np.ndarray:
@@ -41,7 +43,8 @@ class NavState:
       t_s, sigma_BN (3), omega_BN_B (3) [rad/s], r_N (3) [m], v_N (3) [m/s],
       vrel_N (3), V_rel_mps, h_m, C_WN (3x3), C_BN (3x3), alpha_rad, beta_rad, bank_rad,
       rho_kgpm3 (FSW model, undispersed), qbar_pa, mach, accel_B (3) [m/s^2].
-    The arrays are views of one buffer (``buf``), which the compiled update writes.
+    The arrays are views of one buffer (``buf``), which the compiled update writes; it also
+    holds a copy of the scalars (``_S_T`` on), the compiled law's (the attributes are Python's).
     """
 
     def __init__(self):
@@ -70,7 +73,8 @@ class NavState:
 @njit(cache=True)
 def _nav_kernel(x, omega_planet, radius_m, model, rho0, H_m, b):
     """One navigation update from the packed frame vectors ``x`` (frame_vectors' order) into
-    the NavState buffer ``b``; returns (V_rel, h, alpha, beta, bank, rho, qbar, mach). Same
+    the NavState buffer ``b`` (the scalars too, after the arrays: not the time, the caller's);
+    returns (V_rel, h, alpha, beta, bank, rho, qbar, mach). Same
     steps as the NumPy code it replaced: copy the inputs, v_rel = v - Omega x r, |v_rel|,
     h = |r| - R, C_WN, C_BN, aerodynamic angles, model density (0 exponential, 1
     polynomial), dynamic pressure, Mach."""
@@ -100,6 +104,14 @@ def _nav_kernel(x, omega_planet, radius_m, model, rho0, H_m, b):
         rho = _rho_poly(h)
     qbar = 0.5 * rho * V ** 2
     mach = V / _speed_of_sound(h)
+    b[_S_VR] = V
+    b[_S_H] = h
+    b[_S_ALPHA] = alpha
+    b[_S_BETA] = beta
+    b[_S_BANK] = bank
+    b[_S_RHO] = rho
+    b[_S_QBAR] = qbar
+    b[_S_MACH] = mach
     return V, h, alpha, beta, bank, rho, qbar, mach
 
 
@@ -133,6 +145,7 @@ class Navigation:
         float64 array of 15 in its order): one compiled call."""
         n = self.state
         n.t_s = t_s
+        n.buf[_S_T] = t_s
         om, R, model, rho0, H = self._consts
         (n.V_rel_mps, n.h_m, n.alpha_rad, n.beta_rad, n.bank_rad, n.rho_kgpm3, n.qbar_pa,
          n.mach) = _nav_kernel(x, om, R, model, rho0, H, n.buf)

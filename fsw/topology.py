@@ -146,6 +146,13 @@ class Topology:
         # the flying instance's own rehearsal (its stages' compiled calls on scratch copies)
         # is code no cycle runs: loaded here too, on the spare, which has flown
         spare.rehearse(nxt, spare.u_cal_B)
+        # the cycles off the common path -- no frame, the sensors stale, a frame the check
+        # refuses -- call compiled code of their own (the driver, the answers' ring, the record,
+        # each on its own): its first call would cost a real cycle milliseconds
+        for _ in range(spare.monitor.stale_n + 1):
+            spare.no_frame(spare.t_s + spare.dt_s)
+        spare.control_step(frame)   # an old step: refused
+        spare.control_step(nxt)     # a frame again after them
         spare.close()
         if self.rehearsal is not None:
             # the rehearsal's own first call is cold too (its spare's first cycle, the flying

@@ -290,3 +290,34 @@ def test_the_spare_rehearses_on_a_copy_so_the_next_frame_in_a_refilled_record_re
     assert counts["chamber_range"] == 1 and counts["chamber_nonfinite"] == 0
     assert counts == ref_topo.fsw.monitor.counts
     assert topo.rehearsal.monitor.counts["chamber_range"] == 1              # the spare saw the value too
+
+
+def test_after_warm_up_a_missing_a_stale_and_a_rejected_frame_load_no_compiled_code():
+    """The cycles off the common path -- no frame came, the sensors went stale, the frame check
+    refused a frame -- are rare in flight, so their first one must not wait for a kernel's
+    first call either (seen: every real-time SIL run's largest control task, ~5 ms, was the
+    one tick after the plant's last step, which has no frame)."""
+    scn = load_scenario("nominal")
+    plant = Plant(scn, scn.seed)
+    fsw = FlightSoftware(scn, EventLog())
+    src = [plant.sensors]
+    topo = Topology(fsw, LockstepClock(), frame_source=lambda: src[0])
+    topo.warm_up(plant.sensors)
+    old = None
+    for i in range(3):
+        if i == 1:
+            old = plant.sensors.copy()
+        topo.tick()
+        plant.step(topo.u)
+    before = _compiled_overloads()
+    assert len(before) > 10
+    src[0] = None
+    for _ in range(fsw.monitor.stale_n + 1):     # no frame, until the sensors are stale
+        topo.tick()
+    assert fsw.monitor.stale
+    src[0] = old                                 # an old step: the frame check refuses it
+    topo.tick()
+    src[0] = plant.sensors
+    topo.tick()
+    assert _compiled_overloads() == before
+    topo.close()

@@ -219,8 +219,8 @@ class FlightSoftware(GroundCommands):
         self.allocator = Allocator(veh.torque_matrix_Nm, veh.thrust_N, self.params, async_rebuild=realtime)
         self.fdir = Fdir(self.params, self.dt_s, self.events)
         # the driver keeps the ring of answers (below) in its buffers, beside what it sent last
-        self.driver = JetDriver(veh.thrust_N, veh.isp_s, planet.g0_mps2, self.dt_s, self.events,
-                                ring=periods(COMMAND_RING_S, self.dt_s))
+        self._ring = periods(COMMAND_RING_S, self.dt_s)
+        self.driver = JetDriver(veh.thrust_N, veh.isp_s, planet.g0_mps2, self.dt_s, self.events, ring=self._ring)
         self.modes = ModeManager(self.events)
         self.monitor = SensorMonitor(self.events, self.dt_s, self.params, planet.radius_m)
         self.failsafes = Failsafes(self.params, self.modes)
@@ -286,7 +286,6 @@ class FlightSoftware(GroundCommands):
         # the commands this FSW answered frames with, by frame index: FDIR judges each jet by
         # the command the plant reports it held (SENSORS.u_k), which in real time can be an
         # older one than the last sent (a late answer: the plant held the one before)
-        self._ring = periods(COMMAND_RING_S, self.dt_s)
         self._sent = self.driver.sent                 # (ring, jets) uint8: the answers
         self._sent_k = self.driver.sent_k             # the frame index of each slot's answer
         self._drive_state = self.driver.packed()      # finish_cycle's buffers (the ring's too)
@@ -322,8 +321,10 @@ class FlightSoftware(GroundCommands):
         self.output = self._output.rec
         # scratch copies of what finish_cycle writes (the driver's buffers, the record, the
         # torques' buffer), for the tail's rehearsal
+        # (the torques' copy is the law's rehearsal's too: each rehearsal refills it first)
+        self._torques_scratch = self.torques.copy()
         self._tail_scratch = (*(a.copy() for a in self._drive_state), self._output.one.copy(),
-                              self.torques.copy())
+                              self._torques_scratch)
         # law_cycle's two buffers (law.py LR_*, LW_*): the owners' arrays become views of them;
         # it reads tau_alloc_B from and writes u_cal_B into the torques' buffer. The rehearsal
         # writes a scratch copy of ``lw``, of the reference's outputs, of SAMI's state and of the
@@ -340,7 +341,7 @@ class FlightSoftware(GroundCommands):
             _adopt(owner, name, view)
         self._law_w = lw
         self._law_args = (lr, g._out, ctl._kb, ctl._sb, lw, self.torques)
-        self._law_scratch = (np.zeros(18), np.zeros(LW_N), np.zeros(10))
+        self._law_scratch = (np.zeros(18), np.zeros(LW_N), self._torques_scratch)
         self._law_rehearse_args = (lr, self._law_scratch[0], ctl._kb, ctl._rb, self._law_scratch[1],
                                    self._law_scratch[2])
 

@@ -32,6 +32,7 @@ import shutil
 import subprocess
 import sys
 import time
+from typing import Callable
 
 from common import argtypes
 from ellipsled.procs import stop_process
@@ -257,18 +258,26 @@ def child(seconds: float, priority: int | None, cpu: int | None, scenario: str =
 
 def run_child(seconds: float, priority: int | None = PRIORITY, cpu: int | None = 1,
               period_us: int = PERIOD_US) -> dict:
-    cmd = [sys.executable, "-m", "ellipsled.bench.jitter", "--child", "--seconds", str(seconds),
-           "--priority", str(priority if priority is not None else 0), "--cpu", str(cpu if cpu is not None else -1),
-           "--period-us", str(period_us)]
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    return run_json_child("ellipsled.bench.jitter",
+                          ["--child", "--seconds", str(seconds), "--priority", str(priority if priority is not None else 0),
+                           "--cpu", str(cpu if cpu is not None else -1), "--period-us", str(period_us)],
+                          RESULT_TAG, seconds + 120.0)
+
+
+def run_json_child(module: str, args: list[str], tag: str, timeout_s: float) -> dict:
+    """``python -m module *args`` in its own session (killed with its group on timeout): the
+    JSON on its output line that starts with ``tag``. The real-time loops of the benchmark run
+    so, that neither their scheduling policy nor their locked memory outlives them."""
+    p = subprocess.Popen([sys.executable, "-m", module, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, start_new_session=True)
     try:
-        out, err = p.communicate(timeout=seconds + 120.0)
+        out, err = p.communicate(timeout=timeout_s)
     except subprocess.TimeoutExpired:
         stop_process(p, 5.0, group=True)
-        raise RuntimeError(f"real-time loop child timed out after {seconds + 120.0:.0f} s")
+        raise RuntimeError(f"real-time loop child timed out after {timeout_s:.0f} s")
     for line in out.splitlines():
-        if line.startswith(RESULT_TAG):
-            return json.loads(line[len(RESULT_TAG):])
+        if line.startswith(tag):
+            return json.loads(line[len(tag):])
     raise RuntimeError(f"real-time loop child failed (exit {p.returncode}): {err.strip()[-400:]}")
 
 
@@ -418,23 +427,36 @@ def rt_rows(res: dict) -> list[Row]:
                 "", "", "used when permitted", NO_TARGET)]
 
 
+def child_arguments(ap: argparse.ArgumentParser) -> None:
+    """The options a real-time child of the benchmark takes (this loop's and wake.py's):
+    ``--priority``, ``--cpu``, and ``--quick`` for the section run alone."""
+    ap.add_argument("--priority", type=argtypes.int_range(0, 99), default=PRIORITY, help="SCHED_FIFO priority (0: none)")
+    ap.add_argument("--cpu", type=argtypes.int_range(-1, (os.cpu_count() or 1) - 1), default=-1,
+                    help="pin to this CPU (-1: no pinning)")
+    ap.add_argument("--quick", action="store_true")
+
+
+def child_or_section(a: argparse.Namespace, is_child: bool, child_fn: Callable[..., dict], tag: str,
+                     section: Callable[[bool], dict], **kw) -> int:
+    """As a child: ``child_fn(priority, cpu, **kw)``'s figures on one line behind ``tag``
+    (run_json_child reads them); else the section run here, its JSON printed."""
+    if is_child:
+        res = child_fn(priority=a.priority or None, cpu=a.cpu if a.cpu >= 0 else None, **kw)
+        print(tag + json.dumps(res), flush=True)
+    else:
+        print(json.dumps(section(a.quick), indent=2))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--child", action="store_true", help="run the real-time loop here, print its statistics")
     ap.add_argument("--seconds", type=argtypes.timeout_s, default=10.0)
-    ap.add_argument("--priority", type=argtypes.int_range(0, 99), default=PRIORITY, help="SCHED_FIFO priority (0: none)")
-    ap.add_argument("--cpu", type=argtypes.int_range(-1, (os.cpu_count() or 1) - 1), default=-1,
-                    help="pin to this CPU (-1: no pinning)")
     ap.add_argument("--period-us", type=argtypes.int_range(1000, 100_000), default=PERIOD_US,
                     help="(child) the loop's control period [us]")
-    ap.add_argument("--quick", action="store_true")
+    child_arguments(ap)
     a = ap.parse_args(argv)
-    if a.child:
-        res = child(a.seconds, a.priority or None, a.cpu if a.cpu >= 0 else None, period_us=a.period_us)
-        print(RESULT_TAG + json.dumps(res), flush=True)
-    else:
-        print(json.dumps(run(a.quick), indent=2))
-    return 0
+    return child_or_section(a, a.child, child, RESULT_TAG, run, seconds=a.seconds, period_us=a.period_us)
 
 
 if __name__ == "__main__":

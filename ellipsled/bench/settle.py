@@ -24,7 +24,7 @@ SAMPLES = 12                     # sleeps and timed pieces of work in one probe
 TOLERANCE = 1.25                 # settled: the probe within this factor of the baseline ...
 SETTLED_PROBES = 2               # ... this many probes running
 MAX_WAIT_S = {True: 30.0, False: 90.0}       # quick / full: the longest wait before a section
-REALTIME_SECTIONS = ("groundlink", "latency", "jitter", "sil_realtime", "sil_router", "flood")
+REALTIME_SECTIONS = ("groundlink", "latency", "jitter", "wake", "sil_realtime", "sil_router", "flood")
 
 
 class Work:

@@ -10,7 +10,7 @@ interrupted run keeps what it measured.
 Sections (ellipsled/bench/<name>.py, each ``run(quick) -> dict``): machine, codec,
 allocator, plant, cycle, batch, groundlink, latency, jitter, sil_lockstep, sil_realtime,
 sil_router (ellipsled/bench/router.py), flood (a ground flood at the real-time SIL),
-bridge; ``rt`` (real-time hygiene) is read from the jitter loop. The real-time sections
+bridge, wake (what the wait between cycles does to the control task); ``rt`` (real-time hygiene) is read from the jitter loop. The real-time sections
 each begin after a settle phase (settle.py: the host back at the run's start). Each
 section module declares its TARGETS and builds its own table rows from them
 (``rows(res)``); this module only orders them (ROWS).
@@ -61,7 +61,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
 }
 
 ORDER = ("machine", "codec", "allocator", "reconfig", "plant", "cycle", "batch", "guidance", "groundlink", "latency",
-         "jitter", "sil_lockstep", "sil_realtime", "sil_router", "flood", "bridge")
+         "jitter", "wake", "sil_lockstep", "sil_realtime", "sil_router", "flood", "bridge")
 
 
 # --------------------------------------------------------------------------- sections
@@ -131,7 +131,7 @@ SECTIONS: dict[str, Callable[[bool], dict]] = {
     "machine": machine, "codec": _lazy("codec"), "allocator": _lazy("allocator"), "reconfig": _lazy("reconfig"),
     "plant": _lazy("plant"), "cycle": _lazy("cycle"), "batch": _lazy("batch"), "guidance": _lazy("guidance"),
     "groundlink": _lazy("groundlink"),
-    "latency": _lazy("latency"), "jitter": _lazy("jitter"), "sil_lockstep": _lazy("sil", "lockstep"),
+    "latency": _lazy("latency"), "jitter": _lazy("jitter"), "wake": _lazy("wake"), "sil_lockstep": _lazy("sil", "lockstep"),
     "sil_realtime": _lazy("sil", "realtime"), "sil_router": _lazy("router"), "flood": _lazy("flood"),
     "bridge": _lazy("bridge", "section"),
 }
@@ -284,7 +284,7 @@ def _write_json(res: dict, out: Path) -> None:
 # --------------------------------------------------------------------------- table
 # The table's rows, in order: each section module builds its own against the targets it
 # declares (ellipsled/bench/rows.py); imported only when a table is made.
-ROWS = (("allocator", "rows"), ("reconfig", "rows"), ("cycle", "rows"), ("jitter", "rows"), ("sil", "realtime_rows"), ("router", "rows"),
+ROWS = (("allocator", "rows"), ("reconfig", "rows"), ("cycle", "rows"), ("jitter", "rows"), ("sil", "realtime_rows"), ("wake", "rows"), ("router", "rows"),
         ("flood", "rows"), ("latency", "rows"), ("sil", "lockstep_rows"), ("batch", "rows"), ("guidance", "rows"), ("plant", "rows"),
         ("bridge", "rows"), ("codec", "rows"), ("groundlink", "rows"), ("jitter", "rt_rows"), ("settle", "rows"))
 

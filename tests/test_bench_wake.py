@@ -52,6 +52,19 @@ def test_spun_never_sleeps_and_slept_sleeps_to_its_final_spin():
     assert slept.sleeps == [slept.sleeps[0] + k * PERIOD_NS for k in range(3)]   # absolute, a period apart
 
 
+def test_a_turn_restarts_its_clock_one_period_away_whatever_release_it_is_at():
+    for k0 in (0, 1, 975):
+        ft = FakeTime()
+        clock = wake.clock_for("slept", load_params(PARAMS), PERIOD_NS, now_ns=ft.now_ns, sleep_until=ft.sleep_until)
+        t_start = ft.t
+        wake.restart(clock, k0)
+        k, t_rel = clock.release()
+        assert k == k0 and clock.missed == 0
+        assert 0 < t_rel - t_start <= PERIOD_NS + 10_000        # one period (and the clock's reads) away
+        k, t_next = clock.release()
+        assert (k, t_next - t_rel) == (k0 + 1, PERIOD_NS)
+
+
 def test_batch_is_lockstep_and_unknown_conditions_are_refused():
     assert isinstance(wake.clock_for("batch", load_params(PARAMS), PERIOD_NS), LockstepClock)
     assert isinstance(wake.clock_for("rehearsed", load_params(PARAMS), PERIOD_NS), RealTimeClock)

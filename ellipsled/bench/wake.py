@@ -60,6 +60,13 @@ def clock_for(condition: str, params: dict, period_ns: int, **kw):
     raise ValueError(f"wake: unknown condition {condition!r} (known: {', '.join(CONDITIONS)})")
 
 
+def restart(clock, k0: int) -> None:
+    """Release ``k0`` of a real-time ``clock`` one period from now, the next a period apart:
+    the other flights' turns are neither missed releases nor waited out (``RealTimeClock.start``
+    counts releases from its t0: the default t0 would put release k0 k0 periods away)."""
+    clock.start(t0_ns=clock.now_ns() + (1 - k0) * clock.period_ns, k0=k0)
+
+
 def child(period_us: int, block: int, rounds: int, priority: int | None, cpu: int | None,
           scenario: str = "nominal") -> dict:
     """The four conditions in this process; per condition the control task's p50 / p99 /
@@ -114,8 +121,7 @@ def child(period_us: int, block: int, rounds: int, priority: int | None, cpu: in
                 modulated[i] = fsw.dutycycle.modulated
                 frame = plant.step(topo.u)
         else:
-            # its next release a period from now: the turns of the others are no missed releases
-            clock.start(k0=k)
+            restart(clock, k)
             for i in range(k, k + block):
                 topo.tick()
                 modulated[i] = fsw.dutycycle.modulated

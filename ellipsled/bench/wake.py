@@ -104,7 +104,6 @@ def child(period_us: int, block: int, rounds: int, priority: int | None, cpu: in
         topo.warm_up(plant.sensors)
         flights[name] = (plant, fsw, topo, clock)
 
-    released = dict.fromkeys(CONDITIONS, 0)      # cycles each has flown (its clock's releases)
     lp = {name: np.zeros(n_max, dtype=bool) for name in CONDITIONS}   # the duty-cycle LP's cycles
     # the first cycles of a batch turn come after the others' turns, seconds of other work:
     # cold, not back to back -- flown, not counted
@@ -112,7 +111,7 @@ def child(period_us: int, block: int, rounds: int, priority: int | None, cpu: in
 
     def turn(name: str) -> None:
         plant, fsw, topo, clock = flights[name]
-        k, modulated = released[name], lp[name]
+        k, modulated = topo.executive.cycles, lp[name]    # the cycles it has flown so far
         if name == "batch":
             frame = plant.sensors
             counted[name][k:k + BATCH_COLD] = False
@@ -125,7 +124,6 @@ def child(period_us: int, block: int, rounds: int, priority: int | None, cpu: in
             for i in range(k, k + block):
                 topo.tick()
                 modulated[i] = fsw.dutycycle.modulated
-        released[name] = k + block
 
     rt_rep = rt.apply(cpus=[cpu] if cpu is not None else None, priority=priority)
     rt.gc_out_of_cycle()

@@ -62,6 +62,18 @@ def positive_float(s: str) -> float:
     return v
 
 
+def choice_list(choices):
+    """A comma-separated, non-empty list of names out of ``choices`` (a tuple, in the order given)."""
+    def parse(s: str) -> tuple[str, ...]:
+        names = tuple(x.strip() for x in s.split(",") if x.strip())
+        bad = [x for x in names if x not in choices]
+        if not names or bad:
+            raise argparse.ArgumentTypeError(f"must be a comma-separated list of {', '.join(choices)}, got {s!r}")
+        return names
+    parse.__name__ = "list"
+    return parse
+
+
 # the options several commands share, with their ranges
 seed = int_range(0, SEED_MAX)
 # simulated seconds: an entry lasts minutes; the run's history must also fit the memory

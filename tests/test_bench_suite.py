@@ -266,15 +266,41 @@ def test_latency_floor_is_the_same_runs_round_trip_at_the_runs_rate_plus_the_con
     def run(p99, ctl99):
         return {"latency_p99_us": p99, "extra": {"fsw_control_us": {"p50": 50.0, "p99": ctl99},
                                                  "latency_split_us": {}}}
-    res = {"sil_realtime": {"idle": run(800.0, 200.0), "idle_200hz": run(520.0, 100.0)},
-           "latency": {"sil_50hz_zenoh_p99_us": 500.0, "sil_200hz_zenoh_p99_us": 400.0,
-                       "sil_zenoh_p99_us": 1.0}}                        # the 100-Hz figure is not the floor
+    def part(p99):
+        return {"p50_us": 1.0, "p99_us": p99, "samples_us": [p99] * 100, "n": 100, "lost": 0}
+    res = {"sil_realtime": {"idle": run(800.0, 200.0), "idle_200hz": run(520.0, 100.0),
+                            "floor_50hz": sil.pooled_floor(part(500.0), part(500.0), 50.0),
+                            "floor_200hz": sil.pooled_floor(part(400.0), part(400.0), 200.0)},
+           "latency": {"sil_zenoh_p99_us": 1.0}}                        # the 100-Hz figure is not the floor
     f = sil.latency_floor(res, "idle", 50.0)
     assert f["floor_p99_us"] == 700.0 and f["remainder_us"] == 100.0 and abs(f["over_floor"] - 800 / 700) < 1e-12
     rows = sil.floor_rows(res)
     assert [r[-1] for r in rows[::2]] == ["**FAIL**", "pass"]            # 800 / 700 = 1.14x; 520 / 500 = 1.04x
-    assert rows[2][1] == "520.0 (20.0)" and "= Zenoh + codec round trip 400.0 + FSW control task 100.0" in rows[2][2]
+    assert rows[2][1] == "520.0 (20.0)" and "= Zenoh + codec round trip 400.0" in rows[2][2]
+    assert "before / after the run 400.0 / 400.0) + FSW control task 100.0" in rows[2][2]
     assert sil.latency_floor({"sil_realtime": {"idle": run(800.0, 200.0)}}, "idle", 50.0)["floor_p99_us"] is None
+
+
+def test_the_floor_pools_the_round_trips_measured_on_both_sides_of_the_run():
+    """Pooled, not averaged: the p99 over every round trip of both parts (independent truth:
+    numpy's percentile over the concatenation); a failed part nulls the floor with its reason."""
+    import numpy as np
+    rng = np.random.default_rng(3)
+    a, b = rng.gamma(4.0, 30.0, 1000), rng.gamma(4.0, 90.0, 1000)      # a quiet side and a noisy one
+    before = {"p50_us": float(np.median(a)), "p99_us": float(np.percentile(a, 99)), "samples_us": list(a),
+              "n": 1000, "lost": 1}
+    after = {"p50_us": float(np.median(b)), "p99_us": float(np.percentile(b, 99)), "samples_us": list(b),
+             "n": 1000, "lost": 0}
+    f = sil.pooled_floor(before, after, 200.0)
+    both = np.concatenate([a, b])
+    assert f["p99_us"] == float(np.percentile(both, 99)) and f["n"] == 2000 and f["lost"] == 1
+    assert before["p99_us"] < f["p99_us"] < after["p99_us"]
+    assert f["parts"]["before"]["p99_us"] == before["p99_us"] and "samples_us" not in f["parts"]["after"]
+    bad = sil.pooled_floor(before, {"p99_us": None, "p99_us_reason": "RuntimeError: echo died"}, 200.0)
+    assert bad["p99_us"] is None and "after: RuntimeError: echo died" in bad["p99_us_reason"]
+    assert sil.latency_floor({"sil_realtime": {"idle_200hz": {"latency_p99_us": 500.0,
+                                                              "extra": {"fsw_control_us": {"p99": 50.0}}},
+                                               "floor_200hz": bad}}, "idle_200hz", 200.0)["over_floor"] is None
 
 
 

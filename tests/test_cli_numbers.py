@@ -76,6 +76,8 @@ def test_a_number_outside_its_range_is_a_usage_error_naming_the_option(argv, opt
     ("ellipsled.bench.latency", ["--echo", "udp", "--port", "70000"], "--port"),
     ("ellipsled.bench.latency", ["--variants", "--n", "0"], "--n"),
     ("ellipsled.bench.latency", ["--variants", "--rate", "nan"], "--rate"),
+    ("ellipsled.bench.latency", ["--client", "--kinds", "zenoh,tcp"], "--kinds"),
+    ("ellipsled.bench.latency", ["--client", "--kinds", ","], "--kinds"),
 ], ids=lambda x: " ".join(x) if isinstance(x, list) else x)
 def test_a_bench_tools_number_outside_its_range_is_a_usage_error(module, argv, option, capsys, monkeypatch):
     """The benchmark's own tools (python -m ellipsled.bench.<tool>) check their numbers too,
@@ -86,7 +88,7 @@ def test_a_bench_tools_number_outside_its_range_is_a_usage_error(module, argv, o
 
     def ran(*args, **kwargs):
         raise AssertionError(f"{module} ran with {argv}")
-    for work in ("send", "child", "run", "_echo_udp", "_echo_zenoh", "variants", "_both"):
+    for work in ("send", "child", "run", "_echo_udp", "_echo_zenoh", "variants", "round_trips"):
         if hasattr(mod, work):
             monkeypatch.setattr(mod, work, ran)
     with pytest.raises(SystemExit) as e:

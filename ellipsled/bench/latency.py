@@ -47,12 +47,21 @@ from .rows import NO_TARGET, Row, fmt, ratio, row
 READY = "ECHO-READY"
 
 
-def _stats(rtt_ns: list[int], lost: int) -> dict:
-    a = np.asarray(rtt_ns, dtype=np.float64) * 1e-3
+def stats_us(rtt_us, lost: int) -> dict:
+    """p50 / p99 / max [us] and counts of round trips given in microseconds."""
+    a = np.asarray(rtt_us, dtype=np.float64)
     if a.size == 0:
-        return {"p50_us": None, "p99_us": None, "max_us": None, "n": 0, "lost": lost}
+        return {"p50_us": None, "p99_us": None, "max_us": None, "n": 0, "lost": int(lost)}
     return {"p50_us": float(np.percentile(a, 50)), "p99_us": float(np.percentile(a, 99)),
             "max_us": float(a.max()), "n": int(a.size), "lost": int(lost)}
+
+
+def _stats(rtt_ns: list[int], lost: int, samples: bool = False) -> dict:
+    a = np.asarray(rtt_ns, dtype=np.float64) * 1e-3
+    st = stats_us(a, lost)
+    if samples:
+        st["samples_us"] = [round(float(x), 3) for x in a]
+    return st
 
 
 # --------------------------------------------------------------------------- echo processes
@@ -186,7 +195,7 @@ def _stop(p: subprocess.Popen) -> None:
         stop_process(p, 5.0)
 
 
-def udp_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
+def udp_roundtrip(n: int, rate_hz: float, placement: str = "default", samples: bool = False) -> dict:
     from interfaces.transport import free_port
     port = free_port()
     p = _start_echo("udp", port, placement)
@@ -221,14 +230,15 @@ def udp_roundtrip(n: int, rate_hz: float, placement: str = "default") -> dict:
     finally:
         s.close()
         _stop(p)
-    return _stats(rtt, lost)
+    return _stats(rtt, lost, samples)
 
 
 def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default", shm: bool = False,
-                    lowlatency: bool = True) -> dict:
+                    lowlatency: bool = True, samples: bool = False) -> dict:
     """The Zenoh + codec round trip; ``shm``: both ends put their frames from shared-memory
     buffers (the result then counts the frames each end received through shared memory:
-    ``shm_rx_client``, ``shm_rx_echo``); ``lowlatency``: the transport both ends use."""
+    ``shm_rx_client``, ``shm_rx_echo``); ``lowlatency``: the transport both ends use;
+    ``samples``: every round trip [us] in ``samples_us``."""
     from interfaces import records, transport
     from interfaces.codec import Codec
     from interfaces.keys import keys
@@ -282,7 +292,7 @@ def zenoh_roundtrip(n: int, rate_hz: float, placement: str = "default", shm: boo
     finally:
         transport.close(sub, pub, ses)
         _stop(p)
-    st = _stats(rtt, lost)
+    st = _stats(rtt, lost, samples)
     st.update(shm=shm, lowlatency=lowlatency, shm_rx_client=out.shm_rx, shm_rx_echo=echo_shm_rx)
     return st
 
@@ -301,13 +311,17 @@ def variants(n: int, rate_hz: float, rounds: int = 2) -> dict:
     return res
 
 
-def _in_child(n: int, rate_hz: float, placement: str) -> dict:
-    """Both round trips measured by a child client (its scheduling changes stay there)."""
+KINDS = ("udp", "zenoh")
+
+
+def _in_child(n: int, rate_hz: float, placement: str, kinds=KINDS, samples: bool = False) -> dict:
+    """The round trips ``kinds`` measured by a child client (its scheduling changes stay there);
+    ``samples``: each with every round trip [us]."""
     cmd = [sys.executable, "-m", "ellipsled.bench.latency", "--client", "--placement", placement,
-           "--n", str(n), "--rate", f"{rate_hz:g}"]
+           "--n", str(n), "--rate", f"{rate_hz:g}", "--kinds", ",".join(kinds)] + (["--samples"] if samples else [])
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        out, err = p.communicate(timeout=60.0 + 3.0 * n / rate_hz)
+        out, err = p.communicate(timeout=60.0 + 3.0 * len(kinds) * n / rate_hz)
     except subprocess.TimeoutExpired:
         _stop(p)
         raise RuntimeError(f"latency client ({placement}) timed out") from None
@@ -317,16 +331,23 @@ def _in_child(n: int, rate_hz: float, placement: str) -> dict:
     return json.loads(out)
 
 
-def _both(n: int, rate_hz: float, placement: str) -> dict:
-    return {"udp": udp_roundtrip(n, rate_hz, placement), "zenoh": zenoh_roundtrip(n, rate_hz, placement)}
+def round_trips(n: int, rate_hz: float, placement: str, kinds=KINDS, samples: bool = False) -> dict:
+    fns = {"udp": udp_roundtrip, "zenoh": zenoh_roundtrip}
+    return {kind: fns[kind](n, rate_hz, placement, samples=samples) for kind in kinds}
 
 
-SIL_RATES_HZ = (50.0, 200.0)      # the real-time SIL's control rates whose latency floor the bench states
+def sil_floor(seconds: float, rate_hz: float) -> dict:
+    """The Zenoh + codec round trip with the SIL's placement paced at ``rate_hz`` for
+    ``seconds``, every round trip kept (``samples_us``): one part of the floor the real-time
+    SIL's sensor-to-actuator latency is judged against (ellipsled/bench/sil.py measures it
+    on both sides of the run it judges). The idle time between round trips (caches cooling,
+    cores sleeping) is part of what each leg costs, as between the SIL's frames."""
+    return _in_child(max(int(seconds * rate_hz), 1), rate_hz, "sil", kinds=("zenoh",), samples=True)["zenoh"]
 
 
 def run(quick: bool) -> dict:
     n, rate = (1000, 100.0) if quick else (6000, 100.0)
-    d = _both(n, rate, "default")
+    d = round_trips(n, rate, "default")
     udp, zen = d["udp"], d["zenoh"]
     res = {"figure": "round trip between two processes on 127.0.0.1 [us], paced at %g Hz" % rate,
            "round_trips": n, "rate_hz": rate,
@@ -345,19 +366,6 @@ def run(quick: bool) -> dict:
         for kind in ("udp", "zenoh"):
             res[f"sil_{kind}_p99_us"] = None
             res[f"sil_{kind}_p99_us_reason"] = f"{type(e).__name__}: {e}"
-    # the floor of the SIL's sensor-to-actuator latency at each of its control rates: the same
-    # round trip paced at that rate (the idle time between round trips is what cools the
-    # caches and lets the cores sleep, as between the SIL's frames)
-    seconds = 10.0 if quick else 30.0
-    for hz in SIL_RATES_HZ:
-        key = f"sil_{hz:g}hz_zenoh"
-        try:
-            z = _in_child(int(seconds * hz), hz, "sil")["zenoh"]
-            for q in ("p50_us", "p99_us", "max_us", "lost"):
-                res[f"{key}_{q}"] = z[q]
-        except Exception as e:
-            res[f"{key}_p99_us"] = None
-            res[f"{key}_p99_us_reason"] = f"{type(e).__name__}: {e}"
     return res
 
 
@@ -374,12 +382,6 @@ def rows(res: dict) -> list[Row]:
                      f"{fmt(lat.get('sil_zenoh_p50_us'))} / {fmt(lat.get('sil_zenoh_p99_us'))}",
                      f"UDP {fmt(lat.get('sil_udp_p50_us'))} / {fmt(lat.get('sil_udp_p99_us'))}",
                      f"{fmt(ratio(lat.get('sil_zenoh_p99_us'), lat.get('sil_udp_p99_us')))}x (p99)", "", NO_TARGET))
-    for hz in SIL_RATES_HZ:
-        key = f"sil_{hz:g}hz_zenoh"
-        if f"{key}_p99_us" in lat:
-            R.append(row(f"Zenoh + codec round trip, SIL placement, paced at {hz:g} Hz p50 / p99 [us]",
-                         f"{fmt(lat.get(f'{key}_p50_us'))} / {fmt(lat.get(f'{key}_p99_us'))}",
-                         "", "", "the SIL's latency floor at that rate", NO_TARGET))
     return R
 
 
@@ -389,7 +391,10 @@ def main(argv=None) -> int:
     ap.add_argument("--port", type=argtypes.udp_port, default=0)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--placement", choices=("default", "sil"), default="default")
-    ap.add_argument("--client", action="store_true", help="measure both round trips, print JSON")
+    ap.add_argument("--client", action="store_true", help="measure the round trips (--kinds), print JSON")
+    ap.add_argument("--kinds", type=argtypes.choice_list(KINDS), default=",".join(KINDS),
+                    help="(client) the round trips to measure, comma-separated")
+    ap.add_argument("--samples", action="store_true", help="(client) every round trip [us] in the JSON")
     ap.add_argument("--shm", action="store_true", help="(echo) put frames from Zenoh shared memory")
     ap.add_argument("--standard-transport", action="store_true", help="(echo) Zenoh's standard transport")
     ap.add_argument("--variants", action="store_true",
@@ -415,7 +420,7 @@ def main(argv=None) -> int:
     elif a.client:
         import json
         from common import rt
-        out = _both(a.n, a.rate, a.placement)
+        out = round_trips(a.n, a.rate, a.placement, a.kinds, a.samples)
         try:
             fifo = os.sched_getscheduler(0) == os.SCHED_FIFO
         except OSError:

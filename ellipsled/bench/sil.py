@@ -10,9 +10,10 @@
 - rate headroom: the idle run again at a 5-ms control period (``--dt-control 0.005``, 200 Hz)
   beside the 50-Hz one: cycle slips, release jitter, commands the plant missed, the control
   task (target: 0 slips, every command answered);
-- the latency floor: sensor-to-actuator p99 at 50 and 200 Hz against the same invocation's
-  Zenoh + codec round trip paced at that rate plus the control task (target ≤ 1.1×), and the
-  idle run with the nodes' rehearsal off (``--no-rehearse``) beside it.
+- the latency floor: sensor-to-actuator p99 at 50 and 200 Hz against the Zenoh + codec round
+  trip with the SIL's placement paced at that rate, measured just before and just after the
+  run (half the run's span each, pooled: ``pooled_floor``), plus the control task (target
+  ≤ 1.1×), and the idle run with the nodes' rehearsal off (``--no-rehearse``) beside it.
 
 ``ellipsled run <scenario> --lockstep|--realtime --duration S --out DIR --rerun none`` is
 called as a subprocess with a timeout. When the command is absent or fails, every figure
@@ -141,16 +142,24 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
                    extra={k: v for k, v in sil.items() if k not in SIL_KEYS})
         return out
 
-    res = {"figure": "real-time SIL at 50 Hz: sensor-to-actuator latency and release jitter [us]",
-           "idle": one(),
-           # the standard transport instead of the default low-latency one
-           "idle_standard_transport": one(("--no-zenoh-lowlatency",)),
-           # the footprint's baseline: the same run with nothing locked (nor SCHED_FIFO)
-           "idle_unlocked": one(("--no-rt",)),
-           # rate headroom: the same run at 200 Hz
-           "idle_200hz": one(("--dt-control", f"{FAST_DT_S:g}")),
-           # the nodes' rehearsal of their receiving paths off: what it takes off the latency
-           "idle_no_rehearse": one(("--no-rehearse",))}
+    def bracketed(hz: float, extra=()) -> dict:
+        """The run ``extra`` at ``hz`` with its latency floor's round trips measured on both
+        sides of it (``floor_{hz}hz``)."""
+        before = _floor_part(dur / 2, hz)
+        out = one(extra)
+        res[f"floor_{hz:g}hz"] = pooled_floor(before, _floor_part(dur / 2, hz), hz)
+        return out
+
+    res = {"figure": "real-time SIL at 50 Hz: sensor-to-actuator latency and release jitter [us]"}
+    res.update(idle=bracketed(50.0),
+               # the standard transport instead of the default low-latency one
+               idle_standard_transport=one(("--no-zenoh-lowlatency",)),
+               # the footprint's baseline: the same run with nothing locked (nor SCHED_FIFO)
+               idle_unlocked=one(("--no-rt",)),
+               # rate headroom: the same run at 200 Hz
+               idle_200hz=bracketed(200.0, ("--dt-control", f"{FAST_DT_S:g}")),
+               # the nodes' rehearsal of their receiving paths off: what it takes off the latency
+               idle_no_rehearse=one(("--no-rehearse",)))
     res["footprint"] = footprint(res["idle"], res["idle_unlocked"])
     tools_ok, tools_why = ensure_tools()
     if not tools_ok:
@@ -164,6 +173,38 @@ def realtime(quick: bool, available: tuple[bool, str] | None = None) -> dict:
             res["load"] = _nulls(SIL_KEYS[1:], f"background load failed: {type(e).__name__}: {e}")
     res["targets"] = dict(REALTIME_TARGETS)
     return res
+
+
+def _floor_part(seconds: float, hz: float) -> dict:
+    """One side's round trips of a floor (latency.sil_floor), or its failure's reason."""
+    from .latency import sil_floor
+    try:
+        return sil_floor(seconds, hz)
+    except Exception as e:
+        return {"p99_us": None, "p99_us_reason": f"{type(e).__name__}: {e}"}
+
+
+def pooled_floor(before: dict, after: dict, hz: float) -> dict:
+    """The floor's round trip at ``hz`` from its two parts, measured just before and just after
+    the run it judges, each half the run's span at the run's rate: together as many round
+    trips as the run has frames, pooled (p50 / p99 / max over all of them) so that the floor
+    is taken over the same host spell and the same count as the latency. A single sample
+    away from the run is no baseline for a p99: the same round trip's p99 moves 2-3x
+    between 10-s samples minutes apart (docs/changelog.md, Benchmarks). Each part's own
+    p50 / p99 stays beside it (``parts``); null with the reasons when a part failed."""
+    from .latency import stats_us
+    parts = {"before": before, "after": after}
+    out = {"figure": f"Zenoh + codec round trip, SIL placement, paced at {hz:g} Hz, measured on both sides "
+                     "of the run it is the floor of [us]",
+           "rate_hz": hz,
+           "parts": {w: {k: p.get(k) for k in ("p50_us", "p99_us", "max_us", "n", "lost", "p99_us_reason")
+                         if k in p} for w, p in parts.items()}}
+    failed = [f"{w}: {p.get('p99_us_reason', 'no round trips')}" for w, p in parts.items() if not p.get("samples_us")]
+    if failed:
+        out.update(p50_us=None, p99_us=None, max_us=None, p99_us_reason="; ".join(failed))
+        return out
+    out.update(stats_us(before["samples_us"] + after["samples_us"], before.get("lost", 0) + after.get("lost", 0)))
+    return out
 
 
 def footprint(locked: dict, unlocked: dict) -> dict:
@@ -247,16 +288,18 @@ def rate_rows(res: dict) -> list[Row]:
 
 def latency_floor(res: dict, key: str, hz: float) -> dict:
     """The sensor-to-actuator p99 of the real-time run ``key`` against its floor [us]: the
-    same bench run's Zenoh + codec round trip p99 with the SIL's placement paced at the
-    run's rate, plus the FSW's control task p99 (its share); the remainder is the rest."""
+    Zenoh + codec round trip p99 with the SIL's placement paced at the run's rate, measured
+    on both sides of that run (``pooled_floor``), plus the FSW's control task p99 (its share);
+    the remainder is the rest. ``parts``: the round trip's p99 before / after the run."""
     s = g(res, "sil_realtime", key) or {}
     lat = s.get("latency_p99_us")
-    rt = g(res, "latency", f"sil_{hz:g}hz_zenoh_p99_us")
+    rt = g(res, "sil_realtime", f"floor_{hz:g}hz", "p99_us")
+    parts = tuple(g(res, "sil_realtime", f"floor_{hz:g}hz", "parts", w, "p99_us") for w in ("before", "after"))
     ctl = g(s, "extra", "fsw_control_us", "p99")
     floor = None if rt is None or ctl is None else rt + ctl
     return {"latency_p99_us": lat, "roundtrip_p99_us": rt, "control_p99_us": ctl, "floor_p99_us": floor,
             "remainder_us": None if lat is None or floor is None else lat - floor,
-            "over_floor": ratio(lat, floor)}
+            "over_floor": ratio(lat, floor), "parts": parts}
 
 
 def floor_rows(res: dict) -> list[Row]:
@@ -272,6 +315,7 @@ def floor_rows(res: dict) -> list[Row]:
         R.append(row(f"sensor-to-actuator p99 at {hz:g} Hz against its floor [us]: measured (remainder)",
                      f"{fmt(f['latency_p99_us'])} ({fmt(f['remainder_us'])})",
                      f"floor {fmt(f['floor_p99_us'])} = Zenoh + codec round trip {fmt(f['roundtrip_p99_us'])} "
+                     f"(before / after the run {fmt(f['parts'][0])} / {fmt(f['parts'][1])}) "
                      f"+ FSW control task {fmt(f['control_p99_us'])}",
                      f"{fmt(r)}x floor", f"p99 <= {k:g}x floor", None if r is None else r <= k))
         ex = s.get("extra") or {}

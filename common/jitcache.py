@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -68,9 +69,10 @@ def configure() -> str:
         return os.environ.get("NUMBA_CACHE_DIR", "")   # no writable cache: numba decides
     _prune(base, digest, time.time())
     os.environ["NUMBA_CACHE_DIR"] = str(path)
-    try:                                       # numba imported already: its config follows
-        from numba.core import config
+    # numba imported already: its config follows; not yet: it reads the variable when it is
+    # (importing it here would import numpy too, before a real-time process has set numpy's
+    # threads: common/rt.py single_threaded_numerics)
+    config = sys.modules.get("numba.core.config")
+    if config is not None:
         config.CACHE_DIR = str(path)
-    except ImportError:
-        pass
     return str(path)

@@ -57,3 +57,22 @@ def test_this_process_caches_its_kernels_under_this_versions_folder():
     path = jitcache.configure()
     assert path.endswith(jitcache.sources_digest()) and os.environ["NUMBA_CACHE_DIR"] == path
     assert config.CACHE_DIR == path
+
+
+def test_a_fresh_process_configures_the_cache_without_importing_numba_or_numpy(tmp_path):
+    """``import common`` in a process that did not inherit NUMBA_CACHE_DIR leaves numba and
+    numpy unimported (a real-time child sets numpy's threads before numpy loads: the jitter
+    loop, common/rt.py single_threaded_numerics); numba, imported afterwards, reads the
+    folder from the variable."""
+    import subprocess
+    import sys
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["ELLIPSLED_NUMBA_CACHE"] = str(tmp_path)
+    code = ("import sys, os, common\n"
+            "print('numba' in sys.modules, 'numpy' in sys.modules)\n"
+            "import numba.core.config as c\n"
+            "print(c.CACHE_DIR == os.environ['NUMBA_CACHE_DIR'], c.CACHE_DIR.startswith(sys.argv[1]))\n")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=120,
+                       env=env, cwd=str(jitcache.ROOT))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "False", "True", "True"], r.stdout

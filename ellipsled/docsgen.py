@@ -13,12 +13,14 @@ documentation site, written from the code (never edited by hand).
     DIR/reference/paper-claims.md the paper's claims with their verdicts: the figures of one
                                   ``ellipsled report`` (docs/data/paper-claims.json, its
                                   claims.json) judged by ellipsled/verdicts.py
-    DIR/reference/bench-table.md  the benchmark table of one ``ellipsled bench`` run
-                                  (docs/data/bench.json), rendered by ellipsled/bench/suite.py
+    DIR/reference/bench-table.md  the benchmark tables of a full and a quick ``ellipsled bench``
+                                  run (docs/data/bench.json, bench-quick.json), rendered by
+                                  ellipsled/bench/suite.py
 
 ``--figures RUN_DIR`` draws the dashboards page's figures from a run (ellipsled/docfigures.py).
 ``--claims FILE`` / ``--bench FILE`` first take a new report's claims.json / a new bench
-JSON into docs/data/ (``--bench-context TEXT``: what the machine was doing, said on the page).
+JSON into docs/data/ (``--bench-context TEXT``: what the machine was doing, said on the page;
+a bench JSON goes to the full run's slot or the quick run's by its ``quick`` flag).
 
 DIR is docs/ by default. ``make docs`` runs this before ``mkdocs build``;
 tests/test_docs_generated.py regenerates into a temporary folder and compares. ``--check``
@@ -36,7 +38,8 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 DATA = DOCS / "data"
 CLAIMS_JSON = DATA / "paper-claims.json"
-BENCH_JSON = DATA / "bench.json"
+BENCH_JSON = DATA / "bench.json"              # the full run's
+BENCH_QUICK_JSON = DATA / "bench-quick.json"  # the quick run's
 PAGES = ("reference/parameters.md", "reference/records.md", "reference/cli.md", "reference/paper-claims.md",
          "reference/bench-table.md")
 USAGE_WIDTH = 96            # usage lines are wrapped at a fixed width, whatever the terminal
@@ -339,25 +342,43 @@ def claims_page(fig: dict | None = None) -> str:
     return "\n".join(out)
 
 
-def bench_page(res: dict | None = None) -> str:
-    """The table of one committed ``ellipsled bench`` run, each figure beside its same-run
-    baseline and judged also at the reference machine's speed (ellipsled/bench/suite.py)."""
-    from ellipsled.bench import suite
+def bench_slot(res: dict) -> Path:
+    """Where a bench JSON is published: the full run's slot or the quick run's (its ``quick``)."""
+    return BENCH_QUICK_JSON if res.get("quick") else BENCH_JSON
 
-    res = _load_json(BENCH_JSON) if res is None else res
-    out = [BANNER.format(src="docs/data/bench.json (one `ellipsled bench` run) and ellipsled/bench/suite.py"),
-           "# Benchmark table: latest committed run", ""]
-    if res is None:
-        return "\n".join(out + ["No benchmark run committed yet: run `ellipsled bench --quick --out runs/bench.json`, "
-                                "then `python -m ellipsled.docsgen --bench runs/bench.json --bench-context TEXT`."])
+
+def _bench_run(res: dict) -> list[str]:
+    from ellipsled.bench import suite
     m = res.get("machine") or {}
-    out += [f"**{'Quick' if res.get('quick') else 'Full'} run of {m.get('time_utc', 'an unknown date')}** on "
+    return [f"**{'Quick' if res.get('quick') else 'Full'} run of {m.get('time_utc', 'an unknown date')}** on "
             f"{m.get('nproc')} CPUs. {res.get('context', '')}".rstrip(), "",
             "Machine-speed baseline of the same run: `bytes()` of a SENSORS record, p50 "
             f"{_num(round(m['speed_bytes_p50_us'], 3)) if m.get('speed_bytes_p50_us') else 'n/m'} µs, "
             f"×{_num(round(m['speed_factor'], 2)) if m.get('speed_factor') else 'n/m'} the reference machine's "
             f"{_num(suite.REFERENCE_BYTES_P50_US)} µs. How to read the columns and how to produce a new table: "
             "[benchmarks](../benchmarks.md).", "", suite.table(res)]
+
+
+def bench_page(res: dict | None = None, quick: dict | None = None) -> str:
+    """The tables of the committed ``ellipsled bench`` runs, the full one (``res``) and the
+    quick one (``quick``), each figure beside its same-run baseline and judged also at the
+    reference machine's speed (ellipsled/bench/suite.py). Without arguments, the runs in
+    docs/data/; a run passed alone is the page's only one."""
+    if res is None and quick is None:
+        res, quick = _load_json(BENCH_JSON), _load_json(BENCH_QUICK_JSON)
+    runs = [r for r in (res, quick) if r is not None]
+    out = [BANNER.format(src="docs/data/bench.json and docs/data/bench-quick.json (a full and a quick "
+                         "`ellipsled bench` run) and ellipsled/bench/suite.py"),
+           "# Benchmark tables: latest committed runs", ""]
+    if not runs:
+        return "\n".join(out + ["No benchmark run committed yet: run `ellipsled bench --quick --out runs/bench.json`, "
+                                "then `python -m ellipsled.docsgen --bench runs/bench.json --bench-context TEXT`."])
+    if len(runs) == 1:
+        return "\n".join(out + _bench_run(runs[0]))
+    out += ["The full run first, then the quick one (fewer samples, shorter runs: 10 s of real-time SIL "
+            "flight instead of 60)."]
+    for r in runs:
+        out += ["", f"## {'Quick' if r.get('quick') else 'Full'} run", ""] + _bench_run(r)
     return "\n".join(out)
 
 
@@ -408,7 +429,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=DOCS, help="documentation folder (default: docs/)")
     ap.add_argument("--check", action="store_true", help="write nothing; exit 1 if a page is out of date")
     ap.add_argument("--claims", type=Path, help="an `ellipsled report`'s claims.json to publish")
-    ap.add_argument("--bench", type=Path, help="an `ellipsled bench` JSON to publish")
+    ap.add_argument("--bench", type=Path, help="an `ellipsled bench` JSON to publish (a full run's or a quick "
+                                               "run's: each has its slot, the page shows both)")
     ap.add_argument("--bench-context", help="with --bench: what the machine was doing (shown on the page)")
     ap.add_argument("--figures", type=Path, metavar="RUN_DIR",
                     help="draw the dashboards page's figures (docs/img/dashboards/) from a run's output folder")
@@ -424,7 +446,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.claims:
         take(a.claims, CLAIMS_JSON)
     if a.bench:
-        take(a.bench, BENCH_JSON, a.bench_context)
+        import json
+        take(a.bench, bench_slot(json.loads(a.bench.read_text())), a.bench_context)
     if a.check:
         bad = stale(a.out)
         for page in bad:

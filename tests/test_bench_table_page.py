@@ -47,3 +47,17 @@ def test_take_keeps_the_context_beside_the_run(tmp_path):
     docsgen.take(Path(__file__).parent / "data" / "bench-small.json", dest, "loaded 2-core machine")
     data = json.loads(dest.read_text())
     assert data["context"] == "loaded 2-core machine" and data["batch"] == FIXTURE["batch"]
+
+
+def test_a_full_and_a_quick_run_each_have_their_slot_and_the_page_shows_both(tmp_path):
+    full = json.loads(json.dumps(FIXTURE))
+    full["quick"] = False
+    full["machine"]["time_utc"] = "2026-01-03T00:00:00Z"
+    assert docsgen.bench_slot(full) == docsgen.BENCH_JSON and docsgen.bench_slot(FIXTURE) == docsgen.BENCH_QUICK_JSON
+    page = docsgen.bench_page(full, FIXTURE)
+    i_full, i_quick = page.index("## Full run"), page.index("## Quick run")
+    assert i_full < page.index("**Full run of 2026-01-03T00:00:00Z**") < i_quick
+    assert i_quick < page.index("**Quick run of 2026-01-02T03:04:05Z**")
+    assert page.count("| batch real-time factor (one process) |") == 2
+    alone = docsgen.bench_page(FIXTURE)                       # one run: no sections
+    assert "## " not in alone and "**Quick run of" in alone

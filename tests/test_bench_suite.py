@@ -259,6 +259,10 @@ def test_rate_rows_set_200_hz_beside_50_hz():
     assert sil.rate_rows(res)[0][1].startswith("0 (2)") and sil.rate_rows(res)[0][-1] == "pass"
     res["sil_realtime"]["idle_200hz"] = run(2, 0, 2000, 6.0, own=1)
     assert sil.rate_rows(res)[0][-1] == "**FAIL**"
+    res["sil_realtime"]["idle_200hz"] = run(0, 0, 1999, 6.0)         # the plant past its own deadline once:
+    res["sil_realtime"]["idle_200hz"]["extra"]["sim_counts"]["missed_plant_late"] = 1   # not the FSW's miss
+    assert sil.rate_rows(res)[0][1] == ("0 (0); 0 of 2000 (+1 the plant reached past its deadline) "
+                                        "(+10 before the first command)") and sil.rate_rows(res)[0][-1] == "pass"
     assert sil.rate_rows({"sil_realtime": {"idle": run(0, 0, 1, 1.0)}}) == []
 
 

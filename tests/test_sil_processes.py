@@ -177,7 +177,8 @@ def test_realtime_sil_locks_to_the_plant_and_flies_the_fault_case(tmp_path, load
     assert "phase lock on step" in fsw_log, fsw_log
     steps = sim["steps"]
     assert steps == round(20.0 / 0.02) + 1
-    assert (sil["latency_samples"] + sim["counts"]["missed_commands"]     # each step: one of the three
+    assert (sil["latency_samples"] + sim["counts"]["missed_commands"]     # each step: one of the four
+            + sim["counts"]["missed_plant_late"]
             + sim["counts"]["unanswered_at_start"]) == steps
     assert sil["latency_samples"] >= steps // 2, sil
     assert s["bank_err_max_after_fault_deg"] < 5.0

@@ -241,12 +241,16 @@ def _missed(s: dict):
 
 
 def _answered(s: dict) -> str | None:
-    """"m of n" commands missed after the FSW's first answer, and the steps before it."""
+    """"m of n" commands missed after the FSW's first answer; beside them the steps the plant
+    itself reached past its deadline (the host held the plant: it waited for no command) and
+    the steps before the first answer."""
     n, m = g(s, "extra", "latency_samples"), _missed(s)
     if n is None or m is None:
         return None
+    late = g(s, "extra", "sim_counts", "missed_plant_late") or 0
     start = g(s, "extra", "sim_counts", "unanswered_at_start")
-    return f"{m} of {n + m}" + (f" (+{start} before the first command)" if start is not None else "")
+    return (f"{m} of {n + m + late}" + (f" (+{late} the plant reached past its deadline)" if late else "")
+            + (f" (+{start} before the first command)" if start is not None else ""))
 
 
 def _own(s: dict):

@@ -106,8 +106,11 @@ class SimNode:
         self.sensor_seq = 0     # per publication: a frame sent again is a new sample, not a replay
         # real time: a step without its command by the deadline is missed once the FSW has
         # answered once; before that (the FSW phase-locks its clock on the first frames of the
-        # running plant, ellipsled/sil/fsw_node.py) it is unanswered at start
-        self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "unanswered_at_start": 0,
+        # running plant, ellipsled/sil/fsw_node.py) it is unanswered at start; a step the plant
+        # itself reached past its deadline (the host held it: no wait for the command at all)
+        # is missed_plant_late, not the flight software's miss
+        self.counts = {"stale_commands": 0, "late_commands": 0, "missed_commands": 0, "missed_plant_late": 0,
+                       "unanswered_at_start": 0,
                        "fault_rejected": 0, "resent_frames": 0, "warmup_frames": 0,
                        "faults_applied": 0}
         self.rejects: dict[str, int] = {}
@@ -265,6 +268,7 @@ class SimNode:
                 self._warm_command.run()   # its decode warm when the command comes (DecodeRehearsal)
             deadline = release + period - margin
             got = False
+            waited = now_ns() < deadline          # False: the plant came past its own deadline
             while now_ns() < deadline and not self.stop:
                 s = transport.recv(self.sub_jets, max(0.0, (deadline - now_ns()) * 1e-9), poll_s=20e-6,
                                    spin_s=self.spin_s)
@@ -291,7 +295,8 @@ class SimNode:
                     got = True
                     break
             if not got:
-                self.counts["missed_commands" if last_cmd_k >= 0 else "unanswered_at_start"] += 1
+                self.counts["unanswered_at_start" if last_cmd_k < 0
+                            else "missed_commands" if waited else "missed_plant_late"] += 1
             if k - last_cmd_k >= self.args.miss_periods:
                 self.u[:] = 0
                 self.u_k = -1

@@ -218,9 +218,9 @@ class RealTimeClock:
 
 
 # the causes a late release is put down to (explain_late_release): the first two are the loop's
-# own work, the other two the host's (or a thread above the loop's priority)
+# own work, the others the host's (or a thread above the loop's priority)
 OWN_CAUSES = ("previous_cycle", "rehearsal")
-HOST_CAUSES = ("late_wakeup", "preempted")
+HOST_CAUSES = ("late_wakeup", "preempted", "stalled")
 
 
 def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int, carried_host_ns: int = 0) -> dict:
@@ -229,10 +229,14 @@ def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int, carried
     after it, overran into this one), ``late_wakeup`` (a sleep -- to the rehearsal or to the
     release -- ended after its target: the kernel woke the thread late), ``preempted`` (the
     thread was off its CPU while it rehearsed or spun: the host, or a thread above the
-    loop's priority), ``rehearsal`` (the rehearsal's own CPU time beyond the lead it was
-    given: ours). A previous cycle that overran only because the host released it late
-    (``carried_host_ns``, the host's share of that release) hands that share on as the host's.
-    ``cause`` is the largest; ``own`` whether it is the loop's own work."""
+    loop's priority), ``stalled`` (the time from the release -- or the thread's wake-up, if
+    later -- to the task's start beyond what the thread was seen off its CPU: only clock reads
+    run there, so the rest is a stall the guest does not see, e.g. the hypervisor holding
+    the virtual CPU while its thread counts as running), ``rehearsal`` (the rehearsal's own
+    CPU time beyond the lead it was given: ours). A previous cycle that overran only because
+    the host released it late (``carried_host_ns``, the host's share of that release) hands
+    that share on as the host's. ``cause`` is the largest; ``own`` whether it is the loop's
+    own work."""
     reh = clock.tr_reh_target != 0
     lead = t_rel - clock.tr_reh_target if reh else 0
     reh_wall = clock.tr_reh_end - clock.tr_reh_start if reh else 0
@@ -245,11 +249,13 @@ def explain_late_release(clock: RealTimeClock, t_rel: int, t_start: int, carried
     overrun = max(0, clock.tr_enter - t_rel)
     carried = min(overrun, carried_host_ns)
     slept = clock.tr_enter < clock.tr_wake_target
+    spin_off = max(0, spin_wall - spin_cpu)
     shares = {
         "previous_cycle": overrun - carried,
         "late_wakeup": (max(0, clock.tr_reh_start - clock.tr_reh_target)
                         + (max(0, clock.tr_woke - clock.tr_wake_target) if slept else 0) + carried),
-        "preempted": max(0, reh_wall - reh_cpu) + max(0, spin_wall - spin_cpu),
+        "preempted": max(0, reh_wall - reh_cpu) + spin_off,
+        "stalled": max(0, t_start - max(t_rel, clock.tr_woke) - spin_off),
         "rehearsal": max(0, reh_cpu - lead),
     }
     cause = max(shares, key=shares.get)

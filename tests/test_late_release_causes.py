@@ -24,9 +24,13 @@ class Host:
         self.off = 0
         self.late_wakeups: dict[int, int] = {}      # release k -> how late the kernel woke its first sleep
         self.t0 = 0                                   # release 0
+        self.stall_at, self.stall_ns = 1 << 62, 0     # an unseen stall at that time (now())
 
     def now(self) -> int:
         self.t += US
+        if self.t >= self.stall_at:             # the hypervisor holds the virtual CPU: the clock
+            self.t += self.stall_ns             # jumps, the thread's CPU time with it (unseen)
+            self.stall_at, self.stall_ns = 1 << 62, 0
         return self.t
 
     def cpu(self) -> int:
@@ -44,11 +48,12 @@ class Host:
 
 
 def loop(cost: dict[int, int], rehearsal: dict[int, tuple[int, int]] | None = None,
-         late_wakeups: dict[int, int] | None = None, n: int = 8):
+         late_wakeups: dict[int, int] | None = None, n: int = 8, spin_stall: tuple[int, int] | None = None):
     """An executive at 200 Hz with a rehearsal LEAD before each release: cycle k computes
     ``cost[k]`` (default 1 ms); the rehearsal before release k takes ``rehearsal[k]`` =
     (on its CPU, off it) (default 100 us on it); the first sleep towards release k ends
-    ``late_wakeups[k]`` late."""
+    ``late_wakeups[k]`` late; ``spin_stall`` (k, ns): a stall the thread does not see (its CPU
+    time runs on) while it spins towards release k, 100 us before it."""
     h = Host()
     h.late_wakeups = dict(late_wakeups or {})
     clock = RealTimeClock(PERIOD, now_ns=h.now, sleep_until=h.sleep_until, cpu_ns=h.cpu)
@@ -67,6 +72,8 @@ def loop(cost: dict[int, int], rehearsal: dict[int, tuple[int, int]] | None = No
     ex.add(1, "control", control)
     clock.start(h.t + PERIOD)
     h.t0 = clock.t0_ns
+    if spin_stall is not None:
+        h.stall_at, h.stall_ns = h.t0 + spin_stall[0] * PERIOD - 100 * US, spin_stall[1]
     for _ in range(n):
         ex.tick()
     return ex
@@ -176,3 +183,22 @@ def test_a_cycle_the_host_released_late_hands_its_overrun_into_the_next_release_
     assert sorted(recs) == [3, 4] and ex.late_releases == {"late_wakeup": 2}
     assert recs[4]["previous_cycle_us"] == 0 and 300 <= recs[4]["late_wakeup_us"] <= 310
     assert [r["cause"] for r in loop({2: 6 * MS}).late_records] == ["previous_cycle"]
+
+
+def test_a_stall_the_guest_does_not_see_in_the_final_spin_is_the_hosts_and_so_is_its_cascade():
+    """The hypervisor holds the virtual CPU 6 ms while the loop spins towards release 3 (its
+    thread counts the time as running: no preemption seen). Nothing of the loop's runs there
+    but clock reads, so the lateness is the host's (``stalled``), and cycle 3 running into
+    release 4 is that stall carried on, not the previous cycle's own work: no own slip. The
+    eleventh session's in-process loop counted such a cascade as its own."""
+    ex = loop({}, spin_stall=(3, 6 * MS))
+    recs = {r["k"]: r for r in ex.late_records}
+    assert sorted(recs) == [3, 4] and ex.late_releases == {"stalled": 1, "late_wakeup": 1}
+    assert recs[3]["cause"] == "stalled" and not recs[3]["own"] and 5_900 <= recs[3]["stalled_us"] <= 5_905
+    assert recs[3]["preempted_us"] == 0 and recs[3]["rehearsal_us"] == 0
+    assert recs[4]["previous_cycle_us"] == 0 and not recs[4]["own"]
+    assert own_slips(ex.slip_records, PERIOD / 1e3) == [] and ex.host_slips == ex.slips >= 1
+    # the same loop without the stall: quiet; a rehearsal of 2 ms stays the loop's own
+    assert loop({}).late_records == []
+    (rec,) = loop({}, rehearsal={3: (2 * MS, 0)}).late_records
+    assert rec["cause"] == "rehearsal" and rec["own"] and rec["stalled_us"] <= 2

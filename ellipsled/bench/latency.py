@@ -311,7 +311,8 @@ def variants(n: int, rate_hz: float, rounds: int = 2) -> dict:
     return res
 
 
-KINDS = ("udp", "zenoh")
+ROUND_TRIPS = {"udp": udp_roundtrip, "zenoh": zenoh_roundtrip}     # each kind's measurement
+KINDS = tuple(ROUND_TRIPS)
 
 
 def _in_child(n: int, rate_hz: float, placement: str, kinds=KINDS, samples: bool = False) -> dict:
@@ -332,8 +333,7 @@ def _in_child(n: int, rate_hz: float, placement: str, kinds=KINDS, samples: bool
 
 
 def round_trips(n: int, rate_hz: float, placement: str, kinds=KINDS, samples: bool = False) -> dict:
-    fns = {"udp": udp_roundtrip, "zenoh": zenoh_roundtrip}
-    return {kind: fns[kind](n, rate_hz, placement, samples=samples) for kind in kinds}
+    return {kind: ROUND_TRIPS[kind](n, rate_hz, placement, samples=samples) for kind in kinds}
 
 
 def sil_floor(seconds: float, rate_hz: float) -> dict:

@@ -26,6 +26,16 @@ def lp_split(control_us: np.ndarray, lp_cycle: np.ndarray) -> dict:
     return {"lp_cycles": int(lp_cycle.sum()), "p99_without_lp": _pct(rest, 99)}
 
 
+def by_tenth(x: np.ndarray) -> dict | None:
+    """The p50 of each tenth of a run's samples, taken in run order: the lowest, the median
+    and the highest of the ten (None under 100 samples). A host's slow spell shows as a
+    highest tenth well above the median one; a whole run slower as all three up together."""
+    if len(x) < 100:
+        return None
+    p50s = [float(np.percentile(part, 50)) for part in np.array_split(np.asarray(x), 10)]
+    return {"lowest": min(p50s), "median": float(np.median(p50s)), "highest": max(p50s)}
+
+
 def latency_split(total_us: np.ndarray, command_us: np.ndarray) -> dict | None:
     """Where the sensor-to-actuator time goes: the sensor leg with the FSW's wait and
     compute (plant publishes -> FSW publishes its answer) and the command leg (FSW

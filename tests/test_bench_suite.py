@@ -320,6 +320,10 @@ def test_the_control_task_row_sets_the_sil_beside_batch_over_the_same_span_with_
     assert rows[0][3].startswith("2.50x (p99; without the LP's cycles 3.60x)") and rows[0][-1].startswith("**FAIL** (ratio")
     assert "batch first 10.0 s 20.0 / 60.0 (25.0, 28 LP cycles); whole batch entry p99 40.0" == rows[0][2]
     assert rows[1][3].startswith("1.80x") and rows[1][-1] == "pass"
+    assert rows[0][1].endswith("(90.0, 28 LP cycles)")                    # an older run: no tenths
+    res["sil_realtime"]["idle"]["extra"]["fsw_control_us"]["p50_by_tenth"] = {"lowest": 18.0, "median": 20.0,
+                                                                              "highest": 41.0}
+    assert sil.control_rows(res)[0][1].endswith("(90.0, 28 LP cycles; tenths 18.0 / 20.0 / 41.0)")
     assert sil.control_rows({"cycle": {}}) == []                  # no SIL run, no row
 
 

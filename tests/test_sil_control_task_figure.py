@@ -39,3 +39,23 @@ def test_the_duty_cycle_lps_cycles_are_counted_and_the_p99_given_without_them(tm
     f = control_task_us(tmp_path)
     assert f["runs"] == 499 and f["p99"] == 200.0
     assert f["lp_cycles"] == 27 and f["p99_without_lp"] == 50.0
+
+
+def test_a_slow_spell_shows_in_the_highest_tenth_and_a_slower_run_in_all_three(tmp_path):
+    rng = np.random.default_rng(7)
+    c = (20_000 + rng.integers(0, 2_000, 3_000)).astype(np.int64)
+    c[1_800:2_100] += 25_000               # a slow spell: one tenth of the run, 45 us instead of 20
+    np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(3_000, np.int64), control_ns=c,
+                        frame_age_ns=np.zeros(0, np.int64))
+    t = control_task_us(tmp_path)["p50_by_tenth"]
+    assert 20.0 <= t["lowest"] <= t["median"] <= 22.0 and 45.0 <= t["highest"] <= 47.0
+    np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(3_000, np.int64), control_ns=c * 2,
+                        frame_age_ns=np.zeros(0, np.int64))
+    slower = control_task_us(tmp_path)["p50_by_tenth"]
+    assert slower["lowest"] == 2 * t["lowest"] and slower["median"] == 2 * t["median"]
+
+
+def test_no_tenths_under_a_hundred_ticks(tmp_path):
+    np.savez_compressed(tmp_path / "fsw_timing.npz", jitter_ns=np.zeros(99, np.int64),
+                        control_ns=np.full(99, 50_000, np.int64), frame_age_ns=np.zeros(0, np.int64))
+    assert control_task_us(tmp_path)["p50_by_tenth"] is None

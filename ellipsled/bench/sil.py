@@ -348,10 +348,14 @@ def control_rows(res: dict) -> list[Row]:
         ctl = g(s, "extra", "fsw_control_us") or {}
         b = g(res, "cycle", f"control_span_{hz:g}hz") or {}
         r, r_rest = ratio(ctl.get("p99"), b.get("p99_us")), ratio(ctl.get("p99_without_lp"), b.get("p99_without_lp_us"))
+        tenth = ctl.get("p50_by_tenth")
+        tenths = "" if not tenth else (f"; tenths {fmt(tenth.get('lowest'))} / {fmt(tenth.get('median'))} / "
+                                       f"{fmt(tenth.get('highest'))}")
         R.append(row(f"control task at {hz:g} Hz, real-time SIL against batch over the same span, p50 / p99 [us] "
-                     "(p99 without the duty-cycle LP's cycles)",
+                     "(p99 without the duty-cycle LP's cycles; p50 of each tenth of the run, lowest / median / "
+                     "highest)",
                      f"{fmt(ctl.get('p50'))} / {fmt(ctl.get('p99'))} ({fmt(ctl.get('p99_without_lp'))}, "
-                     f"{fmt(ctl.get('lp_cycles'))} LP cycles)",
+                     f"{fmt(ctl.get('lp_cycles'))} LP cycles{tenths})",
                      f"batch first {fmt(b.get('span_s'))} s {fmt(b.get('p50_us'))} / {fmt(b.get('p99_us'))} "
                      f"({fmt(b.get('p99_without_lp_us'))}, {fmt(b.get('lp_cycles'))} LP cycles); "
                      f"whole batch entry p99 {fmt(g(res, 'cycle', 'control_p99_us'))}",

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from common import argtypes
-from ellipsled.node_reports import lp_split, read_fsw, read_sim
+from ellipsled.node_reports import by_tenth, lp_split, read_fsw, read_sim
 from ellipsled.procs import ELLIPSLED, die_with_parent, stop_process
 from ellipsled.runlib import EXIT_NOT_COMPLETED, exit_code, format_summary, judge
 from ellipsled.terminal import RunProgress, files_written
@@ -90,7 +90,9 @@ def control_task_us(out: Path) -> dict | None:
     per-tick times the FSW node saved (fsw_timing.npz); None when it saved none (the
     executive's own statistics cover only its recent cycles). With the node's per-tick flag
     of the duty-cycle LP's cycles: their count (``lp_cycles``) and the p99 without them
-    (``p99_without_lp``), the rest of the control task."""
+    (``p99_without_lp``), the rest of the control task. ``p50_by_tenth``: the p50 of each
+    tenth of the run, lowest / median / highest (node_reports.by_tenth), so that a p99 set by a
+    slow spell of the host can be told from a control task slower throughout."""
     import numpy as np
     try:
         with np.load(Path(out) / "fsw_timing.npz") as z:
@@ -105,7 +107,7 @@ def control_task_us(out: Path) -> dict | None:
     if not len(c):
         return None
     f = {"p50": float(np.percentile(c, 50)), "p99": float(np.percentile(c, 99)), "max": float(c.max()),
-         "runs": int(len(c))}
+         "runs": int(len(c)), "p50_by_tenth": by_tenth(c)}
     if lp is not None and len(lp) == len(ran):
         f.update(lp_split(c, lp[ran]))
     return f

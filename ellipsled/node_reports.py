@@ -32,7 +32,7 @@ def by_tenth(x: np.ndarray) -> dict | None:
     highest tenth well above the median one; a whole run slower as all three up together."""
     if len(x) < 100:
         return None
-    p50s = [float(np.percentile(part, 50)) for part in np.array_split(np.asarray(x), 10)]
+    p50s = [_pct(part, 50) for part in np.array_split(np.asarray(x), 10)]
     return {"lowest": min(p50s), "median": float(np.median(p50s)), "highest": max(p50s)}
 
 

@@ -95,9 +95,10 @@ class Rig:
         self.plant.set_fault(jet, kind, eta)
         return True
 
-    def fly(self, n: int, tick_every: int = 5) -> None:
-        """n control cycles; the link ticks every ``tick_every`` (RG2), the fake clock
-        advancing by the time that elapsed in simulation."""
+    def fly(self, n: int, tick_every: int = 5, listen: bool = True) -> None:
+        """n control cycles; the link ticks every ``tick_every`` (RG2) and listens on the
+        cycles between (as the SIL's FSW does; ``listen=False``: it does not), the fake
+        clock advancing by the time that elapsed in simulation."""
         rg3 = divisors(self.fsw.params, self.fsw.dt_s)[2]
         for _ in range(n):
             u = self.fsw.control_step(self.frame)
@@ -107,6 +108,8 @@ class Rig:
                 self.clock.t += tick_every * self.scn.dt_control_s
                 self.gl.tick(self.frame)
                 self.gcs.poll(0.0)
+            elif listen:
+                self.gl.listen()
             self.frame = self.plant.step(u)
             self.k += 1
 

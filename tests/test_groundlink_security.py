@@ -22,7 +22,8 @@ from interfaces.mavlink.signing.keys import SigningKey
 from interfaces.mavlink.signing.sign import Signer
 from interfaces.mavlink.signing.verify import Reject
 
-from tests.rig import Rig, flown
+from gse.commands import make_request
+from tests.rig import ACCEPTED, Rig, flown
 
 ARM_OFF = mav.MAVLink_command_long_message(1, 1, mav.ELLIPSLED_CMD_ARM_JETS, 0, 0, 0, 0, 0, 0, 0, 0)
 
@@ -445,3 +446,32 @@ def test_answers_to_single_reads_leave_the_events_their_share_of_a_tick(rig):
     assert rig.gl.stats["rx_datagrams"] >= n
     assert sent.count("PARAM_VALUE") <= n - EVENT_SHARE and sent.count("STATUSTEXT") >= EVENT_SHARE, sent
     assert rig.gl.stats["reads_limited"] >= EVENT_SHARE
+
+
+@pytest.mark.parametrize("listen", [True, False])
+def test_a_flood_at_the_control_rate_never_fills_the_queue_a_genuine_command_sent_once_is_answered(rig, listen):
+    """The bench's hostile mix at 2,500 datagrams/s (50 a 50-Hz cycle, 60-kB datagrams among
+    them) and ONE genuine signed command, sent once (no retry) between two link ticks.
+    Listening every cycle (GroundLink.listen, as the SIL's FSW does), the kernel drops
+    nothing, so the command cannot be lost at the queue and is answered. Reading only at
+    RG2 ticks (the control experiment), the queue fills between ticks and the kernel drops
+    datagrams: whether the command is among them is then chance."""
+    from ellipsled.bench.flood import Flood
+    fl = Flood(5)
+    evil = attacker_socket()
+    pc = None
+    try:
+        for cycle in range(60):
+            for _ in range(50):
+                evil.sendto(fl.next()[1], rig.gl.address)
+            if cycle == 22:                               # between two ticks (every 5th cycle)
+                pc = rig.gcs.start(make_request("arm", "on"), timeout_s=60.0, retries=0)
+            rig.fly(1, listen=listen)
+    finally:
+        evil.close()
+    drops = rig.gl.stats["kernel_drops"]
+    if listen:
+        assert drops == 0 and rig.gl.stats["rx_datagrams"] >= 60 * 50, rig.gl.stats
+        assert rig.exchange(lambda: pc.done) and pc.result == ACCEPTED, pc.result
+    else:
+        assert drops > 0, rig.gl.stats

@@ -20,7 +20,7 @@ UDP socket on 127.0.0.1 that the benchmark drains.
 And every command answered: the real-time SIL (``ellipsled run case1 --realtime``) at 50
 and at 200 Hz (``--dt-control``), a ground station with the key sending a signed read-only
 command at ANSWER_PACE_HZ from the first jet command on (the warm-up over), counting the
-answers: in time when the COMMAND_ACK is back within flood.ANSWER_IN_TIME_S (two link ticks),
+answers: in time when the COMMAND_ACK is back within flood.ANSWER_IN_TIME_S (two RG2 periods),
 late, or missing (a command sent a second or more before the vehicle's last frame); one
 command at a time, so each ACK is its own command's (flood.GroundWatch).
 """

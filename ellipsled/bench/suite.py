@@ -55,7 +55,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "sil_router": ("p50_us", "p99_us", "baseline_p50_us", "baseline_p99_us"),
     "flood": ("flood_compute_p99_us", "flood_compute_max_us", "flood_groundlink_p99_us", "flood_groundlink_max_us",
               "flood_slips", "flood_state_changes", "flood_peers_added", "flood_fdir_latency_max_s",
-              "quiet_compute_p99_us", "quiet_groundlink_p99_us"),
+              "quiet_compute_p99_us", "quiet_groundlink_p99_us", "flood_listen_max_us", "flood_kernel_drops"),
     "bridge": ("cpu_pct", "mem_growth_mb"),
     "rt": ("sched_fifo", "affinity", "mlockall", "messages"),
 }

@@ -144,6 +144,11 @@ class FswNode:
             # real time: the link's receiving stops short of the cycle's deadline (lockstep
             # keeps only the link's own budget: its cycles have no wall-clock deadline)
             ex, realtime = self.topo.executive, args.mode == "realtime"
+            rg2 = ex.divisors[1]
+            # the cycles between the link's ticks it listens (GroundLink.listen): the socket
+            # is read every control period, after the command is out
+            self.topo.add(1, "groundlink_rx", lambda c: c.k % rg2 and self.link.listen(
+                c.t_release_ns + ex.deadline_ns if realtime else None))
             self.topo.add(2, "groundlink", lambda c: self.link.tick(
                 self.frame, c.t_release_ns + ex.deadline_ns if realtime else None))
 

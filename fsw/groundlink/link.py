@@ -2,9 +2,11 @@
 ground peers, receive and dispatch, telemetry scheduling and sending. What it sends and
 accepts is documented in interfaces/mavlink/README.md.
 
-Runs in the FSW process, off the control rate group: the executive calls ``tick()`` from
-RG2, in the same thread as ``FlightSoftware.control_step`` and between cycles (commands
-change FSW state, so they must not run concurrently with a control cycle). ``tick`` reads
+Runs in the FSW process, in the same thread as ``FlightSoftware.control_step`` and between
+cycles (commands change FSW state, so they must not run concurrently with a control cycle):
+the executive calls ``tick()`` from RG2 and ``listen()`` (receive and answer only) on the
+other cycles, after the cycle's command is out, so the socket is read every control period
+within the same per-cycle budget. ``tick`` reads
 the socket within a budget (interfaces/mavlink/intake.py: at most ``max_rx_per_tick``
 datagrams and ``rx_budget_us`` a tick; what cannot be a command refused before any CRC or
 signature work; the receive buffer sized to one tick's budget, the kernel dropping the
@@ -250,6 +252,30 @@ class GroundLink:
         finally:
             self.in_tick = False
         b.finish()
+
+    def listen(self, deadline_ns: int | None = None) -> None:
+        """Call on the cycles between ticks (RG1, when RG2 does not run): receive and answer
+        within the tick's budget, sending nothing scheduled (answers draw on the reply and
+        FTP budgets the next tick renews, so what the link sends a second is unchanged).
+        The socket is thus read every control period, not every RG2 period: a flood fills
+        the receive queue for one period at most, so the kernel does not drop a genuine
+        command at a queue filled between ticks, and what the link may spend receiving a
+        second grows with the control rate. ``deadline_ns``: as ``tick``'s. Counted apart
+        from the ticks (``TickBudget.finish``)."""
+        b = self.budget
+        b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
+        self.in_tick = True
+        try:
+            rx_ns = b.receive_ns(0)
+            if rx_ns > 0:
+                self._receive(rx_ns - min(self.rx_tail.ns, rx_ns // 2))
+            else:
+                self.stats["rx_deferred"] += 1
+        except Exception:                       # the link must never take the FSW down
+            log.exception("ground link listen failed")
+        finally:
+            self.in_tick = False
+        b.finish(listen=True)
 
     def _receive(self, given_ns: int, least: bool = True) -> None:
         """Poll within ``given_ns``. The intake's budget ends at its last frame's start; what

@@ -87,6 +87,7 @@ class TickBudget:
         self.ticks = 0
         self.over = 0                                    # ticks that cost more than the budget
         self.max_ns = 0                                  # the costliest tick of the run
+        self.listens = self.listens_over = self.listen_max_ns = 0   # the same of the listens between ticks
 
     def start(self, cap_ns: int | None = None) -> None:
         """A tick begins; ``cap_ns``: less time than the budget is left (the cycle's deadline)."""
@@ -94,9 +95,15 @@ class TickBudget:
         self.limit_ns = self.budget_ns if cap_ns is None else max(0, min(self.budget_ns, int(cap_ns)))
         self.reserve_ns = int(END_RESERVE * self.limit_ns)
 
-    def finish(self) -> int:
-        """The tick ends: its cost [ns], kept."""
+    def finish(self, listen: bool = False) -> int:
+        """The tick ends: its cost [ns], kept (``listen``: a listen between ticks, link.py:
+        counted apart, so the ticks' percentiles stay the ticks')."""
         cost = self.elapsed_ns()
+        if listen:
+            self.listens += 1
+            self.listens_over += cost > self.budget_ns
+            self.listen_max_ns = max(self.listen_max_ns, cost)
+            return cost
         self.costs[self.ticks % COST_RING] = cost
         self.ticks += 1
         self.over += cost > self.budget_ns
@@ -109,7 +116,9 @@ class TickBudget:
         kept = self.costs[:min(self.ticks, COST_RING)]
         p50, p99 = np.percentile(kept, (50, 99)) * 1e-3 if kept.size else (0.0, 0.0)
         return {"budget_us": self.budget_ns * 1e-3, "ticks": self.ticks, "over_budget": self.over,
-                "p50_us": float(p50), "p99_us": float(p99), "max_us": self.max_ns * 1e-3}
+                "p50_us": float(p50), "p99_us": float(p99), "max_us": self.max_ns * 1e-3,
+                "listens": self.listens, "listens_over_budget": self.listens_over,
+                "listen_max_us": self.listen_max_ns * 1e-3}
 
     def elapsed_ns(self) -> int:
         return self.clock_ns() - self.t0_ns

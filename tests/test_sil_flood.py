@@ -2,7 +2,8 @@
 (real processes, loopback), a flood of random, malformed, unsigned, badly signed, replayed
 and oversized datagrams hits the FSW's MAVLink port at >= 2,000 datagrams/s for >= 10 s.
 Its HEARTBEAT keeps coming every second, a genuine signed command is ACCEPTED during the
-flood and after it, and the telemetry carries the drop counters. Bounded: one run of 40 s of
+flood and after it, the kernel drops (almost) nothing at the link's socket, and the
+telemetry carries the drop counters. Bounded: one run of 40 s of
 simulated time, a 12-s flood. What the flood costs the loop's deadlines is a host figure:
 `ellipsled bench` flood section.
 
@@ -102,3 +103,6 @@ def test_a_ground_flood_costs_no_deadline_and_genuine_commands_still_pass(tmp_pa
     assert sys_status.errors_comm > 0 and sys_status.errors_count2 > 0, sys_status
     gl = fsw["ground_link"]
     assert gl["refused_early"] > 0 and gl["rx_datagrams"] + gl["kernel_drops"] >= 0.9 * sent["sent"], gl
+    # the link reads its socket every control period (GroundLink.listen): the queue never
+    # fills, so no genuine command is lost there (read only at RG2 ticks: ~2/3 dropped)
+    assert gl["kernel_drops"] <= 0.01 * sent["sent"], gl

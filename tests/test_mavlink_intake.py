@@ -343,3 +343,21 @@ def test_frames_a_call_left_are_begun_first_in_the_next_call_whatever_its_budget
         assert not b.link.counts[Reject.REPLAY]
     finally:
         b.close()
+
+
+def test_waiting_says_whether_a_call_has_anything_to_take_up():
+    """``waiting()``: False on an empty socket; True with a datagram at the socket, or with
+    frames a spent budget left in the intake (the socket empty); False once all is read."""
+    b = Bench(budget_us=1000.0, clock_ns=stepping_clock(300_000))
+    try:
+        assert not b.intake.waiting()
+        b.send(b"".join(b.ground.pack(ARM) for _ in range(4)))
+        time.sleep(0.01)                                  # loopback delivery
+        assert b.intake.waiting()
+        b.poll()
+        assert b.intake.stats["frames_deferred"] == 1 and b.intake.waiting()    # the socket empty, frames kept
+        while b.intake.waiting():
+            b.intake.poll(lambda msg, addr: b.got.append(msg))
+        assert len(b.got) == 4
+    finally:
+        b.close()

@@ -261,7 +261,10 @@ class GroundLink:
         the receive queue for one period at most, so the kernel does not drop a genuine
         command at a queue filled between ticks, and what the link may spend receiving a
         second grows with the control rate. ``deadline_ns``: as ``tick``'s. Counted apart
-        from the ticks (``TickBudget.finish``)."""
+        from the ticks (``TickBudget.finish``); a cycle with nothing waiting (``intake.waiting``,
+        one poll(2)) costs no more than that check and is not counted."""
+        if not self.intake.waiting():
+            return
         b = self.budget
         b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
         self.in_tick = True

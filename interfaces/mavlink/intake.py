@@ -43,6 +43,7 @@ blocks or raises on network input.
 """
 from __future__ import annotations
 
+import select
 import socket
 import struct
 import time
@@ -107,6 +108,13 @@ class DatagramIntake:
         self.kernel_counts = self._drops0 is not None
         self.last_poll_ns = 0
         self.frame_ns: deque[int] = deque(maxlen=FRAME_COST_RING)   # verify + handle cost of the last frames
+        self._poller = select.poll()
+        self._poller.register(sock, select.POLLIN)
+
+    def waiting(self) -> bool:
+        """Anything to take up: frames a spent budget left, or a datagram (or a socket error)
+        at the socket -- one poll(2) with no timeout, no exception: what an idle call costs."""
+        return self._rest is not None or bool(self._poller.poll(0))
 
     def frame_estimate_ns(self, budget_ns: int) -> int:
         """What a verified frame is taken to cost in a call of ``budget_ns``: the

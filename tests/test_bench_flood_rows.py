@@ -25,3 +25,13 @@ def test_the_listen_row_shows_the_kernel_drops_of_the_sent():
 def test_a_run_from_before_the_listens_keeps_its_rows():
     old = rows(flood_result())
     assert not any("listening between ticks" in r[0] for r in old) and len(old) == 4
+
+
+def test_the_receive_row_shows_the_intake_read_every_control_period_when_measured():
+    rc = {"flood_intake": {"p99_us": 1300.0, "genuine_handled": 93, "genuine_sent": 100},
+          "flood_previous": {"p99_us": 3300.0, "genuine_handled": 27}, "quiet": {"p99_us": 50.0}}
+    every = {"p99_us": 472.0, "genuine_handled": 100, "genuine_sent": 100, "kernel_drops": 0}
+    old = [r for r in rows(flood_result(receive=rc)) if r[0].startswith("  receive work")][0]
+    new = [r for r in rows(flood_result(receive={**rc, "flood_every_cycle": every})) if r[0].startswith("  receive work")][0]
+    assert "every control period" not in old[2] and old[2].endswith("93 / 27 of 100"), old
+    assert new[2].endswith("every control period (as the vehicle): p99 472.0 a call, 100 of 100 through, 0 dropped"), new

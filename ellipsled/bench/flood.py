@@ -211,6 +211,7 @@ def send(target: tuple[str, int], rate: float, seconds: float, seed: int = 1,
 
 # ------------------------------------------------------------------ benchmark
 RG2_HZ = 10.0
+CYCLES_PER_TICK = 5              # control periods in an RG2 period at 50 Hz: the link reads every one
 
 
 def _pct(ns) -> dict:
@@ -224,8 +225,10 @@ def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
     """The vehicle's receive work per RG2 tick (10 Hz), in this process: quiet, and under
     a flood of ``rate`` datagrams/s (the mix above, one genuine signed command among each
     tick's datagrams), through the bounded intake and through the previous receive path
-    (every datagram split, CRC-checked and verified, up to 64 a tick). Same run, same
-    datagrams."""
+    (every datagram split, CRC-checked and verified, up to 64 a tick); and through the
+    intake read every control period at 50 Hz (``flood_every_cycle``: the tick's datagrams
+    in CYCLES_PER_TICK parts, a call after each; its cost per call), as the vehicle reads
+    (fsw/groundlink/link.py ``listen``). Same run, same datagrams."""
     from interfaces.mavlink.intake import DatagramIntake
     from interfaces.mavlink.signing.link import SignedLink
     ticks = 100 if quick else 400
@@ -238,7 +241,7 @@ def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
     out = {"rate_per_s": rate, "ticks": ticks, "datagrams_per_tick": per_tick}
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     tx.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 8 << 20)
-    for name in ("quiet", "flood_intake", "flood_previous"):
+    for name in ("quiet", "flood_intake", "flood_previous", "flood_every_cycle"):
         rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         rx.bind(("127.0.0.1", 0))
         rx.setblocking(False)
@@ -257,12 +260,19 @@ def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
         view = memoryview(buf)
         fl = Flood(1, replay)
         cost, sent_genuine = [], 0
+        parts = CYCLES_PER_TICK if name == "flood_every_cycle" else 1
         for _ in range(ticks):
-            if name != "quiet":
-                at = fl.rng.randrange(per_tick)
-                for i in range(per_tick):
-                    tx.sendto(fl.next()[1] if i != at else ground.pack(ARM), rx.getsockname())
-                sent_genuine += 1
+            at = fl.rng.randrange(per_tick) if name != "quiet" else -1
+            for part in range(parts):
+                if name != "quiet":
+                    for i in range(part * per_tick // parts, (part + 1) * per_tick // parts):
+                        tx.sendto(fl.next()[1] if i != at else ground.pack(ARM), rx.getsockname())
+                if part < parts - 1:          # a control period's call, then the next part
+                    time.sleep(0.002)
+                    t0 = time.perf_counter_ns()
+                    intake.poll(handle)
+                    cost.append(time.perf_counter_ns() - t0)
+            sent_genuine += name != "quiet"
             time.sleep(0.002)                 # loopback delivery
             t0 = time.perf_counter_ns()
             if intake is not None:
@@ -566,7 +576,10 @@ def rows(res: dict) -> list[Row]:
                 f"{fmt(g(rc, 'flood_intake', 'p99_us'))} / {fmt(g(rc, 'flood_previous', 'p99_us'))}",
                 f"quiet {fmt(g(rc, 'quiet', 'p99_us'))}; genuine commands through: "
                 f"{fmt(g(rc, 'flood_intake', 'genuine_handled'))} / {fmt(g(rc, 'flood_previous', 'genuine_handled'))}"
-                f" of {fmt(g(rc, 'flood_intake', 'genuine_sent'))}", "", "", NO_TARGET)]
+                f" of {fmt(g(rc, 'flood_intake', 'genuine_sent'))}"
+                + (f"; the intake read every control period (as the vehicle): p99 {fmt(e['p99_us'])} a call, "
+                   f"{fmt(e['genuine_handled'])} of {fmt(e['genuine_sent'])} through, {fmt(e['kernel_drops'])} dropped"
+                   if (e := rc.get("flood_every_cycle")) else ""), "", "", NO_TARGET)]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -222,9 +222,7 @@ class GroundLink:
         no time to receive reads nothing (counted: rx_deferred); the next one left none takes
         up one datagram and its first frame (the intake's least) if the deadline leaves the
         link any time: a command waits at most one tick past the one it arrived before."""
-        b = self.budget
-        b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
-        self.in_tick = True
+        b = self._start(deadline_ns)
         try:
             overdue = self.streams.overdue_ns(self.clock())      # the streams owed, with what sending costs besides
             rx_ns = b.receive_ns(self.send_ns_peak, overdue + self.send_overhead_ns if overdue else 0)
@@ -233,7 +231,7 @@ class GroundLink:
             if self._rx_skipped:
                 self.stats["rx_deferred"] += 1
             else:                                # a second tick running with no time: one frame (intake.py)
-                self._receive(rx_ns - min(self.rx_tail.ns, rx_ns // 2) if rx_ns > 0 else 1)
+                self._receive(self._share(rx_ns) if rx_ns > 0 else 1)
             t_send = b.elapsed_ns()
             self.streams.sample_allocator()
             self.send_due(sensors)
@@ -265,13 +263,11 @@ class GroundLink:
         one poll(2)) costs no more than that check and is not counted."""
         if not self.intake.waiting():
             return
-        b = self.budget
-        b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
-        self.in_tick = True
+        b = self._start(deadline_ns)
         try:
             rx_ns = b.receive_ns(0)
             if rx_ns > 0:
-                self._receive(rx_ns - min(self.rx_tail.ns, rx_ns // 2))
+                self._receive(self._share(rx_ns))
             else:
                 self.stats["rx_deferred"] += 1
         except Exception:                       # the link must never take the FSW down
@@ -279,6 +275,19 @@ class GroundLink:
         finally:
             self.in_tick = False
         b.finish(listen=True)
+
+    def _start(self, deadline_ns: int | None) -> TickBudget:
+        """A tick or a listen begins: its budget started, ending SEND_MARGIN_NS before the
+        cycle's deadline when there is one; inside it until ``in_tick`` is cleared."""
+        b = self.budget
+        b.start(None if deadline_ns is None else deadline_ns - time.monotonic_ns() - self.SEND_MARGIN_NS)
+        self.in_tick = True
+        return b
+
+    def _share(self, rx_ns: int) -> int:
+        """Receiving's share ``rx_ns`` (> 0) less what receiving recently took past the
+        intake's budget (``rx_tail``), at most half of it."""
+        return rx_ns - min(self.rx_tail.ns, rx_ns // 2)
 
     def _receive(self, given_ns: int, least: bool = True) -> None:
         """Poll within ``given_ns``. The intake's budget ends at its last frame's start; what

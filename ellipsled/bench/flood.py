@@ -263,29 +263,24 @@ def receive_cost(quick: bool, rate: float = 2500.0) -> dict:
         parts = CYCLES_PER_TICK if name == "flood_every_cycle" else 1
         for _ in range(ticks):
             at = fl.rng.randrange(per_tick) if name != "quiet" else -1
-            for part in range(parts):
+            for part in range(parts):         # a part of the tick's datagrams, then a call
                 if name != "quiet":
                     for i in range(part * per_tick // parts, (part + 1) * per_tick // parts):
                         tx.sendto(fl.next()[1] if i != at else ground.pack(ARM), rx.getsockname())
-                if part < parts - 1:          # a control period's call, then the next part
-                    time.sleep(0.002)
-                    t0 = time.perf_counter_ns()
+                time.sleep(0.002)             # loopback delivery
+                t0 = time.perf_counter_ns()
+                if intake is not None:
                     intake.poll(handle)
-                    cost.append(time.perf_counter_ns() - t0)
+                else:                         # the previous GroundLink.poll: 64 datagrams, each split and verified
+                    for _ in range(64):
+                        try:
+                            size, addr = rx.recvfrom_into(buf)
+                        except BlockingIOError:
+                            break
+                        for msg in link.receive(view[:size]):
+                            handle(msg, addr)
+                cost.append(time.perf_counter_ns() - t0)
             sent_genuine += name != "quiet"
-            time.sleep(0.002)                 # loopback delivery
-            t0 = time.perf_counter_ns()
-            if intake is not None:
-                intake.poll(handle)
-            else:                             # the previous GroundLink.poll: 64 datagrams, each split and verified
-                for _ in range(64):
-                    try:
-                        size, addr = rx.recvfrom_into(buf)
-                    except BlockingIOError:
-                        break
-                    for msg in link.receive(view[:size]):
-                        handle(msg, addr)
-            cost.append(time.perf_counter_ns() - t0)
         out[name] = {**_pct(cost), "genuine_sent": sent_genuine, "genuine_handled": len(got),
                      **({"kernel_drops": intake.stats["kernel_drops"], "refused_early": intake.stats["refused_early"],
                          "rcvbuf_bytes": intake.rcvbuf_bytes} if intake is not None else {})}

@@ -29,12 +29,13 @@ from tests.procs import start_ground_sil, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime, pytest.mark.timing]
 RATE, FLOOD_S = 2500.0, 12.0
+SCENARIO = "nominal"
 
 
 
 
 def test_a_ground_flood_costs_no_deadline_and_genuine_commands_still_pass(tmp_path):
-    sil = start_ground_sil(tmp_path)
+    sil = start_ground_sil(tmp_path, SCENARIO)
     run, key, vehicle, gcs, out = sil.run, sil.key, sil.vehicle, sil.gcs, sil.out
     client = GroundClient(key, listen=f"udp:127.0.0.1:{gcs}", vehicle=f"udp:127.0.0.1:{vehicle}",
                           tlog=str(tmp_path / "ground.tlog"))
@@ -113,7 +114,7 @@ def test_a_ground_flood_costs_no_deadline_and_genuine_commands_still_pass(tmp_pa
     # leaves: then the drops are the budget's, and each is counted in the telemetry
     # (SYS_STATUS errors_count1, saturating) -- the in-process test on a clock that stands
     # still judges the reading schedule alone (test_groundlink_security.py)
-    cycles = FLOOD_S / load_scenario("nominal").dt_control_s        # what start_ground_sil flies
+    cycles = FLOOD_S / load_scenario(SCENARIO).dt_control_s
     if gl["rx_budget_hits"] < 0.5 * cycles:
         assert gl["kernel_drops"] <= 0.01 * sent["sent"], gl
     assert sys_status.errors_count1 == min(gl["kernel_drops"], 0xFFFF), (sys_status, gl)
